@@ -1,0 +1,135 @@
+"""Random environments: obstacles, packages and robot start positions for E worlds at once.
+
+A layout is everything about an environment that does not depend on the robots placed in it,
+so the focal and baseline trials of an evaluation can share it exactly.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import torch
+
+from .genome import R_MAX
+from .scenario import Scenario
+
+_CANDIDATES = 32  # rejection sampling: candidate positions drawn per object
+
+
+class Layout(NamedTuple):
+    """Robot-independent part of E environments (leading dimension E)."""
+
+    p_present: torch.Tensor   # [E, P] bool
+    p_pos: torch.Tensor       # [E, P, 2] initial package positions
+    p_mass: torch.Tensor      # [E, P]
+    p_band: torch.Tensor      # [E, P, 2] robot radii that may lift it
+    p_size: torch.Tensor      # [E, P] package radius
+    p_collab: torch.Tensor    # [E, P] bool
+    g_effector: torch.Tensor  # [E, P, G] long, -1 where the grip does not exist
+    g_offset: torch.Tensor    # [E, P, G, 2] grip point relative to the package centre
+    o_pos: torch.Tensor       # [E, O, 2]
+    o_radius: torch.Tensor    # [E, O]
+    o_present: torch.Tensor   # [E, O] bool
+    start: torch.Tensor       # [E, N, 2] robot start positions
+    seed: torch.Tensor        # [E] long, seeds the in-episode hash random numbers
+
+    def index(self, idx: torch.Tensor) -> "Layout":
+        """Environments `idx` (e.g. the same layout repeated for focal and baseline trials)."""
+        return Layout(*(t[idx] for t in self))
+
+
+def spawn_slots(n: int, spacing: float, device=None) -> torch.Tensor:
+    """[n, 2] points of a sunflower spiral around the origin, at least `spacing` apart."""
+    k = torch.arange(n, dtype=torch.float64, device=device)
+    golden = math.pi * (3.0 - math.sqrt(5.0))
+    pts = torch.stack([torch.sqrt(k + 0.5) * torch.cos(k * golden),
+                       torch.sqrt(k + 0.5) * torch.sin(k * golden)], -1)
+    if n > 1:
+        d = torch.cdist(pts, pts) + torch.eye(n, dtype=pts.dtype, device=device) * 1e9
+        pts = pts * (spacing / d.min())
+    return pts.float()
+
+
+def _first_valid(cand: torch.Tensor, ok: torch.Tensor) -> torch.Tensor:
+    """cand [E, K, M, 2], ok [E, K, M] -> [E, M, 2]: the first valid candidate (else the last)."""
+    k = cand.shape[1]
+    order = torch.arange(k, 0, -1, device=cand.device)[None, :, None]
+    pick = torch.where(ok, order, 0).argmax(1)  # first True; all False -> index 0 ...
+    pick = torch.where(ok.any(1), pick, k - 1)  # ... then fall back to the last candidate
+    return cand.gather(1, pick[:, None, :, None].expand(-1, 1, -1, 2)).squeeze(1)
+
+
+def make_layouts(scenario: Scenario, num: int, generator: torch.Generator,
+                 device: torch.device | str = "cpu") -> Layout:
+    """Draw `num` random environments of `scenario` (on the generator's device, then moved)."""
+    g, gdev = generator, generator.device
+    E, N, W = num, scenario.num_robots, scenario.arena
+    base = torch.tensor([W / 2, W / 2], device=gdev)
+    slots = spawn_slots(N, 2 * R_MAX + 0.1, gdev)
+    spawn_r = float(slots.norm(dim=-1).max()) + R_MAX
+
+    # Robots: a random assignment of robots to spawn slots.
+    perm = torch.rand(E, N, generator=g, device=gdev).argsort(-1)
+    start = base + slots[perm]
+
+    # Obstacles: anywhere in the arena, clear of the spawn area.
+    O = scenario.obstacle_count
+    lo, hi = scenario.obstacle_radius
+    o_r = lo + (hi - lo) * torch.rand(E, O, generator=g, device=gdev)
+    cand = torch.rand(E, _CANDIDATES, O, 2, generator=g, device=gdev) * W
+    dc = (cand - base).norm(dim=-1)
+    margin_ok = ((cand > o_r[:, None, :, None]) & (cand < W - o_r[:, None, :, None])).all(-1)
+    o_pos = _first_valid(cand, margin_ok & (dc > spawn_r + o_r[:, None] + 0.5))
+
+    # Packages, class by class.
+    P, G = scenario.num_packages, scenario.max_grips
+    cls_rows = []
+    for c in scenario.packages:
+        cls_rows += [c] * c.count
+    d_lo = torch.tensor([c.distance[0] for c in cls_rows], device=gdev)
+    d_hi = torch.tensor([c.distance[1] for c in cls_rows], device=gdev)
+    size = torch.tensor([c.size for c in cls_rows], device=gdev)
+    u = torch.rand(E, _CANDIDATES, P, generator=g, device=gdev)
+    ang = torch.rand(E, _CANDIDATES, P, generator=g, device=gdev) * 2 * math.pi
+    dist = d_lo + (d_hi - d_lo) * u
+    cand = base + dist[..., None] * torch.stack([ang.cos(), ang.sin()], -1)
+    clear = size + 0.6  # room for a robot at each grip
+    ok = ((cand > clear[:, None]) & (cand < W - clear[:, None])).all(-1)
+    if O:
+        do = (cand[:, :, :, None] - o_pos[:, None, None]).norm(dim=-1)  # [E, K, P, O]
+        ok &= (do > o_r[:, None, None] + clear[:, None]).all(-1)
+    p_pos = _first_valid(cand, ok)
+    d0 = (p_pos - base).norm(dim=-1)
+
+    m_lo = torch.tensor([c.mass[0] for c in cls_rows], device=gdev)
+    m_hi = torch.tensor([c.mass[1] for c in cls_rows], device=gdev)
+    weighted = torch.tensor([c.distance_weighting for c in cls_rows], device=gdev)
+    frac = ((d0 - d_lo) / (d_hi - d_lo).clamp_min(1e-6)).clamp(0, 1)
+    mass = torch.where(weighted, m_hi - (m_hi - m_lo) * frac,
+                       m_lo + (m_hi - m_lo) * torch.rand(E, P, generator=g, device=gdev))
+
+    band = torch.tensor([c.radius_band for c in cls_rows], device=gdev).expand(E, P, 2)
+    collab = torch.tensor([c.kind == "collab" for c in cls_rows], device=gdev).expand(E, P)
+    g_eff = torch.full((P, G), -1, dtype=torch.long, device=gdev)
+    g_off = torch.zeros(P, G, 2, device=gdev)
+    for i, c in enumerate(cls_rows):
+        k = len(c.grips)
+        g_eff[i, :k] = torch.tensor(c.grips, device=gdev)
+        if c.kind == "collab":
+            a = torch.arange(k, device=gdev) * (2 * math.pi / k)
+            g_off[i, :k] = (c.size + 0.1) * torch.stack([a.cos(), a.sin()], -1)
+    # a random orientation of each package's grip ring
+    rot = torch.rand(E, P, generator=g, device=gdev) * 2 * math.pi
+    cs, sn = rot.cos()[..., None], rot.sin()[..., None]
+    gx, gy = g_off[..., 0], g_off[..., 1]
+    g_off = torch.stack([cs * gx - sn * gy, sn * gx + cs * gy], -1)
+
+    seed = torch.randint(0, 2**31 - 1, (E,), generator=g, device=gdev)
+    out = Layout(
+        p_present=torch.ones(E, P, dtype=torch.bool, device=gdev), p_pos=p_pos, p_mass=mass,
+        p_band=band.contiguous(), p_size=size.expand(E, P).contiguous(),
+        p_collab=collab.contiguous(), g_effector=g_eff.expand(E, P, G).contiguous(),
+        g_offset=g_off, o_pos=o_pos, o_radius=o_r,
+        o_present=torch.ones(E, O, dtype=torch.bool, device=gdev), start=start, seed=seed)
+    return Layout(*(t.to(device) for t in out))
