@@ -42,8 +42,9 @@ class WorldParams:
     stuck_speed: float = 0.05    # m/s: slower than this while trying to move counts as stuck
     stuck_ticks: int = 15        # ticks of trying without moving before COND_AM_I_STUCK holds
     waypoint_period: int = 100   # ticks before a random-walk waypoint is redrawn
-    collision_iters: int = 2     # relaxation passes of the robot-robot contact solver
+    collision_iters: int = 3     # relaxation passes of the robot-robot contact solver
     anchor_mass: float = 1e6     # collision mass of a robot waiting at a grip (it does not yield)
+    rest_speed: float = 0.01     # static friction: slower than this (m/s), a body comes to rest
 
     @staticmethod
     def for_scenario(s: Scenario, **kw) -> "WorldParams":
@@ -220,9 +221,10 @@ def _gather(values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     return values.gather(1, idx)
 
 
-def _cap(v: torch.Tensor, vmax: float) -> torch.Tensor:
+def _cap(v: torch.Tensor, vmax: float, vmin: float = 0.0) -> torch.Tensor:
+    """Limit speeds to vmax; speeds below vmin become 0 (static friction)."""
     n = v.norm(dim=-1, keepdim=True)
-    return v * (vmax / n.clamp_min(vmax))
+    return torch.where(n < vmin, 0.0, v * (vmax / n.clamp_min(vmax)))
 
 
 def collide(pos, vel, radius, mass, present, o_pos, o_radius, o_present, params: WorldParams):
@@ -340,7 +342,7 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
 
     # --- free robots: semi-implicit Euler
     vel = _cap(state.vel + params.dt * (f_cmd / robots.mass[..., None] - params.drag * state.vel),
-               params.v_cap)
+               params.v_cap, params.rest_speed)
     pos = state.pos + params.dt * vel
 
     # --- lifted packages move as one rigid body with their carriers
@@ -350,7 +352,7 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     m_pkg = layout.p_mass + _scatter_sum(robots.mass, pidx, P)
     p_vel = torch.where(lifted[..., None],
                         _cap(state.p_vel + params.dt * (f_pkg / m_pkg[..., None] - params.drag * state.p_vel),
-                             params.v_cap), 0.0)
+                             params.v_cap, params.rest_speed), 0.0)
     p_pos = state.p_pos + params.dt * p_vel
     g_off = _gather(layout.g_offset.reshape(E, C, 2), holding * G + grip)
     pos = torch.where(carrying[..., None], _gather(p_pos, holding) + g_off, pos)

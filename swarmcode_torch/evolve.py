@@ -1,0 +1,358 @@
+"""SwarmCoDe end to end: one generation = speciation, evaluation, reproduction (paper Sec. III-A).
+
+`Evolution` owns the population and the run's random generator. `step()` advances one
+generation and returns its metrics; reporters (TensorBoard, summary, checkpoints, progress)
+consume them. Nothing here prints or imports a CLI or logging library.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from . import bt
+from .evaluation import EvalConfig, evaluate
+from .fitness import FitnessWeights, ema
+from .genome import NUM_TIERS, R_MAX, R_MIN, Genome
+from .hardware import genome_phenotype
+from .reproduction import ReproductionParams, mutate_bt, reproduce
+from .scenario import Scenario, load_scenario
+from .speciation import speciate
+from .world import WorldParams, step as world_step
+
+CHECKPOINT_VERSION = 1
+
+
+@dataclass
+class EvolveConfig:
+    """Everything that defines a run (saved as config.toml in the run directory)."""
+
+    scenario: str = "budget"
+    """Built-in scenario name or path to a scenario TOML file."""
+    budget: float | None = None
+    """Fabrication budget in $; None: no budget penalty."""
+    objective: str = "fitness"
+    """'fitness' or 'roi' (fitness divided by team cost)."""
+    generations: int = 500
+    """Total number of generations of the run."""
+    population: int = 100
+    """Individuals in the evolutionary population."""
+    swarm_size: int | None = None
+    """Robots per team; None: the scenario's robot count."""
+    trials: int = 3
+    """Random environments per team evaluation."""
+    ticks: int | None = None
+    """Episode length in ticks; None: the scenario's."""
+    seed: int = 0
+    """Seed of the run's random generator."""
+    device: str = "auto"
+    """'auto', 'cpu' or 'cuda'."""
+    compile: bool | None = None
+    """torch.compile the tick; None: on CUDA only."""
+    tag_length: int = 16
+    """Bits in the speciation / partner tag."""
+    bt_length: int = 32
+    """Slots in a behavior-tree program."""
+    delta: float = 0.4
+    """Speciation threshold."""
+    p_marginal: float = 0.25
+    """Fitness factor when the marginal contribution is not positive."""
+    alpha: float = 0.6
+    """EMA decay of fitness (weight of the previous value)."""
+    lam: float = 0.001
+    """Budget penalty decay."""
+    max_elite: int = 3
+    """E in the elite count N = max(1, min(E, floor(size/5) + 1))."""
+
+    def validate(self) -> None:
+        """Raise ValueError with a one-line message for an invalid setting."""
+        if self.budget is not None and self.budget <= 0:
+            raise ValueError(f"--budget must be > 0, got {self.budget:g}")
+        if self.objective not in ("fitness", "roi"):
+            raise ValueError(f"--objective must be 'fitness' or 'roi', got {self.objective!r}")
+        for name, lo in (("generations", 1), ("population", 2), ("trials", 1), ("tag_length", 1),
+                         ("bt_length", 4), ("max_elite", 1)):
+            v = getattr(self, name)
+            if v < lo:
+                raise ValueError(f"--{name.replace('_', '-')} must be >= {lo}, got {v}")
+        for name in ("swarm_size", "ticks"):
+            v = getattr(self, name)
+            if v is not None and v < 1:
+                raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {v}")
+        if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
+            raise ValueError(f"--device must be auto, cpu or cuda, got {self.device!r}")
+        for name in ("delta", "p_marginal", "alpha", "lam"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "EvolveConfig":
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown config keys: {', '.join(unknown)}")
+        return cls(**{k: (None if v == "none" else v) for k, v in d.items()})
+
+
+def resolve_device(name: str) -> torch.device:
+    """The torch device for 'auto' / 'cpu' / 'cuda[:i]'; ValueError when CUDA is missing."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError("--device cuda was asked for, but no CUDA device is available")
+    return torch.device(name)
+
+
+# ------------------------------------------------------------------ the population
+def random_population(n: int, cfg: EvolveConfig, generator: torch.Generator,
+                      device: torch.device) -> Genome:
+    """The initial population: random genes, each seeded with a randomised template tree."""
+    g = generator
+
+    def u(*shape):
+        return torch.rand(*shape, generator=g, device=device)
+
+    names = list(bt.TEMPLATES)
+    templates = torch.stack([bt.template_tensor(k, cfg.bt_length) for k in names]).to(device)
+    which = torch.randint(0, len(names), (n,), generator=g, device=device)
+    programs = mutate_bt(templates[which], ReproductionParams(), g)
+    tiers = lambda: torch.randint(0, NUM_TIERS, (n,), generator=g, device=device)  # noqa: E731
+    return Genome(
+        tag=u(n, cfg.tag_length) < 0.5, selectivity=u(n), dominance=u(n), bt=programs,
+        radius=R_MIN + (R_MAX - R_MIN) * u(n), chassis=tiers(), battery=tiers(), motor=tiers(),
+        torque_point=u(n), battery_point=u(n),
+        effector=torch.randint(0, 2, (n,), generator=g, device=device))
+
+
+@dataclass
+class EvolutionState:
+    """Everything needed to continue a run after `generation` completed generations."""
+
+    generation: int
+    genome: Genome                 # the population to be evaluated next
+    species_hint: Tensor           # [P] species inherited from the parent (-1: none)
+    proto: Genome | None           # previous generation's species prototypes
+    proto_ids: Tensor              # [K] their species ids
+    next_species_id: int
+    fitness: Tensor                # [P] smoothed fitness carried by elites
+    has_fitness: Tensor            # [P] bool
+    rng_state: Tensor              # the run generator's state
+    best: dict | None = None       # best team of the run so far
+    history: list = field(default_factory=list)  # per-generation composition records
+
+
+@dataclass
+class Context:
+    """Run constants derived from the config (not saved; rebuilt on resume)."""
+
+    cfg: EvolveConfig
+    scenario: Scenario
+    device: torch.device
+    eval_cfg: EvalConfig
+    repro: ReproductionParams
+    params: WorldParams
+    step_fn: Any
+
+
+def make_context(cfg: EvolveConfig) -> Context:
+    """Validate the config, load the scenario and pick the device and tick function."""
+    cfg.validate()
+    scenario = load_scenario(cfg.scenario)
+    device = resolve_device(cfg.device)
+    S = cfg.swarm_size or scenario.num_robots
+    eval_cfg = EvalConfig(swarm_size=S, trials=cfg.trials, ticks=cfg.ticks or scenario.episode_ticks,
+                          budget=cfg.budget, objective=cfg.objective, lam=cfg.lam,
+                          p_marginal=cfg.p_marginal, max_elite=cfg.max_elite,
+                          weights=FitnessWeights())
+    repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite)
+    use_compile = cfg.compile if cfg.compile is not None else device.type == "cuda"
+    step_fn = torch.compile(world_step, dynamic=False) if use_compile else world_step
+    return Context(cfg, scenario, device, eval_cfg, repro, WorldParams.for_scenario(scenario), step_fn)
+
+
+def new_generator(ctx: Context) -> torch.Generator:
+    return torch.Generator(device=ctx.device).manual_seed(ctx.cfg.seed)
+
+
+def init_state(ctx: Context) -> EvolutionState:
+    """Generation 0: a random population, no species yet."""
+    g = new_generator(ctx)
+    P = ctx.cfg.population
+    genome = random_population(P, ctx.cfg, g, ctx.device)
+    return EvolutionState(
+        generation=0, genome=genome,
+        species_hint=torch.full((P,), -1, dtype=torch.long, device=ctx.device),
+        proto=None, proto_ids=torch.zeros(0, dtype=torch.long, device=ctx.device),
+        next_species_id=0, fitness=torch.zeros(P, device=ctx.device),
+        has_fitness=torch.zeros(P, dtype=torch.bool, device=ctx.device),
+        rng_state=g.get_state())
+
+
+def _design(genome: Genome, row: int, species: int, cost: float) -> dict:
+    """A JSON-friendly description of one robot design."""
+    return {
+        "species": species, "effector": "pincher" if int(genome.effector[row]) else "suction",
+        "radius": round(float(genome.radius[row]), 4),
+        "chassis_tier": int(genome.chassis[row]) + 1, "battery_tier": int(genome.battery[row]) + 1,
+        "motor_tier": int(genome.motor[row]) + 1,
+        "torque_point": round(float(genome.torque_point[row]), 4),
+        "battery_point": round(float(genome.battery_point[row]), 4),
+        "dominance": round(float(genome.dominance[row]), 4),
+        "selectivity": round(float(genome.selectivity[row]), 4),
+        "cost": round(cost, 2), "bt": [int(x) for x in genome.bt[row].tolist()],
+    }
+
+
+def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dict]:
+    """Advance one generation; the new state and this generation's metrics."""
+    t0 = time.perf_counter()
+    cfg = ctx.cfg
+    g = torch.Generator(device=ctx.device)
+    g.set_state(state.rng_state)
+    genome = state.genome
+
+    # 1. dynamic speciation
+    sp = speciate(genome, state.species_hint, state.proto, state.proto_ids,
+                  state.next_species_id, cfg.delta)
+
+    # 2. evaluation of every individual, all teams and trials in one batch
+    t_sim = time.perf_counter()
+    res = evaluate(genome, sp.species, sp.proto_ids, sp.proto_index, state.fitness,
+                   state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn)
+    if ctx.device.type == "cuda":
+        torch.cuda.synchronize(ctx.device)
+    sim_seconds = time.perf_counter() - t_sim
+    fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
+
+    # the best team of this generation: the focal team with the highest score
+    b = int(res.focal.argmax())
+    team = res.swarms.focal_team[b]
+    rows, counts = torch.unique(team[team >= 0], return_counts=True)
+    cost = genome_phenotype(genome).cost
+    designs = [dict(_design(genome, int(r), int(sp.species[r]), float(cost[r])), count=int(c))
+               for r, c in zip(rows.tolist(), counts.tolist())]
+    designs.sort(key=lambda d: -d["count"])
+    tm = {k: float(v[b]) for k, v in res.team_metrics.items()}
+    team_record = {
+        "generation": state.generation, "fitness": float(res.focal[b]),
+        "cost": float(res.team_cost[b]), "species": len(designs),
+        "deliveries_individual": tm["delivered_individual"],
+        "deliveries_collab": tm["delivered_collab"],
+        "deliveries": tm["delivered_individual"] + tm["delivered_collab"],
+        "energy_used": tm["energy_used"], "designs": designs,
+    }
+    best = state.best
+    if best is None or team_record["fitness"] > best["fitness"]:
+        best = team_record
+
+    ids, sizes = torch.unique(sp.species, return_counts=True)
+    composition = {
+        "generation": state.generation,
+        "population": {int(i): int(n) for i, n in zip(ids.tolist(), sizes.tolist())},
+        "team": {str(d["species"]): d["count"] for d in designs},
+    }
+
+    # 3. reproduction
+    children, hint, is_elite, parent = reproduce(genome, fit, sp.species, sp.proto_index,
+                                                 sp.proto_ids, ctx.repro, g)
+    new_state = EvolutionState(
+        generation=state.generation + 1, genome=children, species_hint=hint,
+        proto=genome.index(sp.proto_index), proto_ids=sp.proto_ids,
+        next_species_id=sp.next_species_id,
+        fitness=torch.where(is_elite, fit[parent], 0.0), has_fitness=is_elite,
+        rng_state=g.get_state(), best=best, history=state.history + [composition])
+
+    budget = cfg.budget if cfg.budget is not None else float("nan")
+    metrics = {
+        "generation": state.generation,
+        "fitness/best": float(fit.max()), "fitness/mean": float(fit.mean()),
+        "species/count": int(ids.numel()),
+        "team/fitness": team_record["fitness"], "team/species": team_record["species"],
+        "team/cost": team_record["cost"], "team/budget": budget,
+        "team/deliveries": team_record["deliveries"],
+        "team/deliveries_individual": team_record["deliveries_individual"],
+        "team/deliveries_collab": team_record["deliveries_collab"],
+        "team/energy_used": team_record["energy_used"],
+        "perf/generation_seconds": time.perf_counter() - t0,
+        "perf/sim_seconds": sim_seconds,
+        # non-scalars, for reporters
+        "team": team_record, "best": best, "composition": composition,
+        "hist/radius": genome.radius.detach().cpu(),
+        "hist/dominance": genome.dominance.detach().cpu(),
+        "hist/selectivity": genome.selectivity.detach().cpu(),
+    }
+    return new_state, metrics
+
+
+# ------------------------------------------------------------------ checkpoints
+def state_dict(state: EvolutionState, cfg: EvolveConfig) -> dict:
+    """A CPU, torch.save-able snapshot of the run."""
+    return {
+        "version": CHECKPOINT_VERSION, "config": cfg.to_dict(), "generation": state.generation,
+        "genome": state.genome.state_dict(), "species_hint": state.species_hint.cpu(),
+        "proto": state.proto.state_dict() if state.proto is not None else None,
+        "proto_ids": state.proto_ids.cpu(), "next_species_id": state.next_species_id,
+        "fitness": state.fitness.cpu(), "has_fitness": state.has_fitness.cpu(),
+        "rng_state": state.rng_state.cpu(), "best": state.best, "history": state.history,
+    }
+
+
+def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
+    """Rebuild a state from `state_dict` output; ValueError if it does not fit this run."""
+    if not isinstance(d, dict) or d.get("version") != CHECKPOINT_VERSION:
+        raise ValueError("checkpoint has an unknown format or version")
+    dev = ctx.device
+    genome = Genome.from_state_dict(d["genome"]).to(dev)
+    if genome.size != ctx.cfg.population or genome.bt.shape[1] != ctx.cfg.bt_length \
+            or genome.tag.shape[1] != ctx.cfg.tag_length:
+        raise ValueError("checkpoint does not match the run's population, tag or tree length")
+    if ctx.device.type == "cpu":
+        rng = d["rng_state"]
+    else:  # a CPU-saved CUDA generator state is restored as is
+        rng = d["rng_state"]
+    return EvolutionState(
+        generation=int(d["generation"]), genome=genome, species_hint=d["species_hint"].to(dev),
+        proto=Genome.from_state_dict(d["proto"]).to(dev) if d["proto"] is not None else None,
+        proto_ids=d["proto_ids"].to(dev), next_species_id=int(d["next_species_id"]),
+        fitness=d["fitness"].to(dev), has_fitness=d["has_fitness"].to(dev), rng_state=rng,
+        best=d["best"], history=list(d["history"]))
+
+
+class Evolution:
+    """A run: config, context and current state; `step()` runs one generation."""
+
+    def __init__(self, cfg: EvolveConfig, state: EvolutionState | None = None):
+        self.ctx = make_context(cfg)
+        self.cfg = cfg
+        self.state = state if state is not None else init_state(self.ctx)
+
+    @classmethod
+    def from_checkpoint(cls, d: dict, cfg: EvolveConfig) -> "Evolution":
+        ev = cls.__new__(cls)
+        ev.ctx = make_context(cfg)
+        ev.cfg = cfg
+        ev.state = load_state_dict(d, ev.ctx)
+        return ev
+
+    @property
+    def done(self) -> bool:
+        return self.state.generation >= self.cfg.generations
+
+    def step(self) -> dict:
+        self.state, metrics = generation(self.state, self.ctx)
+        return metrics
+
+    def state_dict(self) -> dict:
+        return state_dict(self.state, self.cfg)
+
+
+def with_overrides(cfg: EvolveConfig, **kw) -> EvolveConfig:
+    """A copy of cfg with the given fields replaced (None values are ignored)."""
+    return replace(cfg, **{k: v for k, v in kw.items() if v is not None})

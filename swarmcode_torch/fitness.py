@@ -1,0 +1,80 @@
+"""The SwarmCoDe fitness: raw task score, budget penalty, marginal-contribution gate and EMA.
+
+Everything here is a pure, element-wise function of tensors (any batch shape).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+#: Keys `raw_fitness` reads from its metrics dict (all tensors of one common shape).
+METRIC_KEYS = (
+    "delivered_individual", "delivered_collab", "grips_delivered", "picked_individual",
+    "picked_collab", "mean_final_energy", "proximity", "closeness",
+)
+
+
+@dataclass(frozen=True)
+class FitnessWeights:
+    """Weights of the raw-fitness terms (paper defaults); `inactive_factor` is P_activity when
+    no package was picked up, `floor` the minimum raw fitness."""
+
+    W_delivery: float = 100.0
+    W_collab_bonus: float = 50.0
+    W_pickup: float = 1.0
+    W_energy: float = 0.03
+    W_proximity: float = 1.0
+    W_closeness: float = 30.0
+    inactive_factor: float = 0.5
+    floor: float = 0.1
+
+
+def raw_fitness(m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()) -> Tensor:
+    """dict of [...] metric tensors (see METRIC_KEYS) -> [...] float F_raw (>= w.floor)."""
+    missing = [k for k in METRIC_KEYS if k not in m]
+    if missing:
+        raise KeyError(f"raw_fitness is missing metrics: {', '.join(missing)}")
+    f = {k: torch.as_tensor(m[k]).float() for k in METRIC_KEYS}
+    s_delivery = f["delivered_individual"] * w.W_delivery
+    s_collab = f["grips_delivered"] * w.W_delivery + f["delivered_collab"] * w.W_collab_bonus
+    picked = f["picked_individual"] + f["picked_collab"]
+    s_pickup = picked * w.W_pickup
+    s_energy = f["mean_final_energy"] * w.W_energy
+    s_proximity = f["proximity"] * w.W_proximity
+    s_closeness = f["closeness"] * w.W_closeness
+    p_activity = torch.where(picked <= 0, torch.full_like(picked, w.inactive_factor),
+                             torch.ones_like(picked))
+    total = (s_delivery + s_collab + s_pickup + s_energy + s_proximity + s_closeness) * p_activity
+    return total.clamp(min=w.floor)
+
+
+def budget_penalty(cost: Tensor, budget: float | Tensor | None, lam: float = 0.001,
+                   floor: float = 0.05) -> Tensor:
+    """[...] team cost -> [...] factor: max(floor, exp(-lam (cost - budget))) over budget, else 1."""
+    cost = torch.as_tensor(cost).float()
+    ones = torch.ones_like(cost)
+    if budget is None:
+        return ones
+    over = cost - torch.as_tensor(budget, dtype=cost.dtype, device=cost.device)
+    pen = torch.exp(-lam * over).clamp(min=floor)
+    return torch.where(over > 0, pen, ones)
+
+
+def gate(f_focal: Tensor, f_baseline: Tensor, p_marginal: float = 0.25) -> Tensor:
+    """[...] focal / baseline team fitness -> [...]: f_focal if it beats the baseline, else f_focal * p_marginal."""
+    return torch.where(f_focal - f_baseline > 0, f_focal, f_focal * p_marginal)
+
+
+def ema(prev: Tensor, new: Tensor, has_prev: Tensor, alpha: float = 0.6) -> Tensor:
+    """[...] -> [...]: alpha*prev + (1-alpha)*new where has_prev, else new; alpha is the decay (weight of the OLD value)."""
+    return torch.where(has_prev, alpha * prev + (1.0 - alpha) * new, new)
+
+
+def team_cost(robot_cost: Tensor, robot_present: Tensor, species_count: Tensor,
+              overhead: float) -> Tensor:
+    """[..., N] robot cost, [..., N] bool present, [...] species count -> [...] sum of present costs + overhead*count."""
+    hw = torch.where(robot_present, robot_cost, torch.zeros_like(robot_cost)).sum(-1)
+    return hw + overhead * species_count.to(hw.dtype)

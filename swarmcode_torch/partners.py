@@ -1,0 +1,147 @@
+"""Partner choice and swarm assembly: the composition step of the cooperative evaluation."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import torch
+from torch import Tensor
+
+from .reproduction import elite_count
+from .speciation import hamming
+
+
+@dataclass(frozen=True, eq=False)
+class Swarms:
+    """Teams of B evaluations with S slots (population rows; -1 = empty slot).
+
+    focal_team [B, S], baseline_team [B, S], focal_species_count [B] (1 + partners in the team),
+    baseline_species_count [B] (partners in the team), focal_slot [B, S] bool (slots of the focal
+    design in focal_team = the slots re-filled in baseline_team), partner_in_team [B, K] bool.
+    """
+
+    focal_team: Tensor
+    baseline_team: Tensor
+    focal_species_count: Tensor
+    baseline_species_count: Tensor
+    focal_slot: Tensor
+    partner_in_team: Tensor
+
+
+def choose_partners(tag: Tensor, selectivity: Tensor, species: Tensor, proto_ids: Tensor,
+                    proto_tag: Tensor, elite_index: Tensor, generator: torch.Generator) -> Tensor:
+    """tag [P, L] bool, selectivity [P], species [P], proto_ids [K], proto_tag [K, L], elite_index [K, M] -> partner_rows [P, K] long.
+
+    Species k is a partner of i iff it is not i's species, has >= 1 elite, and H(tag_i, proto_tag_k)/L
+    < selectivity_i (strict); partner_rows[i, k] is one of k's elites drawn uniformly, else -1.
+    """
+    p, l = tag.shape
+    k = proto_ids.numel()
+    dev = tag.device
+    if k == 0 or p == 0 or elite_index.shape[1] == 0:
+        return torch.full((p, k), -1, dtype=torch.long, device=dev)
+    dist = hamming(tag, proto_tag.to(dev)) / max(l, 1)                    # [P, K]
+    valid = elite_index >= 0
+    count = valid.sum(1)                                                  # [K]
+    eligible = (dist < selectivity[:, None]) & (species[:, None] != proto_ids[None, :])
+    eligible &= (count > 0)[None, :]
+    # left-pack each species' elites so that entries 0..count-1 are valid
+    packed = elite_index.gather(1, torch.sort((~valid).to(torch.uint8), dim=1, stable=True).indices)
+    u = torch.rand(p, k, generator=generator, device=dev)
+    j = torch.minimum((u * count[None, :]).long(), (count - 1).clamp(min=0)[None, :])
+    rows = packed[torch.arange(k, device=dev)[None, :].expand(p, k), j]
+    return torch.where(eligible, rows, torch.full_like(rows, -1))
+
+
+def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids: Tensor,
+               n_elite_fn: Callable[[Tensor], Tensor] = elite_count) -> Tensor:
+    """fitness [P], has_fitness [P] bool, species [P], proto_ids [K] -> [K, M] long elite rows per species, best first, -1 padded.
+
+    N_k = n_elite_fn(sizes [K] long) (capped by the size); individuals without fitness rank below
+    those with it; ties by lowest row; individuals whose species is not in proto_ids are ignored.
+    """
+    p = fitness.numel()
+    k = proto_ids.numel()
+    dev = fitness.device
+    if k == 0:
+        return torch.full((0, 0), -1, dtype=torch.long, device=dev)
+    match = species[:, None] == proto_ids[None, :]
+    pos = torch.where(match.any(1), match.to(torch.int32).argmax(1).long(),
+                      torch.full((p,), k, dtype=torch.long, device=dev))  # k: not in any species
+    f = torch.where(has_fitness, torch.nan_to_num(fitness.float(), nan=-torch.inf),
+                    torch.full_like(fitness, -torch.inf, dtype=torch.float))
+    order = torch.sort(f, descending=True, stable=True).indices
+    order = order[torch.sort((~has_fitness[order]).to(torch.uint8), stable=True).indices]
+    order = order[torch.sort(pos[order], stable=True).indices]
+    sizes_all = torch.bincount(pos, minlength=k + 1)
+    sizes = sizes_all[:k]
+    n = torch.minimum(torch.as_tensor(n_elite_fn(sizes), device=dev).long(), sizes)
+    m = int(n.max())
+    starts = sizes_all.cumsum(0) - sizes_all
+    pos_sorted = pos[order]
+    rank = torch.arange(p, device=dev) - starts[pos_sorted]
+    n_ext = torch.cat([n, torch.zeros(1, dtype=torch.long, device=dev)])
+    keep = rank < n_ext[pos_sorted]
+    flat = torch.full((k * m + 1,), -1, dtype=torch.long, device=dev)
+    target = torch.where(keep, pos_sorted * m + rank, torch.full_like(rank, k * m))
+    flat.scatter_(0, target, torch.where(keep, order, torch.full_like(order, -1)))
+    return flat[:k * m].view(k, m)
+
+
+def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swarm_size: int,
+                    generator: torch.Generator) -> Swarms:
+    """focal [B] rows, partner_rows [B, K] (-1 none), dominance [P] -> Swarms of swarm_size S slots.
+
+    Slot 0: the focal design; slots 1..: one per partner in the team (in species order; a uniform
+    random subset of S - 1 if there are more partners); remaining slots: clones drawn from {focal,
+    partners in the team} with probability proportional to dominance (uniform if all are 0).
+    The baseline team re-fills every focal slot by dominance among the partners in the team
+    (-1 if there are none).
+    """
+    b, k = partner_rows.shape
+    s = int(swarm_size)
+    dev = partner_rows.device
+    focal = focal.long().to(dev)
+    dom = dominance.float().clamp(min=0.0)
+    valid = partner_rows >= 0
+
+    # uniform random subset of at most S - 1 partners: rank partners by random keys
+    keys = torch.rand(b, k, generator=generator, device=dev).masked_fill(~valid, 2.0)
+    rank = torch.empty(b, k, dtype=torch.long, device=dev)
+    rank.scatter_(1, torch.sort(keys, dim=1, stable=True).indices,
+                  torch.arange(k, device=dev).expand(b, k).contiguous())
+    in_team = valid & (rank < s - 1)
+    n_team = in_team.sum(1)
+
+    team = torch.full((b, s + 1), -1, dtype=torch.long, device=dev)     # column s: discard bin
+    team[:, 0] = focal
+    slot = torch.where(in_team, in_team.long().cumsum(1), torch.full_like(rank, s))
+    team.scatter_(1, slot, torch.where(in_team, partner_rows, torch.full_like(partner_rows, -1)))
+    team = team[:, :s]
+
+    team_partners = torch.where(in_team, partner_rows, torch.full_like(partner_rows, -1))
+    cand = torch.cat([focal[:, None], team_partners], 1)                  # [B, 1 + K]
+    cand_ok = cand >= 0
+    w = torch.where(cand_ok, dom[cand.clamp(min=0)], torch.zeros(cand.shape, device=dev))
+    w = torch.where(w.sum(1, keepdim=True) > 0, w, cand_ok.float())
+    draw = torch.multinomial(w, s, replacement=True, generator=generator)  # [B, S]
+    empty = team < 0
+    focal_team = torch.where(empty, cand.gather(1, draw), team)
+    focal_slot = empty & (draw == 0)
+    focal_slot[:, 0] = True
+
+    has_p = n_team > 0
+    if k > 0:
+        pw = torch.where(in_team, dom[partner_rows.clamp(min=0)], torch.zeros(b, k, device=dev))
+        pw = torch.where(pw.sum(1, keepdim=True) > 0, pw, in_team.float())
+        pw = torch.where(has_p[:, None], pw, torch.ones_like(pw))        # dummy rows, masked below
+        bdraw = torch.multinomial(pw, s, replacement=True, generator=generator)
+        brows = torch.where(has_p[:, None], partner_rows.gather(1, bdraw),
+                            torch.full((b, s), -1, dtype=torch.long, device=dev))
+    else:
+        brows = torch.full((b, s), -1, dtype=torch.long, device=dev)
+    baseline_team = torch.where(focal_slot, brows, focal_team)
+    return Swarms(focal_team=focal_team, baseline_team=baseline_team,
+                  focal_species_count=n_team + 1, baseline_species_count=n_team,
+                  focal_slot=focal_slot, partner_in_team=in_team)

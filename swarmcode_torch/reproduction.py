@@ -1,0 +1,346 @@
+"""Selection, mating and mutation: per-species elitism, NEAT offspring quotas, tournaments,
+crossover and mutation of whole populations as batched tensor operations."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Callable
+
+import torch
+from torch import Tensor
+
+from .bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ
+from .genome import NUM_TIERS, R_MAX, R_MIN, Genome
+from .speciation import distance
+
+DistanceFn = Callable[[Genome, Genome], Tensor]
+
+
+@dataclass(frozen=True)
+class ReproductionParams:
+    """Reproduction hyperparameters (paper values where the paper gives one).
+
+    tournament_size: individuals per tournament (with replacement; the fittest wins).
+    crossover_same / crossover_cross: crossover probability when both parents are of the same /
+        of different species (otherwise the child is a clone of parent 1).
+    mate_tries: in-species tournaments tried for a second parent within distance `delta` of parent
+        1 (and not parent 1 itself) before falling back to a global tournament (excluding parent 1).
+    delta: mating compatibility threshold on the genome distance (same as the speciation delta).
+    max_elite: E in the elite count N = max(1, min(E, floor(size / 5) + 1)).
+    bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
+    bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
+    bt_point_count: slots re-drawn by one point mutation (each a uniform slot, may repeat).
+    point_opcode_weights: weights of opcodes 0..13 for a point mutation; END and NOP at half weight
+        so that structure-breaking / deleting mutations are rarer than changing a node.
+    subtree_leaf_prob: probability that a replacement subtree is a single random leaf; otherwise
+        it is SEQ or SEL (uniform) with 1..subtree_max_leaves (uniform) random leaves and an END.
+    hw_sigma: std of the gaussian perturbation of radius, torque_point and battery_point, as a
+        fraction of each gene's range; applied to every gene of every non-elite offspring, clipped.
+    social_sigma: the same for selectivity and dominance (range [0, 1]).
+    p_categorical: per-gene probability of resampling chassis, battery, motor tier and effector
+        uniformly (the new value may equal the old one).
+    p_tag_flip: per-bit tag flip probability; None means 1 / L_tag.
+    """
+
+    tournament_size: int = 3
+    crossover_same: float = 0.7
+    crossover_cross: float = 0.025
+    mate_tries: int = 5
+    delta: float = 0.4
+    max_elite: int = 3
+    bt_mutation_rate: float = 1.0
+    bt_subtree_prob: float = 0.05
+    bt_point_count: int = 1
+    point_opcode_weights: tuple[float, ...] = (1.0,) * 12 + (0.5, 0.5)
+    subtree_leaf_prob: float = 0.5
+    subtree_max_leaves: int = 3
+    hw_sigma: float = 0.1
+    social_sigma: float = 0.1
+    p_categorical: float = 0.1
+    p_tag_flip: float | None = None
+
+
+def elite_count(species_size: Tensor | int, max_elite: int = 3) -> Tensor | int:
+    """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite, size // 5 + 1)); max_elite is the paper's E."""
+    if isinstance(species_size, Tensor):
+        return torch.clamp(torch.clamp(species_size // 5 + 1, max=max_elite), min=1)
+    return max(1, min(max_elite, int(species_size) // 5 + 1))
+
+
+def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
+                     protect: int | None = None) -> Tensor:
+    """[K] total adjusted fitness per species -> [K] long quotas summing to population_size.
+
+    Proportional shares rounded by largest remainder (ties: lowest index); all-zero (or negative)
+    fitness gives equal shares. `protect` (a species position) is guaranteed a quota >= 1, taken
+    from the species with the largest quota (ties: lowest index). In `reproduce`, elites are
+    counted inside the quota: a species whose quota is below its elite count keeps only its top
+    `quota` elites; a quota of 0 means the species gets no child (it goes extinct) unless protected.
+    """
+    dev = adjusted_fitness_sum.device
+    k = adjusted_fitness_sum.numel()
+    if k == 0:
+        return torch.zeros(0, dtype=torch.long, device=dev)
+    f = torch.nan_to_num(adjusted_fitness_sum.double(), nan=0.0).clamp(min=0.0)
+    if not bool(f.sum() > 0):
+        f = torch.ones_like(f)
+    share = f / f.sum() * population_size
+    base = share.floor()
+    q = base.long()
+    rem = int(population_size - int(q.sum()))
+    rem = max(0, min(rem, k))
+    if rem > 0:
+        order = torch.sort(share - base, descending=True, stable=True).indices
+        q[order[:rem]] += 1
+    if protect is not None and int(q[protect]) == 0 and population_size > 0:
+        q[int(q.argmax())] -= 1
+        q[protect] = 1
+    return q
+
+
+# ---------------------------------------------------------------------------------------------
+# Behavior-tree operators
+
+
+def subtree_end(bt: Tensor, start: Tensor) -> Tensor:
+    """[N, L] opcodes, [N] start slot -> [N] end (exclusive) of the subtree rooted at start.
+
+    For SEQ/SEL: the index past its matching END (L if unclosed); otherwise start + 1.
+    (Local helper with the same definition as the jump table; to be replaced by bt.compute_jumps.)
+    """
+    n, l = bt.shape
+    t = torch.arange(l, device=bt.device)[None, :]
+    s = start[:, None]
+    is_ctrl = (bt == SEQ) | (bt == SEL)
+    step = is_ctrl.long() - (bt == END).long()
+    step = torch.where(t >= s, step, torch.zeros_like(step))
+    depth = step.cumsum(1)
+    closes = (depth == 0) & (t > s)
+    first = closes.to(torch.int32).argmax(1).long()
+    ctrl_at_start = is_ctrl.gather(1, s).squeeze(1)
+    closed_end = torch.where(closes.any(1), first + 1, torch.full_like(first, l))
+    return torch.where(ctrl_at_start, closed_end, start + 1)
+
+
+def replace_subtree(bt: Tensor, start: Tensor, subtree: Tensor, subtree_len: Tensor) -> Tensor:
+    """[N, L] opcodes, [N] start, [N, S] new subtrees, [N] their lengths -> [N, L] programs.
+
+    Slots [start, subtree_end) are replaced by subtree[:len]; the tail shifts and the result is
+    truncated or NOP-padded to L.
+    """
+    n, l = bt.shape
+    if l == 0 or n == 0:
+        return bt.clone()
+    s_max = subtree.shape[1]
+    end = subtree_end(bt, start)
+    t = torch.arange(l, device=bt.device)[None, :]
+    s, m, e = start[:, None], subtree_len[:, None], end[:, None]
+    from_sub = subtree.gather(1, (t - s).clamp(0, s_max - 1))
+    tail = t - s - m + e
+    from_tail = bt.gather(1, tail.clamp(0, l - 1))
+    from_tail = torch.where(tail < l, from_tail, torch.full_like(from_tail, NOP))
+    return torch.where(t < s, bt, torch.where(t < s + m, from_sub, from_tail))
+
+
+def random_subtrees(n: int, params: ReproductionParams, generator: torch.Generator,
+                    device: torch.device | str = "cpu") -> tuple[Tensor, Tensor]:
+    """-> ([n, max_leaves + 2] long subtrees NOP-padded, [n] long lengths): a leaf, or SEQ/SEL + 1..max leaves + END."""
+    ml = params.subtree_max_leaves
+    s_max = ml + 2
+    leaf_ops = torch.tensor(LEAF_OPS, dtype=torch.long, device=device)
+    is_leaf = torch.rand(n, generator=generator, device=device) < params.subtree_leaf_prob
+    ctrl = torch.randint(0, 2, (n,), generator=generator, device=device)     # SEQ=0 / SEL=1
+    k = torch.randint(1, ml + 1, (n,), generator=generator, device=device)
+    leaves = leaf_ops[torch.randint(0, len(LEAF_OPS), (n, s_max), generator=generator,
+                                    device=device)]
+    t = torch.arange(s_max, device=device)[None, :]
+    kk = k[:, None]
+    nop = torch.full((n, s_max), NOP, dtype=torch.long, device=device)
+    ctrl_form = torch.where(t == 0, torch.where(ctrl[:, None] == 0, SEQ, SEL),
+                            torch.where(t <= kk, leaves, torch.where(t == kk + 1, END, nop)))
+    leaf_form = torch.where(t == 0, leaves, nop)
+    sub = torch.where(is_leaf[:, None], leaf_form, ctrl_form)
+    length = torch.where(is_leaf, torch.ones_like(k), k + 2)
+    return sub, length
+
+
+def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator) -> Tensor:
+    """[N, L] opcodes -> [N, L] opcodes after one point (may redraw the same opcode) or subtree-replacement event per row, w.p. bt_mutation_rate."""
+    n, l = bt.shape
+    if n == 0 or l == 0:
+        return bt.clone()
+    dev = bt.device
+    do = torch.rand(n, generator=generator, device=dev) < params.bt_mutation_rate
+    sub = torch.rand(n, generator=generator, device=dev) < params.bt_subtree_prob
+    weights = torch.tensor(params.point_opcode_weights, dtype=torch.float, device=dev)
+    if weights.numel() != NUM_OPCODES:
+        raise ValueError(f"point_opcode_weights needs {NUM_OPCODES} entries")
+    point = bt.clone()
+    for _ in range(params.bt_point_count):
+        slot = torch.randint(0, l, (n, 1), generator=generator, device=dev)
+        op = torch.multinomial(weights, n, replacement=True, generator=generator)
+        point.scatter_(1, slot, op[:, None].to(bt.dtype))
+    start = torch.randint(0, l, (n,), generator=generator, device=dev)
+    subtree, sub_len = random_subtrees(n, params, generator, dev)
+    replaced = replace_subtree(bt, start, subtree.to(bt.dtype), sub_len)
+    out = torch.where((do & ~sub)[:, None], point, bt)
+    return torch.where((do & sub)[:, None], replaced, out)
+
+
+# ---------------------------------------------------------------------------------------------
+# Whole-genome operators
+
+#: Gene groups inherited together in uniform crossover (tier + operating point of one part move together).
+CROSSOVER_GROUPS: tuple[tuple[str, ...], ...] = (
+    ("selectivity",), ("dominance",), ("radius",), ("chassis",),
+    ("battery", "battery_point"), ("motor", "torque_point"), ("effector",),
+)
+
+
+def crossover(a: Genome, b: Genome, generator: torch.Generator) -> Genome:
+    """Parents [N], [N] -> child [N]: uniform per gene group, uniform per tag bit, one-point BT crossover at the same cut in 1..L-1."""
+    n = a.size
+    dev = a.bt.device
+    out: dict[str, Tensor] = {}
+    pick = torch.rand(n, len(CROSSOVER_GROUPS), generator=generator, device=dev) < 0.5
+    for gi, group in enumerate(CROSSOVER_GROUPS):
+        for name in group:
+            out[name] = torch.where(pick[:, gi], getattr(a, name), getattr(b, name))
+    bits = torch.rand(a.tag.shape, generator=generator, device=dev) < 0.5
+    out["tag"] = torch.where(bits, a.tag, b.tag)
+    l = a.bt.shape[1]
+    if l >= 2:
+        cut = torch.randint(1, l, (n, 1), generator=generator, device=dev)
+        t = torch.arange(l, device=dev)[None, :]
+        out["bt"] = torch.where(t < cut, a.bt, b.bt)
+    else:
+        out["bt"] = a.bt.clone()
+    return Genome(**{f.name: out[f.name] for f in fields(Genome)})
+
+
+def _gauss_clip(x: Tensor, lo: float, hi: float, sigma: float, generator: torch.Generator) -> Tensor:
+    """[N] -> [N] x + N(0, (sigma (hi - lo))^2), clipped to [lo, hi]."""
+    noise = torch.randn(x.shape, generator=generator, device=x.device, dtype=x.dtype)
+    return (x + noise * (sigma * (hi - lo))).clamp(lo, hi)
+
+
+def _resample(x: Tensor, n_values: int, p: float, generator: torch.Generator) -> Tensor:
+    """[N] long -> [N] long, each entry replaced w.p. p by a uniform value in 0..n_values-1."""
+    hit = torch.rand(x.shape, generator=generator, device=x.device) < p
+    new = torch.randint(0, n_values, x.shape, generator=generator, device=x.device, dtype=x.dtype)
+    return torch.where(hit, new, x)
+
+
+def mutate(g: Genome, params: ReproductionParams, generator: torch.Generator) -> Genome:
+    """Genome [N] -> mutated Genome [N] (BT, continuous and categorical hardware, tag bits, selectivity, dominance)."""
+    l_tag = g.tag.shape[1]
+    p_flip = params.p_tag_flip if params.p_tag_flip is not None else (1.0 / l_tag if l_tag else 0.0)
+    flips = torch.rand(g.tag.shape, generator=generator, device=g.tag.device) < p_flip
+    return Genome(
+        tag=g.tag ^ flips,
+        selectivity=_gauss_clip(g.selectivity, 0.0, 1.0, params.social_sigma, generator),
+        dominance=_gauss_clip(g.dominance, 0.0, 1.0, params.social_sigma, generator),
+        bt=mutate_bt(g.bt, params, generator),
+        radius=_gauss_clip(g.radius, R_MIN, R_MAX, params.hw_sigma, generator),
+        chassis=_resample(g.chassis, NUM_TIERS, params.p_categorical, generator),
+        battery=_resample(g.battery, NUM_TIERS, params.p_categorical, generator),
+        motor=_resample(g.motor, NUM_TIERS, params.p_categorical, generator),
+        torque_point=_gauss_clip(g.torque_point, 0.0, 1.0, params.hw_sigma, generator),
+        battery_point=_gauss_clip(g.battery_point, 0.0, 1.0, params.hw_sigma, generator),
+        effector=_resample(g.effector, 2, params.p_categorical, generator),
+    )
+
+
+def _select(mask: Tensor, a: Genome, b: Genome) -> Genome:
+    """[N] bool, Genomes [N] -> Genome [N] taking a's row where mask else b's."""
+    out = {}
+    for f in fields(Genome):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        m = mask.view(-1, *([1] * (x.dim() - 1)))
+        out[f.name] = torch.where(m, x, y)
+    return Genome(**out)
+
+
+def reproduce(genome: Genome, fitness: Tensor, species: Tensor, proto_index: Tensor,
+              proto_ids: Tensor, params: ReproductionParams, generator: torch.Generator,
+              distance_fn: DistanceFn = distance) -> tuple[Genome, Tensor, Tensor, Tensor]:
+    """Genome [P], fitness [P], species [P], prototypes [K] -> (children [P], child_species_hint [P], is_elite [P], parent_index [P]).
+
+    Quotas: proportional to each species' mean fitness (NEAT adjusted-fitness sum), the species of
+    the global best protected (>= 1). Elites (top elite_count per species, capped by the quota)
+    are copied unchanged and listed first (species by proto order, best first); the remaining
+    quota is filled by offspring: p1 by in-species tournament, p2 by in-species tournament within
+    `delta` of p1 (and != p1), up to mate_tries tries, else a global tournament (!= p1); crossover
+    w.p. crossover_same / crossover_cross (same / different species) else clone p1; then every
+    offspring is mutated. Hints: the elite's own species / p1's species; parent_index: the elite
+    row / p1. `distance_fn(genome, genome)` is called once ([P, P]); `proto_index` is unused
+    (kept for the API). Fitness must be finite for every individual.
+    """
+    p = genome.size
+    dev = genome.bt.device
+    k = proto_ids.numel()
+    ids = proto_ids.to(dev).long()
+    match = species[:, None] == ids[None, :]
+    if p and not bool(match.any(1).all()):
+        raise ValueError("every individual's species must be listed in proto_ids")
+    pos = match.to(torch.int32).argmax(1).long()
+    sizes = torch.bincount(pos, minlength=k)
+    fit = fitness.float()
+    fsum = torch.zeros(k, dtype=torch.float64, device=dev).index_add_(0, pos, fit.double())
+    adjusted = fsum / sizes.clamp(min=1)
+    quota = torch.zeros(k, dtype=torch.long, device=dev)
+    nonempty = (sizes > 0).nonzero().squeeze(1)                           # empty species get 0
+    if p:
+        best_pos = pos[int(fit.argmax())]
+        protect = int((nonempty == best_pos).to(torch.int32).argmax())
+        quota[nonempty] = offspring_quotas(adjusted[nonempty], p, protect=protect)
+    n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
+
+    # Population sorted by (species position, fitness desc, row asc).
+    order = torch.sort(fit, descending=True, stable=True).indices
+    order = order[torch.sort(pos[order], stable=True).indices]
+    starts = sizes.cumsum(0) - sizes
+    pos_sorted = pos[order]
+    rank = torch.arange(p, device=dev) - starts[pos_sorted]
+    elite = order[rank < n_elite[pos_sorted]]
+
+    off_pos = torch.repeat_interleave(torch.arange(k, device=dev), quota - n_elite)
+    n_off = off_pos.numel()
+    ts = params.tournament_size
+
+    def tournament(spos: Tensor, tries: int) -> Tensor:
+        """[N] species positions -> [N, tries] tournament winners (rows) within those species."""
+        u = torch.rand(spos.numel(), tries, ts, generator=generator, device=dev)
+        size = sizes[spos].view(-1, 1, 1)
+        local = (u * size).long().clamp(max=size - 1)
+        rows = order[starts[spos].view(-1, 1, 1) + local]
+        win = fit[rows].argmax(-1, keepdim=True)
+        return rows.gather(-1, win).squeeze(-1)
+
+    p1 = tournament(off_pos, 1)[:, 0]
+    cand = tournament(off_pos, params.mate_tries)                         # [N, tries]
+    dmat = distance_fn(genome, genome)
+    ok = (dmat[p1[:, None], cand] <= params.delta) & (cand != p1[:, None])
+    local_p2 = cand.gather(1, ok.to(torch.int32).argmax(1, keepdim=True).long()).squeeze(1)
+    if p > 1:
+        g = torch.randint(0, p - 1, (n_off, ts), generator=generator, device=dev)
+        g = g + (g >= p1[:, None]).long()                                 # uniform over rows != p1
+    else:
+        g = torch.zeros(n_off, ts, dtype=torch.long, device=dev)
+    global_p2 = g.gather(1, fit[g].argmax(1, keepdim=True)).squeeze(1)
+    p2 = torch.where(ok.any(1), local_p2, global_p2)
+
+    same = species[p2] == species[p1]
+    p_cross = torch.where(same, torch.full((n_off,), params.crossover_same, device=dev),
+                          torch.full((n_off,), params.crossover_cross, device=dev))
+    do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
+    g1, g2 = genome.index(p1), genome.index(p2)
+    child = _select(do_cross, crossover(g1, g2, generator), g1)
+    child = mutate(child, params, generator)
+
+    children = Genome.cat([genome.index(elite), child])
+    hint = torch.cat([species[elite], species[p1]])
+    is_elite = torch.cat([torch.ones(elite.numel(), dtype=torch.bool, device=dev),
+                          torch.zeros(n_off, dtype=torch.bool, device=dev)])
+    parent = torch.cat([elite, p1])
+    return children, hint, is_elite, parent

@@ -1,0 +1,271 @@
+from dataclasses import fields
+
+import pytest
+import torch
+
+from swarmcode_torch.bt import (ACT_DROP, ACT_MOVE_TO_BASE, ACT_MOVE_TO_PACK,
+                                ACT_MOVE_TO_RANDOM_PACK, ACT_PICK_UP, ACT_RANDOM_WALK,
+                                COND_HAS_PACKAGE, END, LEAF_OPS, NOP, SEL, SEQ)
+from swarmcode_torch.genome import R_MAX, R_MIN, Genome
+from swarmcode_torch.reproduction import (ReproductionParams, crossover, elite_count,
+                                          mutate, mutate_bt, offspring_quotas, random_subtrees,
+                                          replace_subtree, reproduce, subtree_end)
+from swarmcode_torch.speciation import speciate
+
+
+def random_genomes(n, gen, l_tag=8, l_bt=12):
+    return Genome(
+        tag=torch.rand(n, l_tag, generator=gen) < 0.5,
+        selectivity=torch.rand(n, generator=gen), dominance=torch.rand(n, generator=gen),
+        bt=torch.randint(0, 14, (n, l_bt), generator=gen),
+        radius=R_MIN + (R_MAX - R_MIN) * torch.rand(n, generator=gen),
+        chassis=torch.randint(0, 3, (n,), generator=gen),
+        battery=torch.randint(0, 3, (n,), generator=gen),
+        motor=torch.randint(0, 3, (n,), generator=gen),
+        torque_point=torch.rand(n, generator=gen), battery_point=torch.rand(n, generator=gen),
+        effector=torch.randint(0, 2, (n,), generator=gen))
+
+
+def genome_equal(a: Genome, b: Genome) -> bool:
+    return all(torch.equal(getattr(a, f.name), getattr(b, f.name)) for f in fields(Genome))
+
+
+def check_bounds(g: Genome):
+    assert g.bt.dtype == torch.long and int(g.bt.min()) >= 0 and int(g.bt.max()) <= 13
+    assert torch.all((g.radius >= R_MIN) & (g.radius <= R_MAX))
+    for name in ("selectivity", "dominance", "torque_point", "battery_point"):
+        x = getattr(g, name)
+        assert torch.all((x >= 0) & (x <= 1)), name
+    for name in ("chassis", "battery", "motor"):
+        x = getattr(g, name)
+        assert torch.all((x >= 0) & (x <= 2)), name
+    assert torch.all((g.effector == 0) | (g.effector == 1))
+    assert g.tag.dtype == torch.bool
+
+
+@pytest.mark.parametrize("size,count", [(0, 1), (1, 1), (4, 1), (5, 2), (9, 2), (10, 3),
+                                        (14, 3), (15, 3), (100, 3)])
+def test_elite_count_table(size, count):
+    assert elite_count(size, 3) == count
+    assert elite_count(torch.tensor([size]), 3).item() == count
+
+
+def test_elite_count_max_elite():
+    assert elite_count(torch.tensor([1, 20, 100]), 5).tolist() == [1, 5, 5]
+    assert elite_count(100, 1) == 1
+
+
+def test_quotas_proportional_and_exact():
+    assert offspring_quotas(torch.tensor([1.0, 1.0, 2.0]), 8).tolist() == [2, 2, 4]
+    assert offspring_quotas(torch.tensor([1.0, 1.0, 1.0]), 10).tolist() == [4, 3, 3]
+    assert offspring_quotas(torch.tensor([0.0, 0.0]), 5).tolist() == [3, 2]
+    assert offspring_quotas(torch.tensor([3.0, 0.0]), 5).tolist() == [5, 0]
+    # largest remainder: shares 1.4, 2.8, 5.6, 0.2 -> floors 1, 2, 5, 0 + remainders .8, .6
+    assert offspring_quotas(torch.tensor([1.0, 2.0, 4.0, 1 / 7]), 10).tolist() == [1, 3, 6, 0]
+
+
+def test_quotas_protect():
+    assert offspring_quotas(torch.tensor([100.0, 1e-6]), 10).tolist() == [10, 0]
+    assert offspring_quotas(torch.tensor([100.0, 1e-6]), 10, protect=1).tolist() == [9, 1]
+    assert offspring_quotas(torch.tensor([100.0, 1e-6]), 10, protect=0).tolist() == [10, 0]
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_quotas_sum_random(seed):
+    gen = torch.Generator().manual_seed(seed)
+    k = int(torch.randint(1, 30, (1,), generator=gen))
+    f = torch.rand(k, generator=gen) * 100
+    p = int(torch.randint(1, 500, (1,), generator=gen))
+    q = offspring_quotas(f, p)
+    assert q.sum().item() == p and torch.all(q >= 0)
+    share = f.double() / f.double().sum() * p
+    assert torch.all((q.double() - share).abs() < 1.0)
+
+
+PROG = [SEQ, COND_HAS_PACKAGE, SEL, ACT_MOVE_TO_PACK, ACT_MOVE_TO_BASE, END, ACT_RANDOM_WALK,
+        END, NOP, NOP]
+
+
+def test_subtree_end_hand_program():
+    bt = torch.tensor([PROG] * 6)
+    start = torch.tensor([0, 2, 1, 5, 8, 6])
+    assert subtree_end(bt, start).tolist() == [8, 6, 2, 6, 9, 7]
+    unclosed = torch.tensor([[SEQ, ACT_PICK_UP, SEL, ACT_DROP, END, NOP]])
+    assert subtree_end(unclosed, torch.tensor([0])).tolist() == [6]
+    assert subtree_end(unclosed, torch.tensor([2])).tolist() == [5]
+
+
+def test_replace_subtree_hand_program():
+    bt = torch.tensor([PROG] * 3)
+    start = torch.tensor([2, 1, 0])
+    sub = torch.tensor([[ACT_DROP, NOP, NOP, NOP, NOP],
+                        [SEL, ACT_PICK_UP, ACT_DROP, ACT_MOVE_TO_RANDOM_PACK, END],
+                        [ACT_RANDOM_WALK, NOP, NOP, NOP, NOP]])
+    length = torch.tensor([1, 5, 1])
+    out = replace_subtree(bt, start, sub, length)
+    assert out.tolist() == [
+        [SEQ, COND_HAS_PACKAGE, ACT_DROP, ACT_RANDOM_WALK, END, NOP, NOP, NOP, NOP, NOP],
+        [SEQ, SEL, ACT_PICK_UP, ACT_DROP, ACT_MOVE_TO_RANDOM_PACK, END,   # inserted
+         SEL, ACT_MOVE_TO_PACK, ACT_MOVE_TO_BASE, END],                    # truncated tail
+        [ACT_RANDOM_WALK] + [NOP] * 9,
+    ]
+    assert torch.equal(bt, torch.tensor([PROG] * 3))     # input untouched
+
+
+def test_random_subtrees_forms():
+    gen = torch.Generator().manual_seed(0)
+    sub, length = random_subtrees(2000, ReproductionParams(), gen)
+    assert sub.shape == (2000, 5)
+    leaves = torch.tensor(LEAF_OPS)
+    for row, n in zip(sub.tolist()[:300], length.tolist()[:300]):
+        if n == 1:
+            assert row[0] in LEAF_OPS and row[1:] == [NOP] * 4
+        else:
+            assert 3 <= n <= 5 and row[0] in (SEQ, SEL) and row[n - 1] == END
+            assert all(x in LEAF_OPS for x in row[1:n - 1]) and row[n:] == [NOP] * (5 - n)
+    assert abs((length == 1).float().mean().item() - 0.5) < 0.05
+    assert torch.isin(sub[length == 1, 0], leaves).all()
+
+
+def test_mutate_bt_point_and_rate():
+    gen = torch.Generator().manual_seed(0)
+    bt = torch.randint(0, 14, (500, 12), generator=gen)
+    p = ReproductionParams(bt_subtree_prob=0.0)
+    out = mutate_bt(bt, p, gen)
+    assert ((out != bt).sum(1) <= 1).all() and (out != bt).any(1).float().mean() > 0.8
+    assert torch.equal(mutate_bt(bt, ReproductionParams(bt_mutation_rate=0.0), gen), bt)
+    sub = mutate_bt(bt, ReproductionParams(bt_subtree_prob=1.0), gen)
+    assert sub.shape == bt.shape and int(sub.min()) >= 0 and int(sub.max()) <= 13
+
+
+def test_crossover_groups_and_one_point_bt():
+    gen = torch.Generator().manual_seed(0)
+    n = 400
+    a = random_genomes(n, gen)
+    b = random_genomes(n, gen)
+    c = crossover(a, b, gen)
+    for name in ("selectivity", "dominance", "radius", "chassis", "effector"):
+        x = getattr(c, name)
+        assert torch.all((x == getattr(a, name)) | (x == getattr(b, name)))
+    # tier and operating point of battery / motor come from the same parent
+    from_a = c.battery_point == a.battery_point
+    assert torch.equal(c.battery[from_a], a.battery[from_a])
+    assert torch.equal(c.battery[~from_a], b.battery[~from_a])
+    assert 0.35 < from_a.float().mean() < 0.65
+    from_a = c.torque_point == a.torque_point
+    assert torch.equal(c.motor[from_a], a.motor[from_a])
+    assert torch.all((c.tag == a.tag) | (c.tag == b.tag))
+    # BT: a prefix of a followed by the suffix of b at one cut in 1..L-1
+    t = torch.arange(12)
+    ok = torch.zeros(n, dtype=torch.bool)
+    for cut in range(1, 12):
+        ok |= (torch.where(t < cut, a.bt, b.bt) == c.bt).all(1)
+    assert ok.all()
+    # identical parents -> identical child
+    assert genome_equal(crossover(a, a, gen), a)
+
+
+def test_mutate_bounds_and_flip_rate():
+    gen = torch.Generator().manual_seed(0)
+    g = random_genomes(2000, gen, l_tag=16)
+    g.radius[:1000] = R_MAX
+    g.selectivity[:1000] = 1.0
+    g.dominance[1000:] = 0.0
+    m = mutate(g, ReproductionParams(), gen)
+    check_bounds(m)
+    flip = (m.tag != g.tag).float().mean().item()
+    assert abs(flip - 1 / 16) < 0.01
+    changed = (m.chassis != g.chassis).float().mean().item()
+    assert abs(changed - 0.1 * 2 / 3) < 0.02                # resampled w.p. 0.1, new value 2/3
+    step = (m.torque_point - g.torque_point)[(g.torque_point > 0.4) & (g.torque_point < 0.6)]
+    assert abs(step.std().item() - 0.1) < 0.02
+
+
+def population(seed, p=60):
+    gen = torch.Generator().manual_seed(seed)
+    g = random_genomes(p, gen)
+    r = speciate(g, torch.full((p,), -1), None, torch.zeros(0, dtype=torch.long), 0, delta=1.1)
+    fit = torch.rand(p, generator=gen) * 100
+    return g, fit, r
+
+
+def test_reproduce_invariants_and_elites():
+    g, fit, r = population(0)
+    assert 2 <= r.proto_ids.numel() <= 40
+    gen = torch.Generator().manual_seed(1)
+    ch, hint, is_elite, parent = reproduce(g, fit, r.species, r.proto_index, r.proto_ids,
+                                           ReproductionParams(), gen)
+    p = g.size
+    assert ch.size == p and hint.shape == (p,) and is_elite.shape == (p,) and parent.shape == (p,)
+    check_bounds(ch)
+    # elites are exact copies and keep their species id
+    assert is_elite.any()
+    assert genome_equal(ch.index(is_elite), g.index(parent[is_elite]))
+    assert torch.equal(hint, r.species[parent])
+    assert parent[is_elite].unique().numel() == int(is_elite.sum())
+    # the global best survives
+    assert int(fit.argmax()) in parent[is_elite].tolist()
+    # every elite is among the top elite_count of its species
+    for row in parent[is_elite].tolist():
+        members = (r.species == r.species[row]).nonzero().squeeze(1)
+        n = elite_count(members.numel(), 3)
+        top = members[fit[members].argsort(descending=True)[:n]].tolist()
+        assert row in top
+    # offspring are mutated (BT mutation rate 1.0 -> nearly all differ from their parent)
+    off = ~is_elite
+    differs = (ch.bt[off] != g.bt[parent[off]]).any(1) | (ch.radius[off] != g.radius[parent[off]])
+    assert differs.all()
+
+
+def test_reproduce_elite_counts_and_quotas():
+    gen = torch.Generator().manual_seed(0)
+    g = random_genomes(17, gen)
+    species = torch.tensor([7] * 12 + [3] * 4 + [9])
+    fit = torch.ones(17)                                 # quotas 6, 6, 5
+    fit[[2, 5, 8]] = torch.tensor([1.5, 1.4, 1.3])
+    fit[[0, 1, 3]] = torch.tensor([0.8, 0.7, 0.7])       # means 1.033, 1, 1 -> 5.79, 5.6, 5.6
+    ch, hint, is_elite, parent = reproduce(g, fit, species, torch.tensor([0, 12, 16]),
+                                           torch.tensor([7, 3, 9]), ReproductionParams(), gen)
+    assert parent[is_elite].tolist() == [2, 5, 8, 12, 16]  # 3 + 1 + 1 elites, best first
+    assert torch.bincount(hint, minlength=10)[[7, 3, 9]].tolist() == [6, 6, 5]
+
+
+def test_reproduce_zero_quota_species_goes_extinct():
+    gen = torch.Generator().manual_seed(0)
+    g = random_genomes(16, gen)
+    species = torch.tensor([0] * 15 + [1])
+    fit = torch.ones(16)
+    fit[15] = 1000.0
+    ch, hint, is_elite, parent = reproduce(g, fit, species, torch.tensor([0, 15]),
+                                           torch.tensor([0, 1]), ReproductionParams(), gen)
+    assert ch.size == 16 and torch.all(hint == 1)
+    assert parent[is_elite].tolist() == [15] and torch.all(parent == 15)
+
+
+def test_reproduce_large_tournament_picks_species_best():
+    gen = torch.Generator().manual_seed(0)
+    g = random_genomes(20, gen)
+    species = torch.tensor([0] * 10 + [1] * 10)
+    fit = torch.arange(20, dtype=torch.float)
+    params = ReproductionParams(tournament_size=200)
+    _, hint, is_elite, parent = reproduce(g, fit, species, torch.tensor([0, 10]),
+                                          torch.tensor([0, 1]), params, gen)
+    assert set(parent[~is_elite].tolist()) <= {9, 19}
+
+
+def test_reproduce_deterministic():
+    g, fit, r = population(3)
+    args = (g, fit, r.species, r.proto_index, r.proto_ids, ReproductionParams())
+    a = reproduce(*args, torch.Generator().manual_seed(7))
+    b = reproduce(*args, torch.Generator().manual_seed(7))
+    c = reproduce(*args, torch.Generator().manual_seed(8))
+    assert genome_equal(a[0], b[0])
+    assert all(torch.equal(x, y) for x, y in zip(a[1:], b[1:]))
+    assert not genome_equal(a[0], c[0])
+
+
+def test_reproduce_rejects_unknown_species():
+    g, fit, r = population(0, p=10)
+    with pytest.raises(ValueError):
+        reproduce(g, fit, torch.full((10,), 999), r.proto_index, r.proto_ids,
+                  ReproductionParams(), torch.Generator().manual_seed(0))
