@@ -1,0 +1,197 @@
+"""The `swarmcode-torch` command line: scenarios, evolve, inspect."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich import box
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from . import bt
+from .scenario import ScenarioError, builtin_names, load_scenario
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="SwarmCoDe: co-design the behavior trees and hardware of robot swarms.")
+# off a terminal (logs, pipes) Rich would wrap at 80 columns; tables need a little more
+console = Console(width=None if sys.stdout.isatty() else 120)
+err = Console(stderr=True, width=None if sys.stderr.isatty() else 200)
+
+
+def fail(msg: str) -> None:
+    """Print a one-line error and exit non-zero."""
+    err.print(f"[bold red]Error:[/] {msg}", highlight=False, soft_wrap=True)
+    raise typer.Exit(code=2)
+
+
+@app.command()
+def scenarios() -> None:
+    """List the built-in scenarios."""
+    t = Table(title="Built-in scenarios (use with --scenario NAME, or give a .toml file)")
+    for col in ("name", "robots", "packages", "collab", "ticks", "$/species", "description"):
+        t.add_column(col, no_wrap=True, overflow="ellipsis")
+    for name in builtin_names():
+        s = load_scenario(name)
+        collab = sum(p.count for p in s.packages if p.kind == "collab")
+        t.add_row(name, str(s.num_robots), str(s.num_packages - collab), str(collab),
+                  str(s.episode_ticks), f"{s.species_overhead:g}", s.description)
+    console.print(t)
+
+
+class _Progress:
+    """Rich progress bar on a terminal; a plain line every few generations otherwise."""
+
+    def __init__(self, total: int, start: int, every: int):
+        self.tty = sys.stdout.isatty()
+        self.every = every
+        self.bar = None
+        if self.tty:
+            self.bar = Progress(TextColumn("gen"), MofNCompleteColumn(), BarColumn(),
+                                TextColumn("{task.description}"), TimeElapsedColumn(),
+                                console=console)
+            self.task = self.bar.add_task("", total=total, completed=start)
+
+    def on_start(self, ev) -> None:
+        if self.bar:
+            self.bar.start()
+
+    def on_generation(self, ev, m: dict) -> None:
+        text = (f"best {m['fitness/best']:.1f}  species {m['species/count']}  "
+                f"team {m['team/species']} sp ${m['team/cost']:.0f}  "
+                f"{m['perf/generation_seconds']:.2f}s/gen")
+        if self.bar:
+            self.bar.update(self.task, completed=ev.state.generation, description=text)
+        elif ev.state.generation % self.every == 0 or ev.done:
+            print(f"gen {ev.state.generation}/{ev.cfg.generations}  {text}", flush=True)
+
+    def on_end(self, ev) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        if self.bar:
+            self.bar.stop()
+            self.bar = None
+
+
+@app.command()
+def evolve(
+    scenario: Annotated[Optional[str], typer.Option(help="Built-in scenario name or a scenario .toml file.")] = None,
+    budget: Annotated[Optional[float], typer.Option(help="Fabrication budget in $ (default: none, no penalty).")] = None,
+    objective: Annotated[Optional[str], typer.Option(help="'fitness' or 'roi' (fitness / team cost).")] = None,
+    generations: Annotated[Optional[int], typer.Option(help="Total generations (with --resume: extend to this many).")] = None,
+    population: Annotated[Optional[int], typer.Option(help="Individuals in the population [default: 100].")] = None,
+    swarm_size: Annotated[Optional[int], typer.Option(help="Robots per team [default: the scenario's].")] = None,
+    trials: Annotated[Optional[int], typer.Option(help="Random environments per team evaluation [default: 3].")] = None,
+    ticks: Annotated[Optional[int], typer.Option(help="Episode length in ticks [default: the scenario's].")] = None,
+    seed: Annotated[Optional[int], typer.Option(help="Random seed [default: 0].")] = None,
+    device: Annotated[Optional[str], typer.Option(help="auto, cpu or cuda [default: auto].")] = None,
+    compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick [default: on CUDA only].")] = None,
+    logdir: Annotated[Path, typer.Option(help="Directory that holds run directories.")] = Path("runs"),
+    checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
+    log_every: Annotated[int, typer.Option(help="Generations between log lines when not on a terminal.")] = 10,
+    resume: Annotated[Optional[Path], typer.Option(help="Continue the run in this directory.")] = None,
+) -> None:
+    """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
+    from .evolve import Evolution, EvolveConfig, with_overrides
+    from .reporting import TensorBoardReporter
+    from .runs import (CheckpointReporter, RunError, SummaryReporter, new_run_dir, run,
+                       write_config)
+    from .runs import resume as resume_run
+
+    if checkpoint_every < 1 or log_every < 1:
+        fail("--checkpoint-every and --log-every must be >= 1")
+    given = dict(scenario=scenario, budget=budget, objective=objective, population=population,
+                 swarm_size=swarm_size, trials=trials, ticks=ticks, seed=seed, compile=compile)
+    try:
+        if resume is not None:
+            extra = [k.replace("_", "-") for k, v in given.items() if v is not None]
+            if extra:
+                fail(f"--resume uses the run's saved config; only --generations and --device may "
+                     f"change (got --{', --'.join(extra)})")
+            ev = resume_run(resume, generations=generations, device=device)
+            run_dir = resume
+            write_config(run_dir, ev.cfg)
+            console.print(f"Resuming [bold]{run_dir}[/] at generation {ev.state.generation} "
+                          f"of {ev.cfg.generations}")
+        else:
+            cfg = with_overrides(EvolveConfig(), generations=generations, device=device, **given)
+            cfg.validate()
+            if cfg.scenario:
+                load_scenario(cfg.scenario)  # a clear error before anything is created
+            ev = Evolution(cfg)
+            run_dir = new_run_dir(logdir, cfg)
+            write_config(run_dir, cfg)
+            console.print(f"Run directory: [bold]{run_dir}[/]  (device {ev.ctx.device}, "
+                          f"scenario {ev.ctx.scenario.name}, population {cfg.population}, "
+                          f"swarm {ev.ctx.eval_cfg.swarm_size})")
+    except (ScenarioError, RunError, ValueError) as e:
+        fail(str(e))
+
+    progress = _Progress(ev.cfg.generations, ev.state.generation, log_every)
+    reporters = [progress, SummaryReporter(run_dir), TensorBoardReporter(run_dir),
+                 CheckpointReporter(run_dir, checkpoint_every)]
+    try:
+        run(ev, run_dir, reporters)
+    except KeyboardInterrupt:
+        progress.stop()
+        err.print(f"Interrupted: checkpoint of generation {ev.state.generation} written to "
+                  f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}")
+        raise typer.Exit(code=130)
+    progress.stop()
+    console.print(f"Done: {ev.state.generation} generations in {run_dir}")
+    _print_team(run_dir)
+    console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir {run_dir.parent}")
+
+
+def _print_team(run_dir: Path) -> None:
+    path = Path(run_dir) / "summary.json"
+    if not path.is_file():
+        fail(f"{run_dir} has no summary.json (is it a run directory with a finished generation?)")
+    try:
+        s = json.loads(path.read_text())
+        designs = s["designs"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        fail(f"{path} is malformed")
+    budget = "none" if s.get("budget") is None else f"${s['budget']:g}"
+    console.print(
+        f"Best team (generation {s['best_generation']}): fitness {s['best_fitness']:.2f}, "
+        f"cost ${s['team_cost']:.0f} (budget {budget}), {s['num_species']} species, "
+        f"deliveries {s['deliveries']:.2f} ({s['deliveries_individual']:.2f} individual, "
+        f"{s['deliveries_collab']:.2f} collaborative), energy used {s['energy_used']:.1f}%")
+    t = Table(title="Robots per design", box=box.SIMPLE_HEAD,
+              caption="ch/bat/mot: chassis, battery, motor tier (1-3); torque, capacity: "
+                      "operating points (0-1); dom: dominance")
+    for col in ("robots", "species", "tool", "radius", "ch", "bat", "mot",
+                "torque", "capacity", "dom", "$ each"):
+        t.add_column(col, justify="right", no_wrap=True)
+    for d in designs:
+        t.add_row(str(d["count"]), str(d["species"]), d["effector"], f"{d['radius']:.3f}",
+                  str(d["chassis_tier"]), str(d["battery_tier"]), str(d["motor_tier"]),
+                  f"{d['torque_point']:.2f}", f"{d['battery_point']:.2f}",
+                  f"{d['dominance']:.2f}", f"{d['cost']:.0f}")
+    console.print(t)
+    return designs
+
+
+@app.command()
+def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory.")]) -> None:
+    """Show the best team of a run: robots per design, hardware, cost and behavior trees."""
+    if not run_dir.is_dir():
+        fail(f"{run_dir} is not a directory")
+    designs = _print_team(run_dir)
+    for d in designs:
+        console.print(f"[bold]species {d['species']}[/] ({d['count']} robots, {d['effector']}):")
+        console.print(bt.format_tree(d["bt"]) or "  (empty tree)", highlight=False)
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":
+    main()
