@@ -32,14 +32,21 @@ def fail(msg: str) -> None:
 @app.command()
 def scenarios() -> None:
     """List the built-in scenarios."""
-    t = Table(title="Built-in scenarios (use with --scenario NAME, or give a .toml file)")
-    for col in ("name", "robots", "packages", "collab", "ticks", "$/species", "description"):
-        t.add_column(col, no_wrap=True, overflow="ellipsis")
+    t = Table(title="Built-in scenarios (use with --scenario NAME, or give a .toml file)",
+              box=box.SIMPLE_HEAD)
+    rows = []
     for name in builtin_names():
         s = load_scenario(name)
         collab = sum(p.count for p in s.packages if p.kind == "collab")
-        t.add_row(name, str(s.num_robots), str(s.num_packages - collab), str(collab),
-                  str(s.episode_ticks), f"{s.species_overhead:g}", s.description)
+        rows.append((name, str(s.num_robots), str(s.num_packages - collab), str(collab),
+                     str(s.episode_ticks), f"{s.species_overhead:g}", s.description))
+    for i, col in enumerate(("name", "robots", "packages", "collab", "ticks", "$/species",
+                             "description")):
+        fixed = i < 6  # every column but the description keeps its full width
+        t.add_column(col, no_wrap=True, overflow="ellipsis",
+                     min_width=max(len(col), *(len(r[i]) for r in rows)) if fixed else None)
+    for r in rows:
+        t.add_row(*r)
     console.print(t)
 
 

@@ -9,7 +9,7 @@ from typing import Callable
 import torch
 from torch import Tensor
 
-from .bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ
+from .bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ, compute_jumps
 from .genome import NUM_TIERS, R_MAX, R_MIN, Genome
 from .speciation import distance
 
@@ -103,23 +103,9 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
 
 
 def subtree_end(bt: Tensor, start: Tensor) -> Tensor:
-    """[N, L] opcodes, [N] start slot -> [N] end (exclusive) of the subtree rooted at start.
-
-    For SEQ/SEL: the index past its matching END (L if unclosed); otherwise start + 1.
-    (Local helper with the same definition as the jump table; to be replaced by bt.compute_jumps.)
-    """
-    n, l = bt.shape
-    t = torch.arange(l, device=bt.device)[None, :]
-    s = start[:, None]
-    is_ctrl = (bt == SEQ) | (bt == SEL)
-    step = is_ctrl.long() - (bt == END).long()
-    step = torch.where(t >= s, step, torch.zeros_like(step))
-    depth = step.cumsum(1)
-    closes = (depth == 0) & (t > s)
-    first = closes.to(torch.int32).argmax(1).long()
-    ctrl_at_start = is_ctrl.gather(1, s).squeeze(1)
-    closed_end = torch.where(closes.any(1), first + 1, torch.full_like(first, l))
-    return torch.where(ctrl_at_start, closed_end, start + 1)
+    """[N, L] opcodes, [N] start slot -> [N] end (exclusive) of the subtree rooted at start:
+    the jump index (past the matching END for SEQ/SEL, L if unclosed; start + 1 otherwise)."""
+    return compute_jumps(bt).gather(1, start[:, None].long()).squeeze(1)
 
 
 def replace_subtree(bt: Tensor, start: Tensor, subtree: Tensor, subtree_len: Tensor) -> Tensor:

@@ -1,0 +1,116 @@
+"""The command line: evolve, resume, inspect, scenarios, and every kind of bad input."""
+
+from pathlib import Path
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from swarmcode_torch.cli import app
+from swarmcode_torch.scenario import builtin_names
+
+runner = CliRunner()
+TINY = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
+        "--ticks", "15", "--seed", "3"]
+
+
+def invoke(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def only_run(logdir: Path) -> Path:
+    runs = list(logdir.iterdir())
+    assert len(runs) == 1, runs
+    return runs[0]
+
+
+def assert_clean_error(result, *needles):
+    assert result.exit_code != 0
+    assert "Traceback" not in result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+    for n in needles:
+        assert n in result.output, result.output
+
+
+def test_scenarios_lists_every_builtin():
+    r = invoke("scenarios")
+    assert r.exit_code == 0, r.output
+    for name in builtin_names():
+        assert name in r.output
+
+
+def test_evolve_writes_a_complete_run_directory(tmp_path):
+    r = invoke("evolve", *TINY, "--generations", 2, "--logdir", tmp_path, "--budget", 900)
+    assert r.exit_code == 0, r.output
+    run = only_run(tmp_path)
+    for f in ("config.toml", "checkpoint.pt", "summary.json"):
+        assert (run / f).is_file()
+    assert list(run.glob("events.out.tfevents.*"))
+    assert "gen 2/2" in r.output  # plain progress lines off a terminal
+    r = invoke("inspect", run)
+    assert r.exit_code == 0, r.output
+    assert "Robots per design" in r.output and "species" in r.output
+
+
+def test_resume_extends_a_finished_run(tmp_path):
+    assert invoke("evolve", *TINY, "--generations", 2, "--logdir", tmp_path).exit_code == 0
+    run = only_run(tmp_path)
+    r = invoke("evolve", "--resume", run, "--generations", 3)
+    assert r.exit_code == 0, r.output
+    assert "Resuming" in r.output and "gen 3/3" in r.output
+    d = torch.load(run / "checkpoint.pt", weights_only=False)
+    assert d["generation"] == 3
+    assert "generations = 3" in (run / "config.toml").read_text()
+
+
+@pytest.mark.parametrize("args,needles", [
+    (["--budget", "-5"], ["--budget must be > 0"]),
+    (["--population", "1"], ["--population must be >= 2"]),
+    (["--generations", "0"], ["--generations must be >= 1"]),
+    (["--objective", "profit"], ["--objective"]),
+    (["--scenario", "nowhere"], ["unknown scenario", "four-niche", "budget"]),
+    (["--scenario", "missing/file.toml"], ["not found"]),
+    (["--device", "tpu"], ["--device"]),
+])
+def test_bad_options_give_one_line_errors(tmp_path, args, needles):
+    r = invoke("evolve", "--logdir", tmp_path, *args)
+    assert_clean_error(r, *needles)
+    assert not tmp_path.exists() or not any(tmp_path.iterdir())  # no run directory left behind
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="CUDA is present here")
+def test_cuda_without_cuda_is_a_clear_error(tmp_path):
+    assert_clean_error(invoke("evolve", "--device", "cuda", "--logdir", tmp_path), "no CUDA")
+
+
+def test_malformed_scenario_file_names_the_field(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "x"\narena = 20.0\nbase_radius = 1.0\nnum_robots = "many"\n'
+                   'episode_ticks = 10\n[[packages]]\nkind = "individual"\neffector = "pincher"\n'
+                   'count = 1\ndistance = [2.0, 4.0]\nmass = [1.0, 2.0]\n')
+    assert_clean_error(invoke("evolve", "--scenario", bad, "--logdir", tmp_path / "runs"),
+                       "num_robots")
+    bad.write_text("this is = not [toml")
+    assert_clean_error(invoke("evolve", "--scenario", bad, "--logdir", tmp_path / "runs"),
+                       "not valid TOML")
+
+
+def test_corrupt_and_incompatible_checkpoints(tmp_path):
+    assert invoke("evolve", *TINY, "--generations", 1, "--logdir", tmp_path).exit_code == 0
+    run = only_run(tmp_path)
+    good = (run / "checkpoint.pt").read_bytes()
+    (run / "checkpoint.pt").write_bytes(b"\x00garbage" * 10)
+    assert_clean_error(invoke("evolve", "--resume", run, "--generations", 2), "corrupt")
+    (run / "checkpoint.pt").write_bytes(good)
+    cfg = (run / "config.toml").read_text()
+    (run / "config.toml").write_text(cfg.replace("population = 6", "population = 8"))
+    assert_clean_error(invoke("evolve", "--resume", run, "--generations", 2), "does not match")
+    (run / "config.toml").write_text("population = [")
+    assert_clean_error(invoke("evolve", "--resume", run), "malformed config")
+    assert_clean_error(invoke("evolve", "--resume", tmp_path / "nope"), "not a run directory")
+    assert_clean_error(invoke("evolve", "--resume", run, "--population", 9), "--resume")
+
+
+def test_inspect_of_a_non_run_is_an_error(tmp_path):
+    assert_clean_error(invoke("inspect", tmp_path), "summary.json")
+    assert_clean_error(invoke("inspect", tmp_path / "absent"), "not a directory")

@@ -1,0 +1,142 @@
+"""SwarmCoDe end to end: evaluation batching, generations, checkpoints, resume, TensorBoard."""
+
+from dataclasses import replace
+
+import pytest
+import torch
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from swarmcode_torch.evaluation import EvalConfig, evaluate
+from swarmcode_torch.evolve import Evolution, EvolveConfig, random_population
+from swarmcode_torch.reporting import SCALAR_TAGS, TensorBoardReporter
+from swarmcode_torch.runs import (CheckpointReporter, SummaryReporter, load_checkpoint, resume,
+                                  run, write_config)
+from swarmcode_torch.scenario import load_scenario
+from swarmcode_torch.world import step as world_step
+
+TINY = EvolveConfig(scenario="one-niche", population=8, swarm_size=5, trials=2, ticks=15,
+                    generations=4, seed=1)
+
+
+def _two_identical(cfg=TINY):
+    g = torch.Generator().manual_seed(0)
+    pop = random_population(1, cfg, g, torch.device("cpu"))
+    pop = pop.index(torch.tensor([0, 0]))
+    pop.tag[:] = True
+    pop.selectivity[:] = 1.0
+    return pop
+
+
+def test_all_focal_and_baseline_trials_run_as_one_batch():
+    pop = _two_identical()
+    seen = []
+
+    def spy(state, *args):
+        seen.append(state.pos.shape)
+        return world_step(state, *args)
+
+    cfg = EvalConfig(swarm_size=5, trials=3, ticks=7)
+    evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
+             torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"), cfg,
+             torch.Generator().manual_seed(0), step_fn=spy)
+    assert len(seen) == 7                       # one tick loop
+    assert all(s == (2 * 2 * 3, 5, 2) for s in seen)  # 2 individuals x (focal, baseline) x 3 trials
+
+
+def test_identical_partner_gives_zero_marginal_and_gated_fitness():
+    # the baseline replaces the focal by an identical design in identical environments,
+    # so both teams score exactly the same and the gate applies
+    pop = _two_identical()
+    cfg = EvalConfig(swarm_size=6, trials=2, ticks=60)
+    res = evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
+                   torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"),
+                   cfg, torch.Generator().manual_seed(4))
+    assert (res.swarms.baseline_team[0] == 1).all() and (res.swarms.baseline_team[1] == 0).all()
+    assert torch.equal(res.focal, res.baseline)
+    assert torch.allclose(res.fitness, res.focal * cfg.p_marginal)
+
+
+def test_alone_an_individual_beats_an_empty_baseline():
+    pop = _two_identical()
+    pop.selectivity[:] = 0.0  # no partners: the baseline team is empty
+    cfg = EvalConfig(swarm_size=4, trials=1, ticks=30)
+    res = evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
+                   torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"),
+                   cfg, torch.Generator().manual_seed(4))
+    assert (res.swarms.baseline_team == -1).all() and (res.swarms.focal_team >= 0).all()
+    assert torch.allclose(res.baseline, torch.full((2,), 0.1))  # floor of an empty team's score
+    assert (res.fitness == res.focal).all()
+
+
+def test_generations_keep_population_and_report_metrics():
+    ev = Evolution(TINY)
+    for _ in range(3):
+        m = ev.step()
+        assert ev.state.genome.size == TINY.population
+        assert m["species/count"] >= 1 and m["team/species"] >= 1
+        assert 1 <= sum(d["count"] for d in m["team"]["designs"]) == TINY.swarm_size
+        assert m["fitness/best"] >= m["fitness/mean"] > 0
+        assert m["team/cost"] > 0
+    assert ev.state.generation == 3 and len(ev.state.history) == 3
+    assert m["best"]["fitness"] >= m["team/fitness"]
+
+
+def test_roi_objective_divides_by_cost():
+    ev = Evolution(replace(TINY, objective="roi"))
+    m = ev.step()
+    assert m["team/fitness"] < 1.0  # fitness (~100s) divided by a team cost (~$500+)
+
+
+def _same_state(a, b):
+    for name in ("tag", "bt", "radius", "dominance", "selectivity", "effector", "chassis"):
+        assert torch.equal(getattr(a.genome, name), getattr(b.genome, name)), name
+    assert torch.equal(a.fitness, b.fitness) and torch.equal(a.species_hint, b.species_hint)
+    assert a.best == b.best and a.history == b.history
+
+
+def test_resume_equals_straight_through(tmp_path):
+    straight = Evolution(TINY)
+    while not straight.done:
+        straight.step()
+
+    cfg = replace(TINY, generations=2)
+    first = Evolution(cfg)
+    write_config(tmp_path, cfg)
+    run(first, tmp_path, [CheckpointReporter(tmp_path, every=1)])
+    resumed = resume(tmp_path, generations=TINY.generations)
+    assert resumed.state.generation == 2
+    run(resumed, tmp_path, [])
+    _same_state(straight.state, resumed.state)
+
+
+def test_ctrl_c_checkpoints_the_last_finished_generation(tmp_path):
+    class Interrupt:
+        def on_start(self, ev): pass
+        def on_end(self, ev): pass
+
+        def on_generation(self, ev, metrics):
+            if ev.state.generation == 2:
+                raise KeyboardInterrupt
+
+    ev = Evolution(TINY)
+    write_config(tmp_path, TINY)
+    with pytest.raises(KeyboardInterrupt):
+        run(ev, tmp_path, [Interrupt()])
+    assert load_checkpoint(tmp_path)["generation"] == 2
+    assert resume(tmp_path).state.generation == 2
+
+
+def test_tensorboard_tags_read_back(tmp_path):
+    ev = Evolution(replace(TINY, generations=2, budget=800.0))
+    write_config(tmp_path, ev.cfg)
+    run(ev, tmp_path, [TensorBoardReporter(tmp_path, figure_every=1), SummaryReporter(tmp_path)])
+    acc = EventAccumulator(str(tmp_path), size_guidance={"images": 0, "histograms": 0})
+    acc.Reload()
+    tags = acc.Tags()
+    for tag in SCALAR_TAGS:
+        assert tag in tags["scalars"], tag
+        assert [e.step for e in acc.Scalars(tag)] == [0, 1]
+    assert acc.Scalars("team/budget")[0].value == 800.0
+    assert {"hist/radius", "hist/dominance", "hist/selectivity"} <= set(tags["histograms"])
+    assert "species/composition" in tags["images"]
+    assert any("config" in t for t in tags["tensors"])
