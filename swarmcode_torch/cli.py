@@ -105,9 +105,7 @@ def evolve(
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
     from .evolve import Evolution, EvolveConfig, with_overrides
-    from .reporting import TensorBoardReporter
-    from .runs import (CheckpointReporter, RunError, SummaryReporter, new_run_dir, run,
-                       write_config)
+    from .runs import RunError, new_run_dir, write_config
     from .runs import resume as resume_run
 
     if checkpoint_every < 1 or log_every < 1:
@@ -139,6 +137,17 @@ def evolve(
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
 
+    _execute(ev, run_dir, checkpoint_every, log_every)
+    console.print(f"Done: {ev.state.generation} generations in {run_dir}")
+    _print_team(run_dir)
+    console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir {run_dir.parent}")
+
+
+def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int) -> None:
+    """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints."""
+    from .reporting import TensorBoardReporter
+    from .runs import CheckpointReporter, SummaryReporter, run
+
     progress = _Progress(ev.cfg.generations, ev.state.generation, log_every)
     reporters = [progress, SummaryReporter(run_dir), TensorBoardReporter(run_dir),
                  CheckpointReporter(run_dir, checkpoint_every)]
@@ -150,9 +159,82 @@ def evolve(
                   f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}")
         raise typer.Exit(code=130)
     progress.stop()
-    console.print(f"Done: {ev.state.generation} generations in {run_dir}")
-    _print_team(run_dir)
-    console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir {run_dir.parent}")
+
+
+def _parse_list(text: str, kind, option: str) -> list:
+    try:
+        vals = [kind(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        fail(f"{option} expects a comma-separated list of numbers, got {text!r}")
+    if not vals:
+        fail(f"{option} is empty")
+    return vals
+
+
+@app.command()
+def sweep(
+    budgets: Annotated[str, typer.Option(help="Comma-separated budgets in $.")] = "2500,3000,4000,5000,6000,8000",
+    seeds: Annotated[str, typer.Option(help="Comma-separated seeds; one run per budget and seed.")] = "0",
+    objective: Annotated[Optional[str], typer.Option(help="'fitness' or 'roi'.")] = None,
+    scenario: Annotated[Optional[str], typer.Option(help="Scenario [default: budget].")] = None,
+    generations: Annotated[Optional[int], typer.Option(help="Generations per run [default: 500].")] = None,
+    population: Annotated[Optional[int], typer.Option(help="Population [default: 100].")] = None,
+    swarm_size: Annotated[Optional[int], typer.Option(help="Robots per team [default: the scenario's].")] = None,
+    trials: Annotated[Optional[int], typer.Option(help="Environments per evaluation [default: 3].")] = None,
+    ticks: Annotated[Optional[int], typer.Option(help="Episode length [default: the scenario's].")] = None,
+    device: Annotated[Optional[str], typer.Option(help="auto, cpu or cuda.")] = None,
+    compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick.")] = None,
+    out: Annotated[Optional[Path], typer.Option(help="Sweep directory; run again with the same --out to resume.")] = None,
+    checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
+    log_every: Annotated[int, typer.Option(help="Generations between log lines off a terminal.")] = 50,
+) -> None:
+    """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
+    import time
+
+    from .evolve import Evolution, EvolveConfig, with_overrides
+    from .runs import RunError, load_checkpoint, read_config, write_config
+    from .runs import resume as resume_run
+    from .sweep import run_name, table_rows, write_outputs
+
+    budget_list = _parse_list(budgets, float, "--budgets")
+    seed_list = _parse_list(seeds, int, "--seeds")
+    out = out or Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
+    base = with_overrides(EvolveConfig(), objective=objective, scenario=scenario,
+                          generations=generations, population=population, swarm_size=swarm_size,
+                          trials=trials, ticks=ticks, device=device, compile=compile)
+    try:
+        for b in budget_list:
+            with_overrides(base, budget=b).validate()
+        load_scenario(base.scenario)
+    except (ScenarioError, ValueError) as e:
+        fail(str(e))
+    out.mkdir(parents=True, exist_ok=True)
+    runs = []
+    for b in budget_list:
+        for s in seed_list:
+            cfg = with_overrides(base, budget=b, seed=s)
+            run_dir = out / run_name(b, s)
+            try:
+                if (run_dir / "config.toml").is_file() and (run_dir / "checkpoint.pt").is_file():
+                    if read_config(run_dir).generations >= cfg.generations and \
+                            load_checkpoint(run_dir)["generation"] >= cfg.generations:
+                        console.print(f"{run_dir.name}: already done")
+                        runs.append((b, s, run_dir))
+                        continue
+                    ev = resume_run(run_dir, generations=cfg.generations)
+                else:
+                    run_dir.mkdir(exist_ok=True)
+                    ev = Evolution(cfg)
+                    write_config(run_dir, cfg)
+            except (ScenarioError, RunError, ValueError) as e:
+                fail(str(e))
+            console.print(f"[bold]{run_dir.name}[/]: generation {ev.state.generation} -> {cfg.generations}")
+            _execute(ev, run_dir, checkpoint_every, log_every)
+            runs.append((b, s, run_dir))
+    rows = table_rows(runs)
+    paths = write_outputs(rows, out)
+    console.print((out / "table.md").read_text(), highlight=False)
+    console.print("Wrote " + ", ".join(str(p) for p in paths))
 
 
 def _print_team(run_dir: Path) -> None:

@@ -313,10 +313,10 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
     if genome.size != ctx.cfg.population or genome.bt.shape[1] != ctx.cfg.bt_length \
             or genome.tag.shape[1] != ctx.cfg.tag_length:
         raise ValueError("checkpoint does not match the run's population, tag or tree length")
-    if ctx.device.type == "cpu":
-        rng = d["rng_state"]
-    else:  # a CPU-saved CUDA generator state is restored as is
-        rng = d["rng_state"]
+    rng = d["rng_state"]
+    if rng.numel() != torch.Generator(device=dev).get_state().numel():
+        raise ValueError(f"checkpoint was written on another kind of device than {dev.type}; "
+                         "resume it with the --device it was run on")
     return EvolutionState(
         generation=int(d["generation"]), genome=genome, species_hint=d["species_hint"].to(dev),
         proto=Genome.from_state_dict(d["proto"]).to(dev) if d["proto"] is not None else None,

@@ -111,14 +111,15 @@ def make_layouts(scenario: Scenario, num: int, generator: torch.Generator,
 
     band = torch.tensor([c.radius_band for c in cls_rows], device=gdev).expand(E, P, 2)
     collab = torch.tensor([c.kind == "collab" for c in cls_rows], device=gdev).expand(E, P)
-    g_eff = torch.full((P, G), -1, dtype=torch.long, device=gdev)
-    g_off = torch.zeros(P, G, 2, device=gdev)
+    g_eff = torch.full((P, G), -1, dtype=torch.long)      # per-class constants, built on the CPU
+    g_off = torch.zeros(P, G, 2)
     for i, c in enumerate(cls_rows):
         k = len(c.grips)
-        g_eff[i, :k] = torch.tensor(c.grips, device=gdev)
+        g_eff[i, :k] = torch.tensor(c.grips)
         if c.kind == "collab":
-            a = torch.arange(k, device=gdev) * (2 * math.pi / k)
+            a = torch.arange(k) * (2 * math.pi / k)
             g_off[i, :k] = (c.size + 0.1) * torch.stack([a.cos(), a.sin()], -1)
+    g_eff, g_off = g_eff.to(gdev), g_off.to(gdev)
     # a random orientation of each package's grip ring
     rot = torch.rand(E, P, generator=g, device=gdev) * 2 * math.pi
     cs, sn = rot.cos()[..., None], rot.sin()[..., None]

@@ -114,3 +114,20 @@ def test_corrupt_and_incompatible_checkpoints(tmp_path):
 def test_inspect_of_a_non_run_is_an_error(tmp_path):
     assert_clean_error(invoke("inspect", tmp_path), "summary.json")
     assert_clean_error(invoke("inspect", tmp_path / "absent"), "not a directory")
+
+
+def test_sweep_writes_table_iii_and_resumes(tmp_path):
+    out = tmp_path / "sweep"
+    args = ["sweep", "--budgets", "1500,3000", "--seeds", "0", "--scenario", "one-niche",
+            "--generations", 1, "--population", 6, "--swarm-size", 4, "--trials", 1,
+            "--ticks", 10, "--out", out]
+    r = invoke(*args)
+    assert r.exit_code == 0, r.output
+    table = (out / "table.md").read_text().splitlines()
+    assert table[0].startswith("| Budget | Best fitness | Team cost")
+    assert [line.split("|")[1].strip() for line in table[2:4]] == ["1500", "3000"]
+    assert (out / "table.csv").read_text().count("\n") == 3 and (out / "budget.png").is_file()
+    r = invoke(*args)
+    assert r.exit_code == 0 and r.output.count("already done") == 2
+    assert_clean_error(invoke("sweep", "--budgets", "10,abc"), "--budgets")
+    assert_clean_error(invoke("sweep", "--budgets", "-1", "--out", tmp_path / "x"), "--budget")

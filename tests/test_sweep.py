@@ -1,0 +1,27 @@
+"""Table III aggregation from run summaries."""
+
+import json
+
+from swarmcode_torch.sweep import csv_text, markdown, table_rows
+
+
+def _summary(d, **kw):
+    base = dict(best_fitness=100.0, team_cost=2500.0, deliveries=4.0, deliveries_individual=4.0,
+                deliveries_collab=0.0, energy_used=50.0, num_species=1)
+    base.update(kw)
+    d.mkdir()
+    (d / "summary.json").write_text(json.dumps(base))
+    return d
+
+
+def test_rows_average_seeds_per_budget(tmp_path):
+    runs = [(3000.0, 0, _summary(tmp_path / "a", best_fitness=100.0, num_species=1)),
+            (3000.0, 1, _summary(tmp_path / "b", best_fitness=200.0, num_species=3)),
+            (2500.0, 0, _summary(tmp_path / "c", best_fitness=50.0))]
+    rows = table_rows(runs)
+    assert [r["budget"] for r in rows] == [2500.0, 3000.0]
+    assert rows[1]["best_fitness"] == 150.0 and rows[1]["best_fitness_std"] == 50.0
+    assert rows[1]["num_species"] == 2.0 and rows[1]["seeds"] == 2
+    md = markdown(rows)
+    assert "| 3000 | 150.0 ± 50.0 |" in md
+    assert csv_text(rows).splitlines()[0].startswith("budget,seeds,best_fitness,best_fitness_std")
