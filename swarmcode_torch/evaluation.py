@@ -39,6 +39,7 @@ class EvalConfig:
     lam: float = 0.001              # budget penalty decay
     p_marginal: float = 0.25        # factor on fitness when the marginal contribution is <= 0
     max_elite: int = 3              # E in the elite count (partner elites are drawn from these)
+    dominance: bool = True          # False: uniform team composition (an ablation)
     weights: FitnessWeights = FitnessWeights()
 
 
@@ -90,7 +91,8 @@ def evaluate(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Te
                         lambda n: elite_count(n, cfg.max_elite))
     partners = choose_partners(genome.tag, genome.selectivity, species, proto_ids,
                                genome.tag[proto_index], elites, generator)
-    swarms = assemble_swarms(torch.arange(P, device=dev), partners, genome.dominance, S, generator)
+    dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
+    swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator)
 
     # --- one batch: [focal teams x trials ; baseline teams x trials], sharing layouts
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)

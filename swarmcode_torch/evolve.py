@@ -67,6 +67,8 @@ class EvolveConfig:
     """Budget penalty decay."""
     max_elite: int = 3
     """E in the elite count N = max(1, min(E, floor(size/5) + 1))."""
+    dominance: bool = True
+    """Sample team slots by the dominance genes; False: uniformly (an ablation)."""
 
     def validate(self) -> None:
         """Raise ValueError with a one-line message for an invalid setting."""
@@ -170,7 +172,7 @@ def make_context(cfg: EvolveConfig) -> Context:
     eval_cfg = EvalConfig(swarm_size=S, trials=cfg.trials, ticks=cfg.ticks or scenario.episode_ticks,
                           budget=cfg.budget, objective=cfg.objective, lam=cfg.lam,
                           p_marginal=cfg.p_marginal, max_elite=cfg.max_elite,
-                          weights=FitnessWeights())
+                          dominance=cfg.dominance, weights=FitnessWeights())
     repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite)
     use_compile = cfg.compile if cfg.compile is not None else device.type == "cuda"
     step_fn = torch.compile(world_step, dynamic=False) if use_compile else world_step
