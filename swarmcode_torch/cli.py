@@ -101,6 +101,7 @@ def evolve(
     logdir: Annotated[Path, typer.Option(help="Directory that holds run directories.")] = Path("runs"),
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines when not on a terminal.")] = 10,
+    render_every: Annotated[int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")] = 50,
     resume: Annotated[Optional[Path], typer.Option(help="Continue the run in this directory.")] = None,
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
@@ -108,8 +109,8 @@ def evolve(
     from .runs import RunError, new_run_dir, write_config
     from .runs import resume as resume_run
 
-    if checkpoint_every < 1 or log_every < 1:
-        fail("--checkpoint-every and --log-every must be >= 1")
+    if checkpoint_every < 1 or log_every < 1 or render_every < 0:
+        fail("--checkpoint-every and --log-every must be >= 1, --render-every >= 0")
     given = dict(scenario=scenario, budget=budget, objective=objective, population=population,
                  swarm_size=swarm_size, trials=trials, ticks=ticks, seed=seed, compile=compile)
     try:
@@ -137,19 +138,21 @@ def evolve(
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
 
-    _execute(ev, run_dir, checkpoint_every, log_every)
+    _execute(ev, run_dir, checkpoint_every, log_every, render_every)
     console.print(f"Done: {ev.state.generation} generations in {run_dir}")
     _print_team(run_dir)
     console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir {run_dir.parent}")
 
 
-def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int) -> None:
+def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
+             render_every: int = 0) -> None:
     """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints."""
     from .reporting import TensorBoardReporter
     from .runs import CheckpointReporter, SummaryReporter, run
 
     progress = _Progress(ev.cfg.generations, ev.state.generation, log_every)
-    reporters = [progress, SummaryReporter(run_dir), TensorBoardReporter(run_dir),
+    reporters = [progress, SummaryReporter(run_dir),
+                 TensorBoardReporter(run_dir, render_every=render_every),
                  CheckpointReporter(run_dir, checkpoint_every)]
     try:
         run(ev, run_dir, reporters)
@@ -276,6 +279,33 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory.")]) -
     for d in designs:
         console.print(f"[bold]species {d['species']}[/] ({d['count']} robots, {d['effector']}):")
         console.print(bt.format_tree(d["bt"]) or "  (empty tree)", highlight=False)
+
+
+@app.command()
+def replay(
+    run_dir: Annotated[Path, typer.Argument(help="A run directory.")],
+    out: Annotated[Optional[Path], typer.Option(help="Output GIF [default: RUN_DIR/team.gif].")] = None,
+    generation: Annotated[Optional[int], typer.Option(help="Replay this generation's best team instead of the run's.")] = None,
+    seed: Annotated[int, typer.Option(help="Seed of the random environment.")] = 0,
+    ticks: Annotated[Optional[int], typer.Option(help="Episode length [default: the run's].")] = None,
+    every: Annotated[int, typer.Option(help="Draw every k-th tick.")] = 2,
+) -> None:
+    """Render a rollout of the best team headless, as an animated GIF."""
+    from .render import replay_run
+    from .runs import RunError
+
+    if every < 1 or (ticks is not None and ticks < 1):
+        fail("--every and --ticks must be >= 1")
+    if not run_dir.is_dir():
+        fail(f"{run_dir} is not a directory")
+    try:
+        path, m = replay_run(run_dir, out=out, seed=seed, ticks=ticks, every=every,
+                             generation=generation)
+    except (ScenarioError, RunError, ValueError) as e:
+        fail(str(e))
+    console.print(f"Wrote {path}: {m['delivered_individual']:.0f} individual and "
+                  f"{m['delivered_collab']:.0f} collaborative deliveries, "
+                  f"{m['energy_used']:.1f}% energy used")
 
 
 def main() -> None:

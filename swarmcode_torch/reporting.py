@@ -42,15 +42,31 @@ def config_markdown(ev: Evolution) -> str:
     return f"|parameter|value|\n|-|-|\n{rows}"
 
 
+def replay_strip(ev: Evolution, designs: list[dict], seed: int, frames: int = 3):
+    """[H, W, 3] uint8: frames of one episode of a team (start to end), side by side."""
+    import numpy as np
+
+    from .render import frame_image, record_episode, team_genome
+
+    genome, team = team_genome(designs, ev.cfg.tag_length)
+    ticks = ev.ctx.eval_cfg.ticks
+    ep = record_episode(genome, team, ev.ctx.scenario, seed, ticks=ticks,
+                        every=max(1, ticks // (frames - 1)))
+    picks = np.linspace(0, len(ep.snapshots) - 1, frames).round().astype(int)
+    return np.concatenate([frame_image(ep, int(i), dpi=60) for i in picks], axis=1)
+
+
 class TensorBoardReporter:
     """Writes every generation's scalars and histograms; the composition figure every
-    `figure_every` generations and at the end."""
+    `figure_every` generations and at the end; a replay of the generation's best team every
+    `render_every` generations (0: never)."""
 
-    def __init__(self, run_dir: Path, figure_every: int = 10):
+    def __init__(self, run_dir: Path, figure_every: int = 10, render_every: int = 0):
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(log_dir=str(run_dir))
         self.figure_every = max(1, figure_every)
+        self.render_every = render_every
 
     def on_start(self, ev: Evolution) -> None:
         self.writer.add_text("config", config_markdown(ev), ev.state.generation)
@@ -64,6 +80,9 @@ class TensorBoardReporter:
             self.writer.add_histogram(tag, metrics[tag], step)
         if ev.state.generation % self.figure_every == 0:
             self._figure(ev, step)
+        if self.render_every and ev.state.generation % self.render_every == 0:
+            img = replay_strip(ev, metrics["team"]["designs"], seed=step)
+            self.writer.add_image("team/replay", img, step, dataformats="HWC")
         self.writer.flush()
 
     def _figure(self, ev: Evolution, step: int) -> None:

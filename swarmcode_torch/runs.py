@@ -24,6 +24,7 @@ else:  # pragma: no cover
 CONFIG_FILE = "config.toml"
 CHECKPOINT_FILE = "checkpoint.pt"
 SUMMARY_FILE = "summary.json"
+TEAMS_FILE = "teams.jsonl"
 
 
 class RunError(ValueError):
@@ -161,16 +162,20 @@ def summary(ev: Evolution, metrics: dict) -> dict:
 
 
 class SummaryReporter:
-    """Rewrites summary.json (atomically) after every generation."""
+    """Rewrites summary.json (atomically) after every generation and appends the generation's
+    best team to teams.jsonl (one JSON object per line)."""
 
     def __init__(self, run_dir: Path):
         self.path = Path(run_dir) / SUMMARY_FILE
+        self.teams = Path(run_dir) / TEAMS_FILE
 
     def on_start(self, ev: Evolution) -> None:
         pass
 
     def on_generation(self, ev: Evolution, metrics: dict) -> None:
         atomic_write_bytes(self.path, json.dumps(summary(ev, metrics), indent=2).encode())
+        with open(self.teams, "a") as f:
+            f.write(json.dumps(_clean(metrics["team"])) + "\n")
 
     def on_end(self, ev: Evolution) -> None:
         pass
@@ -191,6 +196,24 @@ class CheckpointReporter:
 
     def on_end(self, ev: Evolution) -> None:
         save_checkpoint(self.run_dir, ev)
+
+
+def generation_team(run_dir: Path, generation: int) -> dict:
+    """The best team of one generation, from teams.jsonl (the last record wins after a resume)."""
+    path = Path(run_dir) / TEAMS_FILE
+    if not path.is_file():
+        raise RunError(f"{run_dir} has no {TEAMS_FILE}")
+    found = None
+    for line in path.read_text().splitlines():
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line cut short by an interruption
+        if rec.get("generation") == generation:
+            found = rec
+    if found is None:
+        raise RunError(f"{run_dir} has no record of generation {generation}")
+    return found
 
 
 def run(ev: Evolution, run_dir: Path, reporters: Iterable[Reporter],

@@ -50,6 +50,12 @@ def test_evolve_writes_a_complete_run_directory(tmp_path):
     r = invoke("inspect", run)
     assert r.exit_code == 0, r.output
     assert "Robots per design" in r.output and "species" in r.output
+    r = invoke("replay", run, "--out", tmp_path / "t.gif", "--ticks", 6, "--every", 3)
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "t.gif").is_file() and "deliveries" in r.output
+    r = invoke("replay", run, "--generation", 1, "--ticks", 4, "--out", tmp_path / "g1.gif")
+    assert r.exit_code == 0, r.output
+    assert_clean_error(invoke("replay", run, "--generation", 99), "generation 99")
 
 
 def test_resume_extends_a_finished_run(tmp_path):

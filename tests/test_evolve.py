@@ -129,7 +129,8 @@ def test_ctrl_c_checkpoints_the_last_finished_generation(tmp_path):
 def test_tensorboard_tags_read_back(tmp_path):
     ev = Evolution(replace(TINY, generations=2, budget=800.0))
     write_config(tmp_path, ev.cfg)
-    run(ev, tmp_path, [TensorBoardReporter(tmp_path, figure_every=1), SummaryReporter(tmp_path)])
+    run(ev, tmp_path, [TensorBoardReporter(tmp_path, figure_every=1, render_every=2),
+                       SummaryReporter(tmp_path)])
     acc = EventAccumulator(str(tmp_path), size_guidance={"images": 0, "histograms": 0})
     acc.Reload()
     tags = acc.Tags()
@@ -139,4 +140,5 @@ def test_tensorboard_tags_read_back(tmp_path):
     assert acc.Scalars("team/budget")[0].value == 800.0
     assert {"hist/radius", "hist/dominance", "hist/selectivity"} <= set(tags["histograms"])
     assert "species/composition" in tags["images"]
+    assert [e.step for e in acc.Images("team/replay")] == [1]  # after the 2nd generation
     assert any("config" in t for t in tags["tensors"])

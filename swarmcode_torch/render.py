@@ -1,0 +1,418 @@
+"""Replays of one team in one environment: recording, drawing, GIF / PNG export.
+
+`record_episode` runs a team (rows of a :class:`~swarmcode_torch.genome.Genome`) through one
+random environment of a scenario on the CPU and keeps snapshots of the state; `draw_frame`
+draws a snapshot in true arena coordinates; `save_gif`, `save_png` and `frame_image` turn
+an episode into pictures; `replay_run` does it all for the best team of a run directory.
+
+Matplotlib (Agg canvas, no pyplot) and PIL are imported inside the functions that need them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import torch
+from torch import Tensor
+
+from . import bt
+from .genome import Genome, PINCHER, SUCTION
+from .hardware import genome_phenotype
+from .layout import Layout, make_layouts
+from .scenario import Scenario
+from .world import DELIVERED, Robots, State, WorldParams, compatible, episode_metrics, \
+    random_keys, reset, step
+
+_EFFECTOR_CODES = {"suction": SUCTION, "pincher": PINCHER}
+_EFFECTOR_NAMES = {SUCTION: "suction", PINCHER: "pincher"}
+# tab10, most distinct hues first; brown / olive / grey last (packages are drawn in browns).
+_TAB10_ORDER = (0, 2, 3, 4, 6, 9, 1, 7, 8, 5)
+
+
+# ------------------------------------------------------------------ teams from summary.json
+def team_genome(designs: Sequence[dict], tag_length: int = 16) -> tuple[Genome, Tensor]:
+    """A Genome with one row per design of a run summary, and the team's slots.
+
+    `designs` are summary.json "designs" entries (tiers 1..3, effector by name, "bt" opcode
+    list, "count" robots each). Returns the genome (tags all zero) and a ``[S]`` long tensor of
+    the design row of every robot, `count` robots per design in design order.
+    """
+    if not designs:
+        raise ValueError("no designs: a team needs at least one robot design")
+    rows = []
+    for i, d in enumerate(designs):
+        try:
+            eff = d["effector"]
+            if isinstance(eff, str):
+                if eff not in _EFFECTOR_CODES:
+                    raise ValueError(f"design {i}: unknown effector {eff!r} (suction or pincher)")
+                eff = _EFFECTOR_CODES[eff]
+            tiers = [int(d[k]) - 1 for k in ("chassis_tier", "battery_tier", "motor_tier")]
+            if not all(0 <= t <= 2 for t in tiers):
+                raise ValueError(f"design {i}: tiers must be 1..3, got {[t + 1 for t in tiers]}")
+            count = int(d.get("count", 1))
+            if count < 0:
+                raise ValueError(f"design {i}: count must be >= 0, got {count}")
+            rows.append(dict(
+                radius=float(d["radius"]), chassis=tiers[0], battery=tiers[1], motor=tiers[2],
+                torque_point=float(d["torque_point"]), battery_point=float(d["battery_point"]),
+                effector=int(eff), dominance=float(d.get("dominance", 0.5)),
+                selectivity=float(d.get("selectivity", 0.5)),
+                bt=[int(x) for x in d["bt"]], count=count))
+        except KeyError as e:
+            raise ValueError(f"design {i}: missing field {e.args[0]!r}") from None
+    length = max(max(len(r["bt"]) for r in rows), 1)
+    programs = torch.tensor([r["bt"] + [bt.NOP] * (length - len(r["bt"])) for r in rows],
+                            dtype=torch.long)
+    if ((programs < 0) | (programs >= bt.NUM_OPCODES)).any():
+        raise ValueError(f"design bt lists must hold opcodes 0..{bt.NUM_OPCODES - 1}")
+    f = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.float)  # noqa: E731
+    i = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.long)  # noqa: E731
+    genome = Genome(
+        tag=torch.zeros(len(rows), tag_length, dtype=torch.bool), selectivity=f("selectivity"),
+        dominance=f("dominance"), bt=programs, radius=f("radius"), chassis=i("chassis"),
+        battery=i("battery"), motor=i("motor"), torque_point=f("torque_point"),
+        battery_point=f("battery_point"), effector=i("effector"))
+    team = torch.arange(len(rows)).repeat_interleave(i("count"))
+    if team.numel() == 0:
+        raise ValueError("the designs' counts add up to no robot")
+    return genome, team
+
+
+# ------------------------------------------------------------------ recording
+@dataclass
+class Episode:
+    """One recorded episode of one environment.
+
+    `layout` and `robots` are the simulated batch of one environment (leading dimension 1);
+    each snapshot is a :class:`~swarmcode_torch.world.State` of that environment *without*
+    the environment dimension (``pos [N, 2]``, ``p_pos [P, 2]``, ``holder [P, G]``, ...).
+    `metrics` are the episode metrics of the final state, as floats.
+    """
+
+    layout: Layout
+    robots: Robots
+    params: WorldParams
+    snapshots: list[State]
+    metrics: dict[str, float]
+    name: str = ""                                   # shown in frame titles (scenario name)
+    labels: list[str] = field(default_factory=list)  # legend text per design row
+
+    @property
+    def num_designs(self) -> int:
+        return int(self.robots.program.max()) + 1 if self.robots.program.numel() else 0
+
+
+def _env0(state: State) -> State:
+    return State(*(x.clone() if x.dim() == 0 else x[0].clone() for x in state))
+
+
+def record_episode(genome: Genome, team: Tensor, scenario: Scenario, seed: int,
+                   ticks: int | None = None, every: int = 1,
+                   params: WorldParams | None = None) -> Episode:
+    """Run the team (``[S]`` genome rows, -1 = empty slot) in one random environment on the CPU.
+
+    The environment is ``make_layouts(replace(scenario, num_robots=S), 1, Generator(seed))``;
+    a snapshot is kept at tick 0, every `every` ticks, and at the last tick.
+    """
+    if every < 1:
+        raise ValueError(f"every must be >= 1, got {every}")
+    ticks = scenario.episode_ticks if ticks is None else int(ticks)
+    if ticks < 0:
+        raise ValueError(f"ticks must be >= 0, got {ticks}")
+    genome = genome.to("cpu")
+    teams = torch.as_tensor(team, dtype=torch.long).reshape(1, -1).cpu()
+    S = teams.shape[1]
+    if S == 0:
+        raise ValueError("the team has no robot slot")
+    if int(teams.max()) >= genome.size:
+        raise ValueError(f"team refers to row {int(teams.max())} of a genome of {genome.size}")
+    params = params or WorldParams.for_scenario(scenario)
+    layout = make_layouts(dataclasses.replace(scenario, num_robots=S), 1,
+                          torch.Generator().manual_seed(int(seed)))
+
+    # robots exactly as evaluation.simulate_teams builds them
+    ph = genome_phenotype(genome)
+    present = teams >= 0
+    rows = teams.clamp_min(0)
+    robots = Robots(*(t[rows] for t in (ph.radius, ph.mass, ph.force, ph.payload, ph.capacity,
+                                          ph.efficiency, ph.effector)),
+                    present=present, program=rows)
+    tables = bt.build_tables(genome.bt)
+
+    with torch.no_grad():
+        compat = compatible(layout, robots, params)
+        keys = random_keys(layout, S)
+        state = reset(layout, robots, params)
+        snaps = [_env0(state)]
+        for t in range(1, ticks + 1):
+            state = step(state, layout, robots, compat, keys, tables, params)
+            if t % every == 0 or t == ticks:
+                snaps.append(_env0(state))
+        m = episode_metrics(state, layout, robots, params)
+    metrics = {k: float(v[0]) for k, v in m.items()}
+
+    labels = []
+    for r in range(genome.size):
+        n = int((teams == r).sum())
+        labels.append(f"{_EFFECTOR_NAMES.get(int(genome.effector[r]), '?')} "
+                      f"r={float(genome.radius[r]):.2f} x{n}")
+    return Episode(layout, robots, params, snaps, metrics, scenario.name, labels)
+
+
+# ------------------------------------------------------------------ drawing
+def design_colors(n: int) -> list:
+    """`n` RGBA colours from tab10, one per design row (cycling after 10)."""
+    from matplotlib import colormaps
+    cmap = colormaps["tab10"]
+    return [cmap(_TAB10_ORDER[i % 10]) for i in range(n)]
+
+
+def _mass_colors(episode: Episode, mass: Tensor) -> list:
+    """Package face colours: light (light packages) to dark brown (heavy), over the episode."""
+    from matplotlib import colormaps
+    cmap = colormaps["YlOrBr"]
+    lay = episode.layout
+    all_m = lay.p_mass[0][lay.p_present[0]]
+    lo, hi = (float(all_m.min()), float(all_m.max())) if all_m.numel() else (0.0, 1.0)
+    frac = ((mass - lo) / max(hi - lo, 1e-6)).clamp(0, 1)
+    return [cmap(0.15 + 0.8 * float(f)) for f in frac]
+
+
+def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = None,
+               legend: bool = True) -> None:
+    """Draw one snapshot on a matplotlib Axes (cleared first), in arena coordinates (m).
+
+    Grey discs: obstacles; green disc: the base. Packages on the ground or carried: squares
+    need a pincher, circles suction, shaded light to dark brown by mass; collaborative packages
+    are hexagons with a marker per grip point (square pincher / circle suction, filled black
+    when held). Robots: discs of their true radius coloured by design row; a thick black
+    outline when carrying, faded when the battery is flat.
+    """
+    from matplotlib.collections import PatchCollection
+    from matplotlib.colors import to_rgba
+    from matplotlib.patches import Circle, Rectangle, RegularPolygon
+
+    lay, rob, prm = episode.layout, episode.robots, episode.params
+    W = prm.arena
+    s = snapshot
+    colors = list(colors) if colors is not None else design_colors(max(episode.num_designs, 1))
+    ax.clear()
+    ax.set_xlim(-0.2, W + 0.2)
+    ax.set_ylim(-0.2, W + 0.2)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for sp in ax.spines.values():
+        sp.set_visible(False)
+
+    # arena, base, obstacles
+    ax.add_patch(Rectangle((0, 0), W, W, facecolor="white", edgecolor="black", lw=1.2, zorder=0))
+    ax.add_patch(Circle((W / 2, W / 2), prm.base_radius, facecolor="#cfeccf",
+                        edgecolor="#3a8a3a", lw=1.0, zorder=1))
+    o_keep = lay.o_present[0]
+    obst = [Circle(tuple(p), float(r)) for p, r in
+            zip(lay.o_pos[0][o_keep].tolist(), lay.o_radius[0][o_keep].tolist())]
+    if obst:
+        ax.add_collection(PatchCollection(obst, facecolor="#9a9a9a", edgecolor="#555555",
+                                          lw=0.8, zorder=2))
+
+    # packages (not delivered)
+    present = lay.p_present[0] & (s.p_status != DELIVERED)
+    holder = s.holder                                     # [P, G]
+    g_eff = lay.g_effector[0]                             # [P, G]
+    idx = torch.nonzero(present).flatten().tolist()
+    face = _mass_colors(episode, lay.p_mass[0])
+    ground, carried, ground_c, carried_c = [], [], [], []
+    grips_p, grips_s, grip_fill_p, grip_fill_s = [], [], [], []
+    for p in idx:
+        x, y = s.p_pos[p].tolist()
+        size = float(lay.p_size[0, p])
+        held = bool((holder[p] >= 0).any())
+        if bool(lay.p_collab[0, p]):
+            ground.append(RegularPolygon((x, y), 6, radius=size * 1.05))
+            ground_c.append(face[p])
+            for g in range(g_eff.shape[1]):
+                e = int(g_eff[p, g])
+                if e < 0:
+                    continue
+                gx, gy = (s.p_pos[p] + lay.g_offset[0, p, g]).tolist()
+                taken = int(holder[p, g]) >= 0   # held: small and black, on its robot
+                fill, h = ("black", 0.07) if taken else ("white", 0.11)
+                if e == PINCHER:
+                    grips_p.append(Rectangle((gx - h, gy - h), 2 * h, 2 * h))
+                    grip_fill_p.append(fill)
+                else:
+                    grips_s.append(Circle((gx, gy), h * 1.1))
+                    grip_fill_s.append(fill)
+        else:
+            e = int(g_eff[p, 0])
+            r = size
+            if held:   # drawn small on top of its carrier, so that the robot's colour shows
+                carrier = int(holder[p, 0])
+                r = min(size, 0.5 * float(rob.radius[0, carrier]))
+            if e == PINCHER:
+                h = r * 0.9
+                patch = Rectangle((x - h, y - h), 2 * h, 2 * h)
+            else:
+                patch = Circle((x, y), r)
+            (carried if held else ground).append(patch)
+            (carried_c if held else ground_c).append(face[p])
+    if ground:
+        ax.add_collection(PatchCollection(ground, facecolor=ground_c, edgecolor="black",
+                                          lw=0.6, zorder=3))
+
+    # robots
+    keep = rob.present[0].tolist()
+    prog = rob.program[0].tolist()
+    radius = rob.radius[0].tolist()
+    pos = s.pos.tolist()
+    carrying = (s.holding >= 0).tolist()
+    alive = (s.energy > 0).tolist()
+    discs, fc, ec, lw = [], [], [], []
+    for i in range(len(keep)):
+        if not keep[i]:
+            continue
+        discs.append(Circle(tuple(pos[i]), radius[i]))
+        c = to_rgba(colors[prog[i] % len(colors)])
+        fc.append(c if alive[i] else c[:3] + (0.3,))
+        ec.append("black" if carrying[i] else "#444444")
+        lw.append(1.2 if carrying[i] else 0.4)
+    if discs:
+        ax.add_collection(PatchCollection(discs, facecolor=fc, edgecolor=ec, linewidths=lw,
+                                          zorder=4))
+    if carried:
+        ax.add_collection(PatchCollection(carried, facecolor=carried_c, edgecolor="black",
+                                          lw=0.6, zorder=5))
+    for patches, fills in ((grips_p, grip_fill_p), (grips_s, grip_fill_s)):
+        if patches:
+            ax.add_collection(PatchCollection(patches, facecolor=fills, edgecolor="black",
+                                              lw=0.7, zorder=6))
+
+    # title: tick and deliveries so far
+    done = (s.p_status == DELIVERED) & lay.p_present[0]
+    collab = lay.p_collab[0]
+    n_ind, n_col = int((done & ~collab).sum()), int((done & collab).sum())
+    total = int(lay.p_present[0].sum())
+    extra = f" ({n_ind} indiv, {n_col} collab)" if bool(collab.any()) else ""
+    name = f"{episode.name}  " if episode.name else ""
+    ax.set_title(f"{name}tick {int(s.t)}   delivered {n_ind + n_col}/{total}{extra}",
+                 fontsize=9)
+
+    if legend and episode.labels:
+        from matplotlib.lines import Line2D
+        used = sorted(set(p for p, k in zip(prog, keep) if k))
+        handles = [Line2D([], [], marker="o", ls="", markersize=7, markeredgecolor="#333333",
+                          markerfacecolor=colors[r % len(colors)],
+                          label=episode.labels[r] if r < len(episode.labels) else f"design {r}")
+                   for r in used]
+        kinds = lay.p_present[0]
+        indiv_eff = set(g_eff[kinds & ~collab, 0].tolist())
+        pkg = "#d9a35b"
+        for e, m in ((PINCHER, "s"), (SUCTION, "o")):
+            if e in indiv_eff:
+                handles.append(Line2D([], [], marker=m, ls="", markersize=6, markeredgecolor="black",
+                                      markerfacecolor=pkg, label=f"{_EFFECTOR_NAMES[e]} package"))
+        if bool((kinds & collab).any()):
+            handles.append(Line2D([], [], marker="h", ls="", markersize=8, markeredgecolor="black",
+                                  markerfacecolor=pkg, label="collab package"))
+            grip_eff = set(g_eff[kinds & collab].flatten().tolist())
+            for e, m in ((PINCHER, "s"), (SUCTION, "o")):
+                if e in grip_eff:
+                    handles.append(Line2D([], [], marker=m, ls="", markersize=4,
+                                          markeredgecolor="black", markerfacecolor="white",
+                                          label=f"{_EFFECTOR_NAMES[e]} grip"))
+            handles.append(Line2D([], [], marker="o", ls="", markersize=4, markeredgecolor="black",
+                                  markerfacecolor="black", label="held grip"))
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+                  frameon=False, handletextpad=0.3, borderaxespad=0.0,
+                  title="darker = heavier", title_fontsize=7)
+
+
+class _Canvas:
+    """One reusable Agg figure for rendering many frames quickly."""
+
+    def __init__(self, episode: Episode, dpi: int, size: tuple[float, float] = (7.0, 5.2)):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+        self.fig = Figure(figsize=size, dpi=dpi)
+        self.canvas = FigureCanvasAgg(self.fig)
+        self.ax = self.fig.add_axes((0.01, 0.01, 0.71, 0.93))
+        self.episode = episode
+        self.colors = design_colors(max(episode.num_designs, 1))
+
+    def render(self, snapshot: State):
+        import numpy as np
+        draw_frame(self.ax, self.episode, snapshot, self.colors)
+        self.canvas.draw()
+        return np.asarray(self.canvas.buffer_rgba())[..., :3].copy()
+
+
+def frame_image(episode: Episode, index: int = -1, dpi: int = 80):
+    """Snapshot `index` as a numpy uint8 array ``[H, W, 3]`` (TensorBoard: dataformats="HWC")."""
+    return _Canvas(episode, dpi).render(episode.snapshots[index])
+
+
+def save_png(episode: Episode, path: str | Path, index: int = -1, dpi: int = 100) -> Path:
+    """Write snapshot `index` (default the last) as a PNG."""
+    from PIL import Image
+    path = Path(path)
+    Image.fromarray(frame_image(episode, index, dpi)).save(path)
+    return path
+
+
+def save_gif(episode: Episode, path: str | Path, fps: float = 10, dpi: int = 80) -> Path:
+    """Write every snapshot of the episode as an animated GIF (looping)."""
+    from PIL import Image
+    path = Path(path)
+    cv = _Canvas(episode, dpi)
+    frames = [Image.fromarray(cv.render(s)).quantize(colors=128, method=Image.Quantize.MEDIANCUT)
+              for s in episode.snapshots]
+    duration = max(int(round(1000.0 / fps)), 20)
+    frames[0].save(path, save_all=True, append_images=frames[1:], duration=duration, loop=0,
+                   optimize=False)
+    return path
+
+
+# ------------------------------------------------------------------ run directories
+def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0,
+               ticks: int | None = None, every: int = 2, generation: int | None = None,
+               fps: float = 10, dpi: int = 80) -> tuple[Path, dict]:
+    """Render the best team of a run (summary.json "designs"), or the best team of one
+    `generation` (teams.jsonl), as a GIF.
+
+    The run's config gives the scenario and episode length (``ticks`` overrides it); the
+    environment is drawn from `seed`. Returns the GIF path (default ``run_dir/team.gif``) and
+    the episode metrics as floats.
+    """
+    from .runs import SUMMARY_FILE, RunError, generation_team, read_config
+    from .scenario import load_scenario
+
+    run_dir = Path(run_dir)
+    cfg = read_config(run_dir)
+    if generation is not None:
+        designs = generation_team(run_dir, generation)["designs"]
+    else:
+        path = run_dir / SUMMARY_FILE
+        if not path.is_file():
+            raise RunError(f"{run_dir} has no {SUMMARY_FILE} yet (no generation finished)")
+        try:
+            summ = json.loads(path.read_text())
+        except json.JSONDecodeError as e:
+            raise RunError(f"{path}: malformed JSON ({e})") from None
+        designs = summ.get("designs") if isinstance(summ, dict) else None
+    if not designs:
+        raise RunError(f"{run_dir} holds no team designs to replay")
+    scenario = load_scenario(cfg.scenario)
+    genome, team = team_genome(designs, cfg.tag_length)
+    if ticks is None:
+        ticks = cfg.ticks or scenario.episode_ticks
+    ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every)
+    ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
+    out = Path(out) if out is not None else run_dir / "team.gif"
+    save_gif(ep, out, fps=fps, dpi=dpi)
+    return out, dict(ep.metrics)
