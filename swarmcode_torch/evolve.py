@@ -285,7 +285,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
         "perf/generation_seconds": time.perf_counter() - t0,
         "perf/sim_seconds": sim_seconds,
         # non-scalars, for reporters
-        "team": team_record, "best": best, "composition": composition,
+        "team": team_record, "team/rows": team, "best": best, "composition": composition,
         "hist/radius": genome.radius.detach().cpu(),
         "hist/dominance": genome.dominance.detach().cpu(),
         "hist/selectivity": genome.selectivity.detach().cpu(),
