@@ -142,3 +142,11 @@ def test_tensorboard_tags_read_back(tmp_path):
     assert "species/composition" in tags["images"]
     assert [e.step for e in acc.Images("team/replay")] == [1]  # after the 2nd generation
     assert any("config" in t for t in tags["tensors"])
+
+
+def test_swarm_larger_than_the_population():
+    ev = Evolution(replace(TINY, population=4, swarm_size=12, generations=2))
+    for _ in range(2):
+        m = ev.step()
+        assert sum(d["count"] for d in m["team"]["designs"]) == 12
+        assert m["team/rows"].shape == (12,) and int(m["team/rows"].max()) < 4
