@@ -63,17 +63,22 @@ def team_scores(metrics: dict, cost: Tensor, cfg: EvalConfig) -> Tensor:
     return f
 
 
+def team_robots(genome: Genome, teams: Tensor) -> Robots:
+    """Per-robot constants of teams [E, S] of population rows (-1: an empty slot); each robot
+    runs its row's program (row of `bt.build_tables(genome.bt)`)."""
+    ph = genome_phenotype(genome)
+    rows = teams.clamp_min(0)
+    return Robots(*(t[rows] for t in (ph.radius, ph.mass, ph.force, ph.payload, ph.capacity,
+                                        ph.efficiency, ph.effector)),
+                  present=teams >= 0, program=rows)
+
+
 def simulate_teams(teams: Tensor, genome: Genome, tables: Tensor, layout_ids: Tensor,
                    layouts: Layout, params: WorldParams, ticks: int,
                    step_fn: StepFn | None = None) -> dict:
     """Run teams [E, S] (population rows, -1 empty) in layouts[layout_ids]; metrics [E] each."""
-    ph = genome_phenotype(genome)
-    present = teams >= 0
-    rows = teams.clamp_min(0)
-    robots = Robots(*(t[rows] for t in (ph.radius, ph.mass, ph.force, ph.payload, ph.capacity,
-                                          ph.efficiency, ph.effector)),
-                    present=present, program=rows)
-    return rollout(layouts.index(layout_ids), robots, tables, params, ticks, step_fn)
+    return rollout(layouts.index(layout_ids), team_robots(genome, teams), tables, params, ticks,
+                   step_fn)
 
 
 def evaluate(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Tensor,

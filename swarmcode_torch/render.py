@@ -21,7 +21,7 @@ from torch import Tensor
 
 from . import bt
 from .genome import Genome, PINCHER, SUCTION
-from .hardware import genome_phenotype
+from .evaluation import team_robots
 from .layout import Layout, make_layouts
 from .scenario import Scenario
 from .world import DELIVERED, Robots, State, WorldParams, compatible, episode_metrics, \
@@ -135,13 +135,7 @@ def record_episode(genome: Genome, team: Tensor, scenario: Scenario, seed: int,
     layout = make_layouts(dataclasses.replace(scenario, num_robots=S), 1,
                           torch.Generator().manual_seed(int(seed)))
 
-    # robots exactly as evaluation.simulate_teams builds them
-    ph = genome_phenotype(genome)
-    present = teams >= 0
-    rows = teams.clamp_min(0)
-    robots = Robots(*(t[rows] for t in (ph.radius, ph.mass, ph.force, ph.payload, ph.capacity,
-                                          ph.efficiency, ph.effector)),
-                    present=present, program=rows)
+    robots = team_robots(genome, teams)  # exactly as the evaluation builds them
     tables = bt.build_tables(genome.bt)
 
     with torch.no_grad():

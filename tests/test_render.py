@@ -1,7 +1,6 @@
 """Replays: team genomes from summary designs, recorded episodes, GIF / PNG / image export."""
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
