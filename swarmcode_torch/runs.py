@@ -157,7 +157,7 @@ def summary(ev: Evolution, metrics: dict) -> dict:
         "species_in_population": metrics["species/count"],
         "designs": best["designs"],
         "last_generation": {k: v for k, v in metrics.items()
-                            if "/" in k and not k.startswith("hist/")},
+                            if "/" in k and isinstance(v, (int, float))},
     })
 
 
