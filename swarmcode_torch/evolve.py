@@ -161,6 +161,7 @@ class Context:
     repro: ReproductionParams
     params: WorldParams
     step_fn: Any
+    compiled: bool = False
 
 
 def make_context(cfg: EvolveConfig) -> Context:
@@ -176,7 +177,8 @@ def make_context(cfg: EvolveConfig) -> Context:
     repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite)
     use_compile = cfg.compile if cfg.compile is not None else device.type == "cuda"
     step_fn = torch.compile(world_step, dynamic=False) if use_compile else world_step
-    return Context(cfg, scenario, device, eval_cfg, repro, WorldParams.for_scenario(scenario), step_fn)
+    return Context(cfg, scenario, device, eval_cfg, repro, WorldParams.for_scenario(scenario),
+                   step_fn, use_compile)
 
 
 def new_generator(ctx: Context) -> torch.Generator:

@@ -385,8 +385,10 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     redraw = ((state.waypoint - pos).norm(dim=-1) <= params.reach) | (t % params.waypoint_period == 0)
     waypoint = torch.where(redraw[..., None], _waypoints(layout.seed, t, N, params), state.waypoint)
 
+    # contiguous, like reset()'s holder: a strided view here would make a compiled step (which
+    # guards on input strides) compile a second time on its second call
     return State(t, pos, vel, energy, holding, grip, stuck, waypoint, p_pos, p_vel, p_status,
-                 holder.reshape(E, P, G), p_picked)
+                 holder.reshape(E, P, G).contiguous(), p_picked)
 
 
 # ---------------------------------------------------------------- outcome of an episode

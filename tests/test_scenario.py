@@ -22,7 +22,8 @@ GOOD = {
 
 
 def test_registry_holds_the_papers_scenarios():
-    assert set(builtin_names()) == {"one-niche", "two-niche", "four-niche", "budget", "swarm200"}
+    assert set(builtin_names()) == {"one-niche", "two-niche", "four-niche", "budget", "swarm200",
+                                    "swarm1000"}
     s = {n: load_scenario(n) for n in builtin_names()}
     for n in ("one-niche", "two-niche", "four-niche"):
         assert s[n].num_robots == 20 and s[n].num_packages == 16

@@ -1,0 +1,82 @@
+"""torch.compile and CUDA agree with the eager CPU tick (opt-in: ``pytest -m slow`` / ``-m gpu``)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from swarmcode_torch import bt
+from swarmcode_torch.genome import R_MAX, R_MIN
+from swarmcode_torch.hardware import phenotype
+from swarmcode_torch.layout import make_layouts
+from swarmcode_torch.scenario import load_scenario
+from swarmcode_torch.world import Robots, WorldParams, rollout, step
+
+TICKS = 20
+DISCRETE = ("t", "holding", "grip", "stuck", "p_status", "holder", "p_picked")
+
+
+def _world(name="four-niche", E=2, seed=0, n_programs=12, device="cpu"):
+    """Random layouts, hardware and a mix of template and random programs."""
+    s = load_scenario(name)
+    g = torch.Generator().manual_seed(seed)
+    N = s.num_robots
+    layout = make_layouts(s, E, g, device)
+    u = lambda: torch.rand(E, N, generator=g)  # noqa: E731
+    tier = lambda: torch.randint(0, 3, (E, N), generator=g)  # noqa: E731
+    ph = phenotype(R_MIN + (R_MAX - R_MIN) * u(), tier(), tier(), tier(), u(), u(),
+                   torch.randint(0, 2, (E, N), generator=g))
+    progs = bt.random_programs(n_programs, 32, g)
+    progs[:4] = torch.stack([bt.template_tensor(k, 32) for k in bt.TEMPLATES][:4])
+    rob = Robots.from_phenotype(ph, torch.ones(E, N, dtype=torch.bool),
+                                torch.randint(0, n_programs, (E, N), generator=g))
+    rob = Robots(*(t.to(device) for t in rob))
+    return layout, rob, bt.build_tables(progs).to(device), WorldParams.for_scenario(s)
+
+
+def _assert_close(want, got, pos_atol=1e-3):
+    """Same discrete state; continuous state within tolerance (float reassociation only)."""
+    for name in DISCRETE:
+        a, b = getattr(want, name), getattr(got, name).to(getattr(want, name).device)
+        assert torch.equal(a, b), f"{name}: {(a != b).sum().item()} entries differ"
+    for name in ("pos", "waypoint", "p_pos"):
+        torch.testing.assert_close(getattr(got, name).cpu(), getattr(want, name),
+                                   atol=pos_atol, rtol=0, msg=lambda m: f"{name}: {m}")
+    for name in ("vel", "p_vel"):
+        torch.testing.assert_close(getattr(got, name).cpu(), getattr(want, name),
+                                   atol=1e-3, rtol=0, msg=lambda m: f"{name}: {m}")
+    torch.testing.assert_close(got.energy.cpu(), want.energy, atol=1e-2, rtol=1e-4)
+
+
+@pytest.mark.slow
+def test_compiled_step_matches_eager_on_cpu():
+    # fullgraph: a graph break is an error. error_on_recompile: the step must compile exactly
+    # once (its output state has the same shapes, dtypes and strides as reset()'s).
+    # Positions may drift by float reassociation (fused kernels); over 20 ticks that is ~1e-6 m,
+    # far from any threshold, so pickups, drops and deliveries must be identical.
+    layout, rob, tables, params = _world()
+    torch._dynamo.reset()
+    compiled = torch.compile(step, dynamic=False, fullgraph=True)
+    m_eager, want = rollout(layout, rob, tables, params, TICKS, return_state=True)
+    with torch._dynamo.config.patch(error_on_recompile=True):
+        m_comp, got = rollout(layout, rob, tables, params, TICKS, step_fn=compiled,
+                              return_state=True)
+    _assert_close(want, got)
+    for k in m_eager:
+        torch.testing.assert_close(m_comp[k], m_eager[k], atol=1e-3, rtol=1e-4)
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_cuda_rollout_matches_cpu():
+    # same inputs (drawn on the CPU, then moved); eager and compiled CUDA against eager CPU
+    layout, rob, tables, params = _world()
+    _, want = rollout(layout, rob, tables, params, TICKS, return_state=True)
+    cuda = _world(device="cuda")
+    _, got = rollout(*cuda, TICKS, return_state=True)
+    _assert_close(want, got)
+    torch._dynamo.reset()
+    compiled = torch.compile(step, dynamic=False, fullgraph=True)
+    with torch._dynamo.config.patch(error_on_recompile=True):
+        _, got_c = rollout(*cuda, TICKS, step_fn=compiled, return_state=True)
+    _assert_close(want, got_c)
