@@ -158,7 +158,7 @@ def compatible(layout: Layout, robots: Robots, params: WorldParams) -> torch.Ten
 
 def sense(state: State, layout: Layout, robots: Robots, compat: torch.Tensor,
           keys: torch.Tensor, params: WorldParams) -> Senses:
-    """Leaf statuses of every robot from the current state."""
+    """Leaf statuses of every robot from the current state (`keys`: see :func:`random_keys`)."""
     E, N = robots.radius.shape
     P, G = layout.g_effector.shape[1:]
     C = P * G
@@ -173,7 +173,7 @@ def sense(state: State, layout: Layout, robots: Robots, compat: torch.Tensor,
     valid = compat & avail & free[..., None]
     dm = torch.where(valid, dist, _INF)
     best_d, best = dm.min(-1)
-    score = torch.where(valid, torch.frac(keys[:, :N, None] + keys[:, None, :C] * 7.31), -1.0)
+    score = torch.where(valid, keys, -1.0)
     rand = score.argmax(-1)
     rand_d = torch.where(valid.gather(-1, rand[..., None]).squeeze(-1),
                          dist.gather(-1, rand[..., None]).squeeze(-1), _INF)
@@ -237,19 +237,27 @@ def collide(pos, vel, radius, mass, present, o_pos, o_radius, o_present, params:
     eye = torch.eye(N, dtype=torch.bool, device=pos.device)
     pair = present[:, :, None] & present[:, None, :] & ~eye
     inv_m = 1.0 / mass
+    inv_sum = inv_m[:, :, None] + inv_m[:, None, :]
+    w = inv_m[:, :, None] / inv_sum                       # share of the push robot i takes
     rsum = radius[:, :, None] + radius[:, None, :]
+    # Sums over partners j of (x_i - x_j) c_ij are written x_i sum_j c_ij - (c @ x)_i, so the
+    # solver only ever builds [E, N, N] scalars (and one batched matmul), never [E, N, N, 2].
     for it in range(params.collision_iters):
-        diff = pos[:, :, None, :] - pos[:, None, :, :]                       # i - j
-        d = diff.norm(dim=-1)
-        n = diff / d.clamp_min(1e-6)[..., None]
+        dx = pos[..., 0, None] - pos[:, None, :, 0]                          # [E, N, N] i - j
+        dy = pos[..., 1, None] - pos[:, None, :, 1]
+        d = torch.sqrt(dx * dx + dy * dy)
+        inv_d = 1.0 / d.clamp_min(1e-6)
         overlap = torch.where(pair, (rsum - d).clamp_min(0), 0.0)
-        touching = overlap > 0
-        w = inv_m[:, :, None] / (inv_m[:, :, None] + inv_m[:, None, :])
-        pos = pos + (n * (overlap * w)[..., None]).sum(2)
+        c = overlap * w * inv_d
+        new_pos = pos + pos * c.sum(2, keepdim=True) - torch.bmm(c, pos)
         if it == 0:
-            vn = ((vel[:, :, None, :] - vel[:, None, :, :]) * n).sum(-1)      # approach < 0
-            j = torch.where(touching & (vn < 0), -2.0 * vn / (inv_m[:, :, None] + inv_m[:, None, :]), 0.0)
-            vel = vel + (n * (j * inv_m[:, :, None])[..., None]).sum(2)
+            dvx = vel[..., 0, None] - vel[:, None, :, 0]
+            dvy = vel[..., 1, None] - vel[:, None, :, 1]
+            vn = (dvx * dx + dvy * dy) * inv_d                                # approach < 0
+            j = torch.where((overlap > 0) & (vn < 0), -2.0 * vn / inv_sum, 0.0)
+            k = j * inv_d
+            vel = vel + inv_m[..., None] * (pos * k.sum(2, keepdim=True) - torch.bmm(k, pos))
+        pos = new_pos
 
     # static obstacles: push out, reflect the normal velocity
     diff = pos[:, :, None, :] - o_pos[:, None, :, :]
@@ -423,11 +431,13 @@ def episode_metrics(state: State, layout: Layout, robots: Robots, params: WorldP
 
 
 def random_keys(layout: Layout, n: int) -> torch.Tensor:
-    """[E, max(N, C)] per-environment random keys (robots' and grips' preferences)."""
+    """[E, N, C] each robot's fixed random preference for each grip (ACT_MOVE_TO_RANDOM_PACK
+    goes to the takeable grip it prefers most), drawn from the environment's seed."""
     E, P, G = layout.g_effector.shape
     m = max(n, P * G)
     idx = torch.arange(m, device=layout.seed.device)
-    return hash_uniform(layout.seed[:, None], idx, torch.full_like(idx, -7))
+    u = hash_uniform(layout.seed[:, None], idx, torch.full_like(idx, -7))
+    return torch.frac(u[:, :n, None] + u[:, None, :P * G] * 7.31)
 
 
 def rollout(layout: Layout, robots: Robots, tables: torch.Tensor, params: WorldParams,
