@@ -97,7 +97,7 @@ def evolve(
     ticks: Annotated[Optional[int], typer.Option(help="Episode length in ticks [default: the scenario's].")] = None,
     seed: Annotated[Optional[int], typer.Option(help="Random seed [default: 0].")] = None,
     device: Annotated[Optional[str], typer.Option(help="auto, cpu or cuda [default: auto].")] = None,
-    compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick [default: on CUDA only].")] = None,
+    compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick [default: on CUDA, and on CPU for >= 50 generations].")] = None,
     logdir: Annotated[Path, typer.Option(help="Directory that holds run directories.")] = Path("runs"),
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines when not on a terminal.")] = 10,

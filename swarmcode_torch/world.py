@@ -440,6 +440,30 @@ def random_keys(layout: Layout, n: int) -> torch.Tensor:
     return torch.frac(u[:, :n, None] + u[:, None, :P * G] * 7.31)
 
 
+class CompiledStep:
+    """`torch.compile(step)`, falling back to eager `step` (with a warning) when the first call
+    cannot compile, e.g. on a machine without the C++ compiler that inductor's CPU backend needs."""
+
+    def __init__(self, **compile_kwargs):
+        self.compiled = torch.compile(step, dynamic=False, **compile_kwargs)
+        self.fn = None
+        self.error: Exception | None = None
+
+    def __call__(self, *args):
+        if self.fn is None:
+            try:
+                out = self.compiled(*args)
+                self.fn = self.compiled
+                return out
+            except Exception as e:  # noqa: BLE001 - any compiler failure means: run eager
+                import warnings
+
+                self.error, self.fn = e, step
+                warnings.warn(f"torch.compile failed ({type(e).__name__}); running the tick eagerly",
+                              RuntimeWarning, stacklevel=2)
+        return self.fn(*args)
+
+
 def rollout(layout: Layout, robots: Robots, tables: torch.Tensor, params: WorldParams,
             ticks: int, step_fn: Callable | None = None, return_state: bool = False):
     """Run `ticks` ticks of every environment; the per-environment metrics (and final state)."""

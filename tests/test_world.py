@@ -8,8 +8,8 @@ from swarmcode_torch.genome import R_MAX, R_MIN
 from swarmcode_torch.hardware import phenotype
 from swarmcode_torch.layout import make_layouts
 from swarmcode_torch.scenario import builtin_names, load_scenario
-from swarmcode_torch.world import (DELIVERED, GROUND, Robots, WorldParams, collide, compatible,
-                                   episode_metrics, random_keys, reset, rollout, step)
+from swarmcode_torch.world import (DELIVERED, GROUND, CompiledStep, Robots, WorldParams, collide,
+                                   compatible, episode_metrics, random_keys, reset, rollout, step)
 from worldkit import build, package, robot
 
 
@@ -230,3 +230,20 @@ def test_forage_template_delivers_packages():
     assert (m["delivered_individual"] >= 4).all()
     assert (m["picked_individual"] >= m["delivered_individual"]).all()
     assert (m["energy_used"] > 0).all()
+
+
+def test_compiled_step_falls_back_to_eager_when_compiling_fails(monkeypatch):
+    def broken_compile(fn, **kw):
+        def compiled(*args):
+            raise RuntimeError("no C++ compiler")
+        return compiled
+
+    monkeypatch.setattr(torch, "compile", broken_compile)
+    fn = CompiledStep()
+    s, layout, rob, tables, p = random_world("one-niche", E=1)
+    with pytest.warns(RuntimeWarning, match="torch.compile failed"):
+        m1 = rollout(layout, rob, tables, p, 5, step_fn=fn)
+    m2 = rollout(layout, rob, tables, p, 5)
+    assert fn.fn is step and isinstance(fn.error, RuntimeError)
+    for k in m1:
+        assert torch.equal(m1[k], m2[k])
