@@ -40,11 +40,12 @@ def bench(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
     for _ in range(args.warmup):
         ev.step()
     warmup_s = now(device) - t0
-    gen_s, sim_s = [], []
+    gen_s, eval_s, sim_s = [], [], []
     for _ in range(args.generations):
         t = now(device)
         m = ev.step()
         gen_s.append(now(device) - t)
+        eval_s.append(m["perf/eval_seconds"])
         sim_s.append(m["perf/sim_seconds"])
     ticks = ev.ctx.eval_cfg.ticks
     envs = 2 * pop * args.trials
@@ -54,6 +55,7 @@ def bench(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
         "warmup_generations": args.warmup, "warmup_seconds": warmup_s,
         "seconds_per_generation": median(gen_s), "all_generation_seconds": gen_s,
         "sim_share": sum(sim_s) / sum(gen_s),
+        "evaluation_share": sum(eval_s) / sum(gen_s),
         "robot_ticks_per_s": envs * swarm * ticks / median(sim_s),
         "minutes_per_500_generations": median(gen_s) * 500 / 60,
     }
@@ -81,7 +83,8 @@ def main() -> None:
         rows.append(bench(name, swarm, pop, args, device))
         r = rows[-1]
         print(f"{name} swarm {swarm} pop {pop}: {r['seconds_per_generation']:.2f} s/gen, "
-              f"sim {100 * r['sim_share']:.0f}%, {r['robot_ticks_per_s'] / 1e6:.2f} M robot-ticks/s "
+              f"simulation {100 * r['sim_share']:.0f}%, evaluation {100 * r['evaluation_share']:.0f}%, "
+              f"{r['robot_ticks_per_s'] / 1e6:.2f} M robot-ticks/s "
               f"(warm-up {r['warmup_seconds']:.1f} s; {time.perf_counter() - t:.0f} s total)",
               flush=True)
     out = args.out or Path(__file__).parent / "results" / f"generation_{device.type}.json"

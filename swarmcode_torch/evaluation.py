@@ -8,6 +8,7 @@ E = 2 * B * trials environments through one tick loop.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, replace
 from typing import Callable
 
@@ -53,6 +54,7 @@ class EvalResult:
     team_cost: Tensor      # [B] focal team cost ($)
     swarms: Swarms         # team compositions (population rows per slot)
     team_metrics: dict     # name -> [B] focal team episode metrics, mean over trials
+    sim_seconds: float = 0.0  # wall time of the rollout alone (device synchronised)
 
 
 def team_scores(metrics: dict, cost: Tensor, cfg: EvalConfig) -> Tensor:
@@ -105,7 +107,9 @@ def evaluate(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Te
     layout_ids = torch.arange(P * T, device=dev).repeat(2)
     if tables is None:
         tables = bt.build_tables(genome.bt)
+    t0 = _now(dev)
     m = simulate_teams(teams, genome, tables, layout_ids, layouts, params, cfg.ticks, step_fn)
+    sim_seconds = _now(dev) - t0
 
     # --- scores
     robot_cost = genome_phenotype(genome).cost[teams.clamp_min(0)]
@@ -115,4 +119,12 @@ def evaluate(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Te
     focal, base = score[0], score[1]
     team_m = {k: v.view(2, P, T)[0].mean(-1) for k, v in m.items()}
     return EvalResult(fitness=gate(focal, base, cfg.p_marginal), focal=focal, baseline=base,
-                      team_cost=cost.view(2, P, T)[0, :, 0], swarms=swarms, team_metrics=team_m)
+                      team_cost=cost.view(2, P, T)[0, :, 0], swarms=swarms, team_metrics=team_m,
+                      sim_seconds=sim_seconds)
+
+
+def _now(device: torch.device) -> float:
+    """perf_counter() once the device has finished its queued work."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return time.perf_counter()
