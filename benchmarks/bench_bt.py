@@ -8,11 +8,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
-import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Callable
 
@@ -20,47 +17,19 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from common import RESULTS_DIR, now, run_metadata, write_json  # noqa: E402
 from swarmcode_torch import bt  # noqa: E402
-
-
-def git_commit() -> str:
-    """The repository's HEAD commit, or "unknown"."""
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True,
-                             cwd=Path(__file__).resolve().parent)
-        return out.stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
-def device_name(device: torch.device) -> str:
-    """A human-readable name of the device."""
-    if device.type == "cuda":
-        return torch.cuda.get_device_name(device)
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def timed(fn: Callable[[], object], device: torch.device, repeats: int, warmup: int = 2) -> list[float]:
     """Wall-clock seconds of repeats calls of fn, after warmup calls (synchronizing on CUDA)."""
-    def sync() -> None:
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-
     for _ in range(warmup):
         fn()
-    sync()
     times = []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0 = now(device)
         fn()
-        sync()
-        times.append(time.perf_counter() - t0)
+        times.append(now(device) - t0)
     return times
 
 
@@ -108,13 +77,7 @@ def main() -> None:
     agree = all(torch.equal(w, x) for w, x in zip(want, got))
 
     result = {
-        "device": str(device),
-        "device_name": device_name(device),
-        "torch": torch.__version__,
-        "threads": torch.get_num_threads(),
-        "git_commit": git_commit(),
-        "command": " ".join([sys.executable, *sys.argv]),
-        "date": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        **run_metadata(device),
         "programs": args.programs,
         "length": args.length,
         "robots": args.robots,
@@ -126,10 +89,7 @@ def main() -> None:
         "interpret_per_tick": summary(interp),
         "lookup_equals_interpret": agree,
     }
-    out = Path(args.out) if args.out else \
-        Path(__file__).resolve().parent / "results" / f"bt_{device.type}.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    write_json(result, Path(args.out) if args.out else RESULTS_DIR / f"bt_{device.type}.json")
     print(json.dumps(result, indent=2))
 
 

@@ -10,13 +10,16 @@ Each configuration is `scenario:swarm_size:population`. The first `--warmup` gen
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 import torch
 
-from common import median, now, run_metadata, write_json
-from swarmcode_torch.evolve import Evolution, EvolveConfig
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from common import median, now, run_metadata, write_json  # noqa: E402
+from swarmcode_torch.evolve import Evolution, EvolveConfig  # noqa: E402
 
 DEFAULT_CONFIGS = "four-niche:20:50,budget:20:100,swarm200:200:50,swarm1000:1000:50"
 
