@@ -260,6 +260,36 @@ class _FixedPopulationAlgorithm(_Algorithm):
         return self._fixed if self._fixed is not None else new_layouts(self.ctx, self.trials,
                                                                        self.generator)
 
+    @property
+    def group_sizes(self) -> list[int]:
+        """Sizes of the reproduction groups (consecutive blocks of the population)."""
+        raise NotImplementedError
+
+    def teams(self) -> Tensor:
+        """[P, S] the team (population rows) that scores each individual."""
+        raise NotImplementedError
+
+    def _after_reproduction(self) -> None:
+        """Hook run once the next generation exists."""
+
+    def step(self) -> dict:
+        t0 = time.perf_counter()
+        teams = self.teams()
+        score, cost, _ = score_teams(self.ctx, self.genome, teams, self.environments(),
+                                     step_fn=self.ctx.step_fn)
+        self.episodes += self.episodes_per_generation
+        b = int(score.argmax())
+        gen_best = float(score[b])
+        genome, gen = self.genome, self.generation
+        self._offer(lambda: _team_of(genome, teams[b], gen_best, float(cost[b]), gen), gen_best)
+        self.last_scores = score
+        self.genome, _, _ = reproduce_groups(self.genome, score, self.group_sizes,
+                                             self.cfg.max_elite, self.generator)
+        self._after_reproduction()
+        self.generation += 1
+        species = int(distinct_per_row(teams[b:b + 1])[0])
+        return self._metrics(gen_best, species, float(score.mean()), time.perf_counter() - t0)
+
 
 class HomogeneousGA(_FixedPopulationAlgorithm):
     """A plain GA over single designs: an individual's team is S clones of it (one species).
@@ -275,21 +305,9 @@ class HomogeneousGA(_FixedPopulationAlgorithm):
         P, S = self.population, self.swarm_size
         return torch.arange(P, device=self.ctx.device)[:, None].expand(P, S).contiguous()
 
-    def step(self) -> dict:
-        t0 = time.perf_counter()
-        teams = self.teams()
-        score, cost, _ = score_teams(self.ctx, self.genome, teams, self.environments(),
-                                     step_fn=self.ctx.step_fn)
-        self.episodes += self.episodes_per_generation
-        b = int(score.argmax())
-        gen_best = float(score[b])
-        genome, gen = self.genome, self.generation
-        self._offer(lambda: _team_of(genome, teams[b], gen_best, float(cost[b]), gen), gen_best)
-        self.last_scores = score
-        self.genome, _, _ = reproduce_groups(self.genome, score, [self.population],
-                                             self.cfg.max_elite, self.generator)
-        self.generation += 1
-        return self._metrics(gen_best, 1, float(score.mean()), time.perf_counter() - t0)
+    @property
+    def group_sizes(self) -> list[int]:
+        return [self.population]
 
 
 class FixedSpeciesCCEA(_FixedPopulationAlgorithm):
@@ -334,24 +352,13 @@ class FixedSpeciesCCEA(_FixedPopulationAlgorithm):
         me = torch.arange(P, device=self.ctx.device)[:, None].expand(P, self.swarm_size)
         return torch.where(own, me, self.representatives[self.slot_species][None, :]).contiguous()
 
-    def step(self) -> dict:
-        t0 = time.perf_counter()
-        teams = self.teams()
-        score, cost, _ = score_teams(self.ctx, self.genome, teams, self.environments(),
-                                     step_fn=self.ctx.step_fn)
-        self.episodes += self.episodes_per_generation
-        b = int(score.argmax())
-        gen_best = float(score[b])
-        genome, gen = self.genome, self.generation
-        self._offer(lambda: _team_of(genome, teams[b], gen_best, float(cost[b]), gen), gen_best)
-        self.last_scores = score
-        self.genome, _, _ = reproduce_groups(self.genome, score, self.sizes, self.cfg.max_elite,
-                                             self.generator)
+    @property
+    def group_sizes(self) -> list[int]:
+        return self.sizes
+
+    def _after_reproduction(self) -> None:
         # the best of each subpopulation is its first elite: the first row of its block
         self.representatives = self.starts.clone()
-        self.generation += 1
-        species = int(distinct_per_row(teams[b:b + 1])[0])
-        return self._metrics(gen_best, species, float(score.mean()), time.perf_counter() - t0)
 
 
 class SwarmCoDeRun(_Algorithm):

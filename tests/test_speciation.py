@@ -5,6 +5,8 @@ from swarmcode_torch.bt import ACT_DROP, ACT_PICK_UP, NOP, SEQ
 from swarmcode_torch.genome import R_MAX, R_MIN, Genome
 from swarmcode_torch.speciation import DistanceWeights, distance, hamming, speciate
 
+from genomekit import random_genomes as _random_genomes
+
 
 def make(n, l_tag=8, l_bt=6, **kw):
     """n identical default genomes, with fields overridden by kw (tensors or lists)."""
@@ -21,16 +23,8 @@ def make(n, l_tag=8, l_bt=6, **kw):
 
 
 def random_genomes(n, gen, l_tag=8, l_bt=6):
-    return Genome(
-        tag=torch.rand(n, l_tag, generator=gen) < 0.5,
-        selectivity=torch.rand(n, generator=gen), dominance=torch.rand(n, generator=gen),
-        bt=torch.randint(0, 14, (n, l_bt), generator=gen),
-        radius=R_MIN + (R_MAX - R_MIN) * torch.rand(n, generator=gen),
-        chassis=torch.randint(0, 3, (n,), generator=gen),
-        battery=torch.randint(0, 3, (n,), generator=gen),
-        motor=torch.randint(0, 3, (n,), generator=gen),
-        torque_point=torch.rand(n, generator=gen), battery_point=torch.rand(n, generator=gen),
-        effector=torch.randint(0, 2, (n,), generator=gen))
+    """Shorter trees than genomekit's default, so BT distances are coarse."""
+    return _random_genomes(n, gen, l_tag, l_bt)
 
 
 ONLY = dict(w_tag=0.0, w_hw=0.0, w_bt=0.0, w_tool=0.0, w_size=0.0)
