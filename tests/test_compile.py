@@ -5,33 +5,17 @@ from __future__ import annotations
 import pytest
 import torch
 
-from swarmcode_torch import bt
-from swarmcode_torch.genome import R_MAX, R_MIN
-from swarmcode_torch.hardware import phenotype
-from swarmcode_torch.layout import make_layouts
-from swarmcode_torch.scenario import load_scenario
-from swarmcode_torch.world import Robots, WorldParams, rollout, step
+from swarmcode_torch.world import rollout, step
+
+from worldkit import random_world
 
 TICKS = 20
 DISCRETE = ("t", "holding", "grip", "stuck", "p_status", "holder", "p_picked")
 
 
-def _world(name="four-niche", E=2, seed=0, n_programs=12, device="cpu"):
-    """Random layouts, hardware and a mix of template and random programs."""
-    s = load_scenario(name)
-    g = torch.Generator().manual_seed(seed)
-    N = s.num_robots
-    layout = make_layouts(s, E, g, device)
-    u = lambda: torch.rand(E, N, generator=g)  # noqa: E731
-    tier = lambda: torch.randint(0, 3, (E, N), generator=g)  # noqa: E731
-    ph = phenotype(R_MIN + (R_MAX - R_MIN) * u(), tier(), tier(), tier(), u(), u(),
-                   torch.randint(0, 2, (E, N), generator=g))
-    progs = bt.random_programs(n_programs, 32, g)
-    progs[:4] = torch.stack([bt.template_tensor(k, 32) for k in bt.TEMPLATES][:4])
-    rob = Robots.from_phenotype(ph, torch.ones(E, N, dtype=torch.bool),
-                                torch.randint(0, n_programs, (E, N), generator=g))
-    rob = Robots(*(t.to(device) for t in rob))
-    return layout, rob, bt.build_tables(progs).to(device), WorldParams.for_scenario(s)
+def _world(device="cpu"):
+    """(layout, robots, tables, params): two random four-niche environments."""
+    return random_world("four-niche", E=2, seed=0, device=device)[1:]
 
 
 def _assert_close(want, got, pos_atol=1e-3):

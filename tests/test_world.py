@@ -4,13 +4,12 @@ import pytest
 import torch
 
 from swarmcode_torch import bt
-from swarmcode_torch.genome import R_MAX, R_MIN
 from swarmcode_torch.hardware import phenotype
 from swarmcode_torch.layout import make_layouts
 from swarmcode_torch.scenario import builtin_names, load_scenario
 from swarmcode_torch.world import (DELIVERED, GROUND, CompiledStep, Robots, WorldParams, collide,
                                    compatible, episode_metrics, random_keys, reset, rollout, step)
-from worldkit import build, package, robot
+from worldkit import build, package, random_world, robot
 
 
 def run(layout, rob, tables, params, ticks, each=None):
@@ -21,22 +20,6 @@ def run(layout, rob, tables, params, ticks, each=None):
         if each:
             each(s)
     return s
-
-
-def random_world(name, E=3, seed=0, n_programs=12):
-    s = load_scenario(name)
-    g = torch.Generator().manual_seed(seed)
-    N = s.num_robots
-    layout = make_layouts(s, E, g)
-    u = lambda: torch.rand(E, N, generator=g)  # noqa: E731
-    ti = lambda: torch.randint(0, 3, (E, N), generator=g)  # noqa: E731
-    ph = phenotype(R_MIN + (R_MAX - R_MIN) * u(), ti(), ti(), ti(), u(), u(),
-                   torch.randint(0, 2, (E, N), generator=g))
-    progs = bt.random_programs(n_programs, 32, g)
-    progs[:4] = torch.stack([bt.template_tensor(k, 32) for k in bt.TEMPLATES][:4])
-    rob = Robots.from_phenotype(ph, torch.ones(E, N, dtype=torch.bool),
-                                torch.randint(0, n_programs, (E, N), generator=g))
-    return s, layout, rob, bt.build_tables(progs), WorldParams.for_scenario(s)
 
 
 # ------------------------------------------------------------------ physics invariants

@@ -5,8 +5,10 @@ from __future__ import annotations
 import torch
 
 from swarmcode_torch import bt
+from swarmcode_torch.genome import R_MAX, R_MIN
 from swarmcode_torch.hardware import phenotype
-from swarmcode_torch.layout import Layout
+from swarmcode_torch.layout import Layout, make_layouts
+from swarmcode_torch.scenario import load_scenario
 from swarmcode_torch.world import Robots, WorldParams
 
 PROGRAMS = ["forage", "forage_random", "collaborative", "cautious"]
@@ -59,3 +61,22 @@ def build(robots: list[dict], packages: list[dict], obstacles=(), arena=10.0, ba
     rob = Robots.from_phenotype(ph, torch.ones(1, N, dtype=torch.bool), prog)
     tables = bt.build_tables(torch.stack([bt.template_tensor(n, 32) for n in PROGRAMS]))
     return layout, rob, tables, WorldParams(arena=arena, base_radius=base_radius, **params)
+
+
+def random_world(name, E=3, seed=0, n_programs=12, device="cpu"):
+    """(scenario, layout, robots, tables, params): E random environments of a built-in scenario
+    with random hardware and a mix of the templates and random programs (drawn on the CPU)."""
+    s = load_scenario(name)
+    g = torch.Generator().manual_seed(seed)
+    N = s.num_robots
+    layout = make_layouts(s, E, g, device)
+    u = lambda: torch.rand(E, N, generator=g)  # noqa: E731
+    ti = lambda: torch.randint(0, 3, (E, N), generator=g)  # noqa: E731
+    ph = phenotype(R_MIN + (R_MAX - R_MIN) * u(), ti(), ti(), ti(), u(), u(),
+                   torch.randint(0, 2, (E, N), generator=g))
+    progs = bt.random_programs(n_programs, 32, g)
+    progs[:4] = torch.stack([bt.template_tensor(k, 32) for k in bt.TEMPLATES][:4])
+    rob = Robots.from_phenotype(ph, torch.ones(E, N, dtype=torch.bool),
+                                torch.randint(0, n_programs, (E, N), generator=g))
+    rob = Robots(*(t.to(device) for t in rob))
+    return s, layout, rob, bt.build_tables(progs).to(device), WorldParams.for_scenario(s)
