@@ -81,6 +81,7 @@ def main() -> None:
     args = ap.parse_args()
     device = torch.device(args.device)
     rows = []
+    out = args.out or Path(__file__).parent / "results" / f"generation_{device.type}.json"
     for name, swarm, pop in parse_configs(args.configs):
         t = time.perf_counter()
         rows.append(bench(name, swarm, pop, args, device))
@@ -90,7 +91,7 @@ def main() -> None:
               f"{r['robot_ticks_per_s'] / 1e6:.2f} M robot-ticks/s "
               f"(warm-up {r['warmup_seconds']:.1f} s; {time.perf_counter() - t:.0f} s total)",
               flush=True)
-    out = args.out or Path(__file__).parent / "results" / f"generation_{device.type}.json"
+        write_json({**run_metadata(device), "results": rows}, out)  # keep what is done
     write_json({**run_metadata(device), "results": rows}, out)
     print(f"wrote {out}")
 

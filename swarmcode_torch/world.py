@@ -86,28 +86,43 @@ class State(NamedTuple):
     p_status: torch.Tensor  # [E, P] long GROUND / HELD / DELIVERED
     holder: torch.Tensor    # [E, P, G] long robot holding each grip, -1 none
     p_picked: torch.Tensor  # [E, P] bool ever lifted (all grips held at once)
+    wp_key: torch.Tensor    # [E, N, 2] long random-walk stream of each robot (constant)
 
 
 # ---------------------------------------------------------------- random numbers
-def hash_uniform(seed: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Counter-based uniform [0, 1) numbers from integer keys (broadcast); no generator state."""
-    x = (seed * 0x9E3779B1 + a * 0x85EBCA77 + b * 0xC2B2AE3D) & 0xFFFFFFFF
+_HASH_SEED, _HASH_A, _HASH_B, _MASK32 = 0x9E3779B1, 0x85EBCA77, 0xC2B2AE3D, 0xFFFFFFFF
+
+
+def _finalize(x: torch.Tensor) -> torch.Tensor:
+    """32-bit integer avalanche (murmur3-style) -> uniform [0, 1) float32."""
     x = x ^ (x >> 16)
-    x = (x * 0x7FEB352D) & 0xFFFFFFFF
+    x = (x * 0x7FEB352D) & _MASK32
     x = x ^ (x >> 15)
-    x = (x * 0x846CA68B) & 0xFFFFFFFF
+    x = (x * 0x846CA68B) & _MASK32
     x = x ^ (x >> 16)
     return x.float() * (1.0 / 4294967296.0)
 
 
-def _waypoints(seed, t, n: int, params: WorldParams) -> torch.Tensor:
-    """[E, N, 2] fresh random-walk waypoints for tick t."""
-    idx = torch.arange(n, device=seed.device)
-    s = seed[:, None]
-    ux = hash_uniform(s, idx * 2, t)
-    uy = hash_uniform(s, idx * 2 + 1, t)
+def hash_uniform(seed: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Counter-based uniform [0, 1) numbers from integer keys (broadcast); no generator state."""
+    return _finalize((seed * _HASH_SEED + a * _HASH_A + b * _HASH_B) & _MASK32)
+
+
+def waypoint_keys(seed: torch.Tensor, n: int) -> torch.Tensor:
+    """[E, n, 2] long: the hash of (seed, robot, axis) without the tick term.
+
+    Computed once per episode, outside the compiled tick: folded into the tick, the products of
+    `arange` with 32-bit constants become integer literals that Triton rejects on CUDA.
+    """
+    a = torch.arange(2 * n, device=seed.device).reshape(n, 2)
+    return (seed[:, None, None] * _HASH_SEED + a * _HASH_A) & _MASK32
+
+
+def _waypoints(wp_key: torch.Tensor, t: torch.Tensor, params: WorldParams) -> torch.Tensor:
+    """[E, N, 2] fresh random-walk waypoints for tick t: hash_uniform(seed, 2 i + axis, t)."""
+    u = _finalize((wp_key + t * _HASH_B) & _MASK32)
     lo, hi = 0.5, params.arena - 0.5
-    return torch.stack([lo + (hi - lo) * ux, lo + (hi - lo) * uy], -1)
+    return lo + (hi - lo) * u
 
 
 # ---------------------------------------------------------------- reset
@@ -117,17 +132,18 @@ def reset(layout: Layout, robots: Robots, params: WorldParams) -> State:
     P, G = layout.g_effector.shape[1:]
     dev = robots.radius.device
     t = torch.zeros((), dtype=torch.long, device=dev)
+    wp_key = waypoint_keys(layout.seed, N)
     return State(
         t=t, pos=layout.start.clone(), vel=torch.zeros(E, N, 2, device=dev),
         energy=torch.where(robots.present, robots.capacity, 0.0),
         holding=torch.full((E, N), -1, dtype=torch.long, device=dev),
         grip=torch.zeros(E, N, dtype=torch.long, device=dev),
         stuck=torch.zeros(E, N, dtype=torch.long, device=dev),
-        waypoint=_waypoints(layout.seed, t, N, params),
+        waypoint=_waypoints(wp_key, t, params),
         p_pos=layout.p_pos.clone(), p_vel=torch.zeros(E, P, 2, device=dev),
         p_status=torch.full((E, P), GROUND, dtype=torch.long, device=dev),
         holder=torch.full((E, P, G), -1, dtype=torch.long, device=dev),
-        p_picked=torch.zeros(E, P, dtype=torch.bool, device=dev),
+        p_picked=torch.zeros(E, P, dtype=torch.bool, device=dev), wp_key=wp_key,
     )
 
 
@@ -391,12 +407,12 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     stuck = torch.where(trying & slow, state.stuck + 1, 0)
     t = state.t + 1
     redraw = ((state.waypoint - pos).norm(dim=-1) <= params.reach) | (t % params.waypoint_period == 0)
-    waypoint = torch.where(redraw[..., None], _waypoints(layout.seed, t, N, params), state.waypoint)
+    waypoint = torch.where(redraw[..., None], _waypoints(state.wp_key, t, params), state.waypoint)
 
     # contiguous, like reset()'s holder: a strided view here would make a compiled step (which
     # guards on input strides) compile a second time on its second call
     return State(t, pos, vel, energy, holding, grip, stuck, waypoint, p_pos, p_vel, p_status,
-                 holder.reshape(E, P, G).contiguous(), p_picked)
+                 holder.reshape(E, P, G).contiguous(), p_picked, state.wp_key)
 
 
 # ---------------------------------------------------------------- outcome of an episode
@@ -459,7 +475,9 @@ class CompiledStep:
                 import warnings
 
                 self.error, self.fn = e, step
-                warnings.warn(f"torch.compile failed ({type(e).__name__}); running the tick eagerly",
+                lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+                why = f"{type(e).__name__}: {lines[-1][:200]}" if lines else type(e).__name__
+                warnings.warn(f"torch.compile failed ({why}); running the tick eagerly",
                               RuntimeWarning, stacklevel=2)
         return self.fn(*args)
 
