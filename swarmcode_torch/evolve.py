@@ -71,11 +71,15 @@ class EvolveConfig:
     """E in the elite count N = max(1, min(E, floor(size/5) + 1))."""
     dominance: bool = True
     """Sample team slots by the dominance genes; False: uniformly (an ablation)."""
+    quota_basis: str = "sum"
+    """Offspring quotas proportional to each species' total ('sum') or mean ('mean') fitness."""
 
     def validate(self) -> None:
         """Raise ValueError with a one-line message for an invalid setting."""
         if self.budget is not None and self.budget <= 0:
             raise ValueError(f"--budget must be > 0, got {self.budget:g}")
+        if self.quota_basis not in ("sum", "mean"):
+            raise ValueError(f"quota_basis must be 'sum' or 'mean', got {self.quota_basis!r}")
         if self.objective not in ("fitness", "roi"):
             raise ValueError(f"--objective must be 'fitness' or 'roi', got {self.objective!r}")
         for name, lo in (("generations", 1), ("population", 2), ("trials", 1), ("tag_length", 1),
@@ -176,7 +180,8 @@ def make_context(cfg: EvolveConfig) -> Context:
                           budget=cfg.budget, objective=cfg.objective, lam=cfg.lam,
                           p_marginal=cfg.p_marginal, max_elite=cfg.max_elite,
                           dominance=cfg.dominance, weights=FitnessWeights())
-    repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite)
+    repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite,
+                               quota_basis=cfg.quota_basis)
     use_compile = cfg.compile if cfg.compile is not None else (
         device.type == "cuda" or cfg.generations >= COMPILE_MIN_GENERATIONS)
     step_fn = CompiledStep() if use_compile else world_step

@@ -27,6 +27,9 @@ class ReproductionParams:
         1 (and not parent 1 itself) before falling back to a global tournament (excluding parent 1).
     delta: mating compatibility threshold on the genome distance (same as the speciation delta).
     max_elite: E in the elite count N = max(1, min(E, floor(size / 5) + 1)).
+    quota_basis: what a species' offspring quota is proportional to: "sum", the total of its
+        members' (gated, penalised, smoothed) fitness (the paper's "total adjusted fitness"), or
+        "mean", NEAT's explicit fitness sharing (total / species size). See docs/MODEL.md.
     bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
     bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
     bt_point_count: slots re-drawn by one point mutation (each a uniform slot, may repeat).
@@ -48,15 +51,16 @@ class ReproductionParams:
     mate_tries: int = 5
     delta: float = 0.4
     max_elite: int = 3
+    quota_basis: str = "sum"
     bt_mutation_rate: float = 1.0
     bt_subtree_prob: float = 0.05
     bt_point_count: int = 1
     point_opcode_weights: tuple[float, ...] = (1.0,) * 12 + (0.5, 0.5)
     subtree_leaf_prob: float = 0.5
     subtree_max_leaves: int = 3
-    hw_sigma: float = 0.1
-    social_sigma: float = 0.1
-    p_categorical: float = 0.1
+    hw_sigma: float = 0.05
+    social_sigma: float = 0.05
+    p_categorical: float = 0.02
     p_tag_flip: float | None = None
 
 
@@ -252,8 +256,8 @@ def reproduce(genome: Genome, fitness: Tensor, species: Tensor, proto_index: Ten
               distance_fn: DistanceFn = distance) -> tuple[Genome, Tensor, Tensor, Tensor]:
     """Genome [P], fitness [P], species [P], prototypes [K] -> (children [P], child_species_hint [P], is_elite [P], parent_index [P]).
 
-    Quotas: proportional to each species' mean fitness (NEAT adjusted-fitness sum), the species of
-    the global best protected (>= 1). Elites (top elite_count per species, capped by the quota)
+    Quotas: proportional to each species' total fitness (`params.quota_basis` "sum") or mean
+    fitness ("mean", NEAT's fitness sharing), the species of the global best protected (>= 1). Elites (top elite_count per species, capped by the quota)
     are copied unchanged and listed first (species by proto order, best first); the remaining
     quota is filled by offspring: p1 by in-species tournament, p2 by in-species tournament within
     `delta` of p1 (and != p1), up to mate_tries tries, else a global tournament (!= p1); crossover
@@ -273,7 +277,12 @@ def reproduce(genome: Genome, fitness: Tensor, species: Tensor, proto_index: Ten
     sizes = torch.bincount(pos, minlength=k)
     fit = fitness.float()
     fsum = torch.zeros(k, dtype=torch.float64, device=dev).index_add_(0, pos, fit.double())
-    adjusted = fsum / sizes.clamp(min=1)
+    if params.quota_basis == "sum":
+        adjusted = fsum
+    elif params.quota_basis == "mean":
+        adjusted = fsum / sizes.clamp(min=1)
+    else:
+        raise ValueError(f"quota_basis must be 'sum' or 'mean', not {params.quota_basis!r}")
     quota = torch.zeros(k, dtype=torch.long, device=dev)
     nonempty = (sizes > 0).nonzero().squeeze(1)                           # empty species get 0
     if p:

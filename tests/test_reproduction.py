@@ -160,14 +160,26 @@ def test_mutate_bounds_and_flip_rate():
     g.radius[:1000] = R_MAX
     g.selectivity[:1000] = 1.0
     g.dominance[1000:] = 0.0
-    m = mutate(g, ReproductionParams(), gen)
+    params = ReproductionParams(p_categorical=0.3, hw_sigma=0.1)
+    m = mutate(g, params, gen)
     check_bounds(m)
     flip = (m.tag != g.tag).float().mean().item()
     assert abs(flip - 1 / 16) < 0.01
     changed = (m.chassis != g.chassis).float().mean().item()
-    assert abs(changed - 0.1 * 2 / 3) < 0.02                # resampled w.p. 0.1, new value 2/3
+    assert abs(changed - 0.3 * 2 / 3) < 0.03                # resampled w.p. 0.3, new value 2/3
     step = (m.torque_point - g.torque_point)[(g.torque_point > 0.4) & (g.torque_point < 0.6)]
     assert abs(step.std().item() - 0.1) < 0.02
+
+
+def test_default_mutation_seldom_founds_a_species():
+    # docs/MODEL.md: one mutation alone crosses delta for well under 1 % of offspring
+    from swarmcode_torch.speciation import distance
+    gen = torch.Generator().manual_seed(0)
+    g = random_genomes(4000, gen, l_tag=16)
+    params = ReproductionParams()
+    d = distance(g, mutate(g, params, gen)).diagonal()
+    assert (d > params.delta).float().mean().item() < 0.01
+    assert (d > 0).all()
 
 
 def population(seed, p=60):
@@ -206,17 +218,20 @@ def test_reproduce_invariants_and_elites():
     assert differs.all()
 
 
-def test_reproduce_elite_counts_and_quotas():
+@pytest.mark.parametrize("basis,quotas", [("mean", [6, 6, 5]), ("sum", [12, 4, 1])])
+def test_reproduce_elite_counts_and_quotas(basis, quotas):
     gen = torch.Generator().manual_seed(0)
     g = random_genomes(17, gen)
     species = torch.tensor([7] * 12 + [3] * 4 + [9])
     fit = torch.ones(17)                                 # quotas 6, 6, 5
     fit[[2, 5, 8]] = torch.tensor([1.5, 1.4, 1.3])
-    fit[[0, 1, 3]] = torch.tensor([0.8, 0.7, 0.7])       # means 1.033, 1, 1 -> 5.79, 5.6, 5.6
+    fit[[0, 1, 3]] = torch.tensor([0.8, 0.7, 0.7])
+    # means 1.033, 1, 1 -> shares 5.79, 5.6, 5.6; sums 12.4, 4, 1 -> shares 12.11, 3.91, 0.98
     ch, hint, is_elite, parent = reproduce(g, fit, species, torch.tensor([0, 12, 16]),
-                                           torch.tensor([7, 3, 9]), ReproductionParams(), gen)
+                                           torch.tensor([7, 3, 9]),
+                                           ReproductionParams(quota_basis=basis), gen)
     assert parent[is_elite].tolist() == [2, 5, 8, 12, 16]  # 3 + 1 + 1 elites, best first
-    assert torch.bincount(hint, minlength=10)[[7, 3, 9]].tolist() == [6, 6, 5]
+    assert torch.bincount(hint, minlength=10)[[7, 3, 9]].tolist() == quotas
 
 
 def test_reproduce_zero_quota_species_goes_extinct():
