@@ -8,6 +8,7 @@ robots, packages or environments, and no host synchronisation, so it compiles to
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, NamedTuple
 
@@ -45,6 +46,9 @@ class WorldParams:
     collision_iters: int = 3     # relaxation passes of the robot-robot contact solver
     anchor_mass: float = 1e6     # collision mass of a robot waiting at a grip (it does not yield)
     rest_speed: float = 0.01     # static friction: slower than this (m/s), a body comes to rest
+    broad_phase_min_robots: int = 500  # robot-robot contacts from a cell list at N >= this
+    cell_size: float = 1.1       # broad-phase cell side (m): >= the largest contact distance 2 R_max
+    cell_capacity: int = 16      # robots per cell the broad phase looks at (more cannot fit)
 
     @staticmethod
     def for_scenario(s: Scenario, **kw) -> "WorldParams":
@@ -250,6 +254,16 @@ def collide(pos, vel, radius, mass, present, o_pos, o_radius, o_present, params:
     conserved) and are pushed apart in inverse proportion to their masses.
     """
     N = pos.shape[1]
+    if N >= params.broad_phase_min_robots:
+        pos, vel = _robot_contacts_cells(pos, vel, radius, mass, present, params)
+    else:
+        pos, vel = _robot_contacts_dense(pos, vel, radius, mass, present, params)
+    return _static_contacts(pos, vel, radius, o_pos, o_radius, o_present, params)
+
+
+def _robot_contacts_dense(pos, vel, radius, mass, present, params: WorldParams):
+    """Robot-robot contacts over all [E, N, N] pairs (right for tens to hundreds of robots)."""
+    N = pos.shape[1]
     eye = torch.eye(N, dtype=torch.bool, device=pos.device)
     pair = present[:, :, None] & present[:, None, :] & ~eye
     inv_m = 1.0 / mass
@@ -274,7 +288,71 @@ def collide(pos, vel, radius, mass, present, o_pos, o_radius, o_present, params:
             k = j * inv_d
             vel = vel + inv_m[..., None] * (pos * k.sum(2, keepdim=True) - torch.bmm(k, pos))
         pos = new_pos
+    return pos, vel
 
+
+def neighbour_candidates(pos, present, params: WorldParams) -> tuple[torch.Tensor, torch.Tensor]:
+    """Cell-list broad phase: [E, N, 2] positions -> ([E, N, K] long candidate partner rows,
+    [E, N, K] bool valid), K = 9 * cell_capacity.
+
+    Robots are binned into square cells of side `cell_size` (at least the largest contact
+    distance, so every pair that can touch lies in the same or adjacent cells); each robot's
+    candidates are the first `cell_capacity` robots of each of its 9 neighbouring cells (sorted
+    by cell, so this needs no Python loop and has fixed shapes). Self and absent robots are not
+    valid. A cell cannot hold more than `cell_capacity` robot centres without heavy overlap.
+    """
+    E, N = pos.shape[:2]
+    dev = pos.device
+    g = max(1, math.ceil(params.arena / params.cell_size))
+    cxy = (pos / params.cell_size).floor().long().clamp(0, g - 1)               # [E, N, 2]
+    cell = torch.where(present, cxy[..., 0] * g + cxy[..., 1], g * g)          # absent: past the end
+    sorted_cell, order = torch.sort(cell, dim=1)
+    off = torch.tensor([-1, 0, 1], device=dev)
+    nx = cxy[..., 0, None, None] + off[:, None]                                 # [E, N, 3, 1]
+    ny = cxy[..., 1, None, None] + off[None, :]                                 # [E, N, 1, 3]
+    inside = (nx >= 0) & (nx < g) & (ny >= 0) & (ny < g)                        # [E, N, 3, 3]
+    ncell = torch.where(inside, nx * g + ny, -1).reshape(E, N * 9)
+    start = torch.searchsorted(sorted_cell, ncell, side="left")
+    end = torch.searchsorted(sorted_cell, ncell, side="right")
+    m = torch.arange(params.cell_capacity, device=dev)
+    slot = start[..., None] + m                                                 # [E, N*9, M]
+    ok = (slot < end[..., None]) & (ncell >= 0)[..., None]
+    rows = order.gather(1, slot.clamp(max=N - 1).reshape(E, -1)).reshape(E, N, -1)
+    ok = ok.reshape(E, N, -1) & (rows != torch.arange(N, device=dev)[None, :, None])
+    return rows, ok & present[..., None]
+
+
+def _gather_rows(values: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
+    """values [E, N, *] at rows [E, N, K] -> [E, N, K, *]."""
+    E, N, K = rows.shape
+    return _gather(values, rows.reshape(E, N * K)).reshape((E, N, K) + tuple(values.shape[2:]))
+
+
+def _robot_contacts_cells(pos, vel, radius, mass, present, params: WorldParams):
+    """The same contact solver as `_robot_contacts_dense`, over [E, N, K] broad-phase candidates."""
+    inv_m = 1.0 / mass
+    for it in range(params.collision_iters):
+        # candidates are re-binned every pass: a push may carry a robot into another cell
+        rows, valid = neighbour_candidates(pos, present, params)                 # [E, N, K]
+        inv_sum = inv_m[..., None] + _gather_rows(inv_m, rows)
+        w = inv_m[..., None] / inv_sum
+        rsum = radius[..., None] + _gather_rows(radius, rows)
+        pj = _gather_rows(pos, rows)                                            # [E, N, K, 2]
+        diff = pos[:, :, None, :] - pj
+        d = diff.norm(dim=-1)
+        inv_d = 1.0 / d.clamp_min(1e-6)
+        overlap = torch.where(valid, (rsum - d).clamp_min(0), 0.0)
+        new_pos = pos + ((overlap * w * inv_d)[..., None] * diff).sum(2)
+        if it == 0:
+            vn = ((vel[:, :, None, :] - _gather_rows(vel, rows)) * diff).sum(-1) * inv_d
+            j = torch.where((overlap > 0) & (vn < 0), -2.0 * vn / inv_sum, 0.0)
+            vel = vel + inv_m[..., None] * ((j * inv_d)[..., None] * diff).sum(2)
+        pos = new_pos
+    return pos, vel
+
+
+def _static_contacts(pos, vel, radius, o_pos, o_radius, o_present, params: WorldParams):
+    """Robot-obstacle and robot-wall contacts."""
     # static obstacles: push out, reflect the normal velocity
     diff = pos[:, :, None, :] - o_pos[:, None, :, :]
     d = diff.norm(dim=-1)
