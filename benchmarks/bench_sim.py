@@ -32,7 +32,8 @@ from swarmcode_torch.genome import R_MAX, R_MIN  # noqa: E402
 from swarmcode_torch.hardware import phenotype  # noqa: E402
 from swarmcode_torch.layout import make_layouts  # noqa: E402
 from swarmcode_torch.scenario import Scenario, builtin_names, load_scenario  # noqa: E402
-from swarmcode_torch.world import Robots, WorldParams, compatible, random_keys, reset, step  # noqa: E402
+from swarmcode_torch.world import (CudaGraphTicks, Robots, WorldParams, compatible,  # noqa: E402
+                                  random_keys, reset, step)
 
 PROGRAM_LENGTH = 32
 
@@ -135,6 +136,29 @@ def run_mode(w: Workload, mode: str, args, device: torch.device) -> dict[str, An
     fn: Callable = step
     cudagraphs = False
     state = w.start()
+    if mode == "graphs":
+        # the compiled tick captured in CUDA graphs of --graph-ticks ticks (CudaGraphTicks)
+        torch._dynamo.reset()
+        g = CudaGraphTicks(torch.compile(step, dynamic=False, fullgraph=args.fullgraph),
+                           ticks_per_graph=args.graph_ticks)
+        inputs = (w.layout, w.robots, w.compat, w.keys, w.tables)
+        t0 = now(device)
+        g.run_ticks(state, inputs, w.params, args.graph_ticks)   # compile + capture + replay
+        rec["compile_seconds"] = now(device) - t0
+        times = []
+        for _ in range(args.repeats):
+            t0 = now(device)
+            out = g.run_ticks(state, inputs, w.params, args.ticks)
+            times.append(now(device) - t0)
+        sec = median(times)
+        rec.update({"ticks": args.ticks, "repeats": args.repeats, "seconds": sec,
+                    "seconds_all": times, "ms_per_tick": 1e3 * sec / args.ticks,
+                    "robot_ticks_per_s": E * N * args.ticks / sec,
+                    "robot_ticks_per_s_best": E * N * args.ticks / min(times),
+                    "env_ticks_per_s": E * args.ticks / sec, "graph_ticks": args.graph_ticks,
+                    "finite": bool(torch.isfinite(out.pos).all()),
+                    "peak_memory_bytes": torch.cuda.max_memory_allocated(device)})
+        return rec
     if mode == "compile":
         torch._dynamo.reset()  # a fresh cache: no recompile limit hit, honest compile time
         fn = torch.compile(step, dynamic=False, fullgraph=args.fullgraph, mode=args.compile_mode)
@@ -188,6 +212,10 @@ def main() -> None:
     parser.add_argument("--robots", type=int_list, default=None,
                         help="comma-separated N values (default cpu: 20,200; cuda: 20,200,1000)")
     parser.add_argument("--compile", choices=("eager", "compile", "both"), default="both")
+    parser.add_argument("--cuda-graphs", action="store_true",
+                        help="also time the compiled tick replayed from CUDA graphs (CUDA only)")
+    parser.add_argument("--graph-ticks", type=int, default=10,
+                        help="ticks captured per CUDA graph (with --cuda-graphs)")
     parser.add_argument("--compile-mode", default=None,
                         help="torch.compile mode (e.g. reduce-overhead for CUDA graphs)")
     parser.add_argument("--fullgraph", action=argparse.BooleanOptionalAction, default=True,
@@ -222,6 +250,10 @@ def main() -> None:
     robots = args.robots or ([20, 200, 1000] if cuda else [20, 200])
     args.ticks = args.ticks or (200 if cuda else 20)
     modes = ["eager", "compile"] if args.compile == "both" else [args.compile]
+    if args.cuda_graphs:
+        if not cuda:
+            parser.error("--cuda-graphs needs --device cuda")
+        modes.append("graphs")
 
     result: dict[str, Any] = run_metadata(device)
     result.update({"envs": envs, "robots": robots, "modes": modes, "ticks": args.ticks,

@@ -230,3 +230,11 @@ def test_compiled_step_falls_back_to_eager_when_compiling_fails(monkeypatch):
     assert fn.fn is step and isinstance(fn.error, RuntimeError)
     for k in m1:
         assert torch.equal(m1[k], m2[k])
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the error without CUDA")
+def test_cuda_graph_ticks_need_cuda():
+    from swarmcode_torch.world import CudaGraphTicks
+
+    with pytest.raises(RuntimeError, match="CUDA graphs need a CUDA device"):
+        CudaGraphTicks()
