@@ -73,6 +73,12 @@ class EvolveConfig:
     """Sample team slots by the dominance genes; False: uniformly (an ablation)."""
     quota_basis: str = "sum"
     """Offspring quotas proportional to each species' total ('sum') or mean ('mean') fitness."""
+    hw_sigma: float = 0.05
+    """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
+    social_sigma: float = 0.05
+    """Mutation: Gaussian step of selectivity and dominance."""
+    p_categorical: float = 0.02
+    """Mutation: probability of resampling each tier and the effector."""
 
     def validate(self) -> None:
         """Raise ValueError with a one-line message for an invalid setting."""
@@ -93,9 +99,12 @@ class EvolveConfig:
                 raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {v}")
         if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
             raise ValueError(f"--device must be auto, cpu or cuda, got {self.device!r}")
-        for name in ("delta", "p_marginal", "alpha", "lam"):
+        for name in ("delta", "p_marginal", "alpha", "lam", "hw_sigma", "social_sigma",
+                     "p_categorical"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0")
+        if self.p_categorical > 1:
+            raise ValueError("p_categorical must be <= 1")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -106,7 +115,16 @@ class EvolveConfig:
         unknown = sorted(set(d) - known)
         if unknown:
             raise ValueError(f"unknown config keys: {', '.join(unknown)}")
-        return cls(**{k: (None if v == "none" else v) for k, v in d.items()})
+        d = {k: (None if v == "none" else v) for k, v in d.items()}
+        if "quota_basis" not in d:
+            # written before these settings existed: keep the run's original algorithm
+            d = {**LEGACY_DEFAULTS, **d}
+        return cls(**d)
+
+
+#: Settings of configs saved before `quota_basis` and the mutation steps were config keys.
+LEGACY_DEFAULTS = {"quota_basis": "mean", "hw_sigma": 0.1, "social_sigma": 0.1,
+                   "p_categorical": 0.1}
 
 
 def resolve_device(name: str) -> torch.device:
@@ -181,7 +199,8 @@ def make_context(cfg: EvolveConfig) -> Context:
                           p_marginal=cfg.p_marginal, max_elite=cfg.max_elite,
                           dominance=cfg.dominance, weights=FitnessWeights())
     repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite,
-                               quota_basis=cfg.quota_basis)
+                               quota_basis=cfg.quota_basis, hw_sigma=cfg.hw_sigma,
+                               social_sigma=cfg.social_sigma, p_categorical=cfg.p_categorical)
     use_compile = cfg.compile if cfg.compile is not None else (
         device.type == "cuda" or cfg.generations >= COMPILE_MIN_GENERATIONS)
     step_fn = CompiledStep() if use_compile else world_step

@@ -48,7 +48,7 @@ class WorldParams:
     rest_speed: float = 0.01     # static friction: slower than this (m/s), a body comes to rest
     broad_phase_min_robots: int = 500  # robot-robot contacts from a cell list at N >= this
     cell_size: float = 1.1       # broad-phase cell side (m): >= the largest contact distance 2 R_max
-    cell_capacity: int = 16      # robots per cell the broad phase looks at (more cannot fit)
+    cell_capacity: int = 32      # robots per cell the broad phase looks at (see cell_overflow)
 
     @staticmethod
     def for_scenario(s: Scenario, **kw) -> "WorldParams":
@@ -291,6 +291,22 @@ def _robot_contacts_dense(pos, vel, radius, mass, present, params: WorldParams):
     return pos, vel
 
 
+def _cells(pos, present, params: WorldParams):
+    """Cells per side g, [E, N, 2] cell coordinates, [E, N] cell ids (absent robots: g * g)."""
+    g = max(1, math.ceil(params.arena / params.cell_size))
+    cxy = (pos / params.cell_size).floor().long().clamp(0, g - 1)
+    return g, cxy, torch.where(present, cxy[..., 0] * g + cxy[..., 1], g * g)
+
+
+def cell_overflow(pos, present, params: WorldParams) -> torch.Tensor:
+    """[E] bool: some broad-phase cell holds more than `cell_capacity` robots (contacts could be
+    missed there). A check for tests and diagnostics; the tick does not call it."""
+    g, _, cell = _cells(pos, present, params)
+    counts = torch.zeros(cell.shape[0], g * g + 1, dtype=torch.long, device=pos.device)
+    counts.scatter_add_(1, cell, torch.ones_like(cell))
+    return counts[:, :-1].max(1).values > params.cell_capacity
+
+
 def neighbour_candidates(pos, present, params: WorldParams) -> tuple[torch.Tensor, torch.Tensor]:
     """Cell-list broad phase: [E, N, 2] positions -> ([E, N, K] long candidate partner rows,
     [E, N, K] bool valid), K = 9 * cell_capacity.
@@ -299,15 +315,15 @@ def neighbour_candidates(pos, present, params: WorldParams) -> tuple[torch.Tenso
     distance, so every pair that can touch lies in the same or adjacent cells); each robot's
     candidates are the first `cell_capacity` robots of each of its 9 neighbouring cells (sorted
     by cell, so this needs no Python loop and has fixed shapes). Self and absent robots are not
-    valid. A cell cannot hold more than `cell_capacity` robot centres without heavy overlap.
+    valid. Robots past a cell's `cell_capacity` (by row order) are not seen from that cell: a
+    hexagonal packing of touching R_MIN robots puts 20 centres in a 1.1 m cell, so 32 leaves room
+    for the small overlaps the solver allows; `cell_overflow` tells whether a state exceeds it.
     """
     E, N = pos.shape[:2]
     dev = pos.device
-    g = max(1, math.ceil(params.arena / params.cell_size))
-    cxy = (pos / params.cell_size).floor().long().clamp(0, g - 1)               # [E, N, 2]
-    cell = torch.where(present, cxy[..., 0] * g + cxy[..., 1], g * g)          # absent: past the end
-    sorted_cell, order = torch.sort(cell, dim=1)
-    off = torch.tensor([-1, 0, 1], device=dev)
+    g, cxy, cell = _cells(pos, present, params)
+    sorted_cell, order = torch.sort(cell, dim=1, stable=True)
+    off = torch.arange(-1, 2, device=dev)
     nx = cxy[..., 0, None, None] + off[:, None]                                 # [E, N, 3, 1]
     ny = cxy[..., 1, None, None] + off[None, :]                                 # [E, N, 1, 3]
     inside = (nx >= 0) & (nx < g) & (ny >= 0) & (ny < g)                        # [E, N, 3, 3]
@@ -316,7 +332,7 @@ def neighbour_candidates(pos, present, params: WorldParams) -> tuple[torch.Tenso
     end = torch.searchsorted(sorted_cell, ncell, side="right")
     m = torch.arange(params.cell_capacity, device=dev)
     slot = start[..., None] + m                                                 # [E, N*9, M]
-    ok = (slot < end[..., None]) & (ncell >= 0)[..., None]
+    ok = slot < end[..., None]                                  # outside cells: start == end
     rows = order.gather(1, slot.clamp(max=N - 1).reshape(E, -1)).reshape(E, N, -1)
     ok = ok.reshape(E, N, -1) & (rows != torch.arange(N, device=dev)[None, :, None])
     return rows, ok & present[..., None]
@@ -553,8 +569,11 @@ class CompiledStep:
                 import warnings
 
                 self.error, self.fn = e, step
-                lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
-                why = f"{type(e).__name__}: {lines[-1][:200]}" if lines else type(e).__name__
+                lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()
+                         and not ln.strip().startswith(("Set TORCH", "For even more developer"))]
+                parts = [lines[0]] + ([lines[-1]] if len(lines) > 1 else []) if lines else []
+                why = f"{type(e).__name__}: {' ... '.join(p[:160] for p in parts)}" \
+                    if parts else type(e).__name__
                 warnings.warn(f"torch.compile failed ({why}); running the tick eagerly",
                               RuntimeWarning, stacklevel=2)
         return self.fn(*args)
@@ -576,7 +595,8 @@ class CudaGraphTicks:
             raise RuntimeError("CUDA graphs need a CUDA device")
         if ticks_per_graph < 1:
             raise ValueError("ticks_per_graph must be >= 1")
-        self.step_fn = step_fn or step
+        # the eager tick makes small host-to-device copies, which a capture does not allow
+        self.step_fn = step_fn if step_fn is not None else CompiledStep()
         self.k = ticks_per_graph
         self.key = None
         self.graph: torch.cuda.CUDAGraph | None = None
@@ -590,6 +610,8 @@ class CudaGraphTicks:
         return [*state, *layout, *robots, compat, keys, tables]
 
     def _capture(self, state: State, inputs: tuple, params: WorldParams) -> None:
+        if any(t.device.type != "cuda" for t in self._tensors(state, inputs)):
+            raise ValueError("CudaGraphTicks needs every state and input tensor on the GPU")
         layout, robots, compat, keys, tables = inputs
         self.state = State(*(t.clone() for t in state))
         self.inputs = (Layout(*(t.clone() for t in layout)), Robots(*(t.clone() for t in robots)),
@@ -608,6 +630,9 @@ class CudaGraphTicks:
         with torch.cuda.stream(side):
             ticks(2)                        # compile and allocate outside the capture
         torch.cuda.current_stream().wait_stream(side)
+        if isinstance(self.step_fn, CompiledStep) and self.step_fn.error is not None:
+            raise RuntimeError("CudaGraphTicks needs the compiled tick, and compiling failed: "
+                               f"{self.step_fn.error}")
         self.graph = torch.cuda.CUDAGraph()
         with torch.cuda.graph(self.graph):
             ticks(self.k)

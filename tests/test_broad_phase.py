@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from swarmcode_torch.genome import R_MAX, R_MIN
-from swarmcode_torch.world import WorldParams, collide, neighbour_candidates
+from swarmcode_torch.world import WorldParams, cell_overflow, collide, neighbour_candidates
 
 
 def crowd(E=3, N=300, arena=12.0, seed=0):
@@ -60,3 +60,35 @@ def test_cells_conserve_momentum_of_robot_contacts():
     m = torch.where(present, mass, 0.0)[..., None]
     torch.testing.assert_close((m * v).sum(1), (m * vel).sum(1), atol=1e-3, rtol=1e-5)
     assert (v - vel).abs().max() > 0.1
+
+
+def hex_pack(spacing, n_side, origin=(5.0, 5.0)):
+    """[1, n_side**2, 2] centres of a hexagonal packing."""
+    i, j = torch.meshgrid(torch.arange(n_side), torch.arange(n_side), indexing="ij")
+    x = origin[0] + spacing * (i + 0.5 * (j % 2))
+    y = origin[1] + spacing * j * (3 ** 0.5 / 2)
+    return torch.stack([x.flatten(), y.flatten()], -1)[None].float()
+
+
+def test_touching_min_size_robots_fit_the_cell_capacity():
+    # the densest legal crowd: touching R_MIN discs (a hexagonal packing puts ~20 in a cell)
+    pos = hex_pack(2 * R_MIN, 16)
+    present = torch.ones(pos.shape[:2], dtype=torch.bool)
+    radius = torch.full(pos.shape[:2], R_MIN + 0.01)              # every neighbour touches
+    params = WorldParams(arena=12.0)
+    assert not cell_overflow(pos, present, params).any()
+    rows, valid = neighbour_candidates(pos, present, params)
+    N = pos.shape[1]
+    seen = torch.zeros(1, N, N + 1, dtype=torch.long).scatter_add_(
+        2, torch.where(valid, rows, N), torch.ones_like(rows))[..., :N].bool()
+    d = (pos[:, :, None] - pos[:, None]).norm(dim=-1)
+    touching = (d < 2 * (R_MIN + 0.01)) & ~torch.eye(N, dtype=torch.bool)
+    assert touching.sum() > 5 * N and torch.all(seen | ~touching)
+
+
+def test_cell_overflow_is_reported():
+    pos = hex_pack(0.05, 8)                                      # 64 centres in one cell
+    present = torch.ones(pos.shape[:2], dtype=torch.bool)
+    params = WorldParams(arena=12.0)
+    assert cell_overflow(pos, present, params).tolist() == [True]
+    assert cell_overflow(pos, present, replace(params, cell_capacity=64)).tolist() == [False]

@@ -150,3 +150,19 @@ def test_swarm_larger_than_the_population():
         m = ev.step()
         assert sum(d["count"] for d in m["team"]["designs"]) == 12
         assert m["team/rows"].shape == (12,) and int(m["team/rows"].max()) < 4
+
+
+def test_config_saved_before_quota_basis_keeps_its_algorithm():
+    from swarmcode_torch.evolve import make_context
+
+    new = EvolveConfig(scenario="one-niche", population=8)
+    legacy = {k: v for k, v in new.to_dict().items()
+              if k not in ("quota_basis", "hw_sigma", "social_sigma", "p_categorical")}
+    old = EvolveConfig.from_dict(legacy)
+    assert (old.quota_basis, old.hw_sigma, old.social_sigma, old.p_categorical) == \
+        ("mean", 0.1, 0.1, 0.1)
+    assert EvolveConfig.from_dict(new.to_dict()) == new          # a current config round-trips
+    repro = make_context(old).repro
+    assert (repro.quota_basis, repro.hw_sigma, repro.p_categorical) == ("mean", 0.1, 0.1)
+    with pytest.raises(ValueError, match="p_categorical"):
+        EvolveConfig(p_categorical=1.5).validate()

@@ -47,11 +47,14 @@ def test_cuda_graph_ticks_match_compiled_rollout():
 
     compiled = CompiledStep()
     graphs = CudaGraphTicks(CompiledStep(), ticks_per_graph=10)
+    captured = []
     for E, seed in ((6, 0), (6, 1), (4, 2)):                     # reuse, then recapture
         _, layout, robots, tables, params = random_world("four-niche", E=E, seed=seed,
                                                          device="cuda")
         ref = rollout(layout, robots, tables, params, 25, compiled)  # 2 replays + 5 ticks
         got = rollout(layout, robots, tables, params, 25, graphs)
+        captured.append(graphs.graph)
         for k in ref:
             torch.testing.assert_close(got[k], ref[k], atol=1e-4, rtol=1e-4)
+    assert captured[0] is captured[1] and captured[2] is not captured[1]
     assert compiled.error is None and graphs.step_fn.error is None

@@ -218,13 +218,14 @@ def test_forage_template_delivers_packages():
 def test_compiled_step_falls_back_to_eager_when_compiling_fails(monkeypatch):
     def broken_compile(fn, **kw):
         def compiled(*args):
-            raise RuntimeError("no C++ compiler")
+            raise RuntimeError("InvalidCxxCompiler: No working C++ compiler found\n\n"
+                               "Set TORCHDYNAMO_VERBOSE=1 for the internal stack trace")
         return compiled
 
     monkeypatch.setattr(torch, "compile", broken_compile)
     fn = CompiledStep()
     s, layout, rob, tables, p = random_world("one-niche", E=1)
-    with pytest.warns(RuntimeWarning, match="torch.compile failed"):
+    with pytest.warns(RuntimeWarning, match="torch.compile failed .*No working C\\+\\+ compiler"):
         m1 = rollout(layout, rob, tables, p, 5, step_fn=fn)
     m2 = rollout(layout, rob, tables, p, 5)
     assert fn.fn is step and isinstance(fn.error, RuntimeError)
@@ -238,3 +239,17 @@ def test_cuda_graph_ticks_need_cuda():
 
     with pytest.raises(RuntimeError, match="CUDA graphs need a CUDA device"):
         CudaGraphTicks()
+
+
+def test_waypoints_are_the_counter_hash_of_seed_robot_axis_and_tick():
+    # the per-robot keys are precomputed outside the tick; the numbers must stay the hash's
+    from swarmcode_torch.world import _waypoints, hash_uniform, waypoint_keys
+
+    seed = torch.tensor([0, 7, 2**40, -(2**35)])
+    params = WorldParams(arena=30.0)
+    keys = waypoint_keys(seed, 9)
+    i = torch.arange(9)
+    for t in (0, 1, 99, 2**33):
+        tt = torch.tensor(t)
+        ref = torch.stack([hash_uniform(seed[:, None], 2 * i + a, tt) for a in (0, 1)], -1)
+        assert torch.equal(_waypoints(keys, tt, params), 0.5 + (params.arena - 1.0) * ref)

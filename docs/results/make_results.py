@@ -47,7 +47,12 @@ def compact(run_dir: Path, out_dir: Path, figure: bool = True) -> dict:
     history = torch.load(run_dir / "checkpoint.pt", map_location="cpu", weights_only=False)["history"]
     (out_dir / "history.json").write_text(json.dumps(history))
     pop_species = {h["generation"]: len(h["population"]) for h in history}
-    teams = [json.loads(line) for line in (run_dir / "teams.jsonl").read_text().splitlines() if line]
+    by_gen = {}                     # a resumed run may repeat generations: the last record wins
+    for line in (run_dir / "teams.jsonl").read_text().splitlines():
+        if line:
+            t = json.loads(line)
+            by_gen[t["generation"]] = t
+    teams = [by_gen[g] for g in sorted(by_gen)]
     with open(out_dir / "generations.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS)
         w.writeheader()
@@ -102,7 +107,7 @@ def species_lines(records: list[dict], out: Path) -> None:
         for r in sorted((r for r in records if r["label"].startswith(sc + "-")), key=lambda r: r["label"]):
             sp = [t["species"] for t in r["teams"]]
             smooth = [median(sp[max(0, i - 19):i + 1]) for i in range(len(sp))]
-            ax.plot(range(len(sp)), smooth, label=r["label"].split("-")[-1])
+            ax.plot([t["generation"] for t in r["teams"]], smooth, label=r["label"].split("-")[-1])
         ax.set_title(sc)
         ax.set_xlabel("generation")
         ax.set_ylabel("species in the best team (20-gen. median)")

@@ -12,6 +12,7 @@ set -u
 ROOT=${1:?usage: run_experiments.sh ROOT SECONDS [--resume]}
 SECONDS_LEFT=${2:?usage: run_experiments.sh ROOT SECONDS [--resume]}
 RESUME=${3:-}
+case "$RESUME" in ""|--resume) ;; *) echo "third argument must be --resume" >&2; exit 2;; esac
 export OMP_NUM_THREADS=1 TORCHINDUCTOR_COMPILE_THREADS=1 PYTHONUNBUFFERED=1
 mkdir -p "$ROOT"/{niche,budget,roi,swarm200,logs}
 CLI="timeout -s INT $SECONDS_LEFT python3 -m swarmcode_torch.cli"
@@ -20,7 +21,7 @@ if [ "$RESUME" = "--resume" ]; then
   for d in "$ROOT"/niche/* "$ROOT"/budget/budget-* "$ROOT"/roi/* "$ROOT"/swarm200/*; do
     [ -f "$d/checkpoint.pt" ] || continue
     gens=500; case "$d" in */swarm200/*) gens=50;; esac
-    $CLI evolve --resume "$d" --generations $gens --checkpoint-every 25 --log-every 50 \
+    $CLI evolve --resume "$d" --generations $gens --checkpoint-every 25 --log-every 50 --render-every 0 \
       > "$ROOT/logs/$(basename "$d").log" 2>&1 &
   done
 else
@@ -28,6 +29,8 @@ else
     $CLI evolve --scenario $sc --population 50 --swarm-size 20 --generations 500 --seed $s \
       --logdir "$ROOT/niche" --render-every 0 $OPTS > "$ROOT/logs/$sc-$s.log" 2>&1 &
   done; done
+  # one sweep process per budget into one directory (each rewrites table.md with its own row at
+  # the end; make_results.py builds the whole table)
   for b in 2500 3000 4000 5000 6000 8000; do
     $CLI sweep --budgets $b --generations 500 --out "$ROOT/budget" $OPTS \
       > "$ROOT/logs/budget-$b.log" 2>&1 &
