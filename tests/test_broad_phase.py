@@ -82,7 +82,7 @@ def test_touching_min_size_robots_fit_the_cell_capacity():
     seen = torch.zeros(1, N, N + 1, dtype=torch.long).scatter_add_(
         2, torch.where(valid, rows, N), torch.ones_like(rows))[..., :N].bool()
     d = (pos[:, :, None] - pos[:, None]).norm(dim=-1)
-    touching = (d < 2 * (R_MIN + 0.01)) & ~torch.eye(N, dtype=torch.bool)
+    touching = (d < radius[:, :, None] + radius[:, None]) & ~torch.eye(N, dtype=torch.bool)
     assert touching.sum() > 5 * N and torch.all(seen | ~touching)
 
 
