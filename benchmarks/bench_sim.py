@@ -26,7 +26,8 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import RESULTS_DIR, int_list, load_average, median, now, run_metadata, write_json  # noqa: E402
+from common import (RESULTS_DIR, apply_run_options, int_list, load_average, median,  # noqa: E402
+                    now, run_metadata, write_json)
 from swarmcode_torch import bt  # noqa: E402
 from swarmcode_torch.genome import R_MAX, R_MIN  # noqa: E402
 from swarmcode_torch.hardware import phenotype  # noqa: E402
@@ -150,15 +151,8 @@ def run_mode(w: Workload, mode: str, args, device: torch.device) -> dict[str, An
             t0 = now(device)
             out = g.run_ticks(state, inputs, w.params, args.ticks)
             times.append(now(device) - t0)
-        sec = median(times)
-        rec.update({"ticks": args.ticks, "repeats": args.repeats, "seconds": sec,
-                    "seconds_all": times, "ms_per_tick": 1e3 * sec / args.ticks,
-                    "robot_ticks_per_s": E * N * args.ticks / sec,
-                    "robot_ticks_per_s_best": E * N * args.ticks / min(times),
-                    "env_ticks_per_s": E * args.ticks / sec, "graph_ticks": args.graph_ticks,
-                    "finite": bool(torch.isfinite(out.pos).all()),
-                    "peak_memory_bytes": torch.cuda.max_memory_allocated(device)})
-        return rec
+        rec["graph_ticks"] = args.graph_ticks
+        return _timed(rec, times, args, out, device)
     if mode == "compile":
         torch._dynamo.reset()  # a fresh cache: no recompile limit hit, honest compile time
         fn = torch.compile(step, dynamic=False, fullgraph=args.fullgraph, mode=args.compile_mode)
@@ -186,16 +180,23 @@ def run_mode(w: Workload, mode: str, args, device: torch.device) -> dict[str, An
         times.append(now(device) - t0)
     if mode == "compile":
         rec["recompiles_while_timed"] = graphs_compiled() - g1
+    return _timed(rec, times, args, state, device)
+
+
+def _timed(rec: dict[str, Any], times: list[float], args, state, device: torch.device
+           ) -> dict[str, Any]:
+    """rec completed with the figures of `times` (seconds per run of args.ticks ticks)."""
+    E, N, ticks = rec["E"], rec["N"], args.ticks
     sec = median(times)
     rec.update({
-        "ticks": args.ticks,
+        "ticks": ticks,
         "repeats": args.repeats,
         "seconds": sec,
         "seconds_all": times,
-        "ms_per_tick": 1e3 * sec / args.ticks,
-        "robot_ticks_per_s": E * N * args.ticks / sec,
-        "robot_ticks_per_s_best": E * N * args.ticks / min(times),
-        "env_ticks_per_s": E * args.ticks / sec,
+        "ms_per_tick": 1e3 * sec / ticks,
+        "robot_ticks_per_s": E * N * ticks / sec,
+        "robot_ticks_per_s_best": E * N * ticks / min(times),
+        "env_ticks_per_s": E * ticks / sec,
         "finite": bool(torch.isfinite(state.pos).all()),
     })
     if device.type == "cuda":
@@ -237,14 +238,7 @@ def main() -> None:
     parser.add_argument("--out", default=None,
                         help="output JSON (default benchmarks/results/sim_<device>.json)")
     args = parser.parse_args()
-    if args.threads:
-        torch.set_num_threads(args.threads)
-    if args.cold_compile:
-        from torch._inductor import config as inductor_config
-        inductor_config.force_disable_caches = True
-    device = torch.device(args.device)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        parser.error("--device cuda but CUDA is not available")
+    device = apply_run_options(parser, args)
     cuda = device.type == "cuda"
     envs = args.envs or ([50, 200, 400] if cuda else [16, 64])
     robots = args.robots or ([20, 200, 1000] if cuda else [20, 200])

@@ -46,7 +46,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_sim import PROGRAM_LENGTH, estimate_bytes, mem_available, run_mode, scenario_for  # noqa: E402
-from common import RESULTS_DIR, int_list, load_average, median, now, run_metadata, write_json  # noqa: E402
+from common import (RESULTS_DIR, apply_run_options, int_list, load_average, median,  # noqa: E402
+                    now, run_metadata, write_json)
 from swarmcode_torch import bt  # noqa: E402
 from swarmcode_torch.hardware import phenotype  # noqa: E402
 from swarmcode_torch.layout import make_layouts  # noqa: E402
@@ -358,14 +359,7 @@ def main() -> None:
     parser.add_argument("--out", default=None,
                         help="output JSON (default benchmarks/results/vmas_<device>.json)")
     args = parser.parse_args()
-    if args.threads:
-        torch.set_num_threads(args.threads)
-    if args.cold_compile:
-        from torch._inductor import config as inductor_config
-        inductor_config.force_disable_caches = True
-    device = torch.device(args.device)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        parser.error("--device cuda but CUDA is not available")
+    device = apply_run_options(parser, args)
     cuda = device.type == "cuda"
     envs = args.envs or ([50, 200, 400] if cuda else [16, 64])
     robots = args.robots

@@ -77,6 +77,19 @@ def load_average() -> list[float] | None:
         return None
 
 
+def apply_run_options(parser, args) -> torch.device:
+    """Apply the --threads and --cold-compile options; the --device, checked to exist."""
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    if args.cold_compile:
+        from torch._inductor import config as inductor_config
+        inductor_config.force_disable_caches = True
+    device = torch.device(args.device)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        parser.error("--device cuda but CUDA is not available")
+    return device
+
+
 def run_metadata(device: torch.device) -> dict[str, Any]:
     """What a result needs to be reproduced and compared: machine, software, command line."""
     meta: dict[str, Any] = {
