@@ -77,44 +77,55 @@ def median(values: list) -> float:
     return v[len(v) // 2] if v else float("nan")
 
 
+SCENARIOS = ["one-niche", "two-niche", "four-niche"]
+
+
+def runs_of(records: list[dict], scenario: str) -> list[dict]:
+    """The records of one scenario, by seed."""
+    return sorted((r for r in records if r["label"].startswith(scenario + "-")),
+                  key=lambda r: r["label"])
+
+
+def scenario_panels(records: list[dict], path: Path, ylabel: str, series, height: float,
+                    **plot_kw) -> None:
+    """One panel per scenario, one line per run: series(record) -> (x, y)."""
+    fig, axes = plt.subplots(1, 3, figsize=(14, height), sharey=plot_kw.pop("sharey", False))
+    for ax, sc in zip(axes, SCENARIOS):
+        for r in runs_of(records, sc):
+            ax.plot(*series(r), label=r["label"].split("-")[-1], **plot_kw)
+        ax.set_title(sc)
+        ax.set_xlabel("generation")
+        ax.set_ylabel(ylabel)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def niche_report(records: list[dict], out: Path) -> None:
-    scenarios = ["one-niche", "two-niche", "four-niche"]
-    fig, axes = plt.subplots(1, 3, figsize=(14, 3.4), sharey=False)
     print("\n| scenario | seed | generations | best-team species (best of run) | best-team species, median of the last 50 generations | population species, median of the last 50 | best fitness | deliveries |")
     print("|---|---|---|---|---|---|---|---|")
-    for ax, sc in zip(axes, scenarios):
-        for r in sorted((r for r in records if r["label"].startswith(sc + "-")), key=lambda r: r["label"]):
+    for sc in SCENARIOS:
+        for r in runs_of(records, sc):
             s, teams = r["summary"], r["teams"]
-            g = [t["generation"] for t in teams]
-            ax.plot(g, [t["fitness"] for t in teams], lw=0.7, label=r["label"].split("-")[-1])
             team_sp = median([t["species"] for t in last_window(teams)])
             pop_sp = median([len(h["population"]) for h in last_window(r["history"])])
             print(f"| {sc} | {r['label'].split('seed')[-1]} | {s['generation'] + 1} | {s['num_species']} | "
                   f"{team_sp} | {pop_sp} | {s['best_fitness']:.0f} | {s['deliveries']:.1f} |")
-        ax.set_title(sc)
-        ax.set_ylabel("fitness of the generation's best team")
-        ax.set_xlabel("generation")
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "fitness.png", dpi=90)
-    plt.close(fig)
+    scenario_panels(records, out / "fitness.png", "fitness of the generation's best team",
+                    lambda r: ([t["generation"] for t in r["teams"]],
+                               [t["fitness"] for t in r["teams"]]), 3.4, lw=0.7)
 
 
 def species_lines(records: list[dict], out: Path) -> None:
     """Species in the best team per generation (20-generation running median), per run."""
-    fig, axes = plt.subplots(1, 3, figsize=(14, 3.2), sharey=True)
-    for ax, sc in zip(axes, ["one-niche", "two-niche", "four-niche"]):
-        for r in sorted((r for r in records if r["label"].startswith(sc + "-")), key=lambda r: r["label"]):
-            sp = [t["species"] for t in r["teams"]]
-            smooth = [median(sp[max(0, i - 19):i + 1]) for i in range(len(sp))]
-            ax.plot([t["generation"] for t in r["teams"]], smooth, label=r["label"].split("-")[-1])
-        ax.set_title(sc)
-        ax.set_xlabel("generation")
-        ax.set_ylabel("species in the best team (20-gen. median)")
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out / "team_species.png", dpi=90)
-    plt.close(fig)
+    def series(r):
+        sp = [t["species"] for t in r["teams"]]
+        return ([t["generation"] for t in r["teams"]],
+                [median(sp[max(0, i - 19):i + 1]) for i in range(len(sp))])
+
+    scenario_panels(records, out / "team_species.png",
+                    "species in the best team (20-gen. median)", series, 3.2, sharey=True)
 
 
 def designs_table(summary: dict) -> None:
