@@ -616,7 +616,6 @@ class CudaGraphTicks:
         self.state = State(*(t.clone() for t in state))
         self.inputs = (Layout(*(t.clone() for t in layout)), Robots(*(t.clone() for t in robots)),
                        compat.clone(), keys.clone(), tables.clone())
-        self.params = params
 
         def ticks(n: int) -> None:
             for _ in range(n):
