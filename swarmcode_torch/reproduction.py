@@ -256,15 +256,16 @@ def reproduce(genome: Genome, fitness: Tensor, species: Tensor, proto_index: Ten
               distance_fn: DistanceFn = distance) -> tuple[Genome, Tensor, Tensor, Tensor]:
     """Genome [P], fitness [P], species [P], prototypes [K] -> (children [P], child_species_hint [P], is_elite [P], parent_index [P]).
 
-    Quotas: proportional to each species' total fitness (`params.quota_basis` "sum") or mean
-    fitness ("mean", NEAT's fitness sharing), the species of the global best protected (>= 1).
-    Elites (top elite_count per species, capped by the quota) are copied unchanged and listed
-    first (species by proto order, best first); the remaining quota is filled by offspring: p1 by in-species tournament, p2 by in-species tournament within
-    `delta` of p1 (and != p1), up to mate_tries tries, else a global tournament (!= p1); crossover
-    w.p. crossover_same / crossover_cross (same / different species) else clone p1; then every
-    offspring is mutated. Hints: the elite's own species / p1's species; parent_index: the elite
-    row / p1. `distance_fn(genome, genome)` is called once ([P, P]); `proto_index` is unused
-    (kept for the API). Fitness must be finite for every individual.
+    Quotas: proportional to each species' total fitness (`params.quota_basis` "sum") or mean fitness
+    ("mean", NEAT's fitness sharing), the species of the global best protected (>= 1). Elites (top
+    elite_count per species, capped by the quota) are copied unchanged and listed first (species by
+    proto order, best first); the remaining quota is filled by offspring: p1 by in-species
+    tournament, p2 by in-species tournament within `delta` of p1 (and != p1), up to mate_tries
+    tries, else a global tournament (!= p1); crossover w.p. crossover_same / crossover_cross (same /
+    different species) else clone p1; then every offspring is mutated. Hints: the elite's own
+    species / p1's species; parent_index: the elite row / p1. `distance_fn(genome, genome)` is
+    called once ([P, P]); `proto_index` is unused (kept for the API). Fitness must be finite for
+    every individual.
     """
     p = genome.size
     dev = genome.bt.device
