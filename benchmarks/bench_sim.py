@@ -26,8 +26,8 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import (RESULTS_DIR, apply_run_options, int_list, load_average, median,  # noqa: E402
-                    now, run_metadata, write_json)
+from common import (RESULTS_DIR, add_run_options, apply_run_options, int_list,  # noqa: E402
+                    load_average, median, now, run_metadata, write_json)
 from swarmcode_torch import bt  # noqa: E402
 from swarmcode_torch.genome import R_MAX, R_MIN  # noqa: E402
 from swarmcode_torch.hardware import phenotype  # noqa: E402
@@ -227,10 +227,7 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=3, help="untimed ticks before timing")
     parser.add_argument("--programs", type=int, default=16,
                         help="distinct behavior trees (the 4 templates, then random ones)")
-    parser.add_argument("--cold-compile", action="store_true",
-                        help="disable inductor's caches, so compile_seconds is a cold compile "
-                             "(otherwise a repeated run reuses cached kernels and compiles faster)")
-    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    add_run_options(parser)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--mem-fraction", type=float, default=0.5,
                         help="cpu: skip configurations estimated to need more than this share "

@@ -46,8 +46,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_sim import PROGRAM_LENGTH, estimate_bytes, mem_available, run_mode, scenario_for  # noqa: E402
-from common import (RESULTS_DIR, apply_run_options, int_list, load_average, median,  # noqa: E402
-                    now, run_metadata, write_json)
+from common import (RESULTS_DIR, add_run_options, apply_run_options, int_list,  # noqa: E402
+                    load_average, median, now, run_metadata, write_json)
 from swarmcode_torch import bt  # noqa: E402
 from swarmcode_torch.hardware import phenotype  # noqa: E402
 from swarmcode_torch.layout import make_layouts  # noqa: E402
@@ -349,9 +349,7 @@ def main() -> None:
     parser.add_argument("--vmas-substeps", type=int, default=1, help="VMAS physics substeps per tick")
     parser.add_argument("--vmas-u-range", type=float, default=2.0,
                         help="VMAS action (force) limit per axis, N on a 1 kg agent")
-    parser.add_argument("--cold-compile", action="store_true",
-                        help="disable inductor's caches, so compile_seconds is a cold compile")
-    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    add_run_options(parser)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--mem-fraction", type=float, default=0.5,
                         help="cpu: skip our configurations estimated to need more than this "

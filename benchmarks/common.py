@@ -77,6 +77,14 @@ def load_average() -> list[float] | None:
         return None
 
 
+def add_run_options(parser) -> None:
+    """The --threads and --cold-compile options that `apply_run_options` applies."""
+    parser.add_argument("--cold-compile", action="store_true",
+                        help="disable inductor's caches, so compile_seconds is a cold compile "
+                             "(otherwise a repeated run reuses cached kernels and compiles faster)")
+    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+
+
 def apply_run_options(parser, args) -> torch.device:
     """Apply the --threads and --cold-compile options; the --device, checked to exist."""
     if args.threads:
