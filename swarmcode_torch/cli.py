@@ -103,9 +103,10 @@ def evolve(
     log_every: Annotated[int, typer.Option(help="Generations between log lines when not on a terminal.")] = 10,
     render_every: Annotated[int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")] = 50,
     resume: Annotated[Optional[Path], typer.Option(help="Continue the run in this directory.")] = None,
+    settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key, e.g. --set p_tag_flip=0.0625 (repeatable; keys as in the run's config.toml).")] = None,
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
-    from .evolve import Evolution, EvolveConfig, with_overrides
+    from .evolve import Evolution, EvolveConfig, parse_settings, with_overrides
     from .runs import RunError, new_run_dir, write_config
     from .runs import resume as resume_run
 
@@ -116,6 +117,7 @@ def evolve(
     try:
         if resume is not None:
             extra = [k.replace("_", "-") for k, v in given.items() if v is not None]
+            extra += ["set"] if settings else []
             if extra:
                 fail(f"--resume uses the run's saved config; only --generations and --device may "
                      f"change (got --{', --'.join(extra)})")
@@ -125,7 +127,8 @@ def evolve(
             console.print(f"Resuming [bold]{run_dir}[/] at generation {ev.state.generation} "
                           f"of {ev.cfg.generations}")
         else:
-            cfg = with_overrides(EvolveConfig(), generations=generations, device=device, **given)
+            cfg = with_overrides(EvolveConfig(), generations=generations, device=device, **given,
+                                 **parse_settings(settings or []))
             cfg.validate()
             if cfg.scenario:
                 load_scenario(cfg.scenario)  # a clear error before anything is created
@@ -190,11 +193,12 @@ def sweep(
     out: Annotated[Optional[Path], typer.Option(help="Sweep directory; run again with the same --out to resume.")] = None,
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines off a terminal.")] = 50,
+    settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key of every run (repeatable), as in evolve.")] = None,
 ) -> None:
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
     import time
 
-    from .evolve import Evolution, EvolveConfig, with_overrides
+    from .evolve import Evolution, EvolveConfig, parse_settings, with_overrides
     from .runs import RunError, load_checkpoint, read_config, write_config
     from .runs import resume as resume_run
     from .sweep import run_name, table_rows, write_outputs
@@ -202,10 +206,11 @@ def sweep(
     budget_list = _parse_list(budgets, float, "--budgets")
     seed_list = _parse_list(seeds, int, "--seeds")
     out = out or Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
-    base = with_overrides(EvolveConfig(), objective=objective, scenario=scenario,
-                          generations=generations, population=population, swarm_size=swarm_size,
-                          trials=trials, ticks=ticks, device=device, compile=compile)
     try:
+        base = with_overrides(EvolveConfig(), objective=objective, scenario=scenario,
+                              generations=generations, population=population,
+                              swarm_size=swarm_size, trials=trials, ticks=ticks, device=device,
+                              compile=compile, **parse_settings(settings or []))
         for b in budget_list:
             with_overrides(base, budget=b).validate()
         load_scenario(base.scenario)

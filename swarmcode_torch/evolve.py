@@ -79,6 +79,8 @@ class EvolveConfig:
     """Mutation: Gaussian step of selectivity and dominance."""
     p_categorical: float = 0.02
     """Mutation: probability of resampling each tier and the effector."""
+    p_tag_flip: float = 0.01
+    """Mutation: probability of flipping each tag bit."""
 
     def validate(self) -> None:
         """Raise ValueError with a one-line message for an invalid setting."""
@@ -100,11 +102,12 @@ class EvolveConfig:
         if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
             raise ValueError(f"--device must be auto, cpu or cuda, got {self.device!r}")
         for name in ("delta", "p_marginal", "alpha", "lam", "hw_sigma", "social_sigma",
-                     "p_categorical"):
+                     "p_categorical", "p_tag_flip"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0")
-        if self.p_categorical > 1:
-            raise ValueError("p_categorical must be <= 1")
+        for name in ("p_categorical", "p_tag_flip"):
+            if getattr(self, name) > 1:
+                raise ValueError(f"{name} must be <= 1")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -119,6 +122,9 @@ class EvolveConfig:
         if "quota_basis" not in d:
             # written before these settings existed: keep the run's original algorithm
             d = {**LEGACY_DEFAULTS, **d}
+        if "p_tag_flip" not in d:
+            # written before the tag flip rate was a setting: it was one bit in L per child
+            d["p_tag_flip"] = 1.0 / int(d.get("tag_length", cls.tag_length))
         return cls(**d)
 
 
@@ -200,7 +206,8 @@ def make_context(cfg: EvolveConfig) -> Context:
                           dominance=cfg.dominance, weights=FitnessWeights())
     repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite,
                                quota_basis=cfg.quota_basis, hw_sigma=cfg.hw_sigma,
-                               social_sigma=cfg.social_sigma, p_categorical=cfg.p_categorical)
+                               social_sigma=cfg.social_sigma, p_categorical=cfg.p_categorical,
+                               p_tag_flip=cfg.p_tag_flip)
     use_compile = cfg.compile if cfg.compile is not None else (
         device.type == "cuda" or cfg.generations >= COMPILE_MIN_GENERATIONS)
     step_fn = CompiledStep() if use_compile else world_step
@@ -260,8 +267,10 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
 
-    # the best team of this generation: the focal team with the highest score
-    b = int(res.focal.argmax())
+    # the best team of this generation: the team of the individual with the highest fitness
+    # score (gated: a focal whose marginal contribution is not positive is penalised, so a strong
+    # team carried by its partners is not credited to a focal that weakens it)
+    b = int(res.fitness.argmax())
     team = res.swarms.focal_team[b]
     rows, counts = torch.unique(team[team >= 0], return_counts=True)
     cost = genome_phenotype(genome).cost
@@ -304,6 +313,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
         "fitness/best": float(fit.max()), "fitness/mean": float(fit.mean()),
         "species/count": int(ids.numel()),
         "team/fitness": team_record["fitness"], "team/species": team_record["species"],
+        "team/focal_max": float(res.focal.max()),
         "team/cost": team_record["cost"], "team/budget": budget,
         "team/deliveries": team_record["deliveries"],
         "team/deliveries_individual": team_record["deliveries_individual"],
@@ -381,6 +391,44 @@ class Evolution:
 
     def state_dict(self) -> dict:
         return state_dict(self.state, self.cfg)
+
+
+#: Config keys that `parse_settings` refuses because the command line has an option for them.
+OPTION_KEYS = frozenset({"scenario", "budget", "objective", "generations", "population",
+                         "swarm_size", "trials", "ticks", "seed", "device", "compile"})
+
+
+def parse_settings(pairs: list[str]) -> dict[str, Any]:
+    """["key=value", ...] -> {key: typed value} for the algorithm's config keys (e.g. delta=0.5,
+    p_tag_flip=0.0625, quota_basis=mean); ValueError with a one-line message for a malformed
+    pair, an unknown key, a key that has its own option, or a value of the wrong type."""
+    kinds = {f.name: f.type for f in fields(EvolveConfig)}
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        key, text = key.strip().replace("-", "_"), text.strip()
+        if not sep or not key or not text:
+            raise ValueError(f"--set expects KEY=VALUE, got {pair!r}")
+        if key in OPTION_KEYS:
+            raise ValueError(f"--set {key}: use the --{key.replace('_', '-')} option")
+        if key not in kinds:
+            settable = ", ".join(sorted(set(kinds) - OPTION_KEYS))
+            raise ValueError(f"--set: unknown key {key!r} (settable: {settable})")
+        kind = kinds[key]
+        try:
+            if kind == "bool":
+                if text.lower() not in ("true", "false"):
+                    raise ValueError
+                out[key] = text.lower() == "true"
+            elif kind == "int":
+                out[key] = int(text)
+            elif kind == "float":
+                out[key] = float(text)
+            else:
+                out[key] = text
+        except ValueError:
+            raise ValueError(f"--set {key}: expected a value of type {kind}, got {text!r}") from None
+    return out
 
 
 def with_overrides(cfg: EvolveConfig, **kw) -> EvolveConfig:

@@ -10,7 +10,7 @@ from .evolve import Evolution
 SCALAR_TAGS = (
     "fitness/best", "fitness/mean", "species/count", "team/fitness", "team/species", "team/cost",
     "team/budget", "team/deliveries", "team/deliveries_individual", "team/deliveries_collab",
-    "team/energy_used", "perf/generation_seconds", "perf/eval_seconds", "perf/sim_seconds",
+    "team/energy_used", "team/focal_max", "perf/generation_seconds", "perf/eval_seconds", "perf/sim_seconds",
 )
 
 

@@ -58,6 +58,17 @@ def test_evolve_writes_a_complete_run_directory(tmp_path):
     assert_clean_error(invoke("replay", run, "--generation", 99), "generation 99")
 
 
+def test_set_writes_algorithm_keys_into_the_run_config(tmp_path):
+    r = invoke("evolve", *TINY, "--generations", 1, "--logdir", tmp_path,
+               "--set", "p_tag_flip=0.25", "--set", "quota_basis=mean", "--set", "dominance=false")
+    assert r.exit_code == 0, r.output
+    run = only_run(tmp_path)
+    from swarmcode_torch.runs import read_config
+    cfg = read_config(run)
+    assert (cfg.p_tag_flip, cfg.quota_basis, cfg.dominance) == (0.25, "mean", False)
+    assert_clean_error(invoke("evolve", "--resume", run, "--set", "delta=0.5"), "--set")
+
+
 def test_resume_extends_a_finished_run(tmp_path):
     assert invoke("evolve", *TINY, "--generations", 2, "--logdir", tmp_path).exit_code == 0
     run = only_run(tmp_path)
@@ -77,6 +88,11 @@ def test_resume_extends_a_finished_run(tmp_path):
     (["--scenario", "nowhere"], ["unknown scenario", "four-niche", "budget"]),
     (["--scenario", "missing/file.toml"], ["not found"]),
     (["--device", "tpu"], ["--device"]),
+    (["--set", "foo=1"], ["unknown key 'foo'", "p_tag_flip"]),
+    (["--set", "delta=wide"], ["--set delta: expected a value of type float"]),
+    (["--set", "delta"], ["KEY=VALUE"]),
+    (["--set", "seed=4"], ["use the --seed option"]),
+    (["--set", "p_tag_flip=1.5"], ["p_tag_flip must be <= 1"]),
 ])
 def test_bad_options_give_one_line_errors(tmp_path, args, needles):
     r = invoke("evolve", "--logdir", tmp_path, *args)

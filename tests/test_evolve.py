@@ -166,3 +166,52 @@ def test_config_saved_before_quota_basis_keeps_its_algorithm():
     assert (repro.quota_basis, repro.hw_sigma, repro.p_categorical) == ("mean", 0.1, 0.1)
     with pytest.raises(ValueError, match="p_categorical"):
         EvolveConfig(p_categorical=1.5).validate()
+
+
+def test_config_saved_before_p_tag_flip_keeps_one_flip_in_l():
+    from swarmcode_torch.evolve import make_context
+
+    new = EvolveConfig(scenario="one-niche", population=8, tag_length=8)
+    assert make_context(new).repro.p_tag_flip == new.p_tag_flip == 0.01
+    old = {k: v for k, v in new.to_dict().items() if k != "p_tag_flip"}
+    assert EvolveConfig.from_dict(old).p_tag_flip == 1 / 8
+    assert make_context(EvolveConfig.from_dict(old)).repro.p_tag_flip == 1 / 8
+
+
+def test_parse_settings_types_and_refusals():
+    from swarmcode_torch.evolve import parse_settings
+
+    assert parse_settings(["delta=0.5", "max-elite=2", "dominance=False", "quota_basis=mean"]) == \
+        {"delta": 0.5, "max_elite": 2, "dominance": False, "quota_basis": "mean"}
+    for bad, needle in (("max_elite=2.5", "type int"), ("dominance=yes", "type bool"),
+                        ("=3", "KEY=VALUE"), ("budget=9", "--budget option"),
+                        ("gamma=2", "unknown key")):
+        with pytest.raises(ValueError, match=needle):
+            parse_settings([bad])
+
+
+def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
+    """The generation's best team is the focal team of the highest gated fitness, which need not
+    be the highest focal team score (a focal that weakens its team is penalised)."""
+    import swarmcode_torch.evolve as E
+
+    seen = {}
+    real = E.evaluate
+
+    def spy(*a, **k):
+        seen["r"] = res = real(*a, **k)
+        return res
+
+    monkeypatch.setattr(E, "evaluate", spy)
+    ev = Evolution(EvolveConfig(scenario="two-niche", population=12, swarm_size=6, trials=1,
+                                ticks=40, generations=6, seed=1, device="cpu", compile=False))
+    differed = 0
+    while not ev.done:
+        m = ev.step()
+        r = seen["r"]
+        b = int(r.fitness.argmax())
+        assert torch.equal(m["team/rows"], r.swarms.focal_team[b])
+        assert m["team/fitness"] == pytest.approx(float(r.focal[b]))
+        assert m["team/focal_max"] == pytest.approx(float(r.focal.max()))
+        differed += int(int(r.focal.argmax()) != b)
+    assert differed > 0         # the two definitions disagree in some generation of this run
