@@ -1,11 +1,12 @@
 """Turn the raw run directories of the paper experiments into the compact files and figures that
 docs/RESULTS.md shows.
 
-    python docs/results/make_results.py RAW_ROOT
+    python docs/results/make_results.py RAW_ROOT [--only niche] [--out DIR]
 
 RAW_ROOT holds `niche/`, `budget/` (a `swarmcode-torch sweep --out` directory), `roi/` and
 `swarm200/`, each with run directories as `evolve` writes them (summary.json, teams.jsonl,
-config.toml, checkpoint.pt). For each run this writes, under docs/results/<experiment>/<run>/:
+config.toml, checkpoint.pt); with `--only niche`, only `niche/`. For each run this writes,
+under <DIR, default docs/results>/<experiment>/<run>/:
 config.toml, summary.json, history.json (species composition per generation) and
 generations.csv (the best team of every generation); plus figures and the budget sweep's
 table.md / table.csv / budget.png, and prints the tables that RESULTS.md quotes.
@@ -13,10 +14,10 @@ table.md / table.csv / budget.png, and prints the tables that RESULTS.md quotes.
 
 from __future__ import annotations
 
+import argparse
 import csv
 import json
 import shutil
-import sys
 from pathlib import Path
 
 import matplotlib
@@ -78,6 +79,7 @@ def median(values: list) -> float:
 
 
 SCENARIOS = ["one-niche", "two-niche", "four-niche"]
+PAPER_SPECIES = {"one-niche": 1, "two-niche": 2, "four-niche": 4}
 
 
 def runs_of(records: list[dict], scenario: str) -> list[dict]:
@@ -103,15 +105,16 @@ def scenario_panels(records: list[dict], path: Path, ylabel: str, series, height
 
 
 def niche_report(records: list[dict], out: Path) -> None:
-    print("\n| scenario | seed | generations | best-team species (best of run) | best-team species, median of the last 50 generations | population species, median of the last 50 | best fitness | deliveries |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("\n| scenario | seed | generations | best-team species (best of run) | best-team species, median of the last 50 generations | last 50 with the paper's count | population species, median of the last 50 | best fitness | deliveries |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for sc in SCENARIOS:
         for r in runs_of(records, sc):
             s, teams = r["summary"], r["teams"]
-            team_sp = median([t["species"] for t in last_window(teams)])
+            window = [t["species"] for t in last_window(teams)]
+            hit = sum(n == PAPER_SPECIES[sc] for n in window) / max(1, len(window))
             pop_sp = median([len(h["population"]) for h in last_window(r["history"])])
             print(f"| {sc} | {r['label'].split('seed')[-1]} | {s['generation'] + 1} | {s['num_species']} | "
-                  f"{team_sp} | {pop_sp} | {s['best_fitness']:.0f} | {s['deliveries']:.1f} |")
+                  f"{median(window)} | {hit:.0%} | {pop_sp} | {s['best_fitness']:.0f} | {s['deliveries']:.1f} |")
     scenario_panels(records, out / "fitness.png", "fitness of the generation's best team",
                     lambda r: ([t["generation"] for t in r["teams"]],
                                [t["fitness"] for t in r["teams"]]), 3.4, lw=0.7)
@@ -137,8 +140,12 @@ def designs_table(summary: dict) -> None:
 
 
 def main() -> None:
-    raw = Path(sys.argv[1])
-    out = HERE
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("raw", type=Path, help="directory holding niche/ (budget/, roi/, swarm200/)")
+    ap.add_argument("--only", choices=["all", "niche"], default="all")
+    ap.add_argument("--out", type=Path, default=HERE, help="where the compact files go")
+    args = ap.parse_args()
+    raw, out = args.raw, args.out
     niche = [compact(d, out / "niche" / run_label(d), figure=run_label(d).endswith("seed0"))
              for d in sorted((raw / "niche").iterdir())]
     niche_report(niche, out / "niche")
@@ -146,6 +153,8 @@ def main() -> None:
     for r in niche:
         print(f"\n{r['label']} best team (generation {r['summary']['best_generation']}):")
         designs_table(r["summary"])
+    if args.only == "niche":
+        return
 
     sweep_out = out / "budget_sweep"
     runs = []
