@@ -22,7 +22,7 @@ from .hardware import genome_phenotype
 from .reproduction import ReproductionParams, mutate_bt, reproduce
 from .scenario import Scenario, load_scenario
 from .speciation import speciate
-from .world import CompiledStep, WorldParams, step as world_step
+from .world import CompiledStep, CudaGraphTicks, WorldParams, step as world_step
 
 CHECKPOINT_VERSION = 1
 # compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
@@ -81,6 +81,8 @@ class EvolveConfig:
     """Mutation: probability of resampling each tier and the effector."""
     p_tag_flip: float = 0.01
     """Mutation: probability of flipping each tag bit."""
+    cuda_graphs: bool = False
+    """Replay the compiled tick as CUDA graphs of 10 ticks (`world.CudaGraphTicks`); CUDA only."""
 
     def validate(self) -> None:
         """Raise ValueError with a one-line message for an invalid setting."""
@@ -210,7 +212,11 @@ def make_context(cfg: EvolveConfig) -> Context:
                                p_tag_flip=cfg.p_tag_flip)
     use_compile = cfg.compile if cfg.compile is not None else (
         device.type == "cuda" or cfg.generations >= COMPILE_MIN_GENERATIONS)
+    if cfg.cuda_graphs and (device.type != "cuda" or not use_compile):
+        raise ValueError("cuda_graphs needs --device cuda and the compiled tick (--compile)")
     step_fn = CompiledStep() if use_compile else world_step
+    if cfg.cuda_graphs:
+        step_fn = CudaGraphTicks(step_fn)
     return Context(cfg, scenario, device, eval_cfg, repro, WorldParams.for_scenario(scenario),
                    step_fn, use_compile)
 

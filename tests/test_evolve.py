@@ -215,3 +215,11 @@ def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
         assert m["team/focal_max"] == pytest.approx(float(r.focal.max()))
         differed += int(int(r.focal.argmax()) != b)
     assert differed > 0         # the two definitions disagree in some generation of this run
+
+
+def test_cuda_graphs_need_cuda_and_the_compiled_tick():
+    from swarmcode_torch.evolve import make_context
+
+    with pytest.raises(ValueError, match="cuda_graphs needs --device cuda"):
+        make_context(EvolveConfig(scenario="one-niche", population=4, device="cpu",
+                                  cuda_graphs=True))

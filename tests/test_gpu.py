@@ -58,3 +58,14 @@ def test_cuda_graph_ticks_match_compiled_rollout():
             torch.testing.assert_close(got[k], ref[k], atol=1e-4, rtol=1e-4)
     assert captured[0] is captured[1] and captured[2] is not captured[1]
     assert compiled.error is None and graphs.step_fn.error is None
+
+
+def test_evolve_with_cuda_graphs_replays_captured_ticks():
+    from swarmcode_torch.world import CudaGraphTicks
+
+    ev = Evolution(replace(TINY, compile=True, cuda_graphs=True))
+    assert isinstance(ev.ctx.step_fn, CudaGraphTicks)
+    while not ev.done:
+        m = ev.step()
+        assert m["team/cost"] > 0 and m["fitness/best"] > 0
+    assert ev.ctx.step_fn.graph is not None and ev.ctx.step_fn.step_fn.error is None
