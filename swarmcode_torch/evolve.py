@@ -73,6 +73,8 @@ class EvolveConfig:
     """Sample team slots by the dominance genes; False: uniformly (an ablation)."""
     quota_basis: str = "sum"
     """Offspring quotas proportional to each species' total ('sum') or mean ('mean') fitness."""
+    min_share: float = 1.0
+    """A species whose quota share is below this many individuals gets no slot (0: none)."""
     hw_sigma: float = 0.05
     """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
     social_sigma: float = 0.05
@@ -104,7 +106,7 @@ class EvolveConfig:
         if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
             raise ValueError(f"--device must be auto, cpu or cuda, got {self.device!r}")
         for name in ("delta", "p_marginal", "alpha", "lam", "hw_sigma", "social_sigma",
-                     "p_categorical", "p_tag_flip"):
+                     "p_categorical", "p_tag_flip", "min_share"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0")
         for name in ("p_categorical", "p_tag_flip"):
@@ -127,6 +129,8 @@ class EvolveConfig:
         if "p_tag_flip" not in d:
             # written before the tag flip rate was a setting: it was one bit in L per child
             d["p_tag_flip"] = 1.0 / int(d.get("tag_length", cls.tag_length))
+        if "min_share" not in d:
+            d["min_share"] = 0.0     # written before the quota threshold existed
         return cls(**d)
 
 
@@ -207,7 +211,8 @@ def make_context(cfg: EvolveConfig) -> Context:
                           p_marginal=cfg.p_marginal, max_elite=cfg.max_elite,
                           dominance=cfg.dominance, weights=FitnessWeights())
     repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite,
-                               quota_basis=cfg.quota_basis, hw_sigma=cfg.hw_sigma,
+                               quota_basis=cfg.quota_basis, min_share=cfg.min_share,
+                               hw_sigma=cfg.hw_sigma,
                                social_sigma=cfg.social_sigma, p_categorical=cfg.p_categorical,
                                p_tag_flip=cfg.p_tag_flip)
     use_compile = cfg.compile if cfg.compile is not None else (

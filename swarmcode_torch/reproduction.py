@@ -30,6 +30,7 @@ class ReproductionParams:
     quota_basis: what a species' offspring quota is proportional to: "sum", the total of its
         members' (gated, penalised, smoothed) fitness (the paper's "total adjusted fitness"), or
         "mean", NEAT's explicit fitness sharing (total / species size). See docs/MODEL.md.
+    min_share: a species whose quota share is below this many individuals gets no slot.
     bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
     bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
     bt_point_count: slots re-drawn by one point mutation (each a uniform slot, may repeat).
@@ -52,6 +53,7 @@ class ReproductionParams:
     delta: float = 0.4
     max_elite: int = 3
     quota_basis: str = "sum"
+    min_share: float = 0.0
     bt_mutation_rate: float = 1.0
     bt_subtree_prob: float = 0.05
     bt_point_count: int = 1
@@ -72,11 +74,13 @@ def elite_count(species_size: Tensor | int, max_elite: int = 3) -> Tensor | int:
 
 
 def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
-                     protect: int | None = None) -> Tensor:
+                     protect: int | None = None, min_share: float = 0.0) -> Tensor:
     """[K] total adjusted fitness per species -> [K] long quotas summing to population_size.
 
     Proportional shares rounded by largest remainder (ties: lowest index); all-zero (or negative)
-    fitness gives equal shares. `protect` (a species position) is guaranteed a quota >= 1, taken
+    fitness gives equal shares. A species whose share (population_size * its fraction of the
+    total) is below `min_share` gets 0 and the others share its slots (0, or no species reaching
+    it: no threshold). `protect` (a species position) is guaranteed a quota >= 1, taken
     from the species with the largest quota (ties: lowest index). In `reproduce`, elites are
     counted inside the quota: a species whose quota is below its elite count keeps only its top
     `quota` elites; a quota of 0 means the species gets no child (it goes extinct) unless protected.
@@ -88,6 +92,12 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
     f = torch.nan_to_num(adjusted_fitness_sum.double(), nan=0.0).clamp(min=0.0)
     if not bool(f.sum() > 0):
         f = torch.ones_like(f)
+    if min_share > 0:
+        keep = f / f.sum() * population_size >= min_share
+        if protect is not None:
+            keep[protect] = True
+        if bool((f * keep).sum() > 0):             # else no species qualifies: no threshold
+            f = torch.where(keep, f, torch.zeros_like(f))
     share = f / f.sum() * population_size
     base = share.floor()
     q = base.long()
@@ -289,7 +299,8 @@ def reproduce(genome: Genome, fitness: Tensor, species: Tensor, proto_index: Ten
     if p:
         best_pos = pos[int(fit.argmax())]
         protect = int((nonempty == best_pos).to(torch.int32).argmax())
-        quota[nonempty] = offspring_quotas(adjusted[nonempty], p, protect=protect)
+        quota[nonempty] = offspring_quotas(adjusted[nonempty], p, protect=protect,
+                                           min_share=params.min_share)
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
 
     # Population sorted by (species position, fitness desc, row asc).

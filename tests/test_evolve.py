@@ -178,6 +178,15 @@ def test_config_saved_before_p_tag_flip_keeps_one_flip_in_l():
     assert make_context(EvolveConfig.from_dict(old)).repro.p_tag_flip == 1 / 8
 
 
+def test_config_saved_before_min_share_keeps_every_species_share():
+    from swarmcode_torch.evolve import make_context
+
+    new = EvolveConfig(scenario="one-niche", population=8)
+    assert make_context(new).repro.min_share == new.min_share == 1.0
+    old = EvolveConfig.from_dict({k: v for k, v in new.to_dict().items() if k != "min_share"})
+    assert old.min_share == 0.0 and make_context(old).repro.min_share == 0.0
+
+
 def test_parse_settings_types_and_refusals():
     from swarmcode_torch.evolve import parse_settings
 

@@ -59,6 +59,15 @@ def test_quotas_protect():
     assert offspring_quotas(torch.tensor([100.0, 1e-6]), 10, protect=0).tolist() == [10, 0]
 
 
+def test_quotas_min_share_drops_species_worth_less_than_one_individual():
+    f = torch.tensor([10.0, 5.0, 0.6, 0.5, 0.3])              # shares 12.4, 6.2, .74, .62, .37
+    assert offspring_quotas(f, 20).tolist() == [12, 6, 1, 1, 0]
+    # the three below one individual get nothing; 20 split 10 : 5 -> 13.3, 6.7
+    assert offspring_quotas(f, 20, min_share=1.0).tolist() == [13, 7, 0, 0, 0]
+    assert offspring_quotas(f, 20, protect=4, min_share=1.0).tolist() == [12, 7, 0, 0, 1]
+    assert offspring_quotas(torch.ones(5), 4, min_share=1.0).tolist() == [1, 1, 1, 1, 0]
+
+
 @pytest.mark.parametrize("seed", range(20))
 def test_quotas_sum_random(seed):
     gen = torch.Generator().manual_seed(seed)
@@ -218,8 +227,11 @@ def test_reproduce_invariants_and_elites():
     assert differs.all()
 
 
-@pytest.mark.parametrize("basis,quotas", [("mean", [6, 6, 5]), ("sum", [12, 4, 1])])
-def test_reproduce_elite_counts_and_quotas(basis, quotas):
+@pytest.mark.parametrize("basis,min_share,quotas", [
+    ("mean", 0.0, [6, 6, 5]), ("sum", 0.0, [12, 4, 1]),
+    ("sum", 1.0, [13, 4, 0]),        # species 9's share .98 < 1: its slot goes to species 7
+])
+def test_reproduce_elite_counts_and_quotas(basis, min_share, quotas):
     gen = torch.Generator().manual_seed(0)
     g = random_genomes(17, gen)
     species = torch.tensor([7] * 12 + [3] * 4 + [9])
@@ -229,8 +241,10 @@ def test_reproduce_elite_counts_and_quotas(basis, quotas):
     # means 1.033, 1, 1 -> shares 5.79, 5.6, 5.6; sums 12.4, 4, 1 -> shares 12.11, 3.91, 0.98
     ch, hint, is_elite, parent = reproduce(g, fit, species, torch.tensor([0, 12, 16]),
                                            torch.tensor([7, 3, 9]),
-                                           ReproductionParams(quota_basis=basis), gen)
-    assert parent[is_elite].tolist() == [2, 5, 8, 12, 16]  # 3 + 1 + 1 elites, best first
+                                           ReproductionParams(quota_basis=basis,
+                                                              min_share=min_share), gen)
+    elites = [2, 5, 8, 12, 16] if quotas[2] else [2, 5, 8, 12]     # 3 + 1 (+ 1), best first
+    assert parent[is_elite].tolist() == elites
     assert torch.bincount(hint, minlength=10)[[7, 3, 9]].tolist() == quotas
 
 

@@ -8,8 +8,11 @@ its k species of nearest prototype tag are its partners (k = 1, 3, 6, 10 and all
 distance can add more). Prints, per k, the mean number of species in the focal teams, the mean
 focal team score, the mean gated fitness (what selection sees), the share of positive marginal
 contributions and the mean deliveries. A first table gives the same for the population as it
-evolved (its own selectivities), by the number of species in the focal team. Used in
-docs/RESULTS.md ("Differences, and why") and docs/MODEL.md ("Best team of a generation").
+evolved (its own selectivities), by the number of species in the focal team. A last row, "one
+per niche", gives every individual as partners the largest species of each niche it does not
+cover itself, where a niche is a class of individual packages (effector and radius band) of the
+scenario: the team a perfect partner choice would make. Used in docs/RESULTS.md ("Differences,
+and why") and docs/MODEL.md ("Best team of a generation").
 """
 
 from __future__ import annotations
@@ -21,9 +24,31 @@ from pathlib import Path
 import torch
 
 from swarmcode_torch.evaluation import evaluate
+from swarmcode_torch import evaluation
 from swarmcode_torch.evolve import load_state_dict, make_context
 from swarmcode_torch.runs import load_checkpoint, read_config
 from swarmcode_torch.speciation import hamming, speciate
+
+
+def niche_partners(genome, species, proto_ids, proto_index, scenario, elite_rows_of) -> torch.Tensor:
+    """[P, K] partner rows: for each niche an individual does not cover, one elite of the largest
+    species whose prototype covers it (a niche: an individual package class's effector and radius
+    band); -1 elsewhere."""
+    classes = [c for c in scenario.packages if c.kind == "individual"]
+    def covers(rows):
+        return torch.stack([(genome.effector[rows] == c.grips[0]) &
+                            (genome.radius[rows] >= c.radius_band[0]) &
+                            (genome.radius[rows] <= c.radius_band[1]) for c in classes], 1)
+    p, k = genome.size, proto_ids.numel()
+    own, proto = covers(torch.arange(p)), covers(proto_index)             # [P, C], [K, C]
+    sizes = (species[:, None] == proto_ids[None, :]).sum(0)               # [K]
+    out = torch.full((p, k), -1, dtype=torch.long)
+    for c in range(len(classes)):
+        if bool(proto[:, c].any()):
+            best = int(torch.where(proto[:, c], sizes, torch.full_like(sizes, -1)).argmax())
+            need = ~own[:, c] & (species != proto_ids[best])
+            out[need, best] = elite_rows_of(best)[need]
+    return out
 
 
 def main() -> None:
@@ -72,6 +97,23 @@ def main() -> None:
         label = "all" if k == k_all else str(k)
         print(f"| {label} | {v[0]:.1f} | {args.repeats * g.size} | {v[1]:.0f} | {v[2]:.0f} | "
               f"{v[3]:.2f} | {v[4]:.1f} |")
+
+    real = evaluation.choose_partners
+
+    def one_per_niche(tag, selectivity, species, proto_ids, proto_tag, elite_index, generator):
+        every = real(tag, torch.full_like(selectivity, 2.0), species, proto_ids, proto_tag,
+                     elite_index, generator)                     # one random elite per species
+        chosen = niche_partners(g, species, proto_ids, sp.proto_index, ctx.scenario,
+                                lambda kk: every[:, kk])
+        return chosen
+
+    evaluation.choose_partners = one_per_niche
+    try:
+        v = scores(g.selectivity).mean(0).tolist()
+    finally:
+        evaluation.choose_partners = real
+    print(f"| one per niche | {v[0]:.1f} | {args.repeats * g.size} | {v[1]:.0f} | {v[2]:.0f} | "
+          f"{v[3]:.2f} | {v[4]:.1f} |")
 
 
 if __name__ == "__main__":
