@@ -95,7 +95,8 @@ def markdown(meta: dict, setup: dict, table: list[dict]) -> str:
         "",
         "Mean ± sample standard deviation over seeds. *Best fitness (in run)*: the highest team "
         f"score seen during the run (mean over its {setup['trials']} trial(s); a maximum over "
-        "noisy evaluations, so biased upwards). *Held-out*: that same best team re-scored on "
+        "noisy evaluations, so biased upwards); for SwarmCoDe, over each generation's best team, "
+        "the team of its fittest (gated) individual. *Held-out*: that same best team re-scored on "
         f"{setup['eval_trials']} fixed environments (seed {HELD_OUT_SEED}), identical for every "
         "algorithm and seed, not counted in the budget. *Species in best team*: distinct designs "
         "in it.",
