@@ -210,7 +210,9 @@ def sweep(
         base = with_overrides(EvolveConfig(), objective=objective, scenario=scenario,
                               generations=generations, population=population,
                               swarm_size=swarm_size, trials=trials, ticks=ticks, device=device,
-                              compile=compile, **parse_settings(settings or []))
+                              compile=compile,
+                              **parse_settings(settings or [], {"seed": "--seeds",
+                                                                "budget": "--budgets"}))
         for b in budget_list:
             with_overrides(base, budget=b).validate()
         load_scenario(base.scenario)
@@ -231,8 +233,8 @@ def sweep(
                         continue
                     ev = resume_run(run_dir, generations=cfg.generations)
                 else:
+                    ev = Evolution(cfg)            # a config error leaves no directory behind
                     run_dir.mkdir(exist_ok=True)
-                    ev = Evolution(cfg)
                     write_config(run_dir, cfg)
             except (ScenarioError, RunError, ValueError) as e:
                 fail(str(e))

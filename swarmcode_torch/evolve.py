@@ -7,6 +7,7 @@ consume them. Nothing here prints or imports a CLI or logging library.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
@@ -107,8 +108,9 @@ class EvolveConfig:
             raise ValueError(f"--device must be auto, cpu or cuda, got {self.device!r}")
         for name in ("delta", "p_marginal", "alpha", "lam", "hw_sigma", "social_sigma",
                      "p_categorical", "p_tag_flip", "min_share"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0")
+            v = getattr(self, name)
+            if not (v >= 0 and math.isfinite(v)):          # also refuses nan
+                raise ValueError(f"{name} must be a finite number >= 0, got {v}")
         for name in ("p_categorical", "p_tag_flip"):
             if getattr(self, name) > 1:
                 raise ValueError(f"{name} must be <= 1")
@@ -409,10 +411,11 @@ OPTION_KEYS = frozenset({"scenario", "budget", "objective", "generations", "popu
                          "swarm_size", "trials", "ticks", "seed", "device", "compile"})
 
 
-def parse_settings(pairs: list[str]) -> dict[str, Any]:
+def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None) -> dict[str, Any]:
     """["key=value", ...] -> {key: typed value} for the algorithm's config keys (e.g. delta=0.5,
     p_tag_flip=0.0625, quota_basis=mean); ValueError with a one-line message for a malformed
-    pair, an unknown key, a key that has its own option, or a value of the wrong type."""
+    pair, an unknown key, a key that has its own option (named `option_names[key]`, default
+    --key), or a value of the wrong type."""
     kinds = {f.name: f.type for f in fields(EvolveConfig)}
     out: dict[str, Any] = {}
     for pair in pairs:
@@ -421,7 +424,8 @@ def parse_settings(pairs: list[str]) -> dict[str, Any]:
         if not sep or not key or not text:
             raise ValueError(f"--set expects KEY=VALUE, got {pair!r}")
         if key in OPTION_KEYS:
-            raise ValueError(f"--set {key}: use the --{key.replace('_', '-')} option")
+            option = (option_names or {}).get(key, "--" + key.replace("_", "-"))
+            raise ValueError(f"--set {key}: use the {option} option")
         if key not in kinds:
             settable = ", ".join(sorted(set(kinds) - OPTION_KEYS))
             raise ValueError(f"--set: unknown key {key!r} (settable: {settable})")

@@ -93,10 +93,11 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
     if not bool(f.sum() > 0):
         f = torch.ones_like(f)
     if min_share > 0:
-        keep = f / f.sum() * population_size >= min_share
-        if protect is not None:
-            keep[protect] = True
+        # a relative tolerance, so that an exact share of min_share is not lost to rounding
+        keep = f / f.sum() * population_size >= min_share * (1 - 1e-9)
         if bool((f * keep).sum() > 0):             # else no species qualifies: no threshold
+            if protect is not None:
+                keep[protect] = True
             f = torch.where(keep, f, torch.zeros_like(f))
     share = f / f.sum() * population_size
     base = share.floor()

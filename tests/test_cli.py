@@ -93,6 +93,7 @@ def test_resume_extends_a_finished_run(tmp_path):
     (["--set", "delta"], ["KEY=VALUE"]),
     (["--set", "seed=4"], ["use the --seed option"]),
     (["--set", "p_tag_flip=1.5"], ["p_tag_flip must be <= 1"]),
+    (["--set", "delta=nan"], ["delta must be a finite number"]),
 ])
 def test_bad_options_give_one_line_errors(tmp_path, args, needles):
     r = invoke("evolve", "--logdir", tmp_path, *args)
@@ -153,3 +154,21 @@ def test_sweep_writes_table_iii_and_resumes(tmp_path):
     assert r.exit_code == 0 and r.output.count("already done") == 2
     assert_clean_error(invoke("sweep", "--budgets", "10,abc"), "--budgets")
     assert_clean_error(invoke("sweep", "--budgets", "-1", "--out", tmp_path / "x"), "--budget")
+
+
+def test_sweep_set_applies_to_every_run_and_refuses_clearly(tmp_path):
+    out = tmp_path / "sweep"
+    r = invoke("sweep", "--budgets", "1500", "--scenario", "one-niche", "--generations", 1,
+               "--population", 6, "--swarm-size", 4, "--trials", 1, "--ticks", 10,
+               "--out", out, "--set", "p_tag_flip=0.5", "--set", "min_share=0")
+    assert r.exit_code == 0, r.output
+    from swarmcode_torch.runs import read_config
+    cfg = read_config(out / "budget-1500_seed-0")
+    assert (cfg.p_tag_flip, cfg.min_share) == (0.5, 0.0)
+    assert_clean_error(invoke("sweep", "--set", "seed=3", "--out", tmp_path / "a"),
+                       "use the --seeds option")
+    if not torch.cuda.is_available():
+        bad = tmp_path / "b"
+        assert_clean_error(invoke("sweep", "--budgets", "1500", "--device", "cpu",
+                                  "--set", "cuda_graphs=true", "--out", bad), "cuda_graphs")
+        assert not any(bad.iterdir())                     # no run directory left behind

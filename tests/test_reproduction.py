@@ -65,7 +65,11 @@ def test_quotas_min_share_drops_species_worth_less_than_one_individual():
     # the three below one individual get nothing; 20 split 10 : 5 -> 13.3, 6.7
     assert offspring_quotas(f, 20, min_share=1.0).tolist() == [13, 7, 0, 0, 0]
     assert offspring_quotas(f, 20, protect=4, min_share=1.0).tolist() == [12, 7, 0, 0, 1]
+    # no species reaches the threshold: plain largest remainder, then the protected one gets 1
     assert offspring_quotas(torch.ones(5), 4, min_share=1.0).tolist() == [1, 1, 1, 1, 0]
+    assert offspring_quotas(torch.ones(5), 4, protect=4, min_share=1.0).tolist() == [0, 1, 1, 1, 1]
+    # shares of exactly 1 are kept despite rounding (1/49 * 49 < 1 in floating point)
+    assert offspring_quotas(torch.ones(49), 49, min_share=1.0).tolist() == [1] * 49
 
 
 @pytest.mark.parametrize("seed", range(20))
