@@ -23,7 +23,6 @@ from pathlib import Path
 
 import torch
 
-from swarmcode_torch.evaluation import evaluate
 from swarmcode_torch import evaluation
 from swarmcode_torch.evolve import load_state_dict, make_context
 from swarmcode_torch.runs import load_checkpoint, read_config
@@ -73,7 +72,7 @@ def main() -> None:
         """[R * P, 5]: species in the focal team, focal score, gated fitness, positive, deliveries."""
         rows = []
         for rep in range(args.repeats):
-            r = evaluate(replace(g, selectivity=selectivity), sp.species, sp.proto_ids,
+            r = evaluation.evaluate(replace(g, selectivity=selectivity), sp.species, sp.proto_ids,
                          sp.proto_index, st.fitness, st.has_fitness, ctx.scenario, ecfg,
                          torch.Generator().manual_seed(rep), ctx.params)
             delivered = r.team_metrics["delivered_individual"] + r.team_metrics["delivered_collab"]
@@ -92,28 +91,27 @@ def main() -> None:
             label = f"{lo}" if hi == lo + 1 else (f"{lo}+" if hi == 10_000 else f"{lo}-{hi - 1}")
             print(f"| {label} | {int(m.sum())} | {v[1]:.0f} | {v[2]:.0f} | {v[3]:.2f} | {v[4]:.1f} |")
     print(f"\nPartners set to the k nearest tags:\n| k | {head}\n|---|---|---|---|---|---|---|")
-    for k in sorted({min(k, k_all) for k in (1, 3, 6, 10, k_all)}):
-        v = scores(dist.sort(1).values[:, k - 1] + 1e-4).mean(0).tolist()
-        label = "all" if k == k_all else str(k)
+    def row(label: str, x: torch.Tensor) -> None:
+        v = x.mean(0).tolist()
         print(f"| {label} | {v[0]:.1f} | {args.repeats * g.size} | {v[1]:.0f} | {v[2]:.0f} | "
               f"{v[3]:.2f} | {v[4]:.1f} |")
+
+    for k in sorted({min(k, k_all) for k in (1, 3, 6, 10, k_all)}):
+        row("all" if k == k_all else str(k), scores(dist.sort(1).values[:, k - 1] + 1e-4))
 
     real = evaluation.choose_partners
 
     def one_per_niche(tag, selectivity, species, proto_ids, proto_tag, elite_index, generator):
         every = real(tag, torch.full_like(selectivity, 2.0), species, proto_ids, proto_tag,
                      elite_index, generator)                     # one random elite per species
-        chosen = niche_partners(g, species, proto_ids, sp.proto_index, ctx.scenario,
-                                lambda kk: every[:, kk])
-        return chosen
+        return niche_partners(g, species, proto_ids, sp.proto_index, ctx.scenario,
+                              lambda kk: every[:, kk])
 
     evaluation.choose_partners = one_per_niche
     try:
-        v = scores(g.selectivity).mean(0).tolist()
+        row("one per niche", scores(g.selectivity))
     finally:
         evaluation.choose_partners = real
-    print(f"| one per niche | {v[0]:.1f} | {args.repeats * g.size} | {v[1]:.0f} | {v[2]:.0f} | "
-          f"{v[3]:.2f} | {v[4]:.1f} |")
 
 
 if __name__ == "__main__":
