@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import signal
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -157,14 +159,39 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     reporters = [progress, SummaryReporter(run_dir),
                  TensorBoardReporter(run_dir, render_every=render_every),
                  CheckpointReporter(run_dir, checkpoint_every)]
+    terminated: list[int] = []
     try:
-        run(ev, run_dir, reporters)
+        with _terminate_as_interrupt() as terminated:
+            run(ev, run_dir, reporters)
     except KeyboardInterrupt:
         progress.stop()
-        err.print(f"Interrupted: checkpoint of generation {ev.state.generation} written to "
+        how = "Terminated" if terminated else "Interrupted"
+        err.print(f"{how}: checkpoint of generation {ev.state.generation} written to "
                   f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}")
-        raise typer.Exit(code=130)
+        raise typer.Exit(code=143 if terminated else 130)
     progress.stop()
+
+
+@contextmanager
+def _terminate_as_interrupt():
+    """Within the block SIGTERM (a scheduler's or `kill`'s stop) acts as Ctrl-C: the run writes
+    the checkpoint of its last finished generation. Yields a list that is non-empty once
+    SIGTERM has arrived."""
+    terminated: list[int] = []
+
+    def handler(signum, frame):
+        terminated.append(signum)
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:                     # not the main thread: leave signals alone
+        yield terminated
+        return
+    try:
+        yield terminated
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _parse_list(text: str, kind, option: str) -> list:
