@@ -41,6 +41,7 @@ class EvalConfig:
     p_marginal: float = 0.25        # factor on fitness when the marginal contribution is <= 0
     max_elite: int = 3              # E in the elite count (partner elites are drawn from these)
     dominance: bool = True          # False: uniform team composition (an ablation)
+    evaluated_partners: bool = False  # partners are elites with a fitness (none from a new species)
     weights: FitnessWeights = FitnessWeights()
 
 
@@ -95,7 +96,7 @@ def evaluate(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Te
 
     # --- composition: partners by tag and selectivity, slots by dominance
     elites = elite_rows(fitness, has_fitness, species, proto_ids,
-                        lambda n: elite_count(n, cfg.max_elite))
+                        lambda n: elite_count(n, cfg.max_elite), cfg.evaluated_partners)
     partners = choose_partners(genome.tag, genome.selectivity, species, proto_ids,
                                genome.tag[proto_index], elites, generator)
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)

@@ -84,6 +84,8 @@ class EvolveConfig:
     """Mutation: probability of resampling each tier and the effector."""
     p_tag_flip: float = 0.01
     """Mutation: probability of flipping each tag bit."""
+    evaluated_partners: bool = False
+    """Partners are species elites with a fitness: a species founded this generation is none's."""
     cuda_graphs: bool = False
     """Replay the compiled tick as CUDA graphs of 10 ticks (`world.CudaGraphTicks`); CUDA only."""
 
@@ -211,7 +213,8 @@ def make_context(cfg: EvolveConfig) -> Context:
     eval_cfg = EvalConfig(swarm_size=S, trials=cfg.trials, ticks=cfg.ticks or scenario.episode_ticks,
                           budget=cfg.budget, objective=cfg.objective, lam=cfg.lam,
                           p_marginal=cfg.p_marginal, max_elite=cfg.max_elite,
-                          dominance=cfg.dominance, weights=FitnessWeights())
+                          dominance=cfg.dominance, evaluated_partners=cfg.evaluated_partners,
+                          weights=FitnessWeights())
     repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite,
                                quota_basis=cfg.quota_basis, min_share=cfg.min_share,
                                hw_sigma=cfg.hw_sigma,

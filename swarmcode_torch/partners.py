@@ -55,11 +55,15 @@ def choose_partners(tag: Tensor, selectivity: Tensor, species: Tensor, proto_ids
 
 
 def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids: Tensor,
-               n_elite_fn: Callable[[Tensor], Tensor] = elite_count) -> Tensor:
+               n_elite_fn: Callable[[Tensor], Tensor] = elite_count,
+               evaluated_only: bool = False) -> Tensor:
     """fitness [P], has_fitness [P] bool, species [P], proto_ids [K] -> [K, M] long elite rows per species, best first, -1 padded.
 
     N_k = n_elite_fn(sizes [K] long) (capped by the size); individuals without fitness rank below
     those with it; ties by lowest row; individuals whose species is not in proto_ids are ignored.
+    evaluated_only: individuals without fitness are never elites (a species of unevaluated
+    individuals only, one founded this generation, has none), unless no individual of the
+    population has fitness (the first generation); N_k is then capped by the evaluated members.
     """
     p = fitness.numel()
     k = proto_ids.numel()
@@ -69,6 +73,9 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
     match = species[:, None] == proto_ids[None, :]
     pos = torch.where(match.any(1), match.to(torch.int32).argmax(1).long(),
                       torch.full((p,), k, dtype=torch.long, device=dev))  # k: not in any species
+    n_wanted = torch.as_tensor(n_elite_fn(torch.bincount(pos, minlength=k + 1)[:k]), device=dev)
+    if evaluated_only and bool(has_fitness.any()):
+        pos = torch.where(has_fitness, pos, torch.full_like(pos, k))
     f = torch.where(has_fitness, torch.nan_to_num(fitness.float(), nan=-torch.inf),
                     torch.full_like(fitness, -torch.inf, dtype=torch.float))
     order = torch.sort(f, descending=True, stable=True).indices
@@ -76,7 +83,7 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
     order = order[torch.sort(pos[order], stable=True).indices]
     sizes_all = torch.bincount(pos, minlength=k + 1)
     sizes = sizes_all[:k]
-    n = torch.minimum(torch.as_tensor(n_elite_fn(sizes), device=dev).long(), sizes)
+    n = torch.minimum(n_wanted.long(), sizes)
     m = int(n.max())
     starts = sizes_all.cumsum(0) - sizes_all
     pos_sorted = pos[order]

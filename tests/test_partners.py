@@ -75,6 +75,31 @@ def test_elite_rows_ties_missing_fitness_and_empty_species():
     assert out.tolist() == [[0, 1, 2], [-1, -1, -1], [3, -1, -1]]
 
 
+def test_elite_rows_evaluated_only():
+    # species 4: 6 members (N = 2), 1 evaluated -> 1 elite; species 9: a new species of 2
+    # unevaluated members -> no elite; species 2: 11 members (N = 3), all evaluated
+    species = torch.tensor([4] * 6 + [9] * 2 + [2] * 11)
+    fitness = torch.arange(19, dtype=torch.float)
+    has = torch.ones(19, dtype=torch.bool)
+    has[[0, 1, 2, 3, 5, 6, 7]] = False                   # species 4 keeps only row 4 evaluated
+    ids = torch.tensor([4, 9, 2])
+    out = elite_rows(fitness, has, species, ids, lambda s: elite_count(s, 3), evaluated_only=True)
+    assert out.tolist() == [[4, -1, -1], [-1, -1, -1], [18, 17, 16]]
+    # without the option unevaluated members fill the elite count, lowest row first
+    out = elite_rows(fitness, has, species, ids, lambda s: elite_count(s, 3))
+    assert out.tolist() == [[4, 0, -1], [6, -1, -1], [18, 17, 16]]
+    # first generation: nobody has a fitness, so every species keeps its members as elites
+    none = torch.zeros(19, dtype=torch.bool)
+    assert torch.equal(elite_rows(fitness, none, species, ids, lambda s: elite_count(s, 3), True),
+                       elite_rows(fitness, none, species, ids, lambda s: elite_count(s, 3)))
+    # a species with no elite is never a partner
+    tag = torch.zeros(1, 16, dtype=torch.bool)
+    out = elite_rows(fitness, has, species, ids, lambda s: elite_count(s, 3), evaluated_only=True)
+    rows = choose_partners(tag, torch.ones(1), torch.tensor([4]), ids,
+                           torch.zeros(3, 16, dtype=torch.bool), out, torch.Generator().manual_seed(0))
+    assert rows[0, 0] == -1 and rows[0, 1] == -1 and rows[0, 2] in (16, 17, 18)
+
+
 def test_assemble_dominance_frequencies():
     b, s = 4000, 10
     dominance = torch.tensor([0.2, 0.6, 0.2, 0.9])       # row 3 is not in any team
