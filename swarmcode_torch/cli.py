@@ -136,7 +136,7 @@ def evolve(
                 load_scenario(cfg.scenario)  # a clear error before anything is created
             ev = Evolution(cfg)
             run_dir = new_run_dir(logdir, cfg)
-            write_config(run_dir, cfg)
+            write_config(run_dir, ev.cfg)
             console.print(f"Run directory: [bold]{run_dir}[/]  (device {ev.ctx.device}, "
                           f"scenario {ev.ctx.scenario.name}, population {cfg.population}, "
                           f"swarm {ev.ctx.eval_cfg.swarm_size})")
@@ -262,7 +262,7 @@ def sweep(
                 else:
                     ev = Evolution(cfg)            # a config error leaves no directory behind
                     run_dir.mkdir(exist_ok=True)
-                    write_config(run_dir, cfg)
+                    write_config(run_dir, ev.cfg)
             except (ScenarioError, RunError, ValueError) as e:
                 fail(str(e))
             console.print(f"[bold]{run_dir.name}[/]: generation {ev.state.generation} -> {cfg.generations}")

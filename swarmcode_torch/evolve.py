@@ -135,12 +135,20 @@ class EvolveConfig:
             d["p_tag_flip"] = 1.0 / int(d.get("tag_length", cls.tag_length))
         if "min_share" not in d:
             d["min_share"] = 0.0     # written before the quota threshold existed
+        if d.get("ticks") is None and d.get("scenario") in LEGACY_EPISODE_TICKS:
+            # written before runs pinned their episode length: the scenario's length of that time
+            d["ticks"] = LEGACY_EPISODE_TICKS[d["scenario"]]
         return cls(**d)
 
 
 #: Settings of configs saved before `quota_basis` and the mutation steps were config keys.
 LEGACY_DEFAULTS = {"quota_basis": "mean", "hw_sigma": 0.1, "social_sigma": 0.1,
                    "p_categorical": 0.1}
+
+
+#: Episode lengths of built-in scenarios whose default has changed since runs began pinning
+#: theirs in config.toml; a saved config without `ticks` ran with these.
+LEGACY_EPISODE_TICKS = {"one-niche": 250, "two-niche": 250, "four-niche": 250}
 
 
 def resolve_device(name: str) -> torch.device:
@@ -227,6 +235,9 @@ def make_context(cfg: EvolveConfig) -> Context:
     step_fn = CompiledStep() if use_compile else world_step
     if cfg.cuda_graphs:
         step_fn = CudaGraphTicks(step_fn)
+    # pin the scenario's team size and episode length into the config, so that a saved run keeps
+    # them if a built-in scenario's defaults change later
+    cfg = replace(cfg, swarm_size=S, ticks=eval_cfg.ticks)
     return Context(cfg, scenario, device, eval_cfg, repro, WorldParams.for_scenario(scenario),
                    step_fn, use_compile)
 
@@ -386,14 +397,14 @@ class Evolution:
 
     def __init__(self, cfg: EvolveConfig, state: EvolutionState | None = None):
         self.ctx = make_context(cfg)
-        self.cfg = cfg
+        self.cfg = self.ctx.cfg
         self.state = state if state is not None else init_state(self.ctx)
 
     @classmethod
     def from_checkpoint(cls, d: dict, cfg: EvolveConfig) -> "Evolution":
         ev = cls.__new__(cls)
         ev.ctx = make_context(cfg)
-        ev.cfg = cfg
+        ev.cfg = ev.ctx.cfg
         ev.state = load_state_dict(d, ev.ctx)
         return ev
 

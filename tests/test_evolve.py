@@ -161,11 +161,33 @@ def test_config_saved_before_quota_basis_keeps_its_algorithm():
     old = EvolveConfig.from_dict(legacy)
     assert (old.quota_basis, old.hw_sigma, old.social_sigma, old.p_categorical) == \
         ("mean", 0.1, 0.1, 0.1)
-    assert EvolveConfig.from_dict(new.to_dict()) == new          # a current config round-trips
+    pinned = make_context(new).cfg                               # what a run saves
+    assert EvolveConfig.from_dict(pinned.to_dict()) == pinned    # a current config round-trips
     repro = make_context(old).repro
     assert (repro.quota_basis, repro.hw_sigma, repro.p_categorical) == ("mean", 0.1, 0.1)
     with pytest.raises(ValueError, match="p_categorical"):
         EvolveConfig(p_categorical=1.5).validate()
+
+
+def test_runs_pin_the_episode_and_old_configs_keep_250_ticks(tmp_path):
+    from swarmcode_torch.evolve import make_context
+    from swarmcode_torch.runs import read_config, write_config
+
+    # a new run saves the scenario's episode length and team size, so later scenario changes
+    # cannot alter it
+    ev = Evolution(EvolveConfig(scenario="four-niche", population=4, generations=1,
+                                device="cpu", compile=False))
+    assert (ev.cfg.ticks, ev.cfg.swarm_size) == (200, 20) == (ev.ctx.eval_cfg.ticks,
+                                                                ev.ctx.eval_cfg.swarm_size)
+    write_config(tmp_path, ev.cfg)
+    assert read_config(tmp_path).ticks == 200
+    # a config saved before runs pinned it ran the niche scenarios' episode of that time
+    old = {k: v for k, v in EvolveConfig(scenario="four-niche").to_dict().items() if k != "ticks"}
+    assert make_context(EvolveConfig.from_dict(old)).eval_cfg.ticks == 250
+    old["scenario"] = "budget"                                   # unchanged scenario: its own
+    assert make_context(EvolveConfig.from_dict(old)).eval_cfg.ticks == 250
+    old["scenario"] = "swarm200"
+    assert make_context(EvolveConfig.from_dict(old)).eval_cfg.ticks == 500
 
 
 def test_config_saved_before_p_tag_flip_keeps_one_flip_in_l():
