@@ -85,7 +85,8 @@ class EvolveConfig:
     p_tag_flip: float = 0.01
     """Mutation: probability of flipping each tag bit."""
     evaluated_partners: bool = False
-    """Partners are species elites with a fitness: a species founded this generation is none's."""
+    """Partners are species elites that have a fitness: a species founded this generation is no
+    one's partner (an experiment, off by default: it did not reduce the species in best teams)."""
     cuda_graphs: bool = False
     """Replay the compiled tick as CUDA graphs of 10 ticks (`world.CudaGraphTicks`); CUDA only."""
 
