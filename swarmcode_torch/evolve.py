@@ -84,6 +84,9 @@ class EvolveConfig:
     """Mutation: probability of resampling each tier and the effector."""
     p_tag_flip: float = 0.01
     """Mutation: probability of flipping each tag bit."""
+    merge_species: bool = False
+    """Dissolve a species whose prototype comes within delta of an older one's (not in the paper;
+    an experiment)."""
     evaluated_partners: bool = False
     """Partners are species elites that have a fitness: a species founded this generation is no
     one's partner (an experiment, off by default: it did not reduce the species in best teams)."""
@@ -286,7 +289,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
 
     # 1. dynamic speciation
     sp = speciate(genome, state.species_hint, state.proto, state.proto_ids,
-                  state.next_species_id, cfg.delta)
+                  state.next_species_id, cfg.delta, merge=cfg.merge_species)
 
     # 2. evaluation of every individual, all teams and trials in one batch
     t_eval = time.perf_counter()

@@ -81,11 +81,14 @@ def distance(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights()) -> Te
 
 def speciate(genome: Genome, species_hint: Tensor, prev_proto: Genome | None,
              prev_proto_ids: Tensor, next_species_id: int, delta: float = 0.4,
-             w: DistanceWeights = DistanceWeights()) -> SpeciationResult:
+             w: DistanceWeights = DistanceWeights(), merge: bool = False) -> SpeciationResult:
     """Genome [P], hint [P] long (-1 none), previous prototypes [Kp] + ids [Kp] -> SpeciationResult.
 
     (1) Each previous species with >= 1 member by `species_hint` keeps its id; its new prototype is
     the member closest to the old prototype (ties: lowest row); memberless species go extinct.
+    merge (not in the paper; an experiment): after (1), a surviving species whose new prototype
+    lies within delta of the prototype of an older surviving one (earlier in `prev_proto_ids`)
+    is dissolved, and its members are assigned in (2) like any other individual.
     (2) Every other individual, in row order, joins the closest current prototype if D <= delta,
     else founds a new species (id next_species_id, next_species_id + 1, ...). Ties between
     prototypes go to the earliest prototype in `proto_ids` order. Computed exactly in rounds
@@ -107,6 +110,12 @@ def speciate(genome: Genome, species_hint: Tensor, prev_proto: Genome | None,
         carried_rows, carried_ids = closest[alive], prev_ids[alive]
     else:
         carried_rows, carried_ids = long_empty, long_empty
+    if merge and carried_rows.numel() > 1:
+        d_pp = distance(genome.index(carried_rows), genome.index(carried_rows), w)
+        keep = torch.ones(carried_rows.numel(), dtype=torch.bool, device=dev)
+        for j in range(1, carried_rows.numel()):      # one pass over species, oldest first
+            keep[j] = not bool((d_pp[j, :j][keep[:j]] <= delta).any())
+        carried_rows, carried_ids = carried_rows[keep], carried_ids[keep]
     k = int(carried_rows.numel())
 
     assigned = torch.zeros(p, dtype=torch.bool, device=dev)

@@ -151,6 +151,28 @@ def test_speciate_carry_over_and_extinction():
     assert r.next_species_id == 11
 
 
+def test_speciate_merge_dissolves_a_younger_species_within_delta():
+    # old species 2, 5, 8 (oldest first); 5's new prototype (row 1, 0.3) is within 0.4 of 2's
+    # (0.0), 8's (0.9) is not
+    prev = line([0.0, 0.5, 0.9])
+    g = line([0.0, 0.3, 0.9, 0.2, 0.7])
+    hint = torch.tensor([2, 5, 8, 5, -1])
+    ids = torch.tensor([2, 5, 8])
+    plain = speciate(g, hint, prev, ids, next_species_id=9, w=SIZE_ONLY)
+    assert plain.proto_ids.tolist() == [2, 5, 8] and plain.proto_index.tolist() == [0, 1, 2]
+    assert plain.species.tolist() == [2, 5, 8, 5, 8]
+    merged = speciate(g, hint, prev, ids, next_species_id=9, w=SIZE_ONLY, merge=True)
+    # 5 is dissolved and its members join the closest remaining prototype
+    assert merged.proto_ids.tolist() == [2, 8] and merged.proto_index.tolist() == [0, 2]
+    assert merged.species.tolist() == [2, 2, 8, 2, 8]
+    assert merged.next_species_id == 9
+    # the older species (earlier in the previous ids) is the one kept
+    merged = speciate(g, hint, line([0.5, 0.0, 0.9]), torch.tensor([5, 2, 8]), 9,
+                      w=SIZE_ONLY, merge=True)
+    assert merged.proto_ids.tolist() == [5, 8] and merged.proto_index.tolist() == [1, 2]
+    assert merged.species.tolist() == [5, 5, 8, 5, 8]
+
+
 def test_speciate_carried_members_reassigned():
     # the hint only picks the prototype: hinted members are re-assigned like everyone else
     prev = line([0.0])

@@ -101,8 +101,8 @@ def founders_report(args) -> None:
     original = evolve.speciate
     generation = [0]
 
-    def recording_speciate(genome, hint, prev_proto, prev_ids, next_id, delta=0.4, *rest):
-        sp = original(genome, hint, prev_proto, prev_ids, next_id, delta, *rest)
+    def recording_speciate(genome, hint, prev_proto, prev_ids, next_id, delta=0.4, *rest, **kw):
+        sp = original(genome, hint, prev_proto, prev_ids, next_id, delta, *rest, **kw)
         ids = sp.proto_ids.tolist()
         n_new = sp.next_species_id - next_id
         for row in sp.proto_index[len(ids) - n_new:].tolist():
