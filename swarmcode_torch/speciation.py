@@ -52,8 +52,9 @@ def _one_hot_bt(bt: Tensor) -> Tensor:
     return oh.flatten(1)
 
 
-def distance(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights()) -> Tensor:
-    """Genomes [Pa], [Pb] -> [Pa, Pb] float32 D = w_tag (H/L)^gamma + w_hw d_hw + w_bt d_bt + w_tool d_tool + w_size d_size.
+def distance_terms(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights()) -> dict[str, Tensor]:
+    """Genomes [Pa], [Pb] -> the weighted terms of D, each [Pa, Pb] float32, in the order of the sum:
+    tag = w_tag (H/L)^gamma, hw = w_hw d_hw, bt = w_bt d_bt, tool = w_tool d_tool, size = w_size d_size.
 
     H: tag Hamming distance, L: tag length; d_hw: Euclidean distance of `hardware_vector()` / sqrt(5);
     d_bt: fraction of BT slots whose opcode differs; d_tool: effectors differ; d_size: |dr| / (R_MAX - R_MIN).
@@ -75,8 +76,15 @@ def distance(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights()) -> Te
         d_bt = torch.zeros(pa, pb, device=dev)
     d_tool = (a.effector[:, None] != b.effector[None, :]).float()
     d_size = (a.radius.float()[:, None] - b.radius.float()[None, :]).abs() / (R_MAX - R_MIN)
-    return (w.w_tag * d_tag + w.w_hw * d_hw + w.w_bt * d_bt + w.w_tool * d_tool
-            + w.w_size * d_size)
+    return {"tag": w.w_tag * d_tag, "hw": w.w_hw * d_hw, "bt": w.w_bt * d_bt,
+            "tool": w.w_tool * d_tool, "size": w.w_size * d_size}
+
+
+def distance(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights()) -> Tensor:
+    """Genomes [Pa], [Pb] -> [Pa, Pb] float32 D = w_tag (H/L)^gamma + w_hw d_hw + w_bt d_bt + w_tool d_tool + w_size d_size
+    (the sum of `distance_terms`)."""
+    t = distance_terms(a, b, w)
+    return t["tag"] + t["hw"] + t["bt"] + t["tool"] + t["size"]
 
 
 def speciate(genome: Genome, species_hint: Tensor, prev_proto: Genome | None,
@@ -111,10 +119,13 @@ def speciate(genome: Genome, species_hint: Tensor, prev_proto: Genome | None,
     else:
         carried_rows, carried_ids = long_empty, long_empty
     if merge and carried_rows.numel() > 1:
-        d_pp = distance(genome.index(carried_rows), genome.index(carried_rows), w)
-        keep = torch.ones(carried_rows.numel(), dtype=torch.bool, device=dev)
-        for j in range(1, carried_rows.numel()):      # one pass over species, oldest first
-            keep[j] = not bool((d_pp[j, :j][keep[:j]] <= delta).any())
+        # one pass over the K species, oldest first, on the host (one transfer, not K syncs)
+        close = (distance(genome.index(carried_rows), genome.index(carried_rows), w)
+                 <= delta).cpu()
+        keep = torch.ones(carried_rows.numel(), dtype=torch.bool)
+        for j in range(1, carried_rows.numel()):
+            keep[j] = not bool(close[j, :j][keep[:j]].any())
+        keep = keep.to(dev)
         carried_rows, carried_ids = carried_rows[keep], carried_ids[keep]
     k = int(carried_rows.numel())
 

@@ -23,16 +23,13 @@ from __future__ import annotations
 
 import argparse
 import collections
-import math
 import statistics
 from pathlib import Path
 
-import torch
-
 import swarmcode_torch.evolve as evolve
-from swarmcode_torch.genome import R_MAX, R_MIN, Genome
+from swarmcode_torch.genome import Genome
 from swarmcode_torch.runs import load_checkpoint, read_config
-from swarmcode_torch.speciation import DistanceWeights, _one_hot_bt, distance, hamming
+from swarmcode_torch.speciation import distance, distance_terms
 
 AGE_BUCKETS = ((0, 1, "0"), (1, 5, "1-4"), (5, 20, "5-19"), (20, 50, "20-49"), (50, 10**9, "50+"))
 
@@ -74,16 +71,12 @@ def history_report(run: Path) -> None:
           + ("; ".join(close) if close else "none"))
 
 
-def terms(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights()) -> dict:
+def terms(a: Genome, b: Genome) -> dict:
     """The weighted terms of D between single genomes a and b, and the number of differing tiers."""
-    return dict(
-        tag=float(w.w_tag * (hamming(a.tag, b.tag) / a.tag.shape[1]) ** w.gamma),
-        hw=float(w.w_hw * torch.cdist(a.hardware_vector(), b.hardware_vector()) / math.sqrt(5.0)),
-        bt=float(w.w_bt * (1 - _one_hot_bt(a.bt) @ _one_hot_bt(b.bt).T / a.bt.shape[1])),
-        tool=float(w.w_tool * (a.effector != b.effector).float()),
-        size=float(w.w_size * (a.radius - b.radius).abs() / (R_MAX - R_MIN)),
-        tiers=int((a.chassis != b.chassis).sum() + (a.battery != b.battery).sum()
-                  + (a.motor != b.motor).sum()))
+    out = {k: float(v) for k, v in distance_terms(a, b).items()}
+    out["tiers"] = int((a.chassis != b.chassis).sum() + (a.battery != b.battery).sum()
+                       + (a.motor != b.motor).sum())
+    return out
 
 
 def cause(rec: dict) -> str:
