@@ -7,7 +7,8 @@
 # SECONDS (it writes its checkpoint first) unless it finishes sooner; run the script again with
 # --resume to continue every run in ROOT towards its 500 generations (swarm200: 50). To continue
 # the committed runs: mkdir -p ROOT && tar xzf docs/results/runs.tar.gz -C ROOT, then --resume.
-# At the end ROOT/runs-small.tar.gz holds what make_results.py needs (no TensorBoard events).
+# EXTRA_OPTS (environment) is added to every new run's options, e.g.
+# EXTRA_OPTS='--set cuda_graphs=true'. At the end ROOT/runs-small.tar.gz holds what make_results.py needs (no TensorBoard events).
 set -u
 ROOT=${1:?usage: run_experiments.sh ROOT SECONDS [--resume]}
 SECONDS_LEFT=${2:?usage: run_experiments.sh ROOT SECONDS [--resume]}
@@ -16,7 +17,7 @@ case "$RESUME" in ""|--resume) ;; *) echo "third argument must be --resume" >&2;
 export OMP_NUM_THREADS=1 TORCHINDUCTOR_COMPILE_THREADS=1 PYTHONUNBUFFERED=1
 mkdir -p "$ROOT"/{niche,budget,roi,swarm200,logs}
 CLI="timeout -s INT $SECONDS_LEFT python3 -m swarmcode_torch.cli"
-OPTS="--device cuda --checkpoint-every 25 --log-every 50"
+OPTS="--device cuda --checkpoint-every 25 --log-every 50 ${EXTRA_OPTS:-}"
 if [ "$RESUME" = "--resume" ]; then
   for d in "$ROOT"/niche/* "$ROOT"/budget/budget-* "$ROOT"/roi/* "$ROOT"/swarm200/*; do
     [ -f "$d/checkpoint.pt" ] || continue
