@@ -55,7 +55,8 @@ def bench(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
     envs = 2 * pop * args.trials
     row = {
         "scenario": name, "swarm_size": swarm, "population": pop, "trials": args.trials,
-        "ticks": ticks, "envs": envs, "compile": ev.ctx.compiled, "cuda_graphs": cfg.cuda_graphs,
+        "ticks": ticks, "envs": envs, "compile": ev.ctx.compiled,
+        "cuda_graphs": ev.ctx.tick_mode.endswith("CUDA graphs"),
         "warmup_generations": args.warmup, "warmup_seconds": warmup_s,
         "seconds_per_generation": median(gen_s), "all_generation_seconds": gen_s,
         "sim_share": sum(sim_s) / sum(gen_s),
@@ -78,8 +79,9 @@ def main() -> None:
     ap.add_argument("--ticks", type=int, default=None, help="episode length [scenario's]")
     ap.add_argument("--compile", action=argparse.BooleanOptionalAction, default=None,
                     help="torch.compile the tick [default: on CUDA only]")
-    ap.add_argument("--cuda-graphs", action="store_true",
-                    help="replay the compiled tick as CUDA graphs (evolve's cuda_graphs key)")
+    ap.add_argument("--cuda-graphs", action=argparse.BooleanOptionalAction, default=None,
+                    help="replay the compiled tick as CUDA graphs (evolve's cuda_graphs key) "
+                         "[default: as evolve, on where the tick runs compiled on CUDA]")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     device = torch.device(args.device)

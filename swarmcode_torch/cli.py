@@ -139,7 +139,7 @@ def evolve(
             write_config(run_dir, ev.cfg)
             console.print(f"Run directory: [bold]{run_dir}[/]  (device {ev.ctx.device}, "
                           f"scenario {ev.ctx.scenario.name}, population {cfg.population}, "
-                          f"swarm {ev.ctx.eval_cfg.swarm_size})")
+                          f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})")
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
 

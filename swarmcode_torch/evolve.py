@@ -90,8 +90,9 @@ class EvolveConfig:
     evaluated_partners: bool = False
     """Partners are species elites that have a fitness: a species founded this generation is no
     one's partner (an experiment, off by default: it did not reduce the species in best teams)."""
-    cuda_graphs: bool = False
-    """Replay the compiled tick as CUDA graphs of 10 ticks (`world.CudaGraphTicks`); CUDA only."""
+    cuda_graphs: bool | None = None
+    """Replay the compiled tick as CUDA graphs of 10 ticks (`world.CudaGraphTicks`). Unset: on
+    wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
 
     def validate(self) -> None:
         """Raise ValueError with a one-line message for an invalid setting."""
@@ -215,6 +216,13 @@ class Context:
     step_fn: Any
     compiled: bool = False
 
+    @property
+    def tick_mode(self) -> str:
+        """How the world tick runs: 'eager', 'compiled' or 'compiled, CUDA graphs'."""
+        if isinstance(self.step_fn, CudaGraphTicks):
+            return "compiled, CUDA graphs"
+        return "compiled" if self.compiled else "eager"
+
 
 def make_context(cfg: EvolveConfig) -> Context:
     """Validate the config, load the scenario and pick the device and tick function."""
@@ -237,7 +245,9 @@ def make_context(cfg: EvolveConfig) -> Context:
     if cfg.cuda_graphs and (device.type != "cuda" or not use_compile):
         raise ValueError("cuda_graphs needs --device cuda and the compiled tick (--compile)")
     step_fn = CompiledStep() if use_compile else world_step
-    if cfg.cuda_graphs:
+    graphs = cfg.cuda_graphs if cfg.cuda_graphs is not None else (
+        device.type == "cuda" and use_compile)
+    if graphs:
         step_fn = CudaGraphTicks(step_fn)
     # pin the scenario's team size and episode length into the config, so that a saved run keeps
     # them if a built-in scenario's defaults change later
@@ -449,7 +459,7 @@ def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None)
             raise ValueError(f"--set: unknown key {key!r} (settable: {settable})")
         kind = kinds[key]
         try:
-            if kind == "bool":
+            if kind in ("bool", "bool | None"):
                 if text.lower() not in ("true", "false"):
                     raise ValueError
                 out[key] = text.lower() == "true"
@@ -460,7 +470,8 @@ def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None)
             else:
                 out[key] = text
         except ValueError:
-            raise ValueError(f"--set {key}: expected a value of type {kind}, got {text!r}") from None
+            raise ValueError(f"--set {key}: expected a value of type "
+                             f"{kind.removesuffix(' | None')}, got {text!r}") from None
     return out
 
 

@@ -249,8 +249,21 @@ def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
 
 
 def test_cuda_graphs_need_cuda_and_the_compiled_tick():
-    from swarmcode_torch.evolve import make_context
+    from swarmcode_torch.evolve import make_context, parse_settings
+    from swarmcode_torch.runs import config_to_toml
 
     with pytest.raises(ValueError, match="cuda_graphs needs --device cuda"):
         make_context(EvolveConfig(scenario="one-niche", population=4, device="cpu",
                                   cuda_graphs=True))
+    # unset (the default) is "on where the tick runs compiled on CUDA": off on the CPU
+    for compiled, mode in ((False, "eager"), (True, "compiled")):
+        ctx = make_context(EvolveConfig(scenario="one-niche", population=4, device="cpu",
+                                        compile=compiled))
+        assert ctx.cfg.cuda_graphs is None and ctx.tick_mode == mode
+    assert parse_settings(["cuda_graphs=false"]) == {"cuda_graphs": False}
+    assert parse_settings(["cuda_graphs=TRUE"]) == {"cuda_graphs": True}
+    with pytest.raises(ValueError, match="cuda_graphs: expected a value of type bool"):
+        parse_settings(["cuda_graphs=auto"])
+    # unset is not written, so a resumed run decides again on its device; a choice is kept
+    assert "cuda_graphs" not in config_to_toml(EvolveConfig())
+    assert "cuda_graphs = false" in config_to_toml(EvolveConfig(cuda_graphs=False))

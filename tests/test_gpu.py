@@ -14,16 +14,22 @@ TINY = EvolveConfig(scenario="budget", budget=4000.0, population=12, swarm_size=
                     ticks=40, generations=3, seed=0, device="cuda")
 
 
-@pytest.mark.parametrize("compiled", [False, True])
-def test_evolve_runs_on_cuda(compiled):
-    ev = Evolution(replace(TINY, compile=compiled))
+@pytest.mark.parametrize("compiled, graphs, mode", [
+    (False, None, "eager"),
+    (True, None, "compiled, CUDA graphs"),       # the default on CUDA
+    (True, False, "compiled"),
+])
+def test_evolve_runs_on_cuda(compiled, graphs, mode):
+    ev = Evolution(replace(TINY, compile=compiled, cuda_graphs=graphs))
     assert ev.ctx.device.type == "cuda" and ev.ctx.compiled == compiled
+    assert ev.ctx.tick_mode == mode
     while not ev.done:
         m = ev.step()
         assert m["team/cost"] > 0 and m["fitness/best"] > 0
     assert ev.state.genome.bt.device.type == "cuda"
-    if compiled:
-        assert ev.ctx.step_fn.error is None  # it really ran compiled
+    if compiled:  # it really ran compiled
+        compiled_step = ev.ctx.step_fn.step_fn if graphs is None else ev.ctx.step_fn
+        assert compiled_step.error is None
 
 
 def test_cuda_checkpoint_resumes_on_cuda(tmp_path):
