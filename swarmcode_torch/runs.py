@@ -155,6 +155,7 @@ def summary(ev: Evolution, metrics: dict) -> dict:
         "deliveries_individual": best["deliveries_individual"],
         "deliveries_collab": best["deliveries_collab"], "energy_used": best["energy_used"],
         "species_in_population": metrics["species/count"],
+        "device": str(ev.ctx.device), "tick": ev.ctx.tick_mode,
         "designs": best["designs"],
         "last_generation": {k: v for k, v in metrics.items()
                             if "/" in k and isinstance(v, (int, float))},

@@ -1,5 +1,6 @@
 """The command line: evolve, resume, inspect, scenarios, and every kind of bad input."""
 
+import json
 from pathlib import Path
 
 import pytest
@@ -46,6 +47,9 @@ def test_evolve_writes_a_complete_run_directory(tmp_path):
     for f in ("config.toml", "checkpoint.pt", "summary.json"):
         assert (run / f).is_file()
     assert list(run.glob("events.out.tfevents.*"))
+    summary = json.loads((run / "summary.json").read_text())
+    assert (summary["generation"], summary["generations"]) == (1, 2)
+    assert (summary["device"], summary["tick"]) == ("cpu", "eager")
     assert "gen 2/2" in r.output  # plain progress lines off a terminal
     r = invoke("inspect", run)
     assert r.exit_code == 0, r.output
