@@ -329,7 +329,8 @@ def _continuations(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return nxt, cont
 
 
-def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor) -> torch.Tensor:
+def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = True
+                 ) -> torch.Tensor:
     """ops [P, L], col_status [14 * C] (status of opcode o under combo c at o*C+c) -> int32 [P, C]."""
     P, L = ops.shape
     C = NUM_COMBOS
@@ -355,13 +356,23 @@ def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor) -> torch.Tensor:
     g = (base + start.unsqueeze(1)).expand(P, C).reshape(-1)  # current state, global index
     pos = torch.arange(P * C, device=dev)  # flat output position of each walking pair
     acc = torch.zeros_like(g)  # fired bits so far
+    fired_mask = 0x3F << _FIRED_SHIFT
+    if not compact:
+        # terminal states loop onto themselves and add no fired bits, so a finished pair can
+        # keep stepping; a pair visits each leaf slot at most once, so L + 1 steps end them all
+        combo = pos % C
+        for _ in range(L + 1):
+            w = trans[g * 3 + col_status[colx[g] + combo]]
+            g = w >> _CODE_SHIFT
+            acc |= w
+        return (final.reshape(-1)[g] | (acc & fired_mask)).to(torch.int32).reshape(P, C)
     packed = torch.empty_like(g)
     terminal = NOP * C
     for _ in range(L + 1):  # each step visits one leaf; a pair visits each slot at most once
         col = colx[g]
         live = col != terminal
         fin = (~live).nonzero().squeeze(1)
-        packed[pos[fin]] = final.reshape(-1)[g[fin]] | (acc[fin] & (0x3F << _FIRED_SHIFT))
+        packed[pos[fin]] = final.reshape(-1)[g[fin]] | (acc[fin] & fired_mask)
         keep = live.nonzero().squeeze(1)
         if keep.numel() == 0:
             break
@@ -372,14 +383,23 @@ def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor) -> torch.Tensor:
     return packed.to(torch.int32).reshape(P, C)
 
 
-def build_tables(opcodes: torch.Tensor, chunk: int = 32) -> torch.Tensor:
+def build_tables(opcodes: torch.Tensor, chunk: int | None = None,
+                 compact: bool | None = None) -> torch.Tensor:
     """opcodes [P, L] -> int32 [P, NUM_COMBOS]: packed interpret() result for every combination.
 
     Packing: bits 0-3 action, bit 4+j fired flag of action 6+j, bits 10-11 root status.
+    Programs are walked `chunk` at a time over all combinations. `compact` sets finished
+    (program, combination) pairs aside after each step, which saves work but syncs the device
+    twice a step; without it every pair takes L + 1 steps with no sync (finished pairs stay put).
+    Defaults: compact on the CPU, 32 programs a chunk; on a GPU no compaction, 512 a chunk.
     """
     ops = opcodes.long()
+    on_cpu = ops.device.type == "cpu"
+    compact = on_cpu if compact is None else compact
+    chunk = chunk or (32 if on_cpu else 512)
     col_status = combo_statuses(ops.device).t().reshape(-1)
-    parts = [_build_chunk(ops[i:i + chunk], col_status) for i in range(0, ops.shape[0], chunk)]
+    parts = [_build_chunk(ops[i:i + chunk], col_status, compact)
+             for i in range(0, ops.shape[0], chunk)]
     if not parts:
         return torch.zeros(0, NUM_COMBOS, dtype=torch.int32, device=ops.device)
     return torch.cat(parts, 0)

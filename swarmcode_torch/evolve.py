@@ -315,10 +315,13 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
     team = res.swarms.focal_team[b]
     rows, counts = torch.unique(team[team >= 0], return_counts=True)
     cost = genome_phenotype(genome).cost
-    designs = [dict(_design(genome, int(r), int(sp.species[r]), float(cost[r])), count=int(c))
-               for r, c in zip(rows.tolist(), counts.tolist())]
+    # to the host in one transfer per field, not one per value (each is a device sync)
+    host = genome.index(rows).to("cpu")
+    designs = [dict(_design(host, i, s, c), count=n) for i, (s, c, n) in enumerate(zip(
+        sp.species[rows].tolist(), cost[rows].tolist(), counts.tolist()))]
     designs.sort(key=lambda d: -d["count"])
-    tm = {k: float(v[b]) for k, v in res.team_metrics.items()}
+    tm = dict(zip(res.team_metrics, torch.stack([v[b].float() for v in res.team_metrics.values()])
+                  .tolist()))
     team_record = {
         "generation": state.generation, "fitness": float(res.focal[b]),
         "cost": float(res.team_cost[b]), "species": len(designs),

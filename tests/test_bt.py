@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 from hypothesis import given, settings, strategies as st
 
@@ -239,6 +240,8 @@ def test_lookup_matches_interpret_random() -> None:
                      torch.stack([template_tensor(n, L) for n in TEMPLATES])])
     tables = build_tables(ops, chunk=7)  # odd chunk size exercises chunking
     assert torch.equal(tables, build_tables(ops))
+    # the GPU's walk (no compaction, no device sync) gives the same tables
+    assert torch.equal(tables, build_tables(ops, chunk=9, compact=False))
     prog_idx = torch.randint(0, P, (2, robots // 2), generator=g)
     ls = torch.randint(0, 3, (2, robots // 2, NUM_OPCODES), generator=g)
     cond = ls[..., 2:6] == R
@@ -251,12 +254,14 @@ def test_lookup_matches_interpret_random() -> None:
         assert torch.equal(w, x)
 
 
-def test_build_tables_edge_cases() -> None:
-    assert build_tables(torch.zeros(0, 8, dtype=torch.long)).shape == (0, NUM_COMBOS)
+@pytest.mark.parametrize("compact", [True, False])
+def test_build_tables_edge_cases(compact) -> None:
+    assert build_tables(torch.zeros(0, 8, dtype=torch.long), compact=compact).shape == \
+        (0, NUM_COMBOS)
     for ops in (torch.zeros(2, 0, dtype=torch.long), torch.full((2, 5), NOP), torch.full((2, 5), END)):
-        action, fired, status = unpack(build_tables(ops))
+        action, fired, status = unpack(build_tables(ops, compact=compact))
         assert (action == NOP).all() and not fired.any() and (status == S).all()
-    action, _, status = unpack(build_tables(torch.full((1, 6), SEL)))
+    action, _, status = unpack(build_tables(torch.full((1, 6), SEL), compact=compact))
     assert (action == NOP).all() and (status == F).all()
 
 

@@ -75,3 +75,13 @@ def test_evolve_with_cuda_graphs_replays_captured_ticks():
         m = ev.step()
         assert m["team/cost"] > 0 and m["fitness/best"] > 0
     assert ev.ctx.step_fn.graph is not None and ev.ctx.step_fn.step_fn.error is None
+
+
+def test_build_tables_on_cuda_match_the_cpu():
+    # on a GPU the walk runs without compaction (no device sync); the tables are the same
+    from swarmcode_torch import bt
+
+    g = torch.Generator().manual_seed(0)
+    ops = torch.cat([bt.random_programs(60, 32, g),
+                     torch.stack([bt.template_tensor(n, 32) for n in bt.TEMPLATES])])
+    assert torch.equal(bt.build_tables(ops.cuda()).cpu(), bt.build_tables(ops))
