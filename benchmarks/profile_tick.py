@@ -5,7 +5,7 @@ the tick is bound by launching kernels (host side); when it is busy most of the 
 kernels themselves, and the top-kernel table says which.
 
     python benchmarks/profile_tick.py --device cuda --configs 400:20,400:200,400:1000
-    python benchmarks/profile_tick.py --device cuda --configs 400:20 --compile-mode reduce-overhead
+    python benchmarks/profile_tick.py --device cuda --configs 400:20,400:200 --cuda-graphs
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_sim import Workload, scenario_for  # noqa: E402
 from common import RESULTS_DIR, now, run_metadata, write_json  # noqa: E402
-from swarmcode_torch.world import step  # noqa: E402
+from swarmcode_torch.world import CudaGraphTicks, step  # noqa: E402
 
 
 def _device_us(evt) -> float:
@@ -45,16 +45,26 @@ def profile_config(E: int, N: int, args, device: torch.device) -> dict:
             torch.compiler.cudagraph_mark_step_begin()
         return w.tick(fn, s)
 
-    for _ in range(5):
-        state = tick(state)
+    if args.cuda_graphs:  # the compiled tick replayed from CUDA graphs of 10 ticks, as evolve
+        replay = CudaGraphTicks(fn, ticks_per_graph=10)
+        inputs = (w.layout, w.robots, w.compat, w.keys, w.tables)
+
+        def ticks(s):
+            return replay.run_ticks(s, inputs, w.params, args.ticks)
+    else:
+        def ticks(s):
+            for _ in range(args.ticks):
+                s = tick(s)
+            return s
+
+    for _ in range(2):
+        state = ticks(state)  # compile (and capture) outside the timing
     t0 = now(device)
-    for _ in range(args.ticks):
-        state = tick(state)
+    state = ticks(state)
     wall = (now(device) - t0) / args.ticks
     activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
     with profile(activities=activities) as prof:
-        for _ in range(args.ticks):
-            state = tick(state)
+        state = ticks(state)
         if device.type == "cuda":
             torch.cuda.synchronize()
     kernels = [e for e in prof.events() if e.device_type == torch.autograd.DeviceType.CUDA]
@@ -67,6 +77,7 @@ def profile_config(E: int, N: int, args, device: torch.device) -> dict:
     top = sorted(table.items(), key=lambda kv: -kv[1][1])[:args.top]
     return {
         "E": E, "N": N, "compile_mode": args.compile_mode or "default",
+        "cuda_graphs": args.cuda_graphs,
         "wall_ms_per_tick": 1e3 * wall,
         "gpu_busy_ms_per_tick": busy_us / 1e3,
         "gpu_busy_share": busy_us / 1e6 / wall if wall > 0 else None,
@@ -84,9 +95,13 @@ def main() -> None:
     ap.add_argument("--ticks", type=int, default=50)
     ap.add_argument("--top", type=int, default=8)
     ap.add_argument("--compile-mode", default=None)
+    ap.add_argument("--cuda-graphs", action="store_true",
+                    help="profile the compiled tick replayed from CUDA graphs (world.CudaGraphTicks)")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     device = torch.device(args.device)
+    if args.cuda_graphs and (device.type != "cuda" or args.compile_mode):
+        raise SystemExit("--cuda-graphs needs --device cuda and the default compile mode")
     out = args.out or RESULTS_DIR / f"profile_{device.type}.json"
     result = {**run_metadata(device), "results": []}
     for item in args.configs.split(","):
