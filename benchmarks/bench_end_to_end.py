@@ -24,17 +24,9 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import run_metadata, write_json  # noqa: E402
+from common import parse_configs, run_metadata, write_json  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def parse_configs(text: str) -> list[tuple[str, int, int]]:
-    out = []
-    for item in text.split(","):
-        name, swarm, pop = item.split(":")
-        out.append((name, int(swarm), int(pop)))
-    return out
 
 
 def run_one(name: str, swarm: int, pop: int, args) -> dict:

@@ -18,18 +18,10 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from common import median, now, run_metadata, write_json  # noqa: E402
+from common import median, now, parse_configs, run_metadata, write_json  # noqa: E402
 from swarmcode_torch.evolve import Evolution, EvolveConfig  # noqa: E402
 
 DEFAULT_CONFIGS = "four-niche:20:50,budget:20:100,swarm200:200:50,swarm1000:1000:50"
-
-
-def parse_configs(text: str) -> list[tuple[str, int, int]]:
-    out = []
-    for item in text.split(","):
-        name, swarm, pop = item.split(":")
-        out.append((name, int(swarm), int(pop)))
-    return out
 
 
 def bench(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:

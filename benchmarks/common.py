@@ -138,3 +138,12 @@ def int_list(text: str) -> list[int]:
         return [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
         raise ValueError(f"expected comma-separated integers, got {text!r}") from None
+
+
+def parse_configs(text: str) -> list[tuple[str, int, int]]:
+    """'four-niche:20:50,swarm200:200:50' -> [(scenario, swarm size, population), ...]."""
+    out = []
+    for item in text.split(","):
+        name, swarm, pop = item.split(":")
+        out.append((name, int(swarm), int(pop)))
+    return out
