@@ -218,8 +218,14 @@ class Context:
 
     @property
     def tick_mode(self) -> str:
-        """How the world tick runs: 'eager', 'compiled' or 'compiled, CUDA graphs'."""
-        if isinstance(self.step_fn, CudaGraphTicks):
+        """How the world tick runs: 'eager', 'compiled', 'compiled, CUDA graphs', or 'eager
+        (compiling failed)' once a compiled tick has fallen back."""
+        fn = self.step_fn
+        graphs = isinstance(fn, CudaGraphTicks)
+        compiled_step = fn.step_fn if graphs else fn
+        if isinstance(compiled_step, CompiledStep) and compiled_step.error is not None:
+            return "eager (compiling failed)"
+        if graphs:
             return "compiled, CUDA graphs"
         return "compiled" if self.compiled else "eager"
 
@@ -247,8 +253,8 @@ def make_context(cfg: EvolveConfig) -> Context:
     step_fn = CompiledStep() if use_compile else world_step
     graphs = cfg.cuda_graphs if cfg.cuda_graphs is not None else (
         device.type == "cuda" and use_compile)
-    if graphs:
-        step_fn = CudaGraphTicks(step_fn)
+    if graphs:  # unset (auto): a tick that fails to compile runs eagerly, as without graphs
+        step_fn = CudaGraphTicks(step_fn, required=cfg.cuda_graphs is not None)
     # pin the scenario's team size and episode length into the config, so that a saved run keeps
     # them if a built-in scenario's defaults change later
     cfg = replace(cfg, swarm_size=S, ticks=eval_cfg.ticks)

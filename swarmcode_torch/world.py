@@ -590,7 +590,8 @@ class CudaGraphTicks:
     Pass it as `step_fn` to `rollout`. CUDA only.
     """
 
-    def __init__(self, step_fn: Callable | None = None, ticks_per_graph: int = 10):
+    def __init__(self, step_fn: Callable | None = None, ticks_per_graph: int = 10,
+                 required: bool = True):
         if not torch.cuda.is_available():
             raise RuntimeError("CUDA graphs need a CUDA device")
         if ticks_per_graph < 1:
@@ -600,6 +601,10 @@ class CudaGraphTicks:
         self.k = ticks_per_graph
         self.key = None
         self.graph: torch.cuda.CUDAGraph | None = None
+        # required: a tick that fails to compile is an error; otherwise the ticks run one by one
+        # with the step's eager fallback
+        self.required = required
+        self.disabled = False
 
     def __call__(self, *args):  # a single tick, outside any graph
         return self.step_fn(*args)
@@ -630,8 +635,11 @@ class CudaGraphTicks:
             ticks(2)                        # compile and allocate outside the capture
         torch.cuda.current_stream().wait_stream(side)
         if isinstance(self.step_fn, CompiledStep) and self.step_fn.error is not None:
-            raise RuntimeError("CudaGraphTicks needs the compiled tick, and compiling failed: "
-                               f"{self.step_fn.error}")
+            if self.required:
+                raise RuntimeError("CudaGraphTicks needs the compiled tick, and compiling "
+                                   f"failed: {self.step_fn.error}")
+            self.disabled = True
+            return
         self.graph = torch.cuda.CUDAGraph()
         with torch.cuda.graph(self.graph):
             ticks(self.k)
@@ -639,9 +647,13 @@ class CudaGraphTicks:
     def run_ticks(self, state: State, inputs: tuple, params: WorldParams, ticks: int) -> State:
         """`ticks` ticks from `state`; inputs = (layout, robots, compat, keys, tables)."""
         key = (tuple((t.shape, t.dtype, t.device) for t in self._tensors(state, inputs)), params)
-        if key != self.key:
+        if key != self.key and not self.disabled:
             self._capture(state, inputs, params)
             self.key = key
+        if self.disabled:  # compiling failed and graphs were optional: tick by tick
+            for _ in range(ticks):
+                state = self.step_fn(state, *inputs, params)
+            return state
         for a, b in zip(self._tensors(self.state, self.inputs), self._tensors(state, inputs)):
             a.copy_(b)
         for _ in range(ticks // self.k):

@@ -264,6 +264,11 @@ def test_cuda_graphs_need_cuda_and_the_compiled_tick():
     assert parse_settings(["cuda_graphs=TRUE"]) == {"cuda_graphs": True}
     with pytest.raises(ValueError, match="cuda_graphs: expected a value of type bool"):
         parse_settings(["cuda_graphs=auto"])
+    # a compiled tick that fell back to eager says so
+    ctx = make_context(EvolveConfig(scenario="one-niche", population=4, device="cpu",
+                                    compile=True))
+    ctx.step_fn.error = RuntimeError("no compiler")
+    assert ctx.tick_mode == "eager (compiling failed)"
     # unset is not written, so a resumed run decides again on its device; a choice is kept
     assert "cuda_graphs" not in config_to_toml(EvolveConfig())
     assert "cuda_graphs = false" in config_to_toml(EvolveConfig(cuda_graphs=False))

@@ -85,3 +85,28 @@ def test_build_tables_on_cuda_match_the_cpu():
     ops = torch.cat([bt.random_programs(60, 32, g),
                      torch.stack([bt.template_tensor(n, 32) for n in bt.TEMPLATES])])
     assert torch.equal(bt.build_tables(ops.cuda()).cpu(), bt.build_tables(ops))
+
+
+@pytest.mark.parametrize("required", [True, False])
+def test_cuda_graphs_when_compiling_fails(required):
+    # evolve's default (graphs unset) falls back to eager ticks; an explicit choice is an error
+    from worldkit import random_world
+
+    from swarmcode_torch.world import CompiledStep, CudaGraphTicks, rollout, step
+
+    def broken(*args):
+        raise RuntimeError("no compiler")
+
+    failing = CompiledStep()
+    failing.compiled = broken
+    graphs = CudaGraphTicks(failing, required=required)
+    _, layout, robots, tables, params = random_world("four-niche", E=4, seed=0, device="cuda")
+    if required:
+        with pytest.raises(RuntimeError, match="compiling failed"):
+            rollout(layout, robots, tables, params, 20, graphs)
+        return
+    got = rollout(layout, robots, tables, params, 20, graphs)
+    ref = rollout(layout, robots, tables, params, 20, step)
+    assert graphs.disabled and graphs.graph is None
+    for k in ref:
+        torch.testing.assert_close(got[k], ref[k])
