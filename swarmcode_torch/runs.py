@@ -6,6 +6,7 @@ import io
 import json
 import math
 import os
+import pickle
 import sys
 import tempfile
 import time
@@ -93,17 +94,48 @@ def save_checkpoint(run_dir: Path, ev: Evolution) -> Path:
     return path
 
 
-def load_checkpoint(run_dir: Path) -> dict:
-    path = Path(run_dir) / CHECKPOINT_FILE
-    if not path.is_file():
-        raise RunError(f"{run_dir} has no {CHECKPOINT_FILE} to resume from")
+#: What a checkpoint may hold at the top level, and the type of each entry.
+_CHECKPOINT_KEYS = {"version": int, "config": dict, "generation": int, "genome": dict,
+                    "species_hint": torch.Tensor, "proto": (dict, type(None)),
+                    "proto_ids": torch.Tensor, "next_species_id": int, "fitness": torch.Tensor,
+                    "has_fitness": torch.Tensor, "rng_state": torch.Tensor,
+                    "best": (dict, type(None)), "history": list}
+
+
+def read_checkpoint(path: Path) -> dict:
+    """The contents of a checkpoint file, unpickled with `torch.load(weights_only=True)`: only
+    tensors, plain containers, numbers and strings are rebuilt, so no code in the file can run.
+    RunError for a file that would call anything on loading, a damaged file, or one that is not a
+    swarmcode-torch checkpoint."""
+    path = Path(path)
     try:
-        d = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as e:  # noqa: BLE001 - any unpickling failure means a corrupt file
+        d = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as e:
+        if "weights only load failed" in str(e).lower() or "unsupported global" in str(e).lower():
+            raise RunError(f"{path} was refused: loading it would run code (only tensors, "
+                           "numbers, strings and plain containers are allowed)") from None
+        raise RunError(f"{path} is corrupt or not a checkpoint (UnpicklingError)") from None
+    except OSError as e:
+        raise RunError(f"{path} cannot be read ({e.strerror or type(e).__name__})") from None
+    except Exception as e:  # noqa: BLE001 - any other failure means a damaged file
         raise RunError(f"{path} is corrupt or not a checkpoint ({type(e).__name__})") from None
     if not isinstance(d, dict) or "version" not in d:
         raise RunError(f"{path} is not a swarmcode-torch checkpoint")
+    for key, kind in _CHECKPOINT_KEYS.items():
+        if key not in d:
+            raise RunError(f"{path} is not a complete checkpoint (no {key!r})")
+        if not isinstance(d[key], kind) or isinstance(d[key], bool) and kind is int:
+            raise RunError(f"{path} is damaged: {key!r} has the wrong type "
+                           f"({type(d[key]).__name__})")
     return d
+
+
+def load_checkpoint(run_dir: Path) -> dict:
+    """The checkpoint of a run directory (see `read_checkpoint`)."""
+    path = Path(run_dir) / CHECKPOINT_FILE
+    if not path.is_file():
+        raise RunError(f"{run_dir} has no {CHECKPOINT_FILE} to resume from")
+    return read_checkpoint(path)
 
 
 def resume(run_dir: Path, generations: int | None = None, device: str | None = None) -> Evolution:

@@ -79,7 +79,7 @@ def test_resume_extends_a_finished_run(tmp_path):
     r = invoke("evolve", "--resume", run, "--generations", 3)
     assert r.exit_code == 0, r.output
     assert "Resuming" in r.output and "gen 3/3" in r.output
-    d = torch.load(run / "checkpoint.pt", weights_only=False)
+    d = torch.load(run / "checkpoint.pt", weights_only=True)
     assert d["generation"] == 3
     assert "generations = 3" in (run / "config.toml").read_text()
 
@@ -201,7 +201,7 @@ def test_sigterm_writes_the_last_finished_generation(tmp_path):
     assert proc.returncode == 143, errs
     assert "Terminated: checkpoint of generation" in errs and "Traceback" not in errs
     run = only_run(tmp_path)
-    gen = torch.load(run / "checkpoint.pt", weights_only=False)["generation"]
+    gen = torch.load(run / "checkpoint.pt", weights_only=True)["generation"]
     assert 1 <= gen < 100000
     r = invoke("evolve", "--resume", run, "--generations", gen + 1)
     assert r.exit_code == 0, r.output

@@ -24,7 +24,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-import torch  # noqa: E402
+from swarmcode_torch.runs import load_checkpoint  # noqa: E402
 
 from swarmcode_torch.reporting import composition_figure  # noqa: E402
 from swarmcode_torch.sweep import table_rows, write_outputs  # noqa: E402
@@ -45,7 +45,7 @@ def compact(run_dir: Path, out_dir: Path, figure: bool = True) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     for name in ("config.toml", "summary.json"):
         shutil.copy(run_dir / name, out_dir / name)
-    history = torch.load(run_dir / "checkpoint.pt", map_location="cpu", weights_only=False)["history"]
+    history = load_checkpoint(run_dir)["history"]
     (out_dir / "history.json").write_text(json.dumps(history))
     pop_species = {h["generation"]: len(h["population"]) for h in history}
     by_gen = {}                     # a resumed run may repeat generations: the last record wins
