@@ -310,9 +310,74 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory.")]) -
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
     designs = _print_team(run_dir)
-    for d in designs:
+    caps = _capabilities(run_dir, designs)
+    for i, d in enumerate(designs):
         console.print(f"[bold]species {d['species']}[/] ({d['count']} robots, {d['effector']}):")
+        if caps is not None:
+            labels, can = caps
+            lifts = "; ".join(labels[j] for j in can[i]) or "no package class"
+            console.print(f"  lifts: {lifts}", highlight=False, markup=False)
         console.print(bt.format_tree(d["bt"]) or "  (empty tree)", highlight=False)
+    if caps is not None:
+        from .dynamics import niche_count
+        console.print(f"{niche_count(caps[1])} niches (distinct capabilities) in "
+                      f"{len({d['species'] for d in designs})} species", highlight=False)
+
+
+def _capabilities(run_dir: Path, designs: list[dict]):
+    """(package class labels, per design the classes it lifts), or None without a scenario."""
+    from .analysis import design_capabilities
+    from .runs import RunError, read_config
+
+    try:
+        scenario = load_scenario(read_config(run_dir).scenario)
+        return [c.label for c in scenario.packages], design_capabilities(designs, scenario)
+    except (RunError, ValueError):
+        return None
+
+
+@app.command()
+def dynamics(
+    run_dir: Annotated[Path, typer.Argument(help="A run directory.")],
+    window: Annotated[Optional[list[str]], typer.Option(help="Generations A:B (from A to before B); repeatable [default: every 100, and the last 50].")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+) -> None:
+    """Species dynamics of a run: species in the best team and the population, niches, founding
+    and extinction per generation, ages and lifetimes, over windows of generations."""
+    from .analysis import run_dynamics
+    from .runs import RunError
+
+    if not run_dir.is_dir():
+        fail(f"{run_dir} is not a directory")
+    wins = []
+    for w in window or []:
+        a, sep, b = w.partition(":")
+        try:
+            wins.append((int(a), int(b)))
+        except ValueError:
+            fail(f"--window expects A:B with integers A < B, got {w!r}")
+        if not sep or wins[-1][0] >= wins[-1][1] or wins[-1][0] < 0:
+            fail(f"--window expects A:B with integers 0 <= A < B, got {w!r}")
+    try:
+        stats = run_dynamics(run_dir, wins or None)
+    except (RunError, ValueError) as e:
+        fail(str(e))
+    if as_json:
+        console.print_json(json.dumps(stats).replace("NaN", "null"))
+        return
+    t = Table(title=f"Species dynamics of {run_dir} (medians over each window)",
+              box=box.SIMPLE_HEAD, caption="founded, extinct: species a generation; age, "
+              "lifetime: generations; lifetime of the species that died in the window")
+    cols = (("generations", "from", "{}"), ("to", "to", "{}"), ("team sp", "team_species", "{:g}"),
+            ("pop sp", "population_species", "{:g}"), ("niches", "niches", "{:g}"),
+            ("founded", "founded_per_generation", "{:.2f}"),
+            ("extinct", "extinct_per_generation", "{:.2f}"), ("age", "median_age", "{:g}"),
+            ("team age", "team_median_age", "{:g}"), ("lifetime", "median_lifetime", "{:g}"))
+    for name, _, _ in cols:
+        t.add_column(name, justify="right", no_wrap=True)
+    for st in stats:
+        t.add_row(*(fmt.format(st[key]) for _, key, fmt in cols))
+    console.print(t)
 
 
 @app.command()

@@ -10,20 +10,22 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
+from functools import partial
 from typing import Any
 
 import torch
 from torch import Tensor
 
 from . import bt
+from .dynamics import Turnover, median, niche_count, replay
 from .evaluation import EvalConfig, evaluate
 from .fitness import FitnessWeights, ema
 from .genome import NUM_TIERS, R_MAX, R_MIN, Genome
 from .hardware import genome_phenotype
 from .reproduction import ReproductionParams, mutate_bt, reproduce
 from .scenario import Scenario, load_scenario
-from .speciation import speciate
-from .world import CompiledStep, CudaGraphTicks, WorldParams, step as world_step
+from .speciation import DistanceWeights, distance, speciate
+from .world import CompiledStep, CudaGraphTicks, WorldParams, capabilities, step as world_step
 
 CHECKPOINT_VERSION = 1
 # compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
@@ -84,6 +86,17 @@ class EvolveConfig:
     """Mutation: probability of resampling each tier and the effector."""
     p_tag_flip: float = 0.01
     """Mutation: probability of flipping each tag bit."""
+    d_hw_tiers: bool = False
+    """d_hw also over the three hardware tiers (true: the behaviour before 0.2; the paper's d_hw is
+    over the continuous hardware genes only)."""
+    bt_point_on_nodes: bool = True
+    """A behavior-tree point mutation re-draws one of the tree's nodes, never the NOP padding
+    (false: any slot, the behaviour before 0.2)."""
+    bt_mutation_rate: float = 1.0
+    """Mutation: probability that an offspring gets its behavior-tree mutation event."""
+    p_gene_mutation: float = 1.0
+    """Mutation: probability that each continuous gene (radius, operating points, selectivity,
+    dominance) of an offspring gets its Gaussian step."""
     merge_species: bool = False
     """Dissolve a species whose prototype comes within delta of an older one's (not in the paper;
     an experiment)."""
@@ -114,11 +127,12 @@ class EvolveConfig:
         if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
             raise ValueError(f"--device must be auto, cpu or cuda, got {self.device!r}")
         for name in ("delta", "p_marginal", "alpha", "lam", "hw_sigma", "social_sigma",
-                     "p_categorical", "p_tag_flip", "min_share"):
+                     "p_categorical", "p_tag_flip", "min_share", "bt_mutation_rate",
+                     "p_gene_mutation"):
             v = getattr(self, name)
             if not (v >= 0 and math.isfinite(v)):          # also refuses nan
                 raise ValueError(f"{name} must be a finite number >= 0, got {v}")
-        for name in ("p_categorical", "p_tag_flip"):
+        for name in ("p_categorical", "p_tag_flip", "bt_mutation_rate", "p_gene_mutation"):
             if getattr(self, name) > 1:
                 raise ValueError(f"{name} must be <= 1")
 
@@ -140,6 +154,9 @@ class EvolveConfig:
             d["p_tag_flip"] = 1.0 / int(d.get("tag_length", cls.tag_length))
         if "min_share" not in d:
             d["min_share"] = 0.0     # written before the quota threshold existed
+        # written before the paper-text fixes of d_hw and the tree mutation: the old behaviour
+        d.setdefault("d_hw_tiers", True)
+        d.setdefault("bt_point_on_nodes", False)
         if d.get("ticks") is None and d.get("scenario") in LEGACY_EPISODE_TICKS:
             # written before runs pinned their episode length: the scenario's length of that time
             d["ticks"] = LEGACY_EPISODE_TICKS[d["scenario"]]
@@ -177,7 +194,7 @@ def random_population(n: int, cfg: EvolveConfig, generator: torch.Generator,
     names = list(bt.TEMPLATES)
     templates = torch.stack([bt.template_tensor(k, cfg.bt_length) for k in names]).to(device)
     which = torch.randint(0, len(names), (n,), generator=g, device=device)
-    programs = mutate_bt(templates[which], ReproductionParams(), g)
+    programs = mutate_bt(templates[which], reproduction_params(cfg), g)
     tiers = lambda: torch.randint(0, NUM_TIERS, (n,), generator=g, device=device)  # noqa: E731
     return Genome(
         tag=u(n, cfg.tag_length) < 0.5, selectivity=u(n), dominance=u(n), bt=programs,
@@ -201,6 +218,8 @@ class EvolutionState:
     rng_state: Tensor              # the run generator's state
     best: dict | None = None       # best team of the run so far
     history: list = field(default_factory=list)  # per-generation composition records
+    turnover: Turnover = field(default_factory=Turnover)  # species births and deaths (derived
+    #                                                       from history; not saved)
 
 
 @dataclass
@@ -215,6 +234,7 @@ class Context:
     params: WorldParams
     step_fn: Any
     compiled: bool = False
+    weights: DistanceWeights = DistanceWeights()
 
     @property
     def tick_mode(self) -> str:
@@ -230,6 +250,17 @@ class Context:
         return "compiled" if self.compiled else "eager"
 
 
+def reproduction_params(cfg: EvolveConfig) -> ReproductionParams:
+    """The reproduction settings of a run."""
+    return ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite,
+                              quota_basis=cfg.quota_basis, min_share=cfg.min_share,
+                              hw_sigma=cfg.hw_sigma, social_sigma=cfg.social_sigma,
+                              p_categorical=cfg.p_categorical, p_tag_flip=cfg.p_tag_flip,
+                              bt_point_on_nodes=cfg.bt_point_on_nodes,
+                              bt_mutation_rate=cfg.bt_mutation_rate,
+                              p_gene_mutation=cfg.p_gene_mutation)
+
+
 def make_context(cfg: EvolveConfig) -> Context:
     """Validate the config, load the scenario and pick the device and tick function."""
     cfg.validate()
@@ -241,11 +272,7 @@ def make_context(cfg: EvolveConfig) -> Context:
                           p_marginal=cfg.p_marginal, max_elite=cfg.max_elite,
                           dominance=cfg.dominance, evaluated_partners=cfg.evaluated_partners,
                           weights=FitnessWeights())
-    repro = ReproductionParams(delta=cfg.delta, max_elite=cfg.max_elite,
-                               quota_basis=cfg.quota_basis, min_share=cfg.min_share,
-                               hw_sigma=cfg.hw_sigma,
-                               social_sigma=cfg.social_sigma, p_categorical=cfg.p_categorical,
-                               p_tag_flip=cfg.p_tag_flip)
+    repro = reproduction_params(cfg)
     use_compile = cfg.compile if cfg.compile is not None else (
         device.type == "cuda" or cfg.generations >= COMPILE_MIN_GENERATIONS)
     if cfg.cuda_graphs and (device.type != "cuda" or not use_compile):
@@ -259,7 +286,7 @@ def make_context(cfg: EvolveConfig) -> Context:
     # them if a built-in scenario's defaults change later
     cfg = replace(cfg, swarm_size=S, ticks=eval_cfg.ticks)
     return Context(cfg, scenario, device, eval_cfg, repro, WorldParams.for_scenario(scenario),
-                   step_fn, use_compile)
+                   step_fn, use_compile, DistanceWeights(hw_tiers=cfg.d_hw_tiers))
 
 
 def new_generator(ctx: Context) -> torch.Generator:
@@ -305,7 +332,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
 
     # 1. dynamic speciation
     sp = speciate(genome, state.species_hint, state.proto, state.proto_ids,
-                  state.next_species_id, cfg.delta, merge=cfg.merge_species)
+                  state.next_species_id, cfg.delta, w=ctx.weights, merge=cfg.merge_species)
 
     # 2. evaluation of every individual, all teams and trials in one batch
     t_eval = time.perf_counter()
@@ -323,14 +350,18 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
     cost = genome_phenotype(genome).cost
     # to the host in one transfer per field, not one per value (each is a device sync)
     host = genome.index(rows).to("cpu")
-    designs = [dict(_design(host, i, s, c), count=n) for i, (s, c, n) in enumerate(zip(
-        sp.species[rows].tolist(), cost[rows].tolist(), counts.tolist()))]
+    can = capabilities(genome_phenotype(host), ctx.scenario, ctx.params).tolist()  # [R][C]
+    designs = [dict(_design(host, i, s, c), count=n,
+                    capability=[j for j, ok in enumerate(can[i]) if ok])
+               for i, (s, c, n) in enumerate(zip(sp.species[rows].tolist(), cost[rows].tolist(),
+                                                 counts.tolist()))]
     designs.sort(key=lambda d: -d["count"])
     tm = dict(zip(res.team_metrics, torch.stack([v[b].float() for v in res.team_metrics.values()])
                   .tolist()))
     team_record = {
         "generation": state.generation, "fitness": float(res.focal[b]),
         "cost": float(res.team_cost[b]), "species": len(designs),
+        "niches": niche_count(d["capability"] for d in designs),
         "deliveries_individual": tm["delivered_individual"],
         "deliveries_collab": tm["delivered_collab"],
         "deliveries": tm["delivered_individual"] + tm["delivered_collab"],
@@ -346,23 +377,31 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
         "population": {int(i): int(n) for i, n in zip(ids.tolist(), sizes.tolist())},
         "team": {str(d["species"]): d["count"] for d in designs},
     }
+    turnover = state.turnover.copy()
+    founded, extinct = turnover.advance(state.generation, composition["population"])
 
     # 3. reproduction
     children, hint, is_elite, parent = reproduce(genome, fit, sp.species, sp.proto_index,
-                                                 sp.proto_ids, ctx.repro, g)
+                                                 sp.proto_ids, ctx.repro, g,
+                                                 partial(distance, w=ctx.weights))
     new_state = EvolutionState(
         generation=state.generation + 1, genome=children, species_hint=hint,
         proto=genome.index(sp.proto_index), proto_ids=sp.proto_ids,
         next_species_id=sp.next_species_id,
         fitness=torch.where(is_elite, fit[parent], 0.0), has_fitness=is_elite,
-        rng_state=g.get_state(), best=best, history=state.history + [composition])
+        rng_state=g.get_state(), best=best, history=state.history + [composition],
+        turnover=turnover)
 
     budget = cfg.budget if cfg.budget is not None else float("nan")
     metrics = {
         "generation": state.generation,
         "fitness/best": float(fit.max()), "fitness/mean": float(fit.mean()),
         "species/count": int(ids.numel()),
+        "species/founded": founded, "species/extinct": extinct,
+        "species/median_age": median(turnover.ages(state.generation, composition["population"])),
         "team/fitness": team_record["fitness"], "team/species": team_record["species"],
+        "team/niches": team_record["niches"],
+        "team/median_age": median(turnover.ages(state.generation, composition["team"])),
         "team/focal_max": float(res.focal.max()),
         "team/cost": team_record["cost"], "team/budget": budget,
         "team/deliveries": team_record["deliveries"],
@@ -412,7 +451,7 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
         proto=Genome.from_state_dict(d["proto"]).to(dev) if d["proto"] is not None else None,
         proto_ids=d["proto_ids"].to(dev), next_species_id=int(d["next_species_id"]),
         fitness=d["fitness"].to(dev), has_fitness=d["has_fitness"].to(dev), rng_state=rng,
-        best=d["best"], history=list(d["history"]))
+        best=d["best"], history=list(d["history"]), turnover=replay(d["history"])[0])
 
 
 class Evolution:

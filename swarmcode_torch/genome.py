@@ -63,9 +63,13 @@ class Genome:
         return Genome(**{f.name: torch.cat([getattr(p, f.name) for p in parts])
                          for f in fields(Genome)})
 
-    def hardware_vector(self) -> torch.Tensor:
-        """[P, 5] the continuous hardware space of d_hw, each axis in [0, 1]
-        (tiers scaled to [0, 1], the two operating points); radius and tool excluded."""
-        t = float(NUM_TIERS - 1)
-        return torch.stack([self.chassis / t, self.battery / t, self.motor / t,
-                            self.torque_point, self.battery_point], dim=-1).float()
+    def hardware_vector(self, tiers: bool = False) -> torch.Tensor:
+        """[P, D] the hardware space of d_hw, each axis in [0, 1]: the two continuous operating
+        points (torque, battery; D = 2), the paper's "continuous hardware space"; with `tiers`
+        also the three tiers scaled to [0, 1] first (D = 5, the behaviour before the paper-text
+        fix). Radius and tool are excluded (they have their own terms)."""
+        points = [self.torque_point, self.battery_point]
+        if tiers:
+            t = float(NUM_TIERS - 1)
+            points = [self.chassis / t, self.battery / t, self.motor / t] + points
+        return torch.stack(points, dim=-1).float()

@@ -8,7 +8,9 @@ from pathlib import Path
 from .evolve import Evolution
 
 SCALAR_TAGS = (
-    "fitness/best", "fitness/mean", "species/count", "team/fitness", "team/species", "team/cost",
+    "fitness/best", "fitness/mean", "species/count", "species/founded", "species/extinct",
+    "species/median_age", "team/fitness", "team/species", "team/niches", "team/median_age",
+    "team/cost",
     "team/budget", "team/deliveries", "team/deliveries_individual", "team/deliveries_collab",
     "team/energy_used", "team/focal_max", "perf/generation_seconds", "perf/eval_seconds", "perf/sim_seconds",
 )

@@ -34,6 +34,9 @@ class ReproductionParams:
     bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
     bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
     bt_point_count: slots re-drawn by one point mutation (each a uniform slot, may repeat).
+    bt_point_on_nodes: a point mutation re-draws a uniform slot among the tree's nodes (its
+        non-NOP slots; slot 0 of an all-NOP program), not among all slots: the NOP padding is
+        not a node, so it stays padding (the paper mutates tree nodes). False: any slot.
     point_opcode_weights: weights of opcodes 0..13 for a point mutation; END and NOP at half weight
         so that structure-breaking / deleting mutations are rarer than changing a node.
     subtree_leaf_prob: probability that a replacement subtree is a single random leaf; otherwise
@@ -44,6 +47,9 @@ class ReproductionParams:
     p_categorical: per-gene probability of resampling chassis, battery, motor tier and effector
         uniformly (the new value may equal the old one).
     p_tag_flip: per-bit tag flip probability; None means 1 / L_tag.
+    p_gene_mutation: probability that each continuous gene (radius, operating points,
+        selectivity, dominance) of a non-elite offspring gets its Gaussian step (1.0: every gene
+        of every offspring).
     """
 
     tournament_size: int = 3
@@ -57,6 +63,7 @@ class ReproductionParams:
     bt_mutation_rate: float = 1.0
     bt_subtree_prob: float = 0.05
     bt_point_count: int = 1
+    bt_point_on_nodes: bool = True
     point_opcode_weights: tuple[float, ...] = (1.0,) * 12 + (0.5, 0.5)
     subtree_leaf_prob: float = 0.5
     subtree_max_leaves: int = 3
@@ -64,6 +71,7 @@ class ReproductionParams:
     social_sigma: float = 0.05
     p_categorical: float = 0.02
     p_tag_flip: float | None = None
+    p_gene_mutation: float = 1.0
 
 
 def elite_count(species_size: Tensor | int, max_elite: int = 3) -> Tensor | int:
@@ -165,6 +173,16 @@ def random_subtrees(n: int, params: ReproductionParams, generator: torch.Generat
     return sub, length
 
 
+def _random_node(bt: Tensor, generator: torch.Generator) -> Tensor:
+    """[N, L] opcodes -> [N, 1] a uniform slot among each row's non-NOP slots (0 if none)."""
+    live = bt != NOP
+    count = live.sum(1, keepdim=True)
+    u = torch.rand(bt.shape[0], 1, generator=generator, device=bt.device)
+    k = torch.minimum((u * count).long(), (count - 1).clamp(min=0))        # the k-th node
+    hit = live & (live.long().cumsum(1) - 1 == k)
+    return hit.to(torch.int32).argmax(1, keepdim=True).long()
+
+
 def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator) -> Tensor:
     """[N, L] opcodes -> [N, L] opcodes after one point (may redraw the same opcode) or subtree-replacement event per row, w.p. bt_mutation_rate."""
     n, l = bt.shape
@@ -178,7 +196,10 @@ def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator
         raise ValueError(f"point_opcode_weights needs {NUM_OPCODES} entries")
     point = bt.clone()
     for _ in range(params.bt_point_count):
-        slot = torch.randint(0, l, (n, 1), generator=generator, device=dev)
+        if params.bt_point_on_nodes:
+            slot = _random_node(point, generator)
+        else:
+            slot = torch.randint(0, l, (n, 1), generator=generator, device=dev)
         op = torch.multinomial(weights, n, replacement=True, generator=generator)
         point.scatter_(1, slot, op[:, None].to(bt.dtype))
     start = torch.randint(0, l, (n,), generator=generator, device=dev)
@@ -219,9 +240,12 @@ def crossover(a: Genome, b: Genome, generator: torch.Generator) -> Genome:
     return Genome(**{f.name: out[f.name] for f in fields(Genome)})
 
 
-def _gauss_clip(x: Tensor, lo: float, hi: float, sigma: float, generator: torch.Generator) -> Tensor:
-    """[N] -> [N] x + N(0, (sigma (hi - lo))^2), clipped to [lo, hi]."""
+def _gauss_clip(x: Tensor, lo: float, hi: float, sigma: float, generator: torch.Generator,
+                p: float = 1.0) -> Tensor:
+    """[N] -> [N] x + N(0, (sigma (hi - lo))^2), clipped to [lo, hi], each entry w.p. p."""
     noise = torch.randn(x.shape, generator=generator, device=x.device, dtype=x.dtype)
+    if p < 1.0:
+        noise = noise * (torch.rand(x.shape, generator=generator, device=x.device) < p)
     return (x + noise * (sigma * (hi - lo))).clamp(lo, hi)
 
 
@@ -237,17 +261,18 @@ def mutate(g: Genome, params: ReproductionParams, generator: torch.Generator) ->
     l_tag = g.tag.shape[1]
     p_flip = params.p_tag_flip if params.p_tag_flip is not None else (1.0 / l_tag if l_tag else 0.0)
     flips = torch.rand(g.tag.shape, generator=generator, device=g.tag.device) < p_flip
+    pg = params.p_gene_mutation
     return Genome(
         tag=g.tag ^ flips,
-        selectivity=_gauss_clip(g.selectivity, 0.0, 1.0, params.social_sigma, generator),
-        dominance=_gauss_clip(g.dominance, 0.0, 1.0, params.social_sigma, generator),
+        selectivity=_gauss_clip(g.selectivity, 0.0, 1.0, params.social_sigma, generator, pg),
+        dominance=_gauss_clip(g.dominance, 0.0, 1.0, params.social_sigma, generator, pg),
         bt=mutate_bt(g.bt, params, generator),
-        radius=_gauss_clip(g.radius, R_MIN, R_MAX, params.hw_sigma, generator),
+        radius=_gauss_clip(g.radius, R_MIN, R_MAX, params.hw_sigma, generator, pg),
         chassis=_resample(g.chassis, NUM_TIERS, params.p_categorical, generator),
         battery=_resample(g.battery, NUM_TIERS, params.p_categorical, generator),
         motor=_resample(g.motor, NUM_TIERS, params.p_categorical, generator),
-        torque_point=_gauss_clip(g.torque_point, 0.0, 1.0, params.hw_sigma, generator),
-        battery_point=_gauss_clip(g.battery_point, 0.0, 1.0, params.hw_sigma, generator),
+        torque_point=_gauss_clip(g.torque_point, 0.0, 1.0, params.hw_sigma, generator, pg),
+        battery_point=_gauss_clip(g.battery_point, 0.0, 1.0, params.hw_sigma, generator, pg),
         effector=_resample(g.effector, 2, params.p_categorical, generator),
     )
 

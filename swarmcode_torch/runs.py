@@ -183,6 +183,7 @@ def summary(ev: Evolution, metrics: dict) -> dict:
         "scenario": ev.cfg.scenario, "objective": ev.cfg.objective,
         "best_fitness": best["fitness"], "best_generation": best["generation"],
         "team_cost": best["cost"], "budget": ev.cfg.budget, "num_species": best["species"],
+        "niches": best.get("niches"),
         "deliveries": best["deliveries"],
         "deliveries_individual": best["deliveries_individual"],
         "deliveries_collab": best["deliveries_collab"], "energy_used": best["energy_used"],

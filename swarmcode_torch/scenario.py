@@ -33,6 +33,16 @@ class PackageClass:
     distance_weighting: bool = False
     size: float = 0.2              # package radius (m); grip points lie just outside it
 
+    @property
+    def label(self) -> str:
+        """e.g. 'pincher 16-24 kg, r 0.32-0.5 m' or 'collab suction+pincher 30-40 kg'."""
+        names = {v: k for k, v in EFFECTORS.items()}
+        eff = "+".join(names[e] for e in self.grips)
+        text = f"{'collab ' if self.kind == 'collab' else ''}{eff} {self.mass[0]:g}-{self.mass[1]:g} kg"
+        if self.radius_band != (0.0, 10.0):
+            text += f", r {self.radius_band[0]:g}-{self.radius_band[1]:g} m"
+        return text
+
 
 @dataclass(frozen=True)
 class Scenario:

@@ -26,6 +26,9 @@ class DistanceWeights:
     w_tool: float = 0.35
     w_size: float = 0.7
     gamma: float = 2.0
+    hw_tiers: bool = False
+    """d_hw also over the three tiers (the code before it followed the paper's text; config key
+    `d_hw_tiers`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,7 +59,8 @@ def distance_terms(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights())
     """Genomes [Pa], [Pb] -> the weighted terms of D, each [Pa, Pb] float32, in the order of the sum:
     tag = w_tag (H/L)^gamma, hw = w_hw d_hw, bt = w_bt d_bt, tool = w_tool d_tool, size = w_size d_size.
 
-    H: tag Hamming distance, L: tag length; d_hw: Euclidean distance of `hardware_vector()` / sqrt(5);
+    H: tag Hamming distance, L: tag length; d_hw: Euclidean distance of `hardware_vector(w.hw_tiers)`
+    / sqrt(its dimension), the continuous operating points (and the tiers with `w.hw_tiers`);
     d_bt: fraction of BT slots whose opcode differs; d_tool: effectors differ; d_size: |dr| / (R_MAX - R_MIN).
     """
     pa, pb = a.size, b.size
@@ -66,8 +70,8 @@ def distance_terms(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights())
         d_tag = (hamming(a.tag, b.tag) / l_tag) ** w.gamma
     else:
         d_tag = torch.zeros(pa, pb, device=dev)
-    d_hw = torch.cdist(a.hardware_vector(), b.hardware_vector(),
-                       compute_mode="donot_use_mm_for_euclid_dist") / math.sqrt(5.0)
+    ha, hb = a.hardware_vector(w.hw_tiers), b.hardware_vector(w.hw_tiers)
+    d_hw = torch.cdist(ha, hb, compute_mode="donot_use_mm_for_euclid_dist") / math.sqrt(ha.shape[1])
     l_bt = a.bt.shape[1]
     if l_bt > 0:
         matches = _one_hot_bt(a.bt) @ _one_hot_bt(b.bt).T

@@ -176,6 +176,27 @@ def compatible(layout: Layout, robots: Robots, params: WorldParams) -> torch.Ten
     return ok
 
 
+def capabilities(robots: Phenotype | Robots, scenario: Scenario,
+                 params: WorldParams) -> torch.Tensor:
+    """[..., C] bool: which of the scenario's C package classes each robot can lift, by the
+    criteria of `compatible` (a grip of its effector, its radius in the class's band, payload and
+    drive force for its share of the class's lightest package). A robot's capability is its
+    row; distinct non-empty rows are the niches a team covers."""
+    r = robots.radius[..., None]
+    cols = []
+    for c in scenario.packages:
+        load = c.mass[0] / len(c.grips)
+        grip = torch.zeros_like(robots.effector, dtype=torch.bool)
+        for e in set(c.grips):
+            grip = grip | (robots.effector == e)
+        cols.append(grip & (robots.radius >= c.radius_band[0]) & (robots.radius <= c.radius_band[1])
+                    & (robots.payload >= load)
+                    & (robots.force >= params.lift_force * (robots.mass + load)))
+    if not cols:
+        return torch.zeros(*r.shape[:-1], 0, dtype=torch.bool, device=r.device)
+    return torch.stack(cols, dim=-1)
+
+
 def sense(state: State, layout: Layout, robots: Robots, compat: torch.Tensor,
           keys: torch.Tensor, params: WorldParams) -> Senses:
     """Leaf statuses of every robot from the current state (`keys`: see :func:`random_keys`)."""

@@ -209,6 +209,19 @@ def test_config_saved_before_min_share_keeps_every_species_share():
     assert old.min_share == 0.0 and make_context(old).repro.min_share == 0.0
 
 
+def test_config_saved_before_the_paper_text_fixes_keeps_the_old_operators():
+    from swarmcode_torch.evolve import make_context
+
+    new = EvolveConfig(scenario="one-niche", population=8)
+    ctx = make_context(new)
+    assert (ctx.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (False, True)
+    saved = {k: v for k, v in new.to_dict().items()
+             if k not in ("d_hw_tiers", "bt_point_on_nodes")}
+    ctx = make_context(EvolveConfig.from_dict(saved))
+    assert (ctx.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (True, False)
+    assert EvolveConfig.from_dict(new.to_dict()) == new
+
+
 def test_parse_settings_types_and_refusals():
     from swarmcode_torch.evolve import parse_settings
 
@@ -234,8 +247,10 @@ def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
         return res
 
     monkeypatch.setattr(E, "evaluate", spy)
+    # a run in which the two definitions are known to disagree (the operators before 0.2)
     ev = Evolution(EvolveConfig(scenario="two-niche", population=12, swarm_size=6, trials=1,
-                                ticks=40, generations=6, seed=1, device="cpu", compile=False))
+                                ticks=40, generations=6, seed=1, device="cpu", compile=False,
+                                d_hw_tiers=True, bt_point_on_nodes=False))
     differed = 0
     while not ev.done:
         m = ev.step()

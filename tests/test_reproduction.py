@@ -1,4 +1,4 @@
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import pytest
 import torch
@@ -138,6 +138,45 @@ def test_mutate_bt_point_and_rate():
     assert torch.equal(mutate_bt(bt, ReproductionParams(bt_mutation_rate=0.0), gen), bt)
     sub = mutate_bt(bt, ReproductionParams(bt_subtree_prob=1.0), gen)
     assert sub.shape == bt.shape and int(sub.min()) >= 0 and int(sub.max()) <= 13
+
+
+def test_point_mutations_land_on_tree_nodes_not_on_padding():
+    gen = torch.Generator().manual_seed(1)
+    n, l = 3000, 16
+    bt = torch.randint(0, 12, (n, l), generator=gen)        # live opcodes (no NOP) ...
+    live = torch.randint(1, l + 1, (n, 1), generator=gen)
+    bt = torch.where(torch.arange(l)[None, :] < live, bt, NOP)  # ... then NOP padding
+    bt[0] = NOP                                             # an empty program
+    p = ReproductionParams(bt_subtree_prob=0.0, point_opcode_weights=(1.0,) * 13 + (0.0,))
+    out = mutate_bt(bt, p, gen)
+    changed = out != bt
+    assert (changed.sum(1) <= 1).all()
+    # padding never changes; only slot 0 of the empty program can
+    pad = bt == NOP
+    assert not (changed & pad)[1:].any()
+    assert changed[1:].any(1).float().mean() > 0.85        # a redraw may give the same opcode
+    # the slot is uniform over the nodes: in 1-node programs it is always slot 0, and over
+    # programs of 16 nodes every slot is hit about equally
+    full = (live[:, 0] == l) & changed.any(1)
+    hits = changed[full].float().sum(0)
+    assert hits.min() > 0 and hits.max() < 3 * hits.mean()
+    # the old operator (any slot) does change padding
+    old = mutate_bt(bt, replace(p, bt_point_on_nodes=False), gen)
+    assert ((old != bt) & pad).any()
+
+
+def test_gene_mutation_probability_steps_that_share_of_genes():
+    gen = torch.Generator().manual_seed(0)
+    g = random_genomes(4000, gen, l_tag=16)
+    g.radius[:] = 0.3
+    g.torque_point[:] = 0.5
+    m = mutate(g, ReproductionParams(p_gene_mutation=0.25), gen)
+    for name in ("radius", "torque_point"):
+        moved = (getattr(m, name) != getattr(g, name)).float().mean().item()
+        assert abs(moved - 0.25) < 0.03, name
+    assert torch.equal(mutate(g, ReproductionParams(p_gene_mutation=0.0, bt_mutation_rate=0.0,
+                                                    p_categorical=0.0, p_tag_flip=0.0),
+                              gen).radius, g.radius)
 
 
 def test_crossover_groups_and_one_point_bt():

@@ -42,7 +42,7 @@ def pair():
 
 
 @pytest.mark.parametrize("term,expected", [
-    ("w_tag", 0.0625), ("w_hw", 0.5), ("w_bt", 0.5), ("w_tool", 1.0), ("w_size", 0.4)])
+    ("w_tag", 0.0625), ("w_hw", 0.5 / 2 ** 0.5), ("w_bt", 0.5), ("w_tool", 1.0), ("w_size", 0.4)])
 def test_distance_each_term(term, expected):
     a, b = pair()
     w = DistanceWeights(**{**ONLY, term: 1.0})
@@ -50,11 +50,25 @@ def test_distance_each_term(term, expected):
     assert distance(b, a, w).item() == pytest.approx(expected, abs=1e-6)
 
 
+def test_d_hw_is_over_the_continuous_genes_unless_tiers_are_asked_for():
+    a, b = pair()                          # torque point 0 vs 0.5, chassis tier 1 vs 3
+    hw_only = {**ONLY, "w_hw": 1.0}
+    # the paper: the two continuous operating points only, sqrt(0.5^2) / sqrt(2)
+    assert distance(a, b, DistanceWeights(**hw_only)).item() == pytest.approx(0.5 / 2 ** 0.5)
+    # a tier change alone is not a hardware distance
+    c = make(1, chassis=[2], battery=[1], motor=[2])
+    assert distance(a, c, DistanceWeights(**hw_only)).item() == 0.0
+    # the old behaviour: tiers scaled to [0, 1] beside the points, sqrt(1 + 0.25) / sqrt(5)
+    old = DistanceWeights(**hw_only, hw_tiers=True)
+    assert distance(a, b, old).item() == pytest.approx(0.5, abs=1e-6)
+    assert distance(a, c, old).item() == pytest.approx((1 + 0.25 + 1) ** 0.5 / 5 ** 0.5)
+
+
 def test_distance_gamma_and_weighted_sum():
     a, b = pair()
     assert distance(a, b, DistanceWeights(**{**ONLY, "w_tag": 1.0}, gamma=1.0)).item() == \
         pytest.approx(0.25)
-    total = 1.0 * 0.0625 + 0.5 * 0.5 + 0.3 * 0.5 + 0.35 * 1.0 + 0.7 * 0.4
+    total = 1.0 * 0.0625 + 0.5 * 0.5 / 2 ** 0.5 + 0.3 * 0.5 + 0.35 * 1.0 + 0.7 * 0.4
     assert distance(a, b).item() == pytest.approx(total, abs=1e-6)
 
 

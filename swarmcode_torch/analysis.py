@@ -1,0 +1,71 @@
+"""Species dynamics of a run directory: species, niches, founding and lifetimes over windows of
+generations (`swarmcode-torch dynamics RUN_DIR`), and the capability of each team design."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Sequence
+
+from .dynamics import niche_count, replay, window_stats
+from .hardware import genome_phenotype
+from .runs import TEAMS_FILE, RunError, load_checkpoint, read_config
+from .scenario import Scenario, load_scenario
+from .world import WorldParams, capabilities
+
+
+def design_capabilities(designs: Sequence[dict], scenario: Scenario) -> list[list[int]]:
+    """For each summary / teams.jsonl design, the indices of the scenario's package classes it
+    can lift (the `capability` the run recorded, or computed from its genes for older runs)."""
+    from .render import team_genome
+
+    if all("capability" in d for d in designs):
+        return [list(d["capability"]) for d in designs]
+    genome, _ = team_genome(designs)
+    can = capabilities(genome_phenotype(genome), scenario, WorldParams.for_scenario(scenario))
+    return [[j for j, ok in enumerate(row) if ok] for row in can.tolist()]
+
+
+def team_niches(run_dir: Path, scenario: Scenario) -> dict[int, int]:
+    """generation -> niches of its best team, from teams.jsonl (the last record of a generation
+    wins; a line cut short by an interruption is skipped)."""
+    path = Path(run_dir) / TEAMS_FILE
+    out: dict[int, int] = {}
+    if not path.is_file():
+        return out
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+        try:
+            rec = json.loads(line)
+            g = int(rec["generation"])
+            out[g] = int(rec["niches"]) if "niches" in rec else \
+                niche_count(design_capabilities(rec["designs"], scenario))
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+            continue
+    return out
+
+
+def default_windows(last_generation: int, step: int = 100, tail: int = 50) -> list[tuple[int, int]]:
+    """[0, step), [step, 2 step), ... up to the end, then the last `tail` generations."""
+    end = last_generation + 1
+    wins = [(a, min(a + step, end)) for a in range(0, end, step)]
+    if end > tail:
+        wins.append((end - tail, end))
+    return wins
+
+
+def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None) -> list[dict]:
+    """`dynamics.window_stats` of each window of a run directory (default `default_windows`)."""
+    run_dir = Path(run_dir)
+    cfg = read_config(run_dir)
+    history = load_checkpoint(run_dir)["history"]
+    if not history:
+        raise RunError(f"{run_dir} has no finished generation")
+    try:
+        scenario = load_scenario(cfg.scenario)
+    except ValueError as e:
+        raise RunError(f"{run_dir}: its scenario cannot be loaded ({e})") from None
+    turnover, rows = replay(history)
+    niches = team_niches(run_dir, scenario)
+    last = rows[-1]["generation"]
+    return [window_stats(rows, turnover, a, b, niches)
+            for a, b in (windows or default_windows(last))]
