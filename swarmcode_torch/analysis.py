@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 from typing import Sequence
 
-from .dynamics import niche_count, replay, window_stats
+from .dynamics import median, niche_count, replay, window_stats
 from .hardware import genome_phenotype
 from .runs import TEAMS_FILE, RunError, load_checkpoint, read_config
 from .scenario import Scenario, load_scenario
@@ -26,19 +26,20 @@ def design_capabilities(designs: Sequence[dict], scenario: Scenario) -> list[lis
     return [[j for j, ok in enumerate(row) if ok] for row in can.tolist()]
 
 
-def team_niches(run_dir: Path, scenario: Scenario) -> dict[int, int]:
-    """generation -> niches of its best team, from teams.jsonl (the last record of a generation
-    wins; a line cut short by an interruption is skipped)."""
+def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:
+    """generation -> {"niches", "score"} of its best team, from teams.jsonl (the last record of
+    a generation wins; a line cut short by an interruption is skipped)."""
     path = Path(run_dir) / TEAMS_FILE
-    out: dict[int, int] = {}
+    out: dict[int, dict] = {}
     if not path.is_file():
         return out
     for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
         try:
             rec = json.loads(line)
             g = int(rec["generation"])
-            out[g] = int(rec["niches"]) if "niches" in rec else \
+            niches = int(rec["niches"]) if "niches" in rec else \
                 niche_count(design_capabilities(rec["designs"], scenario))
+            out[g] = {"niches": niches, "score": float(rec["fitness"])}
         except (json.JSONDecodeError, KeyError, TypeError, ValueError):
             continue
     return out
@@ -48,7 +49,7 @@ def default_windows(last_generation: int, step: int = 100, tail: int = 50) -> li
     """[0, step), [step, 2 step), ... up to the end, then the last `tail` generations."""
     end = last_generation + 1
     wins = [(a, min(a + step, end)) for a in range(0, end, step)]
-    if end > tail:
+    if end > tail and (end - tail, end) not in wins:
         wins.append((end - tail, end))
     return wins
 
@@ -65,7 +66,12 @@ def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None
     except ValueError as e:
         raise RunError(f"{run_dir}: its scenario cannot be loaded ({e})") from None
     turnover, rows = replay(history)
-    niches = team_niches(run_dir, scenario)
+    teams = team_records(run_dir, scenario)
+    niches = {g: t["niches"] for g, t in teams.items()}
     last = rows[-1]["generation"]
-    return [window_stats(rows, turnover, a, b, niches)
-            for a, b in (windows or default_windows(last))]
+    out = []
+    for a, b in windows or default_windows(last):
+        st = window_stats(rows, turnover, a, b, niches)
+        st["team_score"] = median([t["score"] for g, t in teams.items() if a <= g < b])
+        out.append(st)
+    return out

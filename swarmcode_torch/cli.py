@@ -368,11 +368,12 @@ def dynamics(
     t = Table(title=f"Species dynamics of {run_dir} (medians over each window)",
               box=box.SIMPLE_HEAD, caption="founded, extinct: species a generation; age, "
               "lifetime: generations; lifetime of the species that died in the window")
-    cols = (("generations", "from", "{}"), ("to", "to", "{}"), ("team sp", "team_species", "{:g}"),
+    cols = (("from", "from", "{}"), ("to", "to", "{}"), ("team sp", "team_species", "{:g}"),
             ("pop sp", "population_species", "{:g}"), ("niches", "niches", "{:g}"),
             ("founded", "founded_per_generation", "{:.2f}"),
             ("extinct", "extinct_per_generation", "{:.2f}"), ("age", "median_age", "{:g}"),
-            ("team age", "team_median_age", "{:g}"), ("lifetime", "median_lifetime", "{:g}"))
+            ("team age", "team_median_age", "{:g}"), ("lifetime", "median_lifetime", "{:g}"),
+            ("team score", "team_score", "{:.1f}"))
     for name, _, _ in cols:
         t.add_column(name, justify="right", no_wrap=True)
     for st in stats:
