@@ -1,11 +1,19 @@
-"""TensorBoard reporting: scalars, histograms, the species-composition figure and the config."""
+"""Reporting: TensorBoard (scalars, histograms, the species-composition figure, the config and
+its hyperparameters) and metrics.csv (every scalar, one row per generation).
+
+Matplotlib and TensorBoard are imported inside the functions that need them; figures are drawn
+on `matplotlib.figure.Figure` with the Agg canvas, never through pyplot or a backend switch."""
 
 from __future__ import annotations
 
+import csv
+import io
 import math
 from pathlib import Path
 
 from .evolve import Evolution
+
+METRICS_FILE = "metrics.csv"
 
 SCALAR_TAGS = (
     "fitness/best", "fitness/mean", "species/count", "species/founded", "species/extinct",
@@ -17,26 +25,67 @@ SCALAR_TAGS = (
 
 
 def composition_figure(history: list[dict]):
-    """A matplotlib figure: species composition of the population and of the best team per
-    generation (stacked areas, one colour per species id; paper Fig. 5)."""
-    import matplotlib
+    """A matplotlib `Figure`: species composition of the population and of the best team per
+    generation (stacked areas, one colour per species id; paper Fig. 5).
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    Drawn object-oriented (`matplotlib.figure.Figure`): no pyplot, no backend change, so a
+    notebook keeps its inline plots; the figure displays as the value of a cell
+    (`IPython.display.display(fig)`) and `fig.savefig(path)` writes it."""
+    from matplotlib import colormaps
+    from matplotlib.figure import Figure
 
     gens = [h["generation"] for h in history]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.6), sharex=True)
+    fig = Figure(figsize=(11, 3.6))
+    axes = fig.subplots(1, 2, sharex=True)
     for ax, key, title in ((axes[0], "population", "population"), (axes[1], "team", "best team")):
         ids = sorted({int(s) for h in history for s in h[key]})
         rows = [[h[key].get(s, h[key].get(str(s), 0)) for h in history] for s in ids]
         if ids:
-            cmap = plt.get_cmap("tab20")
+            cmap = colormaps["tab20"]
             ax.stackplot(gens, rows, colors=[cmap(i % 20) for i in ids], linewidth=0)
         ax.set_title(f"species in the {title}")
         ax.set_xlabel("generation")
         ax.set_ylabel("individuals" if key == "population" else "robots")
     fig.tight_layout()
     return fig
+
+
+def figure_image(fig):
+    """[H, W, 3] uint8: a matplotlib Figure rendered by the Agg canvas (no pyplot)."""
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+def scalar_metrics(metrics: dict) -> dict:
+    """`generation` and every scalar metric of one generation (the TensorBoard scalars, then any
+    other number whose key has a '/'), in a fixed order: a row of metrics.csv."""
+    row = {"generation": metrics["generation"]}
+    for tag in SCALAR_TAGS:
+        row[tag] = metrics[tag]
+    for k, v in metrics.items():
+        if k not in row and "/" in k and isinstance(v, (int, float)):
+            row[k] = v
+    return {k: (int(v) if isinstance(v, bool) else v) for k, v in row.items()}
+
+
+#: TensorBoard HParams metrics of a run: tag -> key of the run's best team.
+HPARAM_METRICS = {"hparams/best_fitness": "fitness", "hparams/team_cost": "cost",
+                  "hparams/team_species": "species", "hparams/team_niches": "niches",
+                  "hparams/team_deliveries": "deliveries"}
+
+
+def hparams(ev: Evolution) -> tuple[dict, dict]:
+    """The run's hyperparameters (its config keys; unset ones left out) and its final metrics
+    (`HPARAM_METRICS` from the best team so far), for TensorBoard's HParams tab."""
+    hp = {k: v for k, v in ev.cfg.to_dict().items() if v is not None}
+    best = ev.state.best or {}
+    metrics = {tag: float(best[key]) if best.get(key) is not None else math.nan
+               for tag, key in HPARAM_METRICS.items()}
+    return hp, metrics
 
 
 def config_markdown(ev: Evolution) -> str:
@@ -61,7 +110,9 @@ def replay_strip(ev: Evolution, designs: list[dict], seed: int, frames: int = 3)
 class TensorBoardReporter:
     """Writes every generation's scalars and histograms; the composition figure every
     `figure_every` generations and at the end; a replay of the generation's best team every
-    `render_every` generations (0: never)."""
+    `render_every` generations (0: never). At the end of a run (or of each resumed part) the
+    config as hyperparameters and the best team's fitness, cost, species, niches and deliveries
+    as their metrics (`hparams/*`), so that TensorBoard's HParams tab compares runs."""
 
     def __init__(self, run_dir: Path, figure_every: int = 50, render_every: int = 0):
         # the figure redraws the whole history with matplotlib: on a 2-core VM, a 300-generation
@@ -92,10 +143,100 @@ class TensorBoardReporter:
 
     def _figure(self, ev: Evolution, step: int) -> None:
         if ev.state.history:
-            self.writer.add_figure("species/composition", composition_figure(ev.state.history),
-                                   step, close=True)
+            img = figure_image(composition_figure(ev.state.history))
+            self.writer.add_image("species/composition", img, step, dataformats="HWC")
 
     def on_end(self, ev: Evolution) -> None:
         if ev.state.history:
-            self._figure(ev, ev.state.history[-1]["generation"])
+            step = ev.state.history[-1]["generation"]
+            self._figure(ev, step)
+            self._hparams(ev, step)
         self.writer.close()
+
+    def _hparams(self, ev: Evolution, step: int) -> None:
+        # SummaryWriter.add_hparams would write into a new sub-run; these summaries go into the
+        # run's own events, beside the metrics' scalars, so each run is one row of the HParams tab
+        from torch.utils.tensorboard.summary import hparams as hparams_summaries
+
+        hp, metrics = hparams(ev)
+        writer = self.writer._get_file_writer()
+        for s in hparams_summaries(hp, metrics):
+            writer.add_summary(s, step)
+        for tag, v in metrics.items():
+            self.writer.add_scalar(tag, v, step)
+
+
+class CsvReporter:
+    """Appends every generation's scalars (`scalar_metrics`) to metrics.csv in the run directory:
+    one row per generation, the header (`generation` and the tags) once; flushed every
+    generation. On a resume, rows of generations the run repeats (those after its checkpoint)
+    are dropped first, so the file keeps one row per generation; a header that lacks some of
+    the tags gets them (earlier rows leave them empty)."""
+
+    def __init__(self, run_dir: Path):
+        self.path = Path(run_dir) / METRICS_FILE
+        self.columns: list[str] | None = None
+
+    def on_start(self, ev: Evolution) -> None:
+        if not self.path.is_file():
+            return
+        rows, columns = read_metrics_csv(self.path, raw=True)
+        rows = [r for r in rows if r["generation"] < ev.state.generation]
+        self._rewrite(columns, rows)
+
+    def _rewrite(self, columns: list[str], rows: list[dict]) -> None:
+        from .runs import atomic_write_bytes
+
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=columns, restval="", extrasaction="ignore",
+                           lineterminator="\n")
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+        atomic_write_bytes(self.path, buf.getvalue().encode())
+        self.columns = list(columns)
+
+    def on_generation(self, ev: Evolution, metrics: dict) -> None:
+        row = scalar_metrics(metrics)
+        if self.columns is None or not set(row) <= set(self.columns):
+            old, _ = read_metrics_csv(self.path, raw=True) if self.path.is_file() else ([], [])
+            self._rewrite((self.columns or []) + [k for k in row if k not in (self.columns or [])],
+                          old)
+        with open(self.path, "a", newline="") as f:
+            csv.DictWriter(f, fieldnames=self.columns, restval="",
+                           lineterminator="\n").writerow(
+                {k: ("" if v is None else v) for k, v in row.items()})
+            f.flush()
+
+    def on_end(self, ev: Evolution) -> None:
+        pass
+
+
+def _number(text: str):
+    if text == "":
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        return float(text)
+
+
+def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[str]]:
+    """The rows of a metrics.csv (numbers as int or float, empty cells None; rows cut short by
+    an interruption, or whose generation is not a number, are skipped) and its header. With
+    `raw`, the cells other than `generation` are kept as text."""
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        columns = list(reader.fieldnames or [])
+        rows = []
+        for r in reader:
+            if None in r or any(v is None for v in r.values()):
+                continue              # more or fewer cells than the header: a cut-short line
+            try:
+                gen = int(r["generation"])
+                row = {k: (v if raw else _number(v)) for k, v in r.items()}
+            except (KeyError, ValueError):
+                continue
+            row["generation"] = gen
+            rows.append(row)
+    return rows, columns

@@ -79,15 +79,14 @@ def csv_text(rows: list[dict]) -> str:
 
 
 def plot(rows: list[dict], path: Path) -> None:
-    """Best fitness and number of species against budget (errorbars: std over seeds)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """Best fitness and number of species against budget (errorbars: std over seeds), drawn on a
+    `matplotlib.figure.Figure` (no pyplot, no backend change) and written as a PNG."""
+    from matplotlib.figure import Figure
 
     rows = [r for r in rows if r["budget"] is not None]
     x = [r["budget"] for r in rows]
-    fig, ax1 = plt.subplots(figsize=(6, 3.6))
+    fig = Figure(figsize=(6, 3.6))
+    ax1 = fig.subplots()
     ax1.errorbar(x, [r["best_fitness"] for r in rows], [r["best_fitness_std"] for r in rows],
                  marker="o", color="tab:blue", capsize=3)
     ax1.set_xlabel("budget ($)")
@@ -98,7 +97,6 @@ def plot(rows: list[dict], path: Path) -> None:
     ax2.set_ylabel("species in the best team", color="tab:orange")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def write_outputs(rows: list[dict], out_dir: Path) -> list[Path]:
