@@ -92,11 +92,14 @@ class EvolveConfig:
     bt_point_on_nodes: bool = True
     """A behavior-tree point mutation re-draws one of the tree's nodes, never the NOP padding
     (false: any slot, the behaviour before 0.2)."""
-    bt_mutation_rate: float = 1.0
-    """Mutation: probability that an offspring gets its behavior-tree mutation event."""
-    p_gene_mutation: float = 1.0
+    bt_mutation_rate: float = 0.5
+    """Mutation: probability that an offspring gets its behavior-tree mutation event (1.0: every
+    offspring, the behaviour before 0.2)."""
+    p_gene_mutation: float = 0.2
     """Mutation: probability that each continuous gene (radius, operating points, selectivity,
-    dominance) of an offspring gets its Gaussian step."""
+    dominance) of an offspring gets its Gaussian step (1.0: every gene, the behaviour before
+    0.2). With every gene stepped in every child, a species' members spread so far from its
+    prototype that any categorical change founds a species (docs/RESULTS.md)."""
     merge_species: bool = False
     """Dissolve a species whose prototype comes within delta of an older one's (not in the paper;
     an experiment)."""
@@ -157,6 +160,8 @@ class EvolveConfig:
         # written before the paper-text fixes of d_hw and the tree mutation: the old behaviour
         d.setdefault("d_hw_tiers", True)
         d.setdefault("bt_point_on_nodes", False)
+        d.setdefault("bt_mutation_rate", 1.0)
+        d.setdefault("p_gene_mutation", 1.0)
         if d.get("ticks") is None and d.get("scenario") in LEGACY_EPISODE_TICKS:
             # written before runs pinned their episode length: the scenario's length of that time
             d["ticks"] = LEGACY_EPISODE_TICKS[d["scenario"]]

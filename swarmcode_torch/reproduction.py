@@ -32,6 +32,7 @@ class ReproductionParams:
         "mean", NEAT's explicit fitness sharing (total / species size). See docs/MODEL.md.
     min_share: a species whose quota share is below this many individuals gets no slot.
     bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
+        The defaults of this class are the run defaults of `EvolveConfig`.
     bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
     bt_point_count: slots re-drawn by one point mutation (each a uniform slot, may repeat).
     bt_point_on_nodes: a point mutation re-draws a uniform slot among the tree's nodes (its
@@ -60,7 +61,7 @@ class ReproductionParams:
     max_elite: int = 3
     quota_basis: str = "sum"
     min_share: float = 0.0
-    bt_mutation_rate: float = 1.0
+    bt_mutation_rate: float = 0.5
     bt_subtree_prob: float = 0.05
     bt_point_count: int = 1
     bt_point_on_nodes: bool = True
@@ -71,7 +72,7 @@ class ReproductionParams:
     social_sigma: float = 0.05
     p_categorical: float = 0.02
     p_tag_flip: float | None = None
-    p_gene_mutation: float = 1.0
+    p_gene_mutation: float = 0.2
 
 
 def elite_count(species_size: Tensor | int, max_elite: int = 3) -> Tensor | int:

@@ -215,10 +215,12 @@ def test_config_saved_before_the_paper_text_fixes_keeps_the_old_operators():
     new = EvolveConfig(scenario="one-niche", population=8)
     ctx = make_context(new)
     assert (ctx.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (False, True)
+    assert (ctx.repro.bt_mutation_rate, ctx.repro.p_gene_mutation) == (0.5, 0.2)
     saved = {k: v for k, v in new.to_dict().items()
-             if k not in ("d_hw_tiers", "bt_point_on_nodes")}
+             if k not in ("d_hw_tiers", "bt_point_on_nodes", "bt_mutation_rate", "p_gene_mutation")}
     ctx = make_context(EvolveConfig.from_dict(saved))
     assert (ctx.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (True, False)
+    assert (ctx.repro.bt_mutation_rate, ctx.repro.p_gene_mutation) == (1.0, 1.0)
 
 
 def test_parse_settings_types_and_refusals():
@@ -249,7 +251,8 @@ def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
     # a run in which the two definitions are known to disagree (the operators before 0.2)
     ev = Evolution(EvolveConfig(scenario="two-niche", population=12, swarm_size=6, trials=1,
                                 ticks=40, generations=6, seed=1, device="cpu", compile=False,
-                                d_hw_tiers=True, bt_point_on_nodes=False))
+                                d_hw_tiers=True, bt_point_on_nodes=False,
+                                bt_mutation_rate=1.0, p_gene_mutation=1.0))
     differed = 0
     while not ev.done:
         m = ev.step()

@@ -132,9 +132,11 @@ def test_random_subtrees_forms():
 def test_mutate_bt_point_and_rate():
     gen = torch.Generator().manual_seed(0)
     bt = torch.randint(0, 14, (500, 12), generator=gen)
-    p = ReproductionParams(bt_subtree_prob=0.0)
+    p = ReproductionParams(bt_subtree_prob=0.0, bt_mutation_rate=1.0)
     out = mutate_bt(bt, p, gen)
     assert ((out != bt).sum(1) <= 1).all() and (out != bt).any(1).float().mean() > 0.8
+    half = mutate_bt(bt, replace(p, bt_mutation_rate=0.5), gen)
+    assert abs((half != bt).any(1).float().mean().item() - 0.5 * 13 / 14) < 0.07
     assert torch.equal(mutate_bt(bt, ReproductionParams(bt_mutation_rate=0.0), gen), bt)
     sub = mutate_bt(bt, ReproductionParams(bt_subtree_prob=1.0), gen)
     assert sub.shape == bt.shape and int(sub.min()) >= 0 and int(sub.max()) <= 13
@@ -147,7 +149,8 @@ def test_point_mutations_land_on_tree_nodes_not_on_padding():
     live = torch.randint(1, l + 1, (n, 1), generator=gen)
     bt = torch.where(torch.arange(l)[None, :] < live, bt, NOP)  # ... then NOP padding
     bt[0] = NOP                                             # an empty program
-    p = ReproductionParams(bt_subtree_prob=0.0, point_opcode_weights=(1.0,) * 13 + (0.0,))
+    p = ReproductionParams(bt_subtree_prob=0.0, bt_mutation_rate=1.0,
+                           point_opcode_weights=(1.0,) * 13 + (0.0,))
     out = mutate_bt(bt, p, gen)
     changed = out != bt
     assert (changed.sum(1) <= 1).all()
@@ -212,7 +215,7 @@ def test_mutate_bounds_and_flip_rate():
     g.radius[:1000] = R_MAX
     g.selectivity[:1000] = 1.0
     g.dominance[1000:] = 0.0
-    params = ReproductionParams(p_categorical=0.3, hw_sigma=0.1)
+    params = ReproductionParams(p_categorical=0.3, hw_sigma=0.1, p_gene_mutation=1.0)
     m = mutate(g, params, gen)
     check_bounds(m)
     flip = (m.tag != g.tag).float().mean().item()
