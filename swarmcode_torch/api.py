@@ -1,0 +1,311 @@
+"""The Python API: run an evolution from a script or a notebook and get its results back.
+
+    import swarmcode_torch as sc
+
+    result = sc.evolve(scenario="four-niche", generations=20, population=30, seed=0)
+    result.best_team["fitness"], result.run_dir
+    result.to_pandas()[["fitness/best", "team/species"]].plot()
+    result = sc.resume(result.run_dir, generations=40)
+
+`evolve` writes the same run directory as `swarmcode-torch evolve` (config.toml, summary.json,
+teams.jsonl, metrics.csv, checkpoint.pt, TensorBoard events), with the same reporters, so the
+same config gives the same results; `logdir=None` runs in memory and writes nothing. A
+scenario is a built-in name, a path to a scenario TOML file, or a `Scenario` object (saved as a
+TOML file in the run directory, so that the run can be resumed and replayed).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+from . import runs
+from .evolve import Evolution, EvolveConfig
+from .scenario import EFFECTORS, Scenario, load_scenario
+
+_CONFIG_KEYS = tuple(f.name for f in fields(EvolveConfig))
+
+
+# ------------------------------------------------------------------ scenarios as TOML
+def _toml(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml(x) for x in v) + "]"
+    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+
+
+def scenario_to_toml(s: Scenario) -> str:
+    """A scenario TOML file that loads back (`load_scenario`) as a scenario equal to `s`."""
+    names = {v: k for k, v in EFFECTORS.items()}
+    lines = [f"name = {_toml(s.name)}", f"description = {_toml(s.description)}",
+             f"arena = {_toml(float(s.arena))}", f"base_radius = {_toml(float(s.base_radius))}",
+             f"num_robots = {_toml(int(s.num_robots))}",
+             f"episode_ticks = {_toml(int(s.episode_ticks))}",
+             f"species_overhead = {_toml(float(s.species_overhead))}", "", "[obstacles]",
+             f"count = {_toml(int(s.obstacle_count))}",
+             f"radius = {_toml([float(x) for x in s.obstacle_radius])}"]
+    for p in s.packages:
+        lines += ["", "[[packages]]", f"kind = {_toml(p.kind)}"]
+        if p.kind == "individual":
+            lines.append(f"effector = {_toml(names[p.grips[0]])}")
+        else:
+            lines.append(f"grips = {_toml([names[g] for g in p.grips])}")
+        lines += [f"count = {_toml(int(p.count))}",
+                  f"distance = {_toml([float(x) for x in p.distance])}",
+                  f"mass = {_toml([float(x) for x in p.mass])}",
+                  f"radius_band = {_toml([float(x) for x in p.radius_band])}",
+                  f"size = {_toml(float(p.size))}",
+                  f"distance_weighting = {_toml(bool(p.distance_weighting))}"]
+    return "\n".join(lines) + "\n"
+
+
+def _scenario_file_name(s: Scenario) -> str:
+    return (re.sub(r"[^A-Za-z0-9._-]+", "_", s.name).strip("._") or "scenario") + ".toml"
+
+
+def _scenario_evolution(cfg: EvolveConfig, s: Scenario) -> tuple[Evolution, str]:
+    """An Evolution of a Scenario object (built from a temporary TOML file, checked to load back
+    as the same scenario) and the file's text."""
+    text = scenario_to_toml(s)
+    with tempfile.TemporaryDirectory(prefix="swarmcode-scenario-") as tmp:
+        path = Path(tmp) / _scenario_file_name(s)
+        path.write_text(text)
+        if load_scenario(str(path)) != s:   # validates it too: ScenarioError names the field
+            raise ValueError(f"scenario {s.name!r} does not survive a round trip through TOML")
+        return Evolution(replace(cfg, scenario=str(path))), text
+
+
+def _set_scenario_source(ev: Evolution, source: str) -> None:
+    """Point a run's config at where its scenario now lives (nothing reloads it in a run)."""
+    ev.cfg = ev.ctx.cfg = replace(ev.cfg, scenario=source)
+
+
+# ------------------------------------------------------------------ results
+@dataclass
+class RunResult:
+    """What a run returns.
+
+    history: one dict per generation of every scalar metric (`generation`, `fitness/best`,
+        `species/count`, `team/cost`, ... as in metrics.csv and TensorBoard), oldest first.
+    species: one composition record per generation: `{"generation", "population": {species id:
+        individuals}, "team": {species id: robots in the best team}}`.
+    best_team: the best team of the run (fitness, cost, species, niches, deliveries, energy,
+        designs: each design's hardware, behavior tree, count and capability).
+    run_dir: the run directory, or None for a run in memory.
+    config: the run's `EvolveConfig` (swarm size and episode length pinned).
+    scenario: the `Scenario` it ran.
+    evolution: the `Evolution` (state and context), None for a run loaded with `load`.
+    """
+
+    config: EvolveConfig
+    run_dir: Path | None
+    history: list[dict]
+    species: list[dict]
+    best_team: dict | None
+    scenario: Scenario | None = None
+    evolution: Evolution | None = field(default=None, repr=False)
+
+    @property
+    def generations(self) -> int:
+        """Generations finished."""
+        return len(self.species)
+
+    def to_pandas(self):
+        """`history` as a pandas DataFrame indexed by generation, one column per metric."""
+        try:
+            import pandas as pd
+        except ImportError:
+            raise ImportError("RunResult.to_pandas() needs pandas: pip install pandas (or "
+                              "pip install 'swarmcode-torch[pandas]'); RunResult.history holds "
+                              "the same records as a list of dicts") from None
+        return pd.DataFrame(self.history).set_index("generation")
+
+    def __repr__(self) -> str:
+        best = self.best_team or {}
+        fit = best.get("fitness")
+        text = f"fitness {fit:.2f}, {best.get('species')} species" if fit is not None else "no team"
+        where = str(self.run_dir) if self.run_dir is not None else "in memory"
+        return (f"RunResult({self.config.scenario!r}, {self.generations}/"
+                f"{self.config.generations} generations, best team: {text}, {where})")
+
+
+class _History:
+    """Reporter: collects every generation's scalars; calls a user callback with the metrics."""
+
+    def __init__(self, callback: Callable[[dict], Any] | None = None):
+        from .reporting import scalar_metrics
+
+        self.rows: list[dict] = []
+        self._scalars = scalar_metrics
+        self.callback = callback
+
+    def on_start(self, ev: Evolution) -> None:
+        pass
+
+    def on_generation(self, ev: Evolution, metrics: dict) -> None:
+        self.rows.append(self._scalars(metrics))
+        if self.callback is not None:
+            self.callback(metrics)
+
+    def on_end(self, ev: Evolution) -> None:
+        pass
+
+
+def _check_every(checkpoint_every: int, render_every: int, figure_every: int) -> None:
+    if checkpoint_every < 1 or render_every < 0 or figure_every < 1:
+        raise ValueError("checkpoint_every and figure_every must be >= 1, render_every >= 0")
+
+
+def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int = 50,
+                   figure_every: int = 50) -> list:
+    """The reporters that write a run directory, as `swarmcode-torch evolve` runs them:
+    summary.json and teams.jsonl, metrics.csv, TensorBoard events (a replay image every
+    `render_every` generations, 0: never; the composition figure every `figure_every`) and
+    checkpoint.pt every `checkpoint_every` generations and at the end."""
+    from .reporting import CsvReporter, TensorBoardReporter
+
+    _check_every(checkpoint_every, render_every, figure_every)
+    return [runs.SummaryReporter(run_dir), CsvReporter(run_dir),
+            TensorBoardReporter(run_dir, figure_every=figure_every, render_every=render_every),
+            runs.CheckpointReporter(run_dir, checkpoint_every)]
+
+
+def _result(ev: Evolution, run_dir: Path | None, history: list[dict]) -> RunResult:
+    best = ev.state.best
+    return RunResult(config=ev.cfg, run_dir=run_dir, history=history,
+                     species=list(ev.state.history), best_team=dict(best) if best else None,
+                     scenario=ev.ctx.scenario, evolution=ev)
+
+
+def _execute(ev: Evolution, run_dir: Path | None, reporters: list) -> None:
+    if run_dir is not None:
+        runs.run(ev, run_dir, reporters)
+        return
+    for r in reporters:                     # in memory: runs.run less the interrupt checkpoint
+        r.on_start(ev)
+    while not ev.done:
+        metrics = ev.step()
+        for r in reporters:
+            r.on_generation(ev, metrics)
+    for r in reporters:
+        r.on_end(ev)
+
+
+# ------------------------------------------------------------------ evolve, resume, load
+def make_config(config: EvolveConfig | None = None, **settings) -> EvolveConfig:
+    """`config` (default `EvolveConfig()`) with `settings` (config keys) replaced; TypeError for
+    an unknown key. A path scenario becomes a string."""
+    if config is not None and not isinstance(config, EvolveConfig):
+        raise TypeError(f"config must be an EvolveConfig, got {type(config).__name__}")
+    unknown = sorted(set(settings) - set(_CONFIG_KEYS))
+    if unknown:
+        raise TypeError(f"unknown setting(s) {', '.join(unknown)} (the keys of EvolveConfig: "
+                        f"{', '.join(_CONFIG_KEYS)})")
+    if isinstance(settings.get("scenario"), os.PathLike):
+        settings["scenario"] = os.fspath(settings["scenario"])
+    return replace(config if config is not None else EvolveConfig(), **settings)
+
+
+def evolve(config: EvolveConfig | None = None, *, scenario: str | os.PathLike | Scenario | None = None,
+           logdir: str | os.PathLike | None = "runs", checkpoint_every: int = 10,
+           render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
+           callback: Callable[[dict], Any] | None = None, **settings) -> RunResult:
+    """Run an evolution and return its `RunResult`.
+
+    config: an `EvolveConfig` to start from (default: `EvolveConfig()`, the paper's budget
+        experiment); `settings` replace its keys: `generations=20, population=30, seed=0,
+        budget=4000.0, delta=0.5, ...` (any key of EvolveConfig / a run's config.toml).
+    scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
+    logdir: where the run directory is created (named `<scenario>__<seed>__<time>`, as by the
+        CLI); None: run in memory, write no file.
+    checkpoint_every, render_every, figure_every: as `swarmcode-torch evolve`'s options
+        (generations between checkpoints, TensorBoard replay images (0: never), composition
+        figures).
+    reporters: more reporters (objects with on_start(ev), on_generation(ev, metrics),
+        on_end(ev)); callback: called with each generation's metrics dict.
+
+    Raises ValueError (`ScenarioError` is one) for an invalid setting or scenario before any
+    file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
+    generation (continue with `resume`) and re-raises KeyboardInterrupt.
+    """
+    _check_every(checkpoint_every, render_every, figure_every)
+    scenario_obj = scenario if isinstance(scenario, Scenario) else None
+    if scenario is not None and scenario_obj is None:
+        settings["scenario"] = scenario
+    cfg = make_config(config, **settings)
+    run_dir = None
+    if scenario_obj is None:
+        ev = Evolution(cfg)                                # every error before a directory
+        if logdir is not None:
+            run_dir = runs.new_run_dir(Path(logdir), cfg)
+    else:
+        ev, text = _scenario_evolution(cfg, scenario_obj)
+        if logdir is None:
+            _set_scenario_source(ev, scenario_obj.name)
+        else:   # the run directory keeps the scenario's file: resume and replay read it
+            run_dir = runs.new_run_dir(Path(logdir), replace(
+                cfg, scenario=_scenario_file_name(scenario_obj)))  # named after the scenario
+            path = (run_dir / _scenario_file_name(scenario_obj)).resolve()
+            path.write_text(text)
+            _set_scenario_source(ev, str(path))
+    history = _History(callback)
+    if run_dir is None:
+        _execute(ev, None, [history, *reporters])
+        return _result(ev, None, history.rows)
+    reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
+    runs.write_config(run_dir, ev.cfg)
+    _execute(ev, run_dir, [*reps, history, *reporters])
+    return _result(ev, run_dir, history.rows)
+
+
+def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
+    from .reporting import METRICS_FILE, read_metrics_csv
+
+    path = Path(run_dir) / METRICS_FILE
+    if not path.is_file():
+        return []
+    return [r for r in read_metrics_csv(path)[0] if r["generation"] < before]
+
+
+def resume(run_dir: str | os.PathLike, generations: int | None = None, device: str | None = None,
+           *, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50,
+           reporters: Iterable = (), callback: Callable[[dict], Any] | None = None) -> RunResult:
+    """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
+    to `generations` in all (default: the run's), on `device` (default: the run's). The
+    result's history has every generation: those before the checkpoint from metrics.csv (when
+    the run has one), then this part's. RunError (a ValueError) for a directory, config or
+    checkpoint that cannot be used."""
+    _check_every(checkpoint_every, render_every, figure_every)
+    run_dir = Path(run_dir)
+    ev = runs.resume(run_dir, generations=generations, device=device)
+    reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
+    earlier = _earlier_rows(run_dir, ev.state.generation)
+    runs.write_config(run_dir, ev.cfg)
+    history = _History(callback)
+    _execute(ev, run_dir, [*reps, history, *reporters])
+    return _result(ev, run_dir, earlier + history.rows)
+
+
+def load(run_dir: str | os.PathLike) -> RunResult:
+    """The results of a run directory as they stand, without running anything: config,
+    metrics.csv as the history (empty for a run written before metrics.csv existed), species
+    composition and best team from the checkpoint. `evolution` is None."""
+    run_dir = Path(run_dir)
+    cfg = runs.read_config(run_dir)
+    ck = runs.load_checkpoint(run_dir)
+    try:
+        scenario = load_scenario(cfg.scenario)
+    except ValueError:
+        scenario = None
+    best = ck["best"]
+    return RunResult(config=cfg, run_dir=run_dir, history=_earlier_rows(run_dir, math.inf),
+                     species=list(ck["history"]), best_team=dict(best) if best else None,
+                     scenario=scenario)

@@ -1,0 +1,263 @@
+"""The Python API (`swarmcode_torch.evolve`, `resume`, `load`, `RunResult`), metrics.csv, the
+TensorBoard hyperparameters, custom scenarios, the examples/ folder and `python -m`."""
+
+import json
+import math
+import runpy
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+from typer.testing import CliRunner
+
+import swarmcode_torch as sc
+from swarmcode_torch.api import scenario_to_toml
+from swarmcode_torch.cli import app
+from swarmcode_torch.reporting import (HPARAM_METRICS, METRICS_FILE, SCALAR_TAGS, CsvReporter,
+                                       read_metrics_csv)
+from swarmcode_torch.scenario import builtin_names, load_scenario
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "examples"
+SETTINGS = dict(scenario="one-niche", population=4, swarm_size=3, trials=1, ticks=6, seed=3,
+                budget=900.0, device="cpu", compile=False)
+CLI_ARGS = ["--scenario", "one-niche", "--population", "4", "--swarm-size", "3", "--trials", "1",
+            "--ticks", "6", "--seed", "3", "--budget", "900", "--device", "cpu", "--no-compile"]
+
+
+def only_dir(logdir: Path) -> Path:
+    dirs = [d for d in Path(logdir).iterdir() if d.is_dir()]
+    assert len(dirs) == 1, dirs
+    return dirs[0]
+
+
+def same(a, b) -> bool:
+    """Equal, NaN equal to NaN."""
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return a == b
+
+
+def untimed(row: dict) -> dict:
+    return {k: v for k, v in row.items() if not k.startswith("perf/")}
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """The same 2-generation run by the CLI and by the API."""
+    base = tmp_path_factory.mktemp("runs")
+    r = CliRunner().invoke(app, ["evolve", *CLI_ARGS, "--generations", "2", "--render-every", "0",
+                                 "--logdir", str(base / "cli")])
+    assert r.exit_code == 0, r.output
+    result = sc.evolve(generations=2, logdir=base / "api", render_every=0, **SETTINGS)
+    return only_dir(base / "cli"), result
+
+
+def test_api_run_directory_is_the_clis(runs):
+    cli_dir, result = runs
+    api_dir = result.run_dir
+    assert api_dir.parent.name == "api" and api_dir.name.startswith("one-niche__3__")
+    for f in ("config.toml", "summary.json", "teams.jsonl", "checkpoint.pt", METRICS_FILE):
+        assert (api_dir / f).is_file(), f
+    assert list(api_dir.glob("events.out.tfevents.*"))
+    assert (api_dir / "config.toml").read_text() == (cli_dir / "config.toml").read_text()
+    assert (api_dir / "teams.jsonl").read_text().splitlines() == \
+        (cli_dir / "teams.jsonl").read_text().splitlines()
+
+    def summary(d):
+        s = json.loads((d / "summary.json").read_text())
+        s["last_generation"] = untimed(s["last_generation"])
+        return s
+
+    assert summary(api_dir) == summary(cli_dir)
+
+
+def test_run_result_holds_history_species_and_best_team(runs):
+    _, result = runs
+    assert result.config.population == 4 and result.config.swarm_size == 3
+    assert result.generations == 2 and result.scenario == load_scenario("one-niche")
+    assert [h["generation"] for h in result.history] == [0, 1]
+    for h in result.history:
+        assert set(SCALAR_TAGS) <= set(h)
+        assert all(isinstance(v, (int, float)) for v in h.values())
+    assert [s["generation"] for s in result.species] == [0, 1]
+    assert sum(result.species[-1]["population"].values()) == 4
+    summary = json.loads((result.run_dir / "summary.json").read_text())
+    best = result.best_team
+    assert {"fitness", "cost", "species", "niches", "designs"} <= set(best)
+    assert (best["fitness"], best["cost"], best["species"]) == \
+        (summary["best_fitness"], summary["team_cost"], summary["num_species"])
+    assert sum(d["count"] for d in best["designs"]) == 3
+    assert "2/2 generations" in repr(result)
+
+
+def test_metrics_csv_has_every_scalar_once_per_generation(runs):
+    _, result = runs
+    text = (result.run_dir / METRICS_FILE).read_text()
+    header = text.splitlines()[0].split(",")
+    assert header == ["generation", *SCALAR_TAGS]
+    rows, _ = read_metrics_csv(result.run_dir / METRICS_FILE)
+    assert len(rows) == 2
+    for row, h in zip(rows, result.history):
+        assert all(same(row[k], float(h[k]) if isinstance(row[k], float) else h[k]) for k in h)
+    assert rows[0]["team/budget"] == 900.0
+
+
+def test_tensorboard_gets_the_runs_hyperparameters(runs):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    from tensorboard.plugins.hparams.plugin_data_pb2 import HParamsPluginData
+
+    _, result = runs
+    acc = EventAccumulator(str(result.run_dir))
+    acc.Reload()
+    content = acc.PluginTagToContent("hparams")
+    assert {"_hparams_/experiment", "_hparams_/session_start_info"} <= set(content)
+    start = HParamsPluginData.FromString(content["_hparams_/session_start_info"])
+    hp = start.session_start_info.hparams
+    assert hp["population"].number_value == 4 and hp["budget"].number_value == 900
+    assert hp["scenario"].string_value == "one-niche" and hp["device"].string_value == "cpu"
+    exp = HParamsPluginData.FromString(content["_hparams_/experiment"]).experiment
+    assert {m.name.tag for m in exp.metric_infos} == set(HPARAM_METRICS)
+    best = result.best_team
+    assert acc.Scalars("hparams/best_fitness")[-1].value == pytest.approx(best["fitness"])
+    assert acc.Scalars("hparams/team_species")[-1].value == best["species"]
+    assert acc.Scalars("hparams/team_niches")[-1].value == best["niches"]
+
+
+def test_in_memory_run_writes_nothing_and_matches_the_files(runs, tmp_path, monkeypatch):
+    _, on_disk = runs
+    monkeypatch.chdir(tmp_path)
+    seen = []
+    result = sc.evolve(sc.EvolveConfig(**SETTINGS, generations=2), logdir=None,
+                       callback=lambda m: seen.append(m["generation"]))
+    assert result.run_dir is None and list(tmp_path.iterdir()) == []
+    assert seen == [0, 1]
+    assert all(same(a[k], b[k]) for a, b in zip(result.history, on_disk.history)
+               for k in untimed(a))
+    assert result.best_team == on_disk.best_team and result.species == on_disk.species
+
+
+def test_to_pandas_and_its_error_without_pandas(runs, monkeypatch):
+    _, result = runs
+    pd = pytest.importorskip("pandas")
+    df = result.to_pandas()
+    assert isinstance(df, pd.DataFrame) and list(df.index) == [0, 1]
+    assert df["fitness/best"].iloc[-1] == result.history[-1]["fitness/best"]
+    monkeypatch.setitem(sys.modules, "pandas", None)       # as if it were not installed
+    with pytest.raises(ImportError, match="pip install pandas"):
+        result.to_pandas()
+
+
+def test_resume_and_load(tmp_path):
+    first = sc.evolve(generations=2, logdir=tmp_path, checkpoint_every=1, render_every=0,
+                      **SETTINGS)
+    result = sc.resume(first.run_dir, generations=3, render_every=0)
+    assert result.run_dir == first.run_dir and result.config.generations == 3
+    assert [h["generation"] for h in result.history] == [0, 1, 2]
+    assert all(same(a[k], b[k]) for a, b in zip(result.history, first.history) for k in b)
+    text = (first.run_dir / METRICS_FILE).read_text()
+    assert text.count("generation,") == 1
+    assert [r["generation"] for r in read_metrics_csv(first.run_dir / METRICS_FILE)[0]] == [0, 1, 2]
+    loaded = sc.load(first.run_dir)
+    assert loaded.evolution is None and loaded.best_team == result.best_team
+    assert loaded.species == result.species and len(loaded.history) == 3
+    # the same seed straight through: the same teams
+    straight = sc.evolve(generations=3, logdir=tmp_path / "straight", render_every=0, **SETTINGS)
+    assert (straight.run_dir / "teams.jsonl").read_text() == \
+        (first.run_dir / "teams.jsonl").read_text()
+
+
+def test_csv_reporter_drops_repeated_generations_on_resume(tmp_path):
+    path = tmp_path / METRICS_FILE
+    path.write_text("generation,fitness/best\n0,1.0\n1,2.0\n2,3.0\n3,4.0\n4,5")  # cut short
+    rep = CsvReporter(tmp_path)
+    rep.on_start(SimpleNamespace(state=SimpleNamespace(generation=2)))     # checkpoint at 2
+    assert path.read_text() == "generation,fitness/best\n0,1.0\n1,2.0\n"
+    metrics = {"generation": 2, **{t: 1.5 for t in SCALAR_TAGS}}
+    rep.on_generation(None, metrics)               # a header without the new tags gets them
+    rows, columns = read_metrics_csv(path)
+    assert columns == ["generation", "fitness/best", *SCALAR_TAGS[1:]]
+    assert [r["generation"] for r in rows] == [0, 1, 2]
+    assert rows[0]["fitness/best"] == 1.0 and rows[0]["team/cost"] is None
+    assert rows[2]["team/cost"] == 1.5
+    assert path.read_text().count("generation,") == 1
+
+
+def test_settings_are_checked_before_anything_is_written(tmp_path):
+    with pytest.raises(TypeError, match="unknown setting.*populaton"):
+        sc.evolve(populaton=4, logdir=tmp_path)
+    with pytest.raises(ValueError, match="population"):
+        sc.evolve(population=1, logdir=tmp_path)
+    with pytest.raises(ValueError, match="unknown scenario"):
+        sc.evolve(scenario="no-such-world", logdir=tmp_path)
+    with pytest.raises(ValueError, match="checkpoint_every"):
+        sc.evolve(checkpoint_every=0, logdir=tmp_path, **SETTINGS)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", builtin_names())
+def test_scenario_objects_round_trip_through_toml(name, tmp_path):
+    s = load_scenario(name)
+    path = tmp_path / "s.toml"
+    path.write_text(scenario_to_toml(s))
+    assert load_scenario(str(path)) == s
+
+
+def test_custom_scenario_from_a_file_and_as_an_object(tmp_path):
+    example = EXAMPLES / "three-niche.toml"
+    tiny = {k: v for k, v in SETTINGS.items() if k != "scenario"}
+    by_path = sc.evolve(scenario=example, generations=1, logdir=None, **tiny)
+    assert by_path.config.scenario == str(example) and by_path.scenario.name == "three-niche"
+    # a Scenario object, changed in code: the run directory keeps it as a TOML file
+    s = replace(load_scenario(str(example)), name="three-niche-wide", arena=24.0)
+    result = sc.evolve(scenario=s, generations=1, logdir=tmp_path, render_every=0, **tiny)
+    assert result.run_dir.name.startswith("three-niche-wide__3__")
+    saved = Path(result.config.scenario)
+    assert saved.parent == result.run_dir.resolve() and load_scenario(str(saved)) == s
+    assert sc.resume(result.run_dir, generations=2, render_every=0).generations == 2
+    memory = sc.evolve(scenario=s, generations=1, logdir=None, **tiny)
+    assert memory.scenario == s and memory.config.scenario == "three-niche-wide"
+    assert memory.best_team == result.best_team
+    bad = replace(s, packages=())
+    with pytest.raises(ValueError, match="packages"):
+        sc.evolve(scenario=bad, generations=1, logdir=tmp_path / "bad", **tiny)
+    assert not (tmp_path / "bad").exists()
+
+
+def test_examples_script_runs_its_scenario(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["custom_scenario.py", "--generations", "1", "--population",
+                                      "4", "--swarm-size", "3", "--ticks", "6",
+                                      "--logdir", str(tmp_path)])
+    runpy.run_path(str(EXAMPLES / "custom_scenario.py"), run_name="__main__")
+    out = capsys.readouterr().out
+    assert "three-niche" in out and "best team: fitness" in out
+    run_dir = only_dir(tmp_path)
+    assert json.loads((run_dir / "summary.json").read_text())["generation"] == 0
+
+
+def test_package_exports_and_cheap_import():
+    code = ("import sys, swarmcode_torch as sc; "
+            "heavy = sorted({m.split('.')[0] for m in sys.modules} & "
+            "{'matplotlib', 'tensorboard', 'typer', 'rich', 'pandas', 'PIL'}); "
+            "import swarmcode_torch.evolve as E; "
+            "print(heavy, callable(sc.evolve), E is sc.evolve, hasattr(E, 'generation'), "
+            "sc.__version__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300, check=True).stdout.split()
+    assert out[:4] == ["[]", "True", "True", "True"], out
+    assert out[4] == sc.__version__
+    for name in ("evolve", "resume", "load", "RunResult", "EvolveConfig", "Evolution",
+                 "load_scenario", "Scenario", "__version__"):
+        assert name in sc.__all__ and hasattr(sc, name)
+    from swarmcode_torch.evolve import EvolveConfig      # the module is still the module
+    assert EvolveConfig is sc.EvolveConfig
+
+
+def test_python_dash_m_runs_the_cli():
+    r = subprocess.run([sys.executable, "-m", "swarmcode_torch", "--help"], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "evolve" in r.stdout and "Usage" in r.stdout
