@@ -234,7 +234,8 @@ def test_default_mutation_seldom_founds_a_species():
     params = ReproductionParams()
     d = distance(g, mutate(g, params, gen)).diagonal()
     assert (d > params.delta).float().mean().item() < 0.01
-    assert (d > 0).all()
+    # each gene mutates with its own probability: most offspring change, some are exact copies
+    assert 0.75 < (d > 0).float().mean().item() < 0.95
 
 
 def population(seed, p=60):
@@ -250,7 +251,7 @@ def test_reproduce_invariants_and_elites():
     assert 2 <= r.proto_ids.numel() <= 40
     gen = torch.Generator().manual_seed(1)
     ch, hint, is_elite, parent = reproduce(g, fit, r.species, r.proto_index, r.proto_ids,
-                                           ReproductionParams(), gen)
+                                           ReproductionParams(bt_mutation_rate=1.0), gen)
     p = g.size
     assert ch.size == p and hint.shape == (p,) and is_elite.shape == (p,) and parent.shape == (p,)
     check_bounds(ch)
