@@ -251,7 +251,8 @@ def test_reproduce_invariants_and_elites():
     assert 2 <= r.proto_ids.numel() <= 40
     gen = torch.Generator().manual_seed(1)
     ch, hint, is_elite, parent = reproduce(g, fit, r.species, r.proto_index, r.proto_ids,
-                                           ReproductionParams(bt_mutation_rate=1.0), gen)
+                                           ReproductionParams(bt_mutation_rate=1.0,
+                                                              p_gene_mutation=1.0), gen)
     p = g.size
     assert ch.size == p and hint.shape == (p,) and is_elite.shape == (p,) and parent.shape == (p,)
     check_bounds(ch)
