@@ -1,0 +1,68 @@
+"""How far do a run's individuals lie from their species' prototype?
+
+    python docs/results/species_spread.py RUN_DIR [RUN_DIR ...]
+
+Reads each run's checkpoint: the population waiting to be speciated (the children of the last
+finished generation, with the species they inherited) and the prototypes of that generation.
+Prints, over all children and with each run's own distance (its d_hw with or without tiers):
+the median distance D to the prototype of the inherited species, its terms (tag, hw, bt, tool,
+size), and the share of children that lie beyond delta - w_tool of it, where one effector flip
+more would found a species, and beyond delta itself (they found or join another species at
+the next speciation); and the share of children that one effector flip would make found a
+species (no prototype of the generation within delta of the flipped child). Used in
+docs/RESULTS.md ("The mechanism").
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from pathlib import Path
+
+import torch
+
+from swarmcode_torch.genome import Genome
+from swarmcode_torch.runs import load_checkpoint, read_config
+from swarmcode_torch.speciation import DistanceWeights, distance_terms
+
+
+def spread(run: Path) -> dict:
+    cfg = read_config(run)
+    ck = load_checkpoint(run)
+    w = DistanceWeights(hw_tiers=cfg.d_hw_tiers)
+    pop = Genome.from_state_dict(ck["genome"])
+    proto = Genome.from_state_dict(ck["proto"])
+    ids = ck["proto_ids"].tolist()
+    hint = ck["species_hint"].tolist()
+    rows = [i for i, s in enumerate(hint) if s in ids]
+    col = torch.tensor([ids.index(hint[i]) for i in rows])
+    terms = distance_terms(pop.index(torch.tensor(rows)), proto, w)
+    mine = {k: v[torch.arange(len(rows)), col] for k, v in terms.items()}
+    d = sum(mine.values())
+    # what one effector flip would do to each child: found a species (no prototype within delta)
+    flipped = Genome.from_state_dict({**ck["genome"], "effector": 1 - pop.effector})
+    d_flip = sum(distance_terms(flipped.index(torch.tensor(rows)), proto, w).values())
+    return {"run": run.name, "generation": int(ck["generation"]), "children": len(rows),
+            "flip_founds": float((d_flip.min(1).values > cfg.delta).float().mean()),
+            "species": len(ids),
+            "median_D": statistics.median(d.tolist()),
+            **{f"median_{k}": statistics.median(v.tolist()) for k, v in mine.items()},
+            "beyond_delta_minus_w_tool": float((d > cfg.delta - w.w_tool).float().mean()),
+            "beyond_delta": float((d > cfg.delta).float().mean())}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="+", type=Path)
+    for run in ap.parse_args().runs:
+        s = spread(run)
+        print(f"{s['run']} gen {s['generation']}: median D {s['median_D']:.3f} "
+              f"(tag {s['median_tag']:.3f} hw {s['median_hw']:.3f} bt {s['median_bt']:.3f} "
+              f"tool {s['median_tool']:.3f} size {s['median_size']:.3f}); beyond "
+              f"delta - w_tool {100 * s['beyond_delta_minus_w_tool']:.0f} %, beyond delta "
+              f"{100 * s['beyond_delta']:.0f} % of {s['children']} children; an effector flip "
+              f"would found a species for {100 * s['flip_founds']:.0f} % ({s['species']} species)")
+
+
+if __name__ == "__main__":
+    main()
