@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+
+from .genome import R_MAX, R_MIN
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -14,6 +17,14 @@ else:  # pragma: no cover
 
 EFFECTORS = {"suction": 0, "pincher": 1}
 MAX_GRIPS = 3
+#: Robot radii the hardware genes can take.
+ROBOT_RADII = (R_MIN, R_MAX)
+#: Upper bounds of a scenario's sizes: beyond them a world is certainly not what was meant.
+MAX_ARENA = 10_000.0          # m
+MAX_EPISODE_TICKS = 1_000_000
+MAX_NUMBER = 1e15             # any number of a scenario: float32 holds it with room to spare
+#: Room kept free around a package for a robot at each grip (layout.make_layouts: size + 0.6).
+PACKAGE_CLEARANCE = 0.6
 
 
 class ScenarioError(ValueError):
@@ -78,6 +89,13 @@ def _get(d: dict, key: str, where: str, kind, default=None, required: bool = Tru
         v = float(v)
     if not isinstance(v, kind) or isinstance(v, bool) and kind is not bool:
         raise ScenarioError(f"{where}{key}: expected {kind.__name__}, got {v!r}")
+    if kind is int and abs(v) > MAX_NUMBER:
+        text = str(v) if len(str(v)) <= 30 else f"{str(v)[:12]}... ({len(str(v))} digits)"
+        raise ScenarioError(f"{where}{key}: expected an integer of at most {MAX_NUMBER:g}, "
+                            f"got {text}")
+    if kind is float and not (math.isfinite(v) and abs(v) <= MAX_NUMBER):
+        raise ScenarioError(f"{where}{key}: expected a finite number (at most {MAX_NUMBER:g} in "
+                            f"size), got {v!r}")
     return v
 
 
@@ -89,6 +107,9 @@ def _range(d: dict, key: str, where: str, default=None, lo: float = 0.0) -> tupl
             or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
         raise ScenarioError(f"{where}{key}: expected [low, high], got {v!r}")
     a, b = float(v[0]), float(v[1])
+    if not all(math.isfinite(x) and abs(x) <= MAX_NUMBER for x in (a, b)):
+        raise ScenarioError(f"{where}{key}: expected finite numbers [low, high] (at most "
+                            f"{MAX_NUMBER:g} in size), got {v!r}")
     if a < lo or b < a:
         raise ScenarioError(f"{where}{key}: expected {lo} <= low <= high, got {v!r}")
     return a, b
@@ -101,7 +122,16 @@ def _effector(name, where: str) -> int:
 
 
 def scenario_from_dict(d: dict, source: str = "scenario") -> Scenario:
-    """Build and validate a :class:`Scenario` from a parsed TOML table."""
+    """Build and validate a :class:`Scenario` from a parsed TOML table: every field's type and
+    range (finite numbers only), and whether its packages can be placed (`check_placement`).
+    ScenarioError names the source and the field."""
+    try:
+        return _scenario_from_dict(d, source)
+    except ScenarioError as e:
+        raise ScenarioError(f"{source}: {e}") from None
+
+
+def _scenario_from_dict(d: dict, source: str) -> Scenario:
     if not isinstance(d, dict):
         raise ScenarioError(f"{source}: expected a table")
     known = {"name", "description", "arena", "base_radius", "num_robots", "episode_ticks",
@@ -115,14 +145,14 @@ def scenario_from_dict(d: dict, source: str = "scenario") -> Scenario:
     num_robots = _get(d, "num_robots", "", int)
     ticks = _get(d, "episode_ticks", "", int)
     overhead = _get(d, "species_overhead", "", float, default=0.0, required=False)
-    if arena <= 0:
-        raise ScenarioError(f"arena: must be > 0, got {arena}")
+    if not 0 < arena <= MAX_ARENA:
+        raise ScenarioError(f"arena: must be in (0, {MAX_ARENA:g}] m, got {arena}")
     if not 0 < base_radius < arena / 2:
         raise ScenarioError(f"base_radius: must be in (0, arena/2), got {base_radius}")
     if num_robots < 1:
         raise ScenarioError(f"num_robots: must be >= 1, got {num_robots}")
-    if ticks < 1:
-        raise ScenarioError(f"episode_ticks: must be >= 1, got {ticks}")
+    if not 1 <= ticks <= MAX_EPISODE_TICKS:
+        raise ScenarioError(f"episode_ticks: must be in [1, {MAX_EPISODE_TICKS}], got {ticks}")
     if overhead < 0:
         raise ScenarioError(f"species_overhead: must be >= 0, got {overhead}")
 
@@ -133,6 +163,9 @@ def scenario_from_dict(d: dict, source: str = "scenario") -> Scenario:
     if obs_count < 0:
         raise ScenarioError(f"obstacles.count: must be >= 0, got {obs_count}")
     obs_radius = _range(obs, "radius", "obstacles.", default=(0.5, 1.0))
+    for k in obs:
+        if k not in {"count", "radius"}:
+            raise ScenarioError(f"obstacles.{k}: unknown field (known: count, radius)")
 
     pkgs = d.get("packages")
     if not isinstance(pkgs, list) or not pkgs:
@@ -149,8 +182,6 @@ def scenario_from_dict(d: dict, source: str = "scenario") -> Scenario:
         if count < 0:
             raise ScenarioError(f"{w}count: must be >= 0, got {count}")
         dist = _range(p, "distance", w)
-        if dist[1] > arena / 2 * 1.4142:
-            raise ScenarioError(f"{w}distance: {dist[1]} lies outside the arena")
         mass = _range(p, "mass", w)
         if kind == "individual":
             grips = (_effector(_get(p, "effector", w, str), f"{w}effector"),)
@@ -173,8 +204,69 @@ def scenario_from_dict(d: dict, source: str = "scenario") -> Scenario:
         classes.append(PackageClass(kind, count, dist, mass, grips, band, dw, size))
     if sum(c.count for c in classes) < 1:
         raise ScenarioError("packages: the scenario places no package")
-    return Scenario(name, str(d.get("description", "")), arena, base_radius, num_robots, ticks,
-                    overhead, obs_count, obs_radius, tuple(classes))
+    description = d.get("description", "")
+    if not isinstance(description, str):
+        raise ScenarioError(f"description: expected str, got {description!r}")
+    scenario = Scenario(name, description, arena, base_radius, num_robots, ticks,
+                        overhead, obs_count, obs_radius, tuple(classes))
+    check_placement(scenario)
+    return scenario
+
+
+def check_placement(s: Scenario) -> None:
+    """ScenarioError unless the packages and obstacles of `s` can be placed the way
+    `layout.make_layouts` places them. These are necessary conditions, kept simple:
+
+    - every obstacle fits in the arena (2 x radius < arena), and the obstacles cover at most
+      half of it (count x pi x low radius^2);
+    - a package's grip band meets the robot radii [0.15, 0.5] m;
+    - its distance range starts outside the base (low >= base_radius + size), its nearest
+      distance is inside the arena in every direction (low <= arena/2 - clearance) and its
+      farthest at most reaches the corners (high <= (arena/2 - clearance) x sqrt 2), where the
+      clearance is size + 0.6 m (the room a robot needs at each grip);
+    - its packages, as discs of radius clearance, fit in the ring their distances allow, and all
+      packages and obstacles together fit in the arena outside the base.
+    """
+    W, base = s.arena, s.base_radius
+    lo_r, hi_r = s.obstacle_radius
+    if s.obstacle_count:
+        if 2 * hi_r >= W:
+            raise ScenarioError(f"obstacles.radius: an obstacle of radius {hi_r:g} m does not fit "
+                                f"in a {W:g} m arena")
+        if s.obstacle_count * math.pi * lo_r ** 2 > W * W / 2:
+            raise ScenarioError(f"obstacles: {s.obstacle_count} obstacles of radius >= {lo_r:g} m "
+                                f"cover more than half of the {W:g} m arena; packages could not "
+                                "be placed clear of them")
+    used = s.obstacle_count * math.pi * lo_r ** 2
+    for i, c in enumerate(s.packages):
+        w = f"packages[{i}]."
+        band_lo, band_hi = c.radius_band
+        if band_hi < ROBOT_RADII[0] or band_lo > ROBOT_RADII[1]:
+            raise ScenarioError(f"{w}radius_band: [{band_lo:g}, {band_hi:g}] m holds no robot "
+                                f"radius (robots are {ROBOT_RADII[0]:g}-{ROBOT_RADII[1]:g} m)")
+        clear = c.size + PACKAGE_CLEARANCE
+        d_lo, d_hi = c.distance
+        if d_lo < base + c.size:
+            raise ScenarioError(f"{w}distance: packages at {d_lo:g} m lie inside the base "
+                                f"(base_radius {base:g} m + size {c.size:g} m)")
+        if d_lo > W / 2 - clear:
+            raise ScenarioError(f"{w}distance: {d_lo:g} m from the base centre lies outside the "
+                                f"arena in most directions (at most {W / 2 - clear:g} m: arena/2 "
+                                f"- size - {PACKAGE_CLEARANCE:g})")
+        if d_hi > (W / 2 - clear) * math.sqrt(2):
+            raise ScenarioError(f"{w}distance: {d_hi:g} m lies outside the arena (at most "
+                                f"{(W / 2 - clear) * math.sqrt(2):.3g} m)")
+        need = c.count * math.pi * clear ** 2
+        ring = min(math.pi * ((d_hi + clear) ** 2 - max(d_lo - clear, 0.0) ** 2), W * W)
+        if need > ring:
+            raise ScenarioError(f"{w}count: {c.count} packages of size {c.size:g} m do not fit "
+                                f"at {d_lo:g}-{d_hi:g} m from the base (they need {need:.4g} m2, "
+                                f"the ring holds {ring:.4g} m2)")
+        used += need
+    if used > W * W - math.pi * base ** 2:
+        raise ScenarioError(f"packages: the packages and obstacles need {used:.4g} m2, more than "
+                            f"the {W * W - math.pi * base ** 2:.4g} m2 of the arena outside the "
+                            "base")
 
 
 def builtin_names() -> list[str]:
@@ -183,23 +275,46 @@ def builtin_names() -> list[str]:
     return sorted(f.name[:-5] for f in files if f.name.endswith(".toml"))
 
 
-def _parse(text: str, source: str) -> Scenario:
+def decode_text(data: bytes, source: str) -> str:
+    """UTF-8 text (a leading byte-order mark is dropped); ScenarioError naming `source` for bytes
+    that are not UTF-8."""
     try:
-        d = tomllib.loads(text)
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise ScenarioError(f"{source}: not UTF-8 text (byte 0x{data[e.start]:02x} at offset "
+                            f"{e.start})") from None
+
+
+def parse_scenario(data: bytes, source: str) -> Scenario:
+    """A scenario from the bytes of its TOML file."""
+    try:
+        d = tomllib.loads(decode_text(data, source))
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{source}: not valid TOML ({e})") from None
     return scenario_from_dict(d, source)
 
 
-def load_scenario(name_or_path: str) -> Scenario:
-    """A built-in scenario by name, or a scenario TOML file by path."""
+def read_scenario(name_or_path: str) -> tuple[Scenario, bytes]:
+    """A built-in scenario by name, or a scenario TOML file by path, and the bytes it was read
+    from (a run keeps them as its scenario.toml)."""
+    if not isinstance(name_or_path, str) or not name_or_path:
+        raise ScenarioError(f"scenario: expected a name or a path, got {name_or_path!r}")
     if name_or_path in builtin_names():
-        text = resources.files("swarmcode_torch").joinpath(f"scenarios/{name_or_path}.toml").read_text()
-        return _parse(text, name_or_path)
+        data = resources.files("swarmcode_torch").joinpath(f"scenarios/{name_or_path}.toml").read_bytes()
+        return parse_scenario(data, name_or_path), data
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
             raise ScenarioError(f"scenario file not found: {path}")
-        return _parse(path.read_text(), str(path))
+        try:
+            data = path.read_bytes()
+        except OSError as e:
+            raise ScenarioError(f"{path}: cannot be read ({e.strerror or type(e).__name__})") from None
+        return parse_scenario(data, str(path)), data
     raise ScenarioError(f"unknown scenario {name_or_path!r} (known: {', '.join(builtin_names())}; "
                         "or give a path to a .toml file)")
+
+
+def load_scenario(name_or_path: str) -> Scenario:
+    """A built-in scenario by name, or a scenario TOML file by path."""
+    return read_scenario(name_or_path)[0]
