@@ -3,22 +3,54 @@
 from __future__ import annotations
 
 import json
+import math
 import signal
 import sys
-from contextlib import contextmanager
+import threading
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 from rich import box
 from rich.console import Console
+from rich.markup import escape
+from typer.core import TyperGroup
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from . import bt
 from .scenario import ScenarioError, builtin_names, load_scenario
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
+class _OneLineErrors(TyperGroup):
+    """The command group, with usage errors (an option value that is not a number, an unknown
+    option) printed as one line, like every other error, instead of a usage panel."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except Exception as e:  # noqa: BLE001 - only click's own exceptions are handled here
+            if not (hasattr(e, "format_message") and hasattr(e, "exit_code")):
+                if type(e).__name__ == "Abort":
+                    err.print("Aborted!", markup=False)
+                    sys.exit(1)
+                raise
+            if type(e).__name__ == "NoArgsIsHelpError":
+                from typer import rich_utils
+
+                rich_utils.rich_format_error(e)
+                sys.exit(e.exit_code)
+            ctx = getattr(e, "ctx", None)
+            hint = f" (see: {ctx.command_path} --help)" if ctx is not None else ""
+            msg = " ".join(e.format_message().split())
+            err.print(f"[bold red]Error:[/] {escape(msg + hint)}", highlight=False, soft_wrap=True)
+            sys.exit(e.exit_code)
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, cls=_OneLineErrors,
                   help="SwarmCoDe: co-design the behavior trees and hardware of robot swarms.")
 # off a terminal (logs, pipes) Rich would wrap at 80 columns; tables need a little more
 console = Console(width=None if sys.stdout.isatty() else 120)
@@ -26,9 +58,18 @@ err = Console(stderr=True, width=None if sys.stderr.isatty() else 200)
 
 
 def fail(msg: str) -> None:
-    """Print a one-line error and exit non-zero."""
-    err.print(f"[bold red]Error:[/] {msg}", highlight=False, soft_wrap=True)
+    """Print a one-line error and exit non-zero. The message is printed as it is: brackets such
+    as [low, high] or [[packages]] are not read as Rich markup; a newline inside it becomes a
+    space, so the error stays on one line."""
+    msg = " ".join(str(msg).split())
+    err.print(f"[bold red]Error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code=2)
+
+
+def _os_fail(e: OSError, doing: str) -> None:
+    from .runs import os_error_text
+
+    fail(f"{doing}: {os_error_text(e)}")
 
 
 @app.command()
@@ -100,7 +141,7 @@ def evolve(
     seed: Annotated[Optional[int], typer.Option(help="Random seed [default: 0].")] = None,
     device: Annotated[Optional[str], typer.Option(help="auto, cpu or cuda [default: auto].")] = None,
     compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick [default: on CUDA, and on CPU for >= 50 generations].")] = None,
-    logdir: Annotated[Path, typer.Option(help="Directory that holds run directories.")] = Path("runs"),
+    logdir: Annotated[Optional[Path], typer.Option(help="Directory that holds run directories [default: runs].")] = None,
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines when not on a terminal.")] = 10,
     render_every: Annotated[int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")] = 50,
@@ -108,9 +149,33 @@ def evolve(
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key, e.g. --set p_tag_flip=0.0625 (repeatable; keys as in the run's config.toml).")] = None,
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
+    with ExitStack() as stack:
+        ev, run_dir, saved = _start_evolve(
+            stack, scenario=scenario, budget=budget, objective=objective,
+            generations=generations, population=population, swarm_size=swarm_size,
+            trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
+            logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
+            render_every=render_every, resume=resume, settings=settings)
+        if ev is None:
+            return
+        _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved)
+    console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
+    _print_team(run_dir)
+    console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir "
+                  f"{run_dir.parent}", markup=False, highlight=False)
+
+
+def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
+                  swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
+                  log_every, render_every, resume, settings):
+    """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
+    directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
+    The run directory's lock is held until `stack` closes."""
     from .evolve import Evolution, EvolveConfig, parse_settings, with_overrides
-    from .runs import RunError, new_run_dir, write_config
+    from .runs import (RunError, RunLock, check_memory, load_run, new_run_dir, write_config,
+                       write_run_files)
     from .runs import resume as resume_run
+    from .scenario import read_scenario
 
     if checkpoint_every < 1 or log_every < 1 or render_every < 0:
         fail("--checkpoint-every and --log-every must be >= 1, --render-every >= 0")
@@ -123,53 +188,125 @@ def evolve(
             if extra:
                 fail(f"--resume uses the run's saved config; only --generations and --device may "
                      f"change (got --{', --'.join(extra)})")
-            ev = resume_run(resume, generations=generations, device=device)
+            if logdir is not None:
+                fail(f"--logdir cannot be used with --resume: the run continues in its own "
+                     f"directory ({resume})")
+            if not resume.is_dir():
+                fail(f"--resume {resume} is not a run directory (no such directory)")
             run_dir = resume
+            stack.enter_context(RunLock(run_dir))
+            loaded = load_run(run_dir)
+            cfg, ck = loaded[0], loaded[1]
+            target = cfg.generations if generations is None else generations
+            if target <= ck["generation"]:
+                console.print(f"{run_dir} already has {ck['generation']} generations"
+                              f"{'' if generations is None else f' (asked for {generations})'}; "
+                              "nothing to do, no file changed", markup=False, highlight=False,
+                              soft_wrap=True)
+                return None, run_dir, None
+            ev = resume_run(run_dir, generations=generations, device=device, loaded=loaded)
             write_config(run_dir, ev.cfg)
-            console.print(f"Resuming [bold]{run_dir}[/] at generation {ev.state.generation} "
-                          f"of {ev.cfg.generations}")
-        else:
-            cfg = with_overrides(EvolveConfig(), generations=generations, device=device, **given,
-                                 **parse_settings(settings or []))
-            cfg.validate()
-            if cfg.scenario:
-                load_scenario(cfg.scenario)  # a clear error before anything is created
-            ev = Evolution(cfg)
+            console.print(f"Resuming [bold]{escape(str(run_dir))}[/] at generation "
+                          f"{ev.state.generation} of {ev.cfg.generations}")
+            return ev, run_dir, ev.state.generation
+        cfg = with_overrides(EvolveConfig(), generations=generations, device=device, **given,
+                             **parse_settings(settings or []))
+        cfg.validate()
+        scen, data = read_scenario(cfg.scenario)  # a clear error before anything is created
+        check_memory(cfg, scen)
+        logdir = logdir if logdir is not None else Path("runs")
+        if logdir.exists() and not logdir.is_dir():
+            fail(f"--logdir {logdir} is not a directory")
+        ev = Evolution(cfg)
+        if ev.ctx.scenario != scen:
+            fail(f"{cfg.scenario} changed while the run was starting; start it again")
+        try:
             run_dir = new_run_dir(logdir, cfg)
-            write_config(run_dir, ev.cfg)
-            console.print(f"Run directory: [bold]{run_dir}[/]  (device {ev.ctx.device}, "
-                          f"scenario {ev.ctx.scenario.name}, population {cfg.population}, "
-                          f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})")
+        except OSError as e:
+            _os_fail(e, f"--logdir {logdir}: cannot make a run directory")
+        stack.enter_context(RunLock(run_dir))
+        write_run_files(run_dir, ev.cfg, data)
+        console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
+                      f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
+                      f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})")
+        return ev, run_dir, None
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
-
-    _execute(ev, run_dir, checkpoint_every, log_every, render_every)
-    console.print(f"Done: {ev.state.generation} generations in {run_dir}")
-    _print_team(run_dir)
-    console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir {run_dir.parent}")
+    except OSError as e:
+        _os_fail(e, "cannot start the run")
 
 
 def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
-             render_every: int = 0) -> None:
-    """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints."""
-    from .reporting import TensorBoardReporter
-    from .runs import CheckpointReporter, SummaryReporter, run
+             render_every: int = 0, saved: int | None = None,
+             again: str | None = None) -> None:
+    """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints.
+    Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
+    failed write (a full disk: OSError from the checkpoint, summary.json, teams.jsonl or
+    TensorBoard) ends the run with a one-line error that names the last checkpointed generation
+    and how to continue (exit 2); the checkpoint on disk is the last complete one. `saved` is the
+    generation of the checkpoint the run resumed from; `again` is the command to continue with
+    (default: swarmcode-torch evolve --resume RUN_DIR)."""
+    from .runs import CheckpointReporter, SummaryReporter, os_error_text, run
 
+    again = again or f"swarmcode-torch evolve --resume {run_dir}"
     progress = _Progress(ev.cfg.generations, ev.state.generation, log_every)
-    reporters = [progress, SummaryReporter(run_dir),
-                 TensorBoardReporter(run_dir, render_every=render_every),
-                 CheckpointReporter(run_dir, checkpoint_every)]
+    checkpoints = CheckpointReporter(run_dir, checkpoint_every)
+    checkpoints.saved = saved
+    reporters = [progress, SummaryReporter(run_dir)]
     terminated: list[int] = []
     try:
-        with _terminate_as_interrupt() as terminated:
-            run(ev, run_dir, reporters)
+        with _quiet_thread_os_errors():
+            from .reporting import TensorBoardReporter
+
+            reporters += [TensorBoardReporter(run_dir, render_every=render_every), checkpoints]
+            with _terminate_as_interrupt() as terminated:
+                run(ev, run_dir, reporters)
     except KeyboardInterrupt:
         progress.stop()
         how = "Terminated" if terminated else "Interrupted"
         err.print(f"{how}: checkpoint of generation {ev.state.generation} written to "
-                  f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}")
+                  f"{run_dir}; continue with: {again}", markup=False, highlight=False)
         raise typer.Exit(code=143 if terminated else 130)
+    except OSError as e:
+        progress.stop()
+        _close_writers(reporters)
+        what = (f"writing the run's files failed after {ev.state.generation} generations "
+                f"({os_error_text(e)})")
+        if checkpoints.saved is None:
+            fail(f"{what}; no checkpoint was written yet: free space or fix the cause, then start "
+                 "the run again")
+        fail(f"{what}; the last checkpoint is of generation {checkpoints.saved} "
+             f"({run_dir / 'checkpoint.pt'}); free space or fix the cause, then continue with: "
+             f"{again}")
     progress.stop()
+
+
+def _close_writers(reporters) -> None:
+    """Stop the TensorBoard writer threads of a failed run (their errors are already reported)."""
+    for r in reporters:
+        writer = getattr(r, "writer", None)
+        if writer is not None:
+            try:
+                writer.close()
+            except Exception:  # noqa: BLE001 - the run already failed; this is cleanup
+                pass
+
+
+@contextmanager
+def _quiet_thread_os_errors():
+    """Within the block an OSError in a background thread (TensorBoard's writer on a full disk)
+    prints no traceback: the writer re-raises it in the run, which reports it in one line."""
+    previous = threading.excepthook
+
+    def hook(args):
+        if not issubclass(args.exc_type, OSError):
+            previous(args)
+
+    threading.excepthook = hook
+    try:
+        yield
+    finally:
+        threading.excepthook = previous
 
 
 @contextmanager
@@ -201,6 +338,11 @@ def _parse_list(text: str, kind, option: str) -> list:
         fail(f"{option} expects a comma-separated list of numbers, got {text!r}")
     if not vals:
         fail(f"{option} is empty")
+    for v in vals:
+        if kind is float and not math.isfinite(v):
+            fail(f"{option}: {v} is not a finite number")
+        if vals.count(v) > 1:
+            fail(f"{option} lists {v:g} twice (each run is one budget and one seed)")
     return vals
 
 
@@ -225,70 +367,152 @@ def sweep(
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
     import time
 
-    from .evolve import Evolution, EvolveConfig, parse_settings, with_overrides
-    from .runs import RunError, load_checkpoint, read_config, write_config
-    from .runs import resume as resume_run
-    from .sweep import run_name, table_rows, write_outputs
+    from .evolve import EvolveConfig, parse_settings, with_overrides
+    from .runs import RunError, RunLock, SWEEP_LOCK_FILE, check_memory, read_summary
+    from .scenario import read_scenario
+    from .sweep import table_rows, write_outputs
 
     budget_list = _parse_list(budgets, float, "--budgets")
     seed_list = _parse_list(seeds, int, "--seeds")
+    if checkpoint_every < 1 or log_every < 1:
+        fail("--checkpoint-every and --log-every must be >= 1")
     out = out or Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
+    names = {"seed": "--seeds", "budget": "--budgets"}
     try:
         base = with_overrides(EvolveConfig(), objective=objective, scenario=scenario,
                               generations=generations, population=population,
                               swarm_size=swarm_size, trials=trials, ticks=ticks, device=device,
-                              compile=compile,
-                              **parse_settings(settings or [], {"seed": "--seeds",
-                                                                "budget": "--budgets"}))
+                              compile=compile, **parse_settings(settings or [], names))
         for b in budget_list:
-            with_overrides(base, budget=b).validate()
-        load_scenario(base.scenario)
+            for sd in seed_list:
+                with_overrides(base, budget=b, seed=sd).validate(option_names=names)
+        scen, data = read_scenario(base.scenario)
+        check_memory(base, scen)
     except (ScenarioError, ValueError) as e:
         fail(str(e))
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        fail(f"--out {out} is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        _os_fail(e, f"--out {out}: cannot make the sweep directory")
     runs = []
-    for b in budget_list:
-        for s in seed_list:
-            cfg = with_overrides(base, budget=b, seed=s)
-            run_dir = out / run_name(b, s)
-            try:
-                if (run_dir / "config.toml").is_file() and (run_dir / "checkpoint.pt").is_file():
-                    if read_config(run_dir).generations >= cfg.generations and \
-                            load_checkpoint(run_dir)["generation"] >= cfg.generations:
-                        console.print(f"{run_dir.name}: already done")
-                        runs.append((b, s, run_dir))
-                        continue
-                    ev = resume_run(run_dir, generations=cfg.generations)
-                else:
-                    ev = Evolution(cfg)            # a config error leaves no directory behind
-                    run_dir.mkdir(exist_ok=True)
-                    write_config(run_dir, ev.cfg)
-            except (ScenarioError, RunError, ValueError) as e:
-                fail(str(e))
-            console.print(f"[bold]{run_dir.name}[/]: generation {ev.state.generation} -> {cfg.generations}")
-            _execute(ev, run_dir, checkpoint_every, log_every)
-            runs.append((b, s, run_dir))
-    rows = table_rows(runs)
-    paths = write_outputs(rows, out)
-    console.print((out / "table.md").read_text(), highlight=False)
-    console.print("Wrote " + ", ".join(str(p) for p in paths))
+    with ExitStack() as stack:
+        try:
+            stack.enter_context(RunLock(out, SWEEP_LOCK_FILE))
+        except RunError as e:
+            fail(str(e))
+        except OSError as e:
+            _os_fail(e, f"--out {out}: cannot lock the sweep directory")
+        plans = [_plan_sweep_run(out, with_overrides(base, budget=b, seed=sd), scen, data)
+                 for b in budget_list for sd in seed_list]      # every refusal before any run
+        again = f"swarmcode-torch sweep with the same options and --out {out}"
+        for b, sd, run_dir, cfg, state in plans:
+            if state != "done":
+                _run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
+            runs.append((b, sd, run_dir))
+        try:
+            for _, _, run_dir in runs:
+                read_summary(run_dir)                  # every figure of the table is checked
+            rows = table_rows(runs)
+            paths = write_outputs(rows, out)
+        except (RunError, ValueError) as e:
+            fail(str(e))
+        except OSError as e:
+            _os_fail(e, f"--out {out}: cannot write the table")
+    console.print((out / "table.md").read_text(), highlight=False, markup=False)
+    console.print("Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False)
+
+
+#: Config keys that say how a run runs, not what it computes: a sweep run again with other
+#: values of these resumes its runs with their saved ones.
+_HOW_KEYS = ("generations", "device", "compile", "cuda_graphs")
+
+
+def _plan_sweep_run(out: Path, cfg, scenario, data: bytes):
+    """(budget, seed, run directory, config, state) of one run of a sweep, state 'done', 'resume'
+    or 'new'; refuses (one-line error) an existing run whose config differs from this sweep's
+    in anything but how it runs (_HOW_KEYS)."""
+    from .runs import (CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, RunError,
+                       config_differences, load_run, read_config, run_scenario)
+    from .sweep import run_name
+
+    run_dir = out / run_name(cfg.budget, cfg.seed)
+    try:
+        if not (run_dir / CONFIG_FILE).is_file():
+            return cfg.budget, cfg.seed, run_dir, cfg, "new"
+        has_checkpoint = (run_dir / CHECKPOINT_FILE).is_file()
+        saved = load_run(run_dir)[0] if has_checkpoint else read_config(run_dir)
+        diff = config_differences(saved, cfg, scenario, ignore=_HOW_KEYS)
+        if "scenario" not in diff and (run_dir / SCENARIO_COPY).is_file() \
+                and run_scenario(run_dir, saved) != scenario:
+            diff.append("scenario (the file's content)")
+        if diff:
+            fail(f"{run_dir} holds a run with other settings than this sweep's (differing keys: "
+                 f"{', '.join(diff)}); use another --out, or the options it was run with")
+        if not has_checkpoint:
+            return cfg.budget, cfg.seed, run_dir, cfg, "new"
+        from .runs import load_checkpoint
+        done = load_checkpoint(run_dir)["generation"]
+    except (ScenarioError, RunError, ValueError) as e:
+        fail(str(e))
+    except OSError as e:
+        _os_fail(e, f"{run_dir}: cannot read the run")
+    if done >= cfg.generations:
+        more = f" (it has {done}, more than the {cfg.generations} asked for)" \
+            if done > cfg.generations else ""
+        console.print(f"{run_dir.name}: already done{more}", markup=False, highlight=False)
+        return cfg.budget, cfg.seed, run_dir, cfg, "done"
+    return cfg.budget, cfg.seed, run_dir, cfg, "resume"
+
+
+def _run_sweep_run(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int,
+                   log_every: int, again: str) -> None:
+    from .evolve import Evolution
+    from .runs import RunError, RunLock, write_config, write_run_files
+    from .runs import resume as resume_run
+
+    with ExitStack() as stack:
+        try:
+            if state == "resume":
+                stack.enter_context(RunLock(run_dir))
+                ev = resume_run(run_dir, generations=cfg.generations)
+                write_config(run_dir, ev.cfg)
+                saved = ev.state.generation
+            else:
+                ev = Evolution(cfg)            # a config error leaves no directory behind
+                run_dir.mkdir(exist_ok=True)
+                stack.enter_context(RunLock(run_dir))
+                write_run_files(run_dir, ev.cfg, data)
+                saved = None
+        except (ScenarioError, RunError, ValueError) as e:
+            fail(str(e))
+        except OSError as e:
+            _os_fail(e, f"{run_dir}: cannot start the run")
+        console.print(f"[bold]{escape(run_dir.name)}[/]: generation {ev.state.generation} -> "
+                      f"{cfg.generations}")
+        _execute(ev, run_dir, checkpoint_every, log_every, saved=saved, again=again)
+
+
+def _num(v, fmt: str) -> str:
+    return "n/a" if v is None else format(v, fmt)
 
 
 def _print_team(run_dir: Path) -> None:
-    path = Path(run_dir) / "summary.json"
-    if not path.is_file():
-        fail(f"{run_dir} has no summary.json (is it a run directory with a finished generation?)")
+    from .runs import RunError, read_summary
+
     try:
-        s = json.loads(path.read_text())
-        designs = s["designs"]
-    except (json.JSONDecodeError, KeyError, TypeError):
-        fail(f"{path} is malformed")
+        s = read_summary(run_dir)
+    except RunError as e:
+        fail(str(e))
+    designs = s["designs"]
     budget = "none" if s.get("budget") is None else f"${s['budget']:g}"
     console.print(
-        f"Best team (generation {s['best_generation']}): fitness {s['best_fitness']:.2f}, "
-        f"cost ${s['team_cost']:.0f} (budget {budget}), {s['num_species']} species, "
-        f"deliveries {s['deliveries']:.2f} ({s['deliveries_individual']:.2f} individual, "
-        f"{s['deliveries_collab']:.2f} collaborative), energy used {s['energy_used']:.1f}%")
+        f"Best team (generation {s['best_generation']}): fitness {_num(s['best_fitness'], '.2f')}, "
+        f"cost ${_num(s['team_cost'], '.0f')} (budget {budget}), {s['num_species']} species, "
+        f"deliveries {_num(s['deliveries'], '.2f')} ({_num(s['deliveries_individual'], '.2f')} "
+        f"individual, {_num(s['deliveries_collab'], '.2f')} collaborative), energy used "
+        f"{_num(s['energy_used'], '.1f')}%", markup=False)
     t = Table(title="Robots per design", box=box.SIMPLE_HEAD,
               caption="ch/bat/mot: chassis, battery, motor tier (1-3); torque, capacity: "
                       "operating points (0-1); dom: dominance")
@@ -327,10 +551,10 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory.")]) -
 def _capabilities(run_dir: Path, designs: list[dict]):
     """(package class labels, per design the classes it lifts), or None without a scenario."""
     from .analysis import design_capabilities
-    from .runs import RunError, read_config
+    from .runs import RunError, read_config, run_scenario
 
     try:
-        scenario = load_scenario(read_config(run_dir).scenario)
+        scenario = run_scenario(run_dir, read_config(run_dir))
         return [c.label for c in scenario.packages], design_capabilities(designs, scenario)
     except (RunError, ValueError):
         return None
@@ -394,8 +618,16 @@ def replay(
     from .render import replay_run
     from .runs import RunError
 
+    from .evolve import MAX_SEED, UPPER_BOUNDS
+
     if every < 1 or (ticks is not None and ticks < 1):
         fail("--every and --ticks must be >= 1")
+    if ticks is not None and ticks > UPPER_BOUNDS["ticks"]:
+        fail(f"--ticks must be <= {UPPER_BOUNDS['ticks']}, got {ticks}")
+    if not 0 <= seed <= MAX_SEED:
+        fail(f"--seed must be in [0, {MAX_SEED}] (2**63 - 1), got {seed}")
+    if generation is not None and generation < 0:
+        fail(f"--generation must be >= 0, got {generation}")
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
     try:
@@ -403,9 +635,11 @@ def replay(
                              generation=generation)
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
+    except OSError as e:
+        _os_fail(e, "replay failed")
     console.print(f"Wrote {path}: {m['delivered_individual']:.0f} individual and "
                   f"{m['delivered_collab']:.0f} collaborative deliveries, "
-                  f"{m['energy_used']:.1f}% energy used")
+                  f"{m['energy_used']:.1f}% energy used", markup=False, highlight=False)
 
 
 def main() -> None:

@@ -110,44 +110,95 @@ class EvolveConfig:
     """Replay the compiled tick as CUDA graphs of 10 ticks (`world.CudaGraphTicks`). Unset: on
     wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
 
-    def validate(self) -> None:
-        """Raise ValueError with a one-line message for an invalid setting."""
-        if self.budget is not None and self.budget <= 0:
-            raise ValueError(f"--budget must be > 0, got {self.budget:g}")
+    def validate(self, option_names: dict[str, str] | None = None, memory: bool = True) -> None:
+        """Raise ValueError with a one-line message for an invalid setting: a value of the wrong
+        type, out of its range, NaN or infinite where a finite number is meant, or (`memory`)
+        sizes whose evaluation cannot fit in this machine's memory (`runs.check_memory`; off
+        for a config read back only to be looked at). The message names the setting as the
+        command line spells it (--population, --set delta; `option_names` maps keys to other
+        spellings, e.g. {"seed": "--seeds"} in a sweep)."""
+        names = {k: "--" + k.replace("_", "-") for k in OPTION_KEYS}
+        names.update(option_names or {})
+
+        def name(key: str) -> str:
+            return names.get(key, f"--set {key}")
+
+        kinds = {"bool": (bool,), "int": (int,), "float": (int, float), "str": (str,)}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            base, _, rest = str(f.type).partition(" | ")
+            if v is None:
+                if rest != "None":
+                    raise ValueError(f"{name(f.name)} must be set")
+                continue
+            if not isinstance(v, kinds[base]) or (isinstance(v, bool) and base != "bool"):
+                what = {"bool": "true or false", "int": "an integer", "float": "a number",
+                        "str": "a string"}[base]
+                raise ValueError(f"{name(f.name)} must be {what}, got {v!r}")
+        if self.budget is not None:
+            if not math.isfinite(self.budget):
+                raise ValueError(f"{name('budget')} must be a finite number, got {self.budget}")
+            if self.budget <= 0:
+                raise ValueError(f"{name('budget')} must be > 0, got {self.budget:g}")
+        if not self.scenario:
+            raise ValueError(f"{name('scenario')} must name a scenario")
         if self.quota_basis not in ("sum", "mean"):
-            raise ValueError(f"quota_basis must be 'sum' or 'mean', got {self.quota_basis!r}")
+            raise ValueError(f"{name('quota_basis')} must be 'sum' or 'mean', "
+                             f"got {self.quota_basis!r}")
         if self.objective not in ("fitness", "roi"):
-            raise ValueError(f"--objective must be 'fitness' or 'roi', got {self.objective!r}")
-        for name, lo in (("generations", 1), ("population", 2), ("trials", 1), ("tag_length", 1),
-                         ("bt_length", 4), ("max_elite", 1)):
-            v = getattr(self, name)
-            if v < lo:
-                raise ValueError(f"--{name.replace('_', '-')} must be >= {lo}, got {v}")
-        for name in ("swarm_size", "ticks"):
-            v = getattr(self, name)
-            if v is not None and v < 1:
-                raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {v}")
-        if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
-            raise ValueError(f"--device must be auto, cpu or cuda, got {self.device!r}")
-        for name in ("delta", "p_marginal", "alpha", "lam", "hw_sigma", "social_sigma",
-                     "p_categorical", "p_tag_flip", "min_share", "bt_mutation_rate",
-                     "p_gene_mutation"):
-            v = getattr(self, name)
+            raise ValueError(f"{name('objective')} must be 'fitness' or 'roi', "
+                             f"got {self.objective!r}")
+        dev = self.device
+        if dev not in ("auto", "cpu", "cuda") and not (
+                dev.startswith("cuda:") and dev[5:].isdigit() and dev[5:].isascii()):
+            raise ValueError(f"{name('device')} must be auto, cpu, cuda or cuda:N, got {dev!r}")
+        # lower bounds; the sizes' upper bound is the memory their evaluation needs
+        for key, lo in (("generations", 1), ("population", 2), ("trials", 1), ("tag_length", 1),
+                        ("bt_length", 4), ("max_elite", 1), ("swarm_size", 1), ("ticks", 1),
+                        ("seed", 0)):
+            v = getattr(self, key)
+            if v is not None and v < lo:
+                raise ValueError(f"{name(key)} must be >= {lo}, got {v}")
+        if self.seed > MAX_SEED:
+            raise ValueError(f"{name('seed')} must be in [0, {MAX_SEED}] (2**63 - 1), "
+                             f"got {self.seed}")
+        for key in ("delta", "lam", "hw_sigma", "social_sigma", "min_share"):
+            v = getattr(self, key)
             if not (v >= 0 and math.isfinite(v)):          # also refuses nan
-                raise ValueError(f"{name} must be a finite number >= 0, got {v}")
-        for name in ("p_categorical", "p_tag_flip", "bt_mutation_rate", "p_gene_mutation"):
-            if getattr(self, name) > 1:
-                raise ValueError(f"{name} must be <= 1")
+                raise ValueError(f"{name(key)} must be a finite number >= 0, got {v}")
+        if not self.delta > 0:
+            raise ValueError(f"{name('delta')} must be a finite number > 0, got {self.delta}")
+        for key in ("p_marginal", "alpha", "p_categorical", "p_tag_flip", "bt_mutation_rate",
+                    "p_gene_mutation"):
+            v = getattr(self, key)
+            if not (v >= 0 and math.isfinite(v)):
+                raise ValueError(f"{name(key)} must be a finite number in [0, 1], got {v}")
+            if v > 1:
+                raise ValueError(f"{name(key)} must be <= 1 (a number in [0, 1]), got {v}")
+        if memory:
+            from .runs import check_memory          # runs imports this module
+
+            check_memory(self, option_names=names)
+        for key, hi in UPPER_BOUNDS.items():
+            v = getattr(self, key)
+            if v is not None and v > hi:
+                fmt = "g" if isinstance(hi, float) else "d"
+                raise ValueError(f"{name(key)} must be <= {hi:{fmt}}, got {v:{fmt}}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "EvolveConfig":
+        if not isinstance(d, dict):
+            raise ValueError(f"expected a table of config keys, got {type(d).__name__}")
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
             raise ValueError(f"unknown config keys: {', '.join(unknown)}")
+        for k, v in d.items():
+            if v is not None and not isinstance(v, (bool, int, float, str)):
+                raise ValueError(f"{k}: expected a single value, got {v!r}")
         d = {k: (None if v == "none" else v) for k, v in d.items()}
         if "quota_basis" not in d:
             # written before these settings existed: keep the run's original algorithm
@@ -168,6 +219,21 @@ class EvolveConfig:
         return cls(**d)
 
 
+#: The largest seed a run's generator takes (torch.Generator.manual_seed accepts 64 bits; a seed
+#: is kept non-negative and below 2**63 so that it reads back the same everywhere).
+MAX_SEED = 2 ** 63 - 1
+
+#: Upper bounds of settings that memory does not bound (checked after `runs.check_memory`, so
+#: that sizes far too large for memory are told what they would need).
+UPPER_BOUNDS = {"generations": 10_000_000, "ticks": 1_000_000, "tag_length": 4096,
+                "bt_length": 4096, "max_elite": 1_000_000, "population": 100_000_000,
+                "trials": 1_000_000, "swarm_size": 10_000_000,
+                # numbers the float32 tensors must hold with room to spare (delta=1e300 is inf
+                # there; social_sigma=1e300 makes NaN genes)
+                "budget": 1e15, "delta": 1e6, "lam": 1e6, "hw_sigma": 1e6,
+                "social_sigma": 1e6, "min_share": 1e9}
+
+
 #: Settings of configs saved before `quota_basis` and the mutation steps were config keys.
 LEGACY_DEFAULTS = {"quota_basis": "mean", "hw_sigma": 0.1, "social_sigma": 0.1,
                    "p_categorical": 0.1}
@@ -184,7 +250,14 @@ def resolve_device(name: str) -> torch.device:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if name.startswith("cuda") and not torch.cuda.is_available():
         raise ValueError("--device cuda was asked for, but no CUDA device is available")
-    return torch.device(name)
+    try:
+        dev = torch.device(name)
+    except RuntimeError:
+        raise ValueError(f"--device must be auto, cpu, cuda or cuda:N, got {name!r}") from None
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise ValueError(f"--device {name}: there are only {torch.cuda.device_count()} CUDA "
+                         "devices")
+    return dev
 
 
 # ------------------------------------------------------------------ the population
@@ -504,6 +577,8 @@ def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None)
         key, text = key.strip().replace("-", "_"), text.strip()
         if not sep or not key or not text:
             raise ValueError(f"--set expects KEY=VALUE, got {pair!r}")
+        if key in out:
+            raise ValueError(f"--set {key} is given twice")
         if key in OPTION_KEYS:
             option = (option_names or {}).get(key, "--" + key.replace("_", "-"))
             raise ValueError(f"--set {key}: use the {option} option")

@@ -11,7 +11,6 @@ Matplotlib (Agg canvas, no pyplot) and PIL are imported inside the functions tha
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -379,34 +378,33 @@ def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0
     """Render the best team of a run (summary.json "designs"), or the best team of one
     `generation` (teams.jsonl), as a GIF.
 
-    The run's config gives the scenario and episode length (``ticks`` overrides it); the
-    environment is drawn from `seed`. Returns the GIF path (default ``run_dir/team.gif``) and
+    The run's config gives the episode length (``ticks`` overrides it) and its scenario.toml
+    copy the scenario (the config's scenario in a run made before runs kept one); the
+    environment is drawn from `seed`. RunError for an `out` whose folder does not exist, a run
+    file that cannot be read or is malformed, or a run whose hardware.toml differs from the
+    installed catalog. Returns the GIF path (default ``run_dir/team.gif``) and
     the episode metrics as floats.
     """
-    from .runs import SUMMARY_FILE, RunError, generation_team, read_config
-    from .scenario import load_scenario
+    from .runs import RunError, check_hardware, generation_team, read_config, read_summary, \
+        run_scenario
 
     run_dir = Path(run_dir)
+    out = Path(out) if out is not None else run_dir / "team.gif"
+    if out.is_dir():
+        raise RunError(f"--out {out} is a directory; give a file name such as {out / 'team.gif'}")
+    if not out.parent.is_dir():
+        raise RunError(f"--out {out}: the folder {out.parent} does not exist")
     cfg = read_config(run_dir)
     if generation is not None:
         designs = generation_team(run_dir, generation)["designs"]
     else:
-        path = run_dir / SUMMARY_FILE
-        if not path.is_file():
-            raise RunError(f"{run_dir} has no {SUMMARY_FILE} yet (no generation finished)")
-        try:
-            summ = json.loads(path.read_text())
-        except json.JSONDecodeError as e:
-            raise RunError(f"{path}: malformed JSON ({e})") from None
-        designs = summ.get("designs") if isinstance(summ, dict) else None
-    if not designs:
-        raise RunError(f"{run_dir} holds no team designs to replay")
-    scenario = load_scenario(cfg.scenario)
+        designs = read_summary(run_dir, figures=False)["designs"]
+    scenario = run_scenario(run_dir, cfg)        # the run's own copy, when it has one
+    check_hardware(run_dir)
     genome, team = team_genome(designs, cfg.tag_length)
     if ticks is None:
         ticks = cfg.ticks or scenario.episode_ticks
     ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every)
     ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
-    out = Path(out) if out is not None else run_dir / "team.gif"
     save_gif(ep, out, fps=fps, dpi=dpi)
     return out, dict(ep.metrics)

@@ -1,21 +1,38 @@
-"""Run directories: config.toml, atomic checkpoints, and the generation loop with reporters."""
+"""Run directories: config.toml, atomic checkpoints, and the generation loop with reporters.
+
+A run directory holds everything the run needs to continue or be replayed: its config, its
+checkpoint, the scenario TOML it ran on (scenario.toml) and the hardware catalog as it was read
+(hardware.toml). A live run holds run.lock (its pid and host) so that no second process writes
+into it. docs/RELIABILITY.md lists what the files promise and the tests that show it.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import errno
 import io
 import json
 import math
 import os
 import pickle
+import re
+import socket
 import sys
 import tempfile
 import time
+from importlib import resources
 from pathlib import Path
 from typing import Any, Callable, Iterable, Protocol
 
 import torch
 
 from .evolve import Evolution, EvolveConfig
+from .scenario import Scenario, load_scenario
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX
+    fcntl = None
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -26,6 +43,17 @@ CONFIG_FILE = "config.toml"
 CHECKPOINT_FILE = "checkpoint.pt"
 SUMMARY_FILE = "summary.json"
 TEAMS_FILE = "teams.jsonl"
+PARTIAL_SUFFIX = ".partial"             # teams.jsonl.partial: cut-off lines set aside on resume
+SCENARIO_COPY = "scenario.toml"         # the scenario file the run ran on, as read
+HARDWARE_COPY = "hardware.toml"         # the hardware catalog the run ran with, as read
+LOCK_FILE = "run.lock"                  # held by the live run: "pid=... host=..."
+SWEEP_LOCK_FILE = "sweep.lock"          # held by a live sweep in its --out directory
+#: Files of a run directory written with `atomic_write_bytes`; a temporary `.NAME.xxxxxxxx` of
+#: one of them (or of any file that exists) left by a killed write is removed on start.
+ATOMIC_FILES = (CONFIG_FILE, CHECKPOINT_FILE, SUMMARY_FILE, SCENARIO_COPY, HARDWARE_COPY,
+                "metrics.csv", "table.md", "table.csv")
+#: The memory assumed when the machine's cannot be read.
+FALLBACK_MEMORY = 64 * 2 ** 30
 
 
 class RunError(ValueError):
@@ -38,20 +66,233 @@ class Reporter(Protocol):
     def on_end(self, ev: Evolution) -> None: ...
 
 
+def current_umask() -> int:
+    """The process umask (read from /proc where it can be, so the umask is never changed)."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        n = os.write(fd, view)
+        view = view[n:]
+
+
 def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write a file so that readers see the old or the new content, never a partial one."""
+    """Write a file so that readers see the old or the new content, never a partial one: the
+    bytes go to a temporary `.NAME.xxxxxxxx` beside it (mode 0666 less the umask, as a plain
+    open would make it), are synced, and the temporary file is renamed over `path`. A failed
+    write (a full disk) removes the temporary file and leaves `path` as it was; one that a kill
+    interrupts leaves the temporary file, which `clean_temporary_files` removes."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
+        try:
+            os.fchmod(fd, 0o666 & ~current_umask())
+            _write_all(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+_TEMP_NAME = re.compile(r"^\.(?P<target>.+)\.[A-Za-z0-9_]{8}$")
+
+
+def clean_temporary_files(run_dir: Path) -> list[Path]:
+    """Remove the temporary files that killed `atomic_write_bytes` calls left in `run_dir` (for
+    a file of `ATOMIC_FILES` or one that exists); returns what was removed. Call it only while
+    holding the directory's lock, so that no live write loses its temporary file."""
+    run_dir = Path(run_dir)
+    removed = []
+    try:
+        entries = list(os.scandir(run_dir))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = _TEMP_NAME.match(entry.name)
+        if not m or not entry.is_file(follow_symlinks=False):
+            continue
+        target = m.group("target")
+        if target in ATOMIC_FILES or (run_dir / target).exists():
+            try:
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+            except FileNotFoundError:
+                pass
+    return removed
+
+
+def repair_teams(run_dir: Path) -> int:
+    """Set aside a cut-off last line of teams.jsonl (a kill or a full disk mid-append): the
+    bytes after its last newline are appended, with a newline, to teams.jsonl.partial and the
+    file is truncated to its last complete line, so that the next record starts a line of its
+    own. Returns the number of bytes set aside (0: the file was whole)."""
+    path = Path(run_dir) / TEAMS_FILE
+    if not path.is_file():
+        return 0
+    with open(path, "rb+") as f:
+        size = f.seek(0, os.SEEK_END)
+        if size == 0:
+            return 0
+        f.seek(size - 1)
+        if f.read(1) == b"\n":
+            return 0
+        cut, pos = 0, size
+        while pos > 0:                                 # the last newline, read backwards
+            step = min(pos, 1 << 16)
+            pos -= step
+            f.seek(pos)
+            i = f.read(step).rfind(b"\n")
+            if i >= 0:
+                cut = pos + i + 1
+                break
+        f.seek(cut)
+        tail = f.read()
+        fd = os.open(str(path) + PARTIAL_SUFFIX, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+        try:
+            _write_all(fd, tail + b"\n")
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        f.truncate(cut)
+        f.flush()
+        os.fsync(f.fileno())
+    return len(tail)
+
+
+def append_line(path: Path, line: str) -> None:
+    """Append one line to a file (one os.write per chunk; no buffering in Python)."""
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+    try:
+        _write_all(fd, (line + "\n").encode("utf-8"))
+    finally:
+        os.close(fd)
+
+
+def prepare_run_dir(run_dir: Path) -> None:
+    """Before a run starts or resumes in `run_dir` (holding its lock): remove the temporary
+    files of killed writes and set aside a cut-off last line of teams.jsonl."""
+    clean_temporary_files(run_dir)
+    repair_teams(run_dir)
+
+
+# ------------------------------------------------------------------ reading run files
+def read_text(path: Path) -> str:
+    """The UTF-8 text of a run file (a byte-order mark is dropped); RunError naming the file
+    when it cannot be read or is not UTF-8."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise RunError(f"{path} cannot be read ({e.strerror or type(e).__name__})") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise RunError(f"{path} is not UTF-8 text (byte 0x{data[e.start]:02x} at offset "
+                       f"{e.start})") from None
+
+
+def os_error_text(e: OSError) -> str:
+    """'No space left on device: runs/x/checkpoint.pt' for an OSError (what and where)."""
+    what = e.strerror or str(e) or type(e).__name__
+    return f"{what}: {e.filename}" if e.filename else what
+
+
+# ------------------------------------------------------------------ locks
+class RunLock:
+    """An exclusive lock on a run (or sweep) directory for one process: the file `name` in it
+    holds the holder's pid and host. The lock itself is an advisory `flock` on that file, which
+    the kernel drops when the process dies, so a lock file left by a killed run (a dead pid) is
+    taken over; a live holder makes `acquire` raise RunError. `release` (also on leaving a `with`
+    block, on an error, Ctrl-C or SIGTERM turned into KeyboardInterrupt) removes the file."""
+
+    def __init__(self, directory: Path, name: str = LOCK_FILE):
+        self.dir = Path(directory)
+        self.path = self.dir / name
+        self.fd: int | None = None
+
+    def _holder(self) -> str:
+        try:
+            text = self.path.read_text(encoding="utf-8", errors="replace").strip()
+        except OSError:
+            text = ""
+        return text or "an unknown process"
+
+    def acquire(self) -> "RunLock":
+        info = f"pid={os.getpid()} host={socket.gethostname()} since={time.strftime('%Y-%m-%dT%H:%M:%S')}\n"
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+            try:
+                if fcntl is not None:
+                    try:
+                        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    except OSError as e:
+                        if e.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                            raise
+                        raise RunError(f"{self.dir} is in use by a live run ({self._holder()}, "
+                                       f"{self.path}); wait for it to finish or stop it first") \
+                            from None
+                elif self._live_holder():  # pragma: no cover - no flock: trust the pid
+                    raise RunError(f"{self.dir} is in use by a live run ({self._holder()}, "
+                                   f"{self.path}); wait for it to finish or stop it first")
+                try:                       # the file may have been released (removed) meanwhile
+                    same = os.stat(self.path).st_ino == os.fstat(fd).st_ino
+                except FileNotFoundError:
+                    same = False
+                if not same:
+                    os.close(fd)
+                    continue
+                os.ftruncate(fd, 0)        # a dead holder's pid is overwritten: taken over
+                _write_all(fd, info.encode())
+            except BaseException:
+                os.close(fd)
+                raise
+            self.fd = fd
+            return self
+
+    def _live_holder(self) -> bool:  # pragma: no cover - used only without fcntl
+        m = re.search(r"pid=(\d+) host=(\S+)", self._holder())
+        if not m or m.group(2) != socket.gethostname():
+            return bool(m)
+        try:
+            os.kill(int(m.group(1)), 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+        return int(m.group(1)) != os.getpid()
+
+    def release(self) -> None:
+        if self.fd is None:
+            return
+        try:
+            if os.stat(self.path).st_ino == os.fstat(self.fd).st_ino:
+                os.unlink(self.path)
+        except OSError:
+            pass
+        finally:
+            os.close(self.fd)
+            self.fd = None
+
+    def __enter__(self) -> "RunLock":
+        return self.acquire()
+
+    def __exit__(self, *exc) -> None:
+        self.release()
 
 
 # ------------------------------------------------------------------ config.toml
@@ -75,14 +316,168 @@ def write_config(run_dir: Path, cfg: EvolveConfig) -> None:
     atomic_write_bytes(Path(run_dir) / CONFIG_FILE, config_to_toml(cfg).encode())
 
 
+#: The names of config keys in messages about a config file: the keys themselves.
+_FILE_KEY_NAMES = {f.name: f.name for f in dataclasses.fields(EvolveConfig)}
+
+
+def config_from_dict(d: Any, source: str) -> EvolveConfig:
+    """A validated config from a parsed table (config.toml, a checkpoint's "config"); RunError
+    naming `source` and the key for anything malformed or out of range."""
+    try:
+        cfg = EvolveConfig.from_dict(d)
+        # a run made on a larger machine can still be inspected and replayed here; a resume
+        # checks the memory it needs (`resume`)
+        cfg.validate(option_names=_FILE_KEY_NAMES, memory=False)
+    except (TypeError, ValueError) as e:
+        raise RunError(f"{source}: malformed config ({e})") from None
+    return cfg
+
+
 def read_config(run_dir: Path) -> EvolveConfig:
+    """The config of a run directory, every value checked (`EvolveConfig.validate`)."""
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise RunError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
     try:
-        return EvolveConfig.from_dict(tomllib.loads(path.read_text()))
-    except (tomllib.TOMLDecodeError, TypeError, ValueError) as e:
+        d = tomllib.loads(read_text(path))
+    except tomllib.TOMLDecodeError as e:
         raise RunError(f"{path}: malformed config ({e})") from None
+    return config_from_dict(d, str(path))
+
+
+# ------------------------------------------------------------------ a run's own scenario
+def hardware_bytes() -> bytes:
+    """The installed hardware catalog file (swarmcode_torch/data/hardware.toml), as read."""
+    return resources.files("swarmcode_torch").joinpath("data/hardware.toml").read_bytes()
+
+
+def write_run_files(run_dir: Path, cfg: EvolveConfig, scenario_data: bytes) -> None:
+    """config.toml, and the copies that make a new run self-contained: scenario.toml (the bytes
+    its scenario was read from) and hardware.toml (the catalog, as read)."""
+    run_dir = Path(run_dir)
+    write_config(run_dir, cfg)
+    atomic_write_bytes(run_dir / SCENARIO_COPY, scenario_data)
+    atomic_write_bytes(run_dir / HARDWARE_COPY, hardware_bytes())
+
+
+def run_scenario_source(run_dir: Path, cfg: EvolveConfig) -> str:
+    """Where the scenario of a run is read from: its scenario.toml copy (an absolute path, so
+    any working directory will do), or, in a run directory made before runs kept one, the
+    config's scenario."""
+    copy = Path(run_dir) / SCENARIO_COPY
+    return str(copy.resolve()) if copy.is_file() else cfg.scenario
+
+
+def run_scenario(run_dir: Path, cfg: EvolveConfig) -> Scenario:
+    """The scenario a run ran on (see `run_scenario_source`)."""
+    return load_scenario(run_scenario_source(run_dir, cfg))
+
+
+def check_hardware(run_dir: Path) -> None:
+    """RunError when the run's hardware.toml differs from the installed catalog: resuming or
+    replaying it would use another catalog than the one it ran with (the tool reads only the
+    installed one). A run without the copy is not checked."""
+    copy = Path(run_dir) / HARDWARE_COPY
+    if not copy.is_file():
+        return
+    try:
+        saved = tomllib.loads(read_text(copy))
+    except tomllib.TOMLDecodeError as e:
+        raise RunError(f"{copy}: not valid TOML ({e})") from None
+    if saved != tomllib.loads(hardware_bytes().decode("utf-8")):
+        raise RunError(f"{copy} differs from the installed hardware catalog "
+                       "(swarmcode_torch/data/hardware.toml): the run used another catalog, and "
+                       "resuming or replaying it with this one would mix the two")
+
+
+def config_differences(a: EvolveConfig, b: EvolveConfig, scenario: Scenario | None = None,
+                       ignore: Iterable[str] = ("generations", "device")) -> list[str]:
+    """The config keys in which `a` and `b` differ (except `ignore`); an unset swarm_size or
+    ticks counts as the scenario's (what a run pins when it starts)."""
+    da, db = a.to_dict(), b.to_dict()
+    if scenario is not None:
+        for d in (da, db):
+            if d["swarm_size"] is None:
+                d["swarm_size"] = scenario.num_robots
+            if d["ticks"] is None:
+                d["ticks"] = scenario.episode_ticks
+    ignore = set(ignore)
+    return sorted(k for k in da if k not in ignore and da[k] != db[k])
+
+
+# ------------------------------------------------------------------ memory
+def memory_limit(device: str = "auto") -> tuple[int, str]:
+    """(bytes, what) of the memory a run's evaluation batch lives in: the total memory of the
+    CUDA device it would run on, or this machine's physical memory; FALLBACK_MEMORY (64 GiB)
+    when neither can be read."""
+    try:
+        if device != "cpu" and torch.cuda.is_available():
+            idx = torch.device("cuda" if device == "auto" else device).index or 0
+            if idx < torch.cuda.device_count():
+                return torch.cuda.get_device_properties(idx).total_memory, f"cuda:{idx} memory"
+        if device == "cpu" or not device.startswith("cuda"):
+            n = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+            if n > 0:
+                return n, "memory"
+    except (ValueError, OSError, RuntimeError, AttributeError):
+        pass
+    return FALLBACK_MEMORY, "assumed memory (64 GiB)"
+
+
+def estimate_bytes(cfg: EvolveConfig, scenario: Scenario | None = None) -> int:
+    """A rough estimate of the memory one generation needs (a lower bound of the peak, close to
+    the measured peak of a swarm1000 generation), in bytes:
+
+    - the evaluation batch: E = 2 x population x trials environments of N robots (the swarm
+      size; the scenario's robots; 1 when unknown), 16 x (16 + C + min(N, 500)) bytes a robot
+      (state and constants, distances to the C grip points of the packages, contact pairs);
+    - the layouts: population x trials environments of 32 candidate positions for each of the
+      K packages (checked against the O obstacles) and each obstacle: 4 x 32 x (K (O + 4) + 2 O);
+    - the programs: population x (4 x 11,664 lookup-table entries + 16 x bt_length + tag_length).
+    """
+    from .bt import NUM_COMBOS
+
+    P, T = cfg.population, cfg.trials
+    if scenario is not None:
+        N = cfg.swarm_size or scenario.num_robots
+        C = sum(c.count * len(c.grips) for c in scenario.packages)
+        K, O = scenario.num_packages, scenario.obstacle_count
+    else:
+        N, C, K, O = cfg.swarm_size or 1, 1, 1, 0
+    envs = 2 * P * T
+    batch = envs * N * 16 * (16 + C + min(N, 500))
+    layouts = P * T * 4 * 32 * (K * (O + 4) + 2 * O)
+    programs = P * (4 * NUM_COMBOS + 16 * cfg.bt_length + cfg.tag_length)
+    return batch + layouts + programs
+
+
+def _size(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"):
+        if n < 1024 or unit == "EiB":
+            return f"{n:.3g} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:.3g} EiB"  # pragma: no cover
+
+
+def check_memory(cfg: EvolveConfig, scenario: Scenario | None = None,
+                 option_names: dict[str, str] | None = None) -> None:
+    """ValueError, before anything is allocated, when `estimate_bytes` exceeds `memory_limit`:
+    the message gives the estimate and the options that size it."""
+    need = estimate_bytes(cfg, scenario)
+    limit, what = memory_limit(cfg.device if isinstance(cfg.device, str) else "auto")
+    if need <= limit:
+        return
+    names = {"population": "--population", "trials": "--trials", "swarm_size": "--swarm-size",
+             **(option_names or {})}
+    N = cfg.swarm_size or (scenario.num_robots if scenario is not None else 1)
+    robots = f"{N} robots" if cfg.swarm_size or scenario is None else \
+        f"{N} robots (num_robots of scenario {cfg.scenario})"
+    raise ValueError(
+        f"this run would need about {_size(need)} of memory, more than the {_size(limit)} of "
+        f"{what}: {2 * cfg.population * cfg.trials} environments of {robots} a generation "
+        f"(2 x population x trials) and the programs of {cfg.population} individuals of "
+        f"bt_length {cfg.bt_length}; use a smaller {names['population']}, {names['trials']} or "
+        f"{names['swarm_size']}")
 
 
 # ------------------------------------------------------------------ checkpoints
@@ -138,30 +533,63 @@ def load_checkpoint(run_dir: Path) -> dict:
     return read_checkpoint(path)
 
 
-def resume(run_dir: Path, generations: int | None = None, device: str | None = None) -> Evolution:
-    """The run in `run_dir`, continued from its checkpoint with its saved config."""
+def load_run(run_dir: Path) -> tuple[EvolveConfig, dict, Scenario]:
+    """The config, checkpoint and scenario of a run directory, checked against each other:
+    config.toml must agree with the config saved in the checkpoint in every key but generations
+    and device, and the run's hardware.toml with the installed catalog (RunError otherwise)."""
+    run_dir = Path(run_dir)
     cfg = read_config(run_dir)
+    d = load_checkpoint(run_dir)
+    scenario = run_scenario(run_dir, cfg)
+    saved = config_from_dict(d["config"], f"{run_dir / CHECKPOINT_FILE} (its config)")
+    diff = config_differences(cfg, saved, scenario)
+    if diff:
+        raise RunError(f"{run_dir / CONFIG_FILE} does not match the config saved in "
+                       f"{CHECKPOINT_FILE} (differing keys: {', '.join(diff)}); restore "
+                       f"{CONFIG_FILE} or start a new run")
+    check_hardware(run_dir)
+    return cfg, d, scenario
+
+
+def resume(run_dir: Path, generations: int | None = None, device: str | None = None,
+           loaded: tuple[EvolveConfig, dict, Scenario] | None = None) -> Evolution:
+    """The run in `run_dir`, continued from its checkpoint with its saved config and its own
+    copy of the scenario (`load_run`; `loaded` is what `load_run` returned, if it was called)."""
+    run_dir = Path(run_dir)
+    cfg, d, scenario = loaded or load_run(run_dir)
+    cfg = dataclasses.replace(cfg)
     if generations is not None:
         cfg.generations = generations
     if device is not None:
         cfg.device = device
-    d = load_checkpoint(run_dir)
+    cfg.validate()
+    check_memory(cfg, scenario)
+    source = run_scenario_source(run_dir, cfg)
     try:
-        return Evolution.from_checkpoint(d, cfg)
+        ev = Evolution.from_checkpoint(d, dataclasses.replace(cfg, scenario=source))
     except (KeyError, TypeError, RuntimeError) as e:
         raise RunError(f"checkpoint in {run_dir} is incompatible ({type(e).__name__}: {e})") from None
+    if source != cfg.scenario:     # the run keeps the scenario it names; only the file differs
+        ev.ctx.cfg = dataclasses.replace(ev.ctx.cfg, scenario=cfg.scenario)
+        ev.cfg = ev.ctx.cfg
+    return ev
 
 
 def new_run_dir(logdir: Path, cfg: EvolveConfig) -> Path:
-    name = Path(cfg.scenario).stem
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    d = Path(logdir) / f"{name}__{cfg.seed}__{stamp}"
-    i = 1
-    while d.exists():
-        d = Path(logdir) / f"{name}__{cfg.seed}__{stamp}-{i}"
-        i += 1
-    d.mkdir(parents=True)
-    return d
+    """A new, empty run directory under `logdir`: SCENARIO__SEED__TIME, with -1, -2, ... added
+    when that exists. Each candidate is made with one mkdir that fails if it exists, so runs
+    started at the same second (threads or processes) never share a directory."""
+    logdir = Path(logdir)
+    logdir.mkdir(parents=True, exist_ok=True)
+    base = f"{Path(cfg.scenario).stem}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
+    i = 0
+    while True:
+        d = logdir / (base if i == 0 else f"{base}-{i}")
+        try:
+            d.mkdir()
+            return d
+        except FileExistsError:
+            i += 1
 
 
 # ------------------------------------------------------------------ summary.json
@@ -200,53 +628,140 @@ class SummaryReporter:
     best team to teams.jsonl (one JSON object per line)."""
 
     def __init__(self, run_dir: Path):
-        self.path = Path(run_dir) / SUMMARY_FILE
-        self.teams = Path(run_dir) / TEAMS_FILE
+        self.run_dir = Path(run_dir)
+        self.path = self.run_dir / SUMMARY_FILE
+        self.teams = self.run_dir / TEAMS_FILE
 
     def on_start(self, ev: Evolution) -> None:
-        pass
+        prepare_run_dir(self.run_dir)       # no leftover temporary files, no cut-off line
 
     def on_generation(self, ev: Evolution, metrics: dict) -> None:
         atomic_write_bytes(self.path, json.dumps(summary(ev, metrics), indent=2).encode())
-        with open(self.teams, "a") as f:
-            f.write(json.dumps(_clean(metrics["team"])) + "\n")
+        append_line(self.teams, json.dumps(_clean(metrics["team"])))
 
     def on_end(self, ev: Evolution) -> None:
         pass
 
 
 class CheckpointReporter:
-    """Writes checkpoint.pt every `every` generations and at the end."""
+    """Writes checkpoint.pt at the start of a new run (generation 0, so that a run stopped
+    before its first periodic checkpoint can still be resumed), every `every` generations and
+    at the end. `saved` is the generation of the checkpoint on disk (None: none yet)."""
 
     def __init__(self, run_dir: Path, every: int):
         self.run_dir, self.every = Path(run_dir), max(1, every)
+        self.saved: int | None = None
 
     def on_start(self, ev: Evolution) -> None:
-        pass
+        if (self.run_dir / CHECKPOINT_FILE).is_file():
+            self.saved = ev.state.generation        # resumed from it
+        else:
+            self._save(ev)
+
+    def _save(self, ev: Evolution) -> None:
+        save_checkpoint(self.run_dir, ev)
+        self.saved = ev.state.generation
 
     def on_generation(self, ev: Evolution, metrics: dict) -> None:
         if ev.state.generation % self.every == 0:
-            save_checkpoint(self.run_dir, ev)
+            self._save(ev)
 
     def on_end(self, ev: Evolution) -> None:
-        save_checkpoint(self.run_dir, ev)
+        self._save(ev)
+
+
+# ------------------------------------------------------------------ run files read back
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def check_designs(designs: Any, source: str) -> list[dict]:
+    """The "designs" of a summary.json or teams.jsonl record, every field checked (RunError
+    naming `source`, the design and the field)."""
+    if not isinstance(designs, list) or not designs:
+        raise RunError(f"{source}: designs: expected a non-empty list, got {designs!r:.60}")
+    for i, d in enumerate(designs):
+        w = f"{source}: designs[{i}]"
+        if not isinstance(d, dict):
+            raise RunError(f"{w}: expected a table, got {d!r:.60}")
+        for key, ok, what in (
+                ("count", lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0,
+                 "an integer >= 0"),
+                ("species", lambda v: isinstance(v, int) and not isinstance(v, bool),
+                 "an integer"),
+                ("effector", lambda v: v in ("suction", "pincher"), "suction or pincher"),
+                ("radius", lambda v: _is_number(v) and math.isfinite(v) and 0 < v <= 10,
+                 "a radius in (0, 10] m"),
+                ("chassis_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
+                ("battery_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
+                ("motor_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
+                ("torque_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+                ("battery_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+                ("dominance", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+                ("cost", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+                ("bt", lambda v: isinstance(v, list) and 0 < len(v) <= 4096 and all(
+                    isinstance(x, int) and not isinstance(x, bool) and 0 <= x < 256 for x in v),
+                 "a list of opcodes")):
+            if key not in d:
+                raise RunError(f"{w}: missing {key!r}")
+            if not ok(d[key]):
+                raise RunError(f"{w}.{key}: expected {what}, got {d[key]!r:.60}")
+    if sum(d["count"] for d in designs) < 1:
+        raise RunError(f"{source}: designs: the counts add up to no robot")
+    return designs
+
+
+#: summary.json keys and whether each must be a number (None allowed: a non-finite value).
+_SUMMARY_NUMBERS = ("best_fitness", "team_cost", "deliveries", "deliveries_individual",
+                    "deliveries_collab", "energy_used", "num_species", "best_generation")
+
+
+def read_summary(run_dir: Path, figures: bool = True) -> dict:
+    """summary.json of a run, checked: a table whose designs are well-formed and (`figures`)
+    whose figures are numbers (or null, where a value was not finite) and budget a number or
+    null. A replay needs only the designs (figures=False)."""
+    path = Path(run_dir) / SUMMARY_FILE
+    if not path.is_file():
+        raise RunError(f"{run_dir} has no {SUMMARY_FILE} (is it a run directory with a finished "
+                       "generation?)")
+    try:
+        s = json.loads(read_text(path))
+    except json.JSONDecodeError as e:
+        raise RunError(f"{path}: malformed JSON ({e})") from None
+    if not isinstance(s, dict):
+        raise RunError(f"{path}: expected a JSON object")
+    for key in _SUMMARY_NUMBERS if figures else ():
+        if key not in s:
+            raise RunError(f"{path}: missing {key!r}")
+        v = s[key]
+        if v is not None and not (_is_number(v) and math.isfinite(v)):
+            raise RunError(f"{path}: {key}: expected a number, got {v!r:.60}")
+    b = s.get("budget")
+    if b is not None and not (_is_number(b) and math.isfinite(b)):
+        raise RunError(f"{path}: budget: expected a number or null, got {b!r:.60}")
+    check_designs(s.get("designs"), str(path))
+    return s
 
 
 def generation_team(run_dir: Path, generation: int) -> dict:
-    """The best team of one generation, from teams.jsonl (the last record wins after a resume)."""
+    """The best team of one generation, from teams.jsonl (the last record wins after a resume;
+    a line that is not a JSON object, cut short by an interruption, is skipped); its designs are
+    checked (`check_designs`)."""
     path = Path(run_dir) / TEAMS_FILE
     if not path.is_file():
         raise RunError(f"{run_dir} has no {TEAMS_FILE}")
     found = None
-    for line in path.read_text().splitlines():
+    for line in read_text(path).splitlines():
         try:
             rec = json.loads(line)
         except json.JSONDecodeError:
             continue  # a line cut short by an interruption
-        if rec.get("generation") == generation:
+        if isinstance(rec, dict) and rec.get("generation") == generation \
+                and not isinstance(rec.get("generation"), bool):
             found = rec
     if found is None:
         raise RunError(f"{run_dir} has no record of generation {generation}")
+    check_designs(found.get("designs"), f"{path} (generation {generation})")
     return found
 
 
