@@ -73,6 +73,9 @@ def test_api_run_directory_is_the_clis(runs):
         return s
 
     assert summary(api_dir) == summary(cli_dir)
+    if (cli_dir / METRICS_FILE).is_file():          # once the CLI writes metrics.csv too
+        cli_rows, api_rows = (read_metrics_csv(d / METRICS_FILE)[0] for d in (cli_dir, api_dir))
+        assert [untimed(r) for r in cli_rows] == [untimed(r) for r in api_rows]
 
 
 def test_run_result_holds_history_species_and_best_team(runs):
