@@ -36,6 +36,8 @@ class _CallableModule(_types.ModuleType):
 
 _evolve_module.__class__ = _CallableModule
 _evolve_module.__signature__ = _inspect.signature(_evolve)
+_evolve_module.__doc__ = (f"{_evolve_module.__doc__ or ''}\n\nCalled, `swarmcode_torch.evolve(...)` "
+                          f"is `swarmcode_torch.api.evolve`: {_evolve.__doc__}")
 evolve = _evolve_module
 
 __all__ = ["evolve", "resume", "load", "RunResult", "EvolveConfig", "Evolution", "load_scenario",
