@@ -469,10 +469,14 @@ def template_tensor(name: str, length: int) -> torch.Tensor:
     return encode(TEMPLATES[name], length)
 
 
-def format_tree(opcodes: torch.Tensor | Sequence[int]) -> str:
-    """opcodes [L] -> an indented tree, one node per line, two spaces per level (NOP, END omitted)."""
+def format_tree(opcodes: torch.Tensor | Sequence[int], root: bool = False) -> str:
+    """opcodes [L] -> an indented tree, one node per line, two spaces per level (NOP, END omitted).
+
+    root: print the implicit root SEQ of the top-level nodes as the first line ("SEQ (root)")
+    and indent them under it, so that the program reads as one tree.
+    """
     program = opcodes.tolist() if isinstance(opcodes, torch.Tensor) else list(opcodes)
-    lines: list[str] = []
+    lines: list[str] = ["SEQ (root)"] if root else []
 
     def emit(nodes: list[Node], level: int) -> None:
         for node in nodes:
@@ -482,7 +486,7 @@ def format_tree(opcodes: torch.Tensor | Sequence[int]) -> str:
                 lines.append("  " * level + _node_name(node[0]))
                 emit(node[1], level + 1)
 
-    emit(parse(program), 0)
+    emit(parse(program), 1 if root else 0)
     return "\n".join(lines)
 
 

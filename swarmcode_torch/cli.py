@@ -541,7 +541,7 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory.")]) -
             labels, can = caps
             lifts = "; ".join(labels[j] for j in can[i]) or "no package class"
             console.print(f"  lifts: {lifts}", highlight=False, markup=False)
-        console.print(bt.format_tree(d["bt"]) or "  (empty tree)", highlight=False)
+        console.print(bt.format_tree(d["bt"], root=True), highlight=False)
     if caps is not None:
         from .dynamics import niche_count
         console.print(f"{niche_count(caps[1])} niches (distinct capabilities) in "

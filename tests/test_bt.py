@@ -327,6 +327,10 @@ def test_format_tree_rules() -> None:
     prog = [END, NOP, SEQ, SEL, END, COND_NEAR_BASE, END, END, SEL, ACT_PICK_UP, SEQ]
     assert format_tree(prog) == "SEQ\n  SEL\n  COND_NEAR_BASE\nSEL\n  ACT_PICK_UP\n  SEQ"
     assert format_tree([NOP, END]) == ""
+    # the implicit root: the top-level nodes are its children
+    assert format_tree(prog, root=True) == \
+        "SEQ (root)\n  SEQ\n    SEL\n    COND_NEAR_BASE\n  SEL\n    ACT_PICK_UP\n    SEQ"
+    assert format_tree([NOP], root=True) == "SEQ (root)"
 
 
 def test_encode() -> None:
