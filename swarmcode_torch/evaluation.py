@@ -4,6 +4,13 @@ Every individual gets a focal team (itself, one elite of each partner species, d
 clones) and a baseline team (its slots refilled from the partners), each run over the same
 `trials` random environments. All focal and baseline trials of a generation are one batch of
 E = 2 * B * trials environments through one tick loop.
+
+`evaluate` is three steps, so that the simulation can run elsewhere: `plan_evaluation` (the
+driver: partners, team assembly and environments, every random draw of the evaluation, from the
+run's generator), `simulate_batch` (a pure function of a `SimBatch` of whole evaluations: genome
+rows, teams, environments; the rollouts draw their in-episode randomness from each environment's
+seed, so any split of the batch gives the same metrics) and `score_plan` (fitness from the
+per-environment metrics, in the driver).
 """
 
 from __future__ import annotations
@@ -84,44 +91,138 @@ def simulate_teams(teams: Tensor, genome: Genome, tables: Tensor, layout_ids: Te
                    step_fn)
 
 
-def evaluate(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
-             fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
-             generator: torch.Generator, params: WorldParams | None = None,
-             step_fn: StepFn | None = None, tables: Tensor | None = None) -> EvalResult:
-    """Score every individual of the population by its marginal contribution to a team."""
+@dataclass(frozen=True, eq=False)
+class EvalPlan:
+    """What the driver draws for a batch of B evaluations: the teams (population rows) and the
+    environments. Trial t of evaluation i runs in `layouts` row i * trials + t, for the focal and
+    the baseline team alike."""
+
+    swarms: Swarms         # [B] focal and baseline teams
+    layouts: Layout        # [B * trials] environments
+    trials: int
+
+    @property
+    def size(self) -> int:
+        return int(self.swarms.focal_team.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class SimBatch:
+    """Whole evaluations to simulate, self-contained (what an evaluation shard receives): the
+    genome rows their teams use, the teams as rows of that genome, their environments."""
+
+    genome: Genome         # the rows the teams use
+    focal_team: Tensor     # [B, S] rows of `genome` (-1: an empty slot)
+    baseline_team: Tensor  # [B, S]
+    layouts: Layout        # [B * trials], as in EvalPlan
+    trials: int
+
+    def to(self, device: torch.device | str) -> "SimBatch":
+        return SimBatch(self.genome.to(device), self.focal_team.to(device),
+                        self.baseline_team.to(device),
+                        Layout(*(t.to(device) for t in self.layouts)), self.trials)
+
+
+def plan_evaluation(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
+                    fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
+                    generator: torch.Generator) -> EvalPlan:
+    """The driver's part of an evaluation, every random draw of it from the run's generator:
+    partners by tag and selectivity, team slots by dominance, and the environments."""
     P = genome.size
     dev = genome.bt.device
-    params = params or WorldParams.for_scenario(scenario)
     S, T = cfg.swarm_size, cfg.trials
-
-    # --- composition: partners by tag and selectivity, slots by dominance
     elites = elite_rows(fitness, has_fitness, species, proto_ids,
                         lambda n: elite_count(n, cfg.max_elite), cfg.evaluated_partners)
     partners = choose_partners(genome.tag, genome.selectivity, species, proto_ids,
                                genome.tag[proto_index], elites, generator)
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
     swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator)
-
-    # --- one batch: [focal teams x trials ; baseline teams x trials], sharing layouts
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)
-    teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
-    layout_ids = torch.arange(P * T, device=dev).repeat(2)
-    if tables is None:
-        tables = bt.build_tables(genome.bt)
-    t0 = _now(dev)
-    m = simulate_teams(teams, genome, tables, layout_ids, layouts, params, cfg.ticks, step_fn)
-    sim_seconds = _now(dev) - t0
+    return EvalPlan(swarms, layouts, T)
 
-    # --- scores
+
+def sim_batch(plan: EvalPlan, genome: Genome, lo: int = 0, hi: int | None = None) -> SimBatch:
+    """Evaluations lo..hi of a plan as a SimBatch: the genome rows their teams use and the teams
+    renumbered into them. The whole plan is the population and its teams as they are."""
+    P, T = plan.size, plan.trials
+    hi = P if hi is None else hi
+    focal, base = plan.swarms.focal_team[lo:hi], plan.swarms.baseline_team[lo:hi]
+    if lo == 0 and hi == P:
+        return SimBatch(genome, focal, base, plan.layouts, T)
+    teams = torch.cat([focal, base])
+    rows = torch.unique(teams[teams >= 0])                # sorted
+    local = [torch.where(t >= 0, torch.searchsorted(rows, t.clamp_min(0)), -1)
+             for t in (focal, base)]
+    envs = torch.arange(lo * T, hi * T, device=plan.layouts.seed.device)
+    return SimBatch(genome.index(rows), local[0], local[1], plan.layouts.index(envs), T)
+
+
+def simulate_batch(batch: SimBatch, params: WorldParams, ticks: int,
+                   step_fn: StepFn | None = None,
+                   tables: Tensor | None = None) -> tuple[dict, float]:
+    """Run a batch's focal and baseline teams over their trials in one rollout: per-environment
+    metrics [2 * B * trials] (every focal trial, then every baseline trial, evaluation-major)
+    and the rollout's wall time (device synchronised). `tables`: the behavior-tree tables of
+    the batch's genome (default: built here)."""
+    T, B = batch.trials, batch.focal_team.shape[0]
+    dev = batch.genome.bt.device
+    teams = torch.cat([batch.focal_team, batch.baseline_team]).repeat_interleave(T, 0)
+    layout_ids = torch.arange(B * T, device=dev).repeat(2)
+    if tables is None:
+        tables = bt.build_tables(batch.genome.bt)
+    t0 = _now(dev)
+    m = simulate_teams(teams, batch.genome, tables, layout_ids, batch.layouts, params, ticks,
+                       step_fn)
+    return m, _now(dev) - t0
+
+
+def gather_metrics(parts: list[dict]) -> dict:
+    """The per-environment metrics of consecutive batches of a plan (`simulate_batch` of
+    evaluations 0..a, a..b, ...) -> those of the whole plan, in the order `simulate_batch` of
+    the whole plan returns them."""
+    if len(parts) == 1:
+        return parts[0]
+    return {k: torch.cat([p[k].view(2, -1) for p in parts], 1).reshape(-1) for k in parts[0]}
+
+
+def score_plan(plan: EvalPlan, genome: Genome, m: dict, scenario: Scenario, cfg: EvalConfig,
+          sim_seconds: float = 0.0) -> EvalResult:
+    """Scores of a plan's evaluations from their per-environment metrics [2 * B * trials]:
+    team cost, F_raw times the budget penalty, the mean over trials, the marginal gate."""
+    P, T = plan.size, plan.trials
+    swarms = plan.swarms
+    teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
     robot_cost = genome_phenotype(genome).cost[teams.clamp_min(0)]
     counts = torch.cat([swarms.focal_species_count, swarms.baseline_species_count]).repeat_interleave(T)
     cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
-    score = team_scores(m, cost, cfg).view(2, P, T).mean(-1)
-    focal, base = score[0], score[1]
+    scores = team_scores(m, cost, cfg).view(2, P, T).mean(-1)
+    focal, base = scores[0], scores[1]
     team_m = {k: v.view(2, P, T)[0].mean(-1) for k, v in m.items()}
     return EvalResult(fitness=gate(focal, base, cfg.p_marginal), focal=focal, baseline=base,
                       team_cost=cost.view(2, P, T)[0, :, 0], swarms=swarms, team_metrics=team_m,
                       sim_seconds=sim_seconds)
+
+
+def evaluate(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
+             fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
+             generator: torch.Generator, params: WorldParams | None = None,
+             step_fn: StepFn | None = None, tables: Tensor | None = None,
+             evaluator=None) -> EvalResult:
+    """Score every individual of the population by its marginal contribution to a team:
+    `plan_evaluation` (teams and environments, drawn here), the simulation, `score`. The
+    simulation runs here (`simulate_batch` of the whole plan), or, given an `evaluator`, where
+    its `simulate(plan, genome)` runs it (`distributed.ShardedEvaluator`: shards of whole
+    evaluations on Ray actors), which returns the same per-environment metrics. `score_plan`
+    then scores them here."""
+    params = params or WorldParams.for_scenario(scenario)
+    plan = plan_evaluation(genome, species, proto_ids, proto_index, fitness, has_fitness,
+                           scenario, cfg, generator)
+    if evaluator is None:
+        m, sim_seconds = simulate_batch(sim_batch(plan, genome), params, cfg.ticks, step_fn,
+                                        tables)
+    else:
+        m, sim_seconds = evaluator.simulate(plan, genome)
+    return score_plan(plan, genome, m, scenario, cfg, sim_seconds)
 
 
 def _now(device: torch.device) -> float:

@@ -313,6 +313,10 @@ class Context:
     step_fn: Any
     compiled: bool = False
     weights: DistanceWeights = DistanceWeights()
+    evaluator: Any = None
+    """Where evaluations are simulated: None, in this process; else an object whose
+    `simulate(plan, genome)` returns their per-environment metrics (`evaluation.evaluate`;
+    `distributed.ShardedEvaluator` shards them over Ray actors)."""
 
     @property
     def tick_mode(self) -> str:
@@ -415,7 +419,8 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
     # 2. evaluation of every individual, all teams and trials in one batch
     t_eval = time.perf_counter()
     res = evaluate(genome, sp.species, sp.proto_ids, sp.proto_index, state.fitness,
-                   state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn)
+                   state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn,
+                   evaluator=ctx.evaluator)
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
 
