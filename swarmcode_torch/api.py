@@ -10,8 +10,9 @@
 `evolve` writes the same run directory as `swarmcode-torch evolve` (config.toml, summary.json,
 teams.jsonl, metrics.csv, checkpoint.pt, TensorBoard events), with the same reporters, so the
 same config gives the same results; `logdir=None` runs in memory and writes nothing. A
-scenario is a built-in name, a path to a scenario TOML file, or a `Scenario` object (saved as a
-TOML file in the run directory, so that the run can be resumed and replayed).
+scenario is a built-in name, a path to a scenario TOML file, or a `Scenario` object (kept as the
+run directory's scenario.toml, like every run's scenario, so that it can be resumed and
+replayed).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from typing import Any, Callable, Iterable
 
 from . import runs
 from .evolve import Evolution, EvolveConfig
-from .scenario import EFFECTORS, Scenario, load_scenario
+from .scenario import EFFECTORS, Scenario, parse_scenario, read_scenario
 
 _CONFIG_KEYS = tuple(f.name for f in fields(EvolveConfig))
 
@@ -67,25 +68,30 @@ def scenario_to_toml(s: Scenario) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _scenario_file_name(s: Scenario) -> str:
-    return (re.sub(r"[^A-Za-z0-9._-]+", "_", s.name).strip("._") or "scenario") + ".toml"
+def _scenario_stem(s: Scenario) -> str:
+    """The scenario's name as a file stem (a run directory is named after it)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", s.name).strip("._") or "scenario"
 
 
-def _scenario_evolution(cfg: EvolveConfig, s: Scenario) -> tuple[Evolution, str]:
-    """An Evolution of a Scenario object (built from a temporary TOML file, checked to load back
-    as the same scenario) and the file's text."""
-    text = scenario_to_toml(s)
+def _scenario_data(s: Scenario) -> bytes:
+    """The TOML of a Scenario object, checked to load back as the same scenario (parsing it
+    validates it: ScenarioError names the field)."""
+    data = scenario_to_toml(s).encode("utf-8")
+    if parse_scenario(data, f"scenario {s.name!r}") != s:
+        raise ValueError(f"scenario {s.name!r} does not survive a round trip through TOML")
+    return data
+
+
+def _object_evolution(cfg: EvolveConfig, s: Scenario, data: bytes) -> Evolution:
+    """An Evolution of a Scenario object: built from a temporary copy of its TOML, then named
+    by the scenario's name (nothing reloads the scenario during a run; a run directory keeps the
+    TOML as its scenario.toml, which resume, replay and inspect read)."""
     with tempfile.TemporaryDirectory(prefix="swarmcode-scenario-") as tmp:
-        path = Path(tmp) / _scenario_file_name(s)
-        path.write_text(text)
-        if load_scenario(str(path)) != s:   # validates it too: ScenarioError names the field
-            raise ValueError(f"scenario {s.name!r} does not survive a round trip through TOML")
-        return Evolution(replace(cfg, scenario=str(path))), text
-
-
-def _set_scenario_source(ev: Evolution, source: str) -> None:
-    """Point a run's config at where its scenario now lives (nothing reloads it in a run)."""
-    ev.cfg = ev.ctx.cfg = replace(ev.cfg, scenario=source)
+        path = Path(tmp) / f"{_scenario_stem(s)}.toml"
+        path.write_bytes(data)
+        ev = Evolution(replace(cfg, scenario=str(path)))
+    ev.cfg = ev.ctx.cfg = replace(ev.cfg, scenario=s.name)
+    return ev
 
 
 # ------------------------------------------------------------------ results
@@ -241,29 +247,37 @@ def evolve(config: EvolveConfig | None = None, *, scenario: str | os.PathLike | 
     if scenario is not None and scenario_obj is None:
         settings["scenario"] = scenario
     cfg = make_config(config, **settings)
-    run_dir = None
-    if scenario_obj is None:
-        ev = Evolution(cfg)                                # every error before a directory
-        if logdir is not None:
-            run_dir = runs.new_run_dir(Path(logdir), cfg)
-    else:
-        ev, text = _scenario_evolution(cfg, scenario_obj)
-        if logdir is None:
-            _set_scenario_source(ev, scenario_obj.name)
-        else:   # the run directory keeps the scenario's file: resume and replay read it
-            run_dir = runs.new_run_dir(Path(logdir), replace(
-                cfg, scenario=_scenario_file_name(scenario_obj)))  # named after the scenario
-            path = (run_dir / _scenario_file_name(scenario_obj)).resolve()
-            path.write_text(text)
-            _set_scenario_source(ev, str(path))
+    if scenario_obj is not None:
+        cfg = replace(cfg, scenario=scenario_obj.name)
+    ev, data = start_evolution(cfg, scenario_obj)
     history = _History(callback)
-    if run_dir is None:
+    if logdir is None:
         _execute(ev, None, [history, *reporters])
         return _result(ev, None, history.rows)
-    reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
-    runs.write_config(run_dir, ev.cfg)
-    _execute(ev, run_dir, [*reps, history, *reporters])
+    name = cfg if scenario_obj is None else replace(cfg, scenario=_scenario_stem(scenario_obj))
+    run_dir = runs.new_run_dir(Path(logdir), name)
+    with runs.RunLock(run_dir):
+        runs.write_run_files(run_dir, ev.cfg, data)
+        reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
+        _execute(ev, run_dir, [*reps, history, *reporters])
     return _result(ev, run_dir, history.rows)
+
+
+def start_evolution(cfg: EvolveConfig, scenario: Scenario | None = None) -> tuple[Evolution, bytes]:
+    """The checks `swarmcode-torch evolve` makes before it creates anything (the config, the
+    scenario, the memory the run needs), then the run's `Evolution` and the bytes of its
+    scenario file (a run directory keeps them as scenario.toml). `scenario`: a Scenario object
+    to run instead of `cfg.scenario`'s file. ValueError (ScenarioError is one) otherwise."""
+    cfg.validate()
+    if scenario is None:
+        scen, data = read_scenario(cfg.scenario)
+    else:
+        scen, data = scenario, _scenario_data(scenario)
+    runs.check_memory(cfg, scen)
+    ev = Evolution(cfg) if scenario is None else _object_evolution(cfg, scenario, data)
+    if ev.ctx.scenario != scen:
+        raise ValueError(f"{cfg.scenario} changed while the run was starting; start it again")
+    return ev, data
 
 
 def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
@@ -285,12 +299,18 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
     checkpoint that cannot be used."""
     _check_every(checkpoint_every, render_every, figure_every)
     run_dir = Path(run_dir)
-    ev = runs.resume(run_dir, generations=generations, device=device)
-    reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
-    earlier = _earlier_rows(run_dir, ev.state.generation)
-    runs.write_config(run_dir, ev.cfg)
-    history = _History(callback)
-    _execute(ev, run_dir, [*reps, history, *reporters])
+    if not run_dir.is_dir():
+        raise runs.RunError(f"{run_dir} is not a run directory (no such directory)")
+    with runs.RunLock(run_dir):
+        loaded = runs.load_run(run_dir)
+        ev = runs.resume(run_dir, generations=generations, device=device, loaded=loaded)
+        earlier = _earlier_rows(run_dir, ev.state.generation)
+        if ev.done:                         # nothing to run: no file changes (as the CLI)
+            return _result(ev, run_dir, earlier)
+        runs.write_config(run_dir, ev.cfg)
+        history = _History(callback)
+        reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
+        _execute(ev, run_dir, [*reps, history, *reporters])
     return _result(ev, run_dir, earlier + history.rows)
 
 
@@ -299,12 +319,7 @@ def load(run_dir: str | os.PathLike) -> RunResult:
     metrics.csv as the history (empty for a run written before metrics.csv existed), species
     composition and best team from the checkpoint. `evolution` is None."""
     run_dir = Path(run_dir)
-    cfg = runs.read_config(run_dir)
-    ck = runs.load_checkpoint(run_dir)
-    try:
-        scenario = load_scenario(cfg.scenario)
-    except ValueError:
-        scenario = None
+    cfg, ck, scenario = runs.load_run(run_dir)
     best = ck["best"]
     return RunResult(config=cfg, run_dir=run_dir, history=_earlier_rows(run_dir, math.inf),
                      species=list(ck["history"]), best_team=dict(best) if best else None,

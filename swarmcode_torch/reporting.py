@@ -168,8 +168,8 @@ class TensorBoardReporter:
 
 class CsvReporter:
     """Appends every generation's scalars (`scalar_metrics`) to metrics.csv in the run directory:
-    one row per generation, the header (`generation` and the tags) once; flushed every
-    generation. On a resume, rows of generations the run repeats (those after its checkpoint)
+    one row per generation, the header (`generation` and the tags) once; each row is written
+    (unbuffered) when its generation ends. On a resume, rows of generations the run repeats (those after its checkpoint)
     are dropped first, so the file keeps one row per generation; a header that lacks some of
     the tags gets them (earlier rows leave them empty)."""
 
@@ -202,11 +202,12 @@ class CsvReporter:
             old, _ = read_metrics_csv(self.path, raw=True) if self.path.is_file() else ([], [])
             self._rewrite((self.columns or []) + [k for k in row if k not in (self.columns or [])],
                           old)
-        with open(self.path, "a", newline="") as f:
-            csv.DictWriter(f, fieldnames=self.columns, restval="",
-                           lineterminator="\n").writerow(
-                {k: ("" if v is None else v) for k, v in row.items()})
-            f.flush()
+        from .runs import append_line
+
+        buf = io.StringIO()
+        csv.DictWriter(buf, fieldnames=self.columns, restval="", lineterminator="").writerow(
+            {k: ("" if v is None else v) for k, v in row.items()})
+        append_line(self.path, buf.getvalue())      # one os.write: on disk when it returns
 
     def on_end(self, ev: Evolution) -> None:
         pass
