@@ -57,13 +57,21 @@ console = Console(width=None if sys.stdout.isatty() else 120)
 err = Console(stderr=True, width=None if sys.stderr.isatty() else 200)
 
 
+class _Failed(typer.Exit):
+    """The exit (code 2) of `fail`; `message` is its line (a sweep's Ray task reports it)."""
+
+    def __init__(self, message: str):
+        super().__init__(code=2)
+        self.message = message
+
+
 def fail(msg: str) -> None:
     """Print a one-line error and exit non-zero. The message is printed as it is: brackets such
     as [low, high] or [[packages]] are not read as Rich markup; a newline inside it becomes a
     space, so the error stays on one line."""
     msg = " ".join(str(msg).split())
     err.print(f"[bold red]Error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
-    raise typer.Exit(code=2)
+    raise _Failed(msg)
 
 
 def _os_fail(e: OSError, doing: str) -> None:
@@ -147,30 +155,89 @@ def evolve(
     render_every: Annotated[int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")] = 50,
     resume: Annotated[Optional[Path], typer.Option(help="Continue the run in this directory.")] = None,
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key, e.g. --set p_tag_flip=0.0625 (repeatable; keys as in the run's config.toml).")] = None,
+    eval_workers: Annotated[int, typer.Option(help="Evaluate each generation in this many shards on Ray actors, one GPU each on CUDA, else CPUs (needs Ray; same results as 1).")] = 1,
+    cpus_per_eval_worker: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1].")] = None,
+    ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one].")] = None,
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
+    shards = _eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
     with ExitStack() as stack:
+        attach = None if shards is None else (lambda ev: _attach_shards(stack, ev, *shards))
         ev, run_dir, saved = _start_evolve(
             stack, scenario=scenario, budget=budget, objective=objective,
             generations=generations, population=population, swarm_size=swarm_size,
             trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
             logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
-            render_every=render_every, resume=resume, settings=settings)
+            render_every=render_every, resume=resume, settings=settings, attach=attach)
         if ev is None:
             return
         _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved)
+        if shards is not None:
+            _print_shard_traffic(ev.ctx.evaluator)
     console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
     _print_team(run_dir)
     console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir "
                   f"{run_dir.parent}", markup=False, highlight=False)
 
 
+def _eval_shards_option(eval_workers: int, cpus: float | None, address: str | None):
+    """(workers, CPUs per worker, address) of a sharded evaluation, or None for the evaluation
+    in this process; a one-line error for bad values or Ray options without Ray."""
+    if eval_workers < 1:
+        fail(f"--eval-workers must be >= 1, got {eval_workers}")
+    if eval_workers == 1 and address is None:
+        if cpus is not None:
+            fail("--cpus-per-eval-worker is for evaluation shards on Ray: use it with "
+                 "--eval-workers N > 1 or --ray-address")
+        return None
+    if cpus is not None and not (cpus > 0 and math.isfinite(cpus)):
+        fail(f"--cpus-per-eval-worker must be a finite number > 0, got {cpus}")
+    _need_ray(f"--eval-workers {eval_workers}" if eval_workers > 1 else "--ray-address")
+    return eval_workers, 1.0 if cpus is None else cpus, address
+
+
+def _need_ray(what: str) -> None:
+    """A one-line error naming the extra to install when Ray is missing."""
+    from .distributed import RayUnavailable, require_ray
+
+    try:
+        require_ray(what)
+    except RayUnavailable as e:
+        fail(str(e))
+
+
+def _attach_shards(stack: ExitStack, ev, workers: int, cpus: float, address: str | None) -> None:
+    """Evaluate `ev`'s generations in shards on Ray actors until `stack` closes."""
+    from .distributed import RayUnavailable, sharded_evaluation
+
+    try:
+        evaluator = stack.enter_context(sharded_evaluation(ev, workers, address, cpus))
+    except RayUnavailable as e:
+        fail(str(e))
+    where = sorted(set(evaluator.where))
+    console.print(f"Evaluation: {workers} shards on Ray actors ({escape('; '.join(where))})",
+                  highlight=False)
+
+
+def _print_shard_traffic(evaluator) -> None:
+    stats = getattr(evaluator, "stats", None)
+    if not stats:
+        return
+    n = len(stats)
+    sent = sum(s["bytes_sent"] for s in stats) / n
+    back = sum(s["bytes_received"] for s in stats) / n
+    console.print(f"Evaluation shards: {sent / 1024:.1f} KiB sent and {back / 1024:.1f} KiB "
+                  f"received per generation (pickled, mean of {n} generations)",
+                  highlight=False, markup=False)
+
+
 def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
                   swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
-                  log_every, render_every, resume, settings):
+                  log_every, render_every, resume, settings, attach=None):
     """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
-    The run directory's lock is held until `stack` closes."""
+    The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
+    once the Evolution exists and before any file is written (evaluation shards)."""
     from .evolve import Evolution, EvolveConfig, parse_settings, with_overrides
     from .runs import (RunError, RunLock, check_memory, load_run, new_run_dir, write_config,
                        write_run_files)
@@ -205,6 +272,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
                               soft_wrap=True)
                 return None, run_dir, None
             ev = resume_run(run_dir, generations=generations, device=device, loaded=loaded)
+            if attach is not None:
+                attach(ev)
             write_config(run_dir, ev.cfg)
             console.print(f"Resuming [bold]{escape(str(run_dir))}[/] at generation "
                           f"{ev.state.generation} of {ev.cfg.generations}")
@@ -220,6 +289,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
         ev = Evolution(cfg)
         if ev.ctx.scenario != scen:
             fail(f"{cfg.scenario} changed while the run was starting; start it again")
+        if attach is not None:
+            attach(ev)
         try:
             run_dir = new_run_dir(logdir, cfg)
         except OSError as e:
@@ -246,6 +317,7 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     and how to continue (exit 2); the checkpoint on disk is the last complete one. `saved` is the
     generation of the checkpoint the run resumed from; `again` is the command to continue with
     (default: swarmcode-torch evolve --resume RUN_DIR)."""
+    from .distributed import ShardError
     from .runs import CheckpointReporter, SummaryReporter, os_error_text, run
 
     again = again or f"swarmcode-torch evolve --resume {run_dir}"
@@ -277,6 +349,12 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
                  "the run again")
         fail(f"{what}; the last checkpoint is of generation {checkpoints.saved} "
              f"({run_dir / 'checkpoint.pt'}); free space or fix the cause, then continue with: "
+             f"{again}")
+    except ShardError as e:
+        progress.stop()
+        _close_writers(reporters)
+        fail(f"{e} after {ev.state.generation} generations; the last checkpoint is of "
+             f"generation {checkpoints.saved} ({run_dir / 'checkpoint.pt'}); continue with: "
              f"{again}")
     progress.stop()
 
@@ -363,6 +441,10 @@ def sweep(
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines off a terminal.")] = 50,
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key of every run (repeatable), as in evolve.")] = None,
+    workers: Annotated[int, typer.Option(help="Runs at once; > 1 runs them as Ray tasks (needs Ray).")] = 1,
+    cpus_per_run: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) each run reserves [default: 1].")] = None,
+    gpus_per_run: Annotated[Optional[float], typer.Option(help="Ray: GPUs each run reserves; 0.25 packs four runs on a GPU [default: 0].")] = None,
+    ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT [default: start a local one]; the runs go to Ray.")] = None,
 ) -> None:
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
     import time
@@ -376,6 +458,7 @@ def sweep(
     seed_list = _parse_list(seeds, int, "--seeds")
     if checkpoint_every < 1 or log_every < 1:
         fail("--checkpoint-every and --log-every must be >= 1")
+    on_ray = _sweep_ray_options(workers, cpus_per_run, gpus_per_run, ray_address, device)
     out = out or Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     names = {"seed": "--seeds", "budget": "--budgets"}
     try:
@@ -407,10 +490,17 @@ def sweep(
         plans = [_plan_sweep_run(out, with_overrides(base, budget=b, seed=sd), scen, data)
                  for b in budget_list for sd in seed_list]      # every refusal before any run
         again = f"swarmcode-torch sweep with the same options and --out {out}"
-        for b, sd, run_dir, cfg, state in plans:
-            if state != "done":
-                _run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
-            runs.append((b, sd, run_dir))
+        failed: list[tuple[str, str]] = []
+        if on_ray is None:
+            for b, sd, run_dir, cfg, state in plans:
+                if state != "done":
+                    _run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
+                runs.append((b, sd, run_dir))
+        else:
+            runs, failed = _sweep_on_ray(plans, data, checkpoint_every, log_every, again, *on_ray)
+            if not runs:
+                fail(f"every run of the sweep failed ({failed[0][0]}: {failed[0][1]}); fix the "
+                     f"cause, then run it again: {again}")
         try:
             for _, _, run_dir in runs:
                 read_summary(run_dir)                  # every figure of the table is checked
@@ -422,6 +512,99 @@ def sweep(
             _os_fail(e, f"--out {out}: cannot write the table")
     console.print((out / "table.md").read_text(), highlight=False, markup=False)
     console.print("Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False)
+    if failed:
+        names = ", ".join(name for name, _ in failed)
+        fail(f"{len(failed)} of {len(plans)} runs failed ({names}); the table has the "
+             f"{len(runs)} that finished; fix the cause, then resume them: {again}")
+
+
+def _sweep_ray_options(workers: int, cpus: float | None, gpus: float | None,
+                       address: str | None, device: str | None):
+    """(workers, CPUs per run, GPUs per run, address) of a sweep on Ray, or None for the runs
+    one after the other in this process; a one-line error for bad values or Ray options without
+    Ray."""
+    if workers < 1:
+        fail(f"--workers must be >= 1, got {workers}")
+    if workers == 1 and address is None:
+        if cpus is not None or gpus is not None:
+            fail("--cpus-per-run and --gpus-per-run are for runs on Ray: use them with "
+                 "--workers N > 1 or --ray-address")
+        return None
+    for name, v in (("--cpus-per-run", cpus), ("--gpus-per-run", gpus)):
+        if v is not None and not (v >= 0 and math.isfinite(v)):
+            fail(f"{name} must be a finite number >= 0, got {v}")
+    cpus = 1.0 if cpus is None else cpus
+    gpus = 0.0 if gpus is None else gpus
+    if gpus > 1 and gpus != int(gpus):
+        fail(f"--gpus-per-run above 1 must be a whole number of GPUs, got {gpus:g}")
+    if device is not None and device.startswith("cuda") and gpus == 0:
+        fail(f"--device {device} on Ray needs --gpus-per-run > 0 (each run reserves its share "
+             "of a GPU; Ray hides the GPUs from a run that reserves none)")
+    _need_ray(f"--workers {workers}" if workers > 1 else "--ray-address")
+    return workers, cpus, gpus, address
+
+
+def _sweep_on_ray(plans, data: bytes, checkpoint_every: int, log_every: int, again: str,
+                  workers: int, cpus: float, gpus: float, address: str | None):
+    """Run the unfinished runs of a sweep as Ray tasks (`_sweep_task`, up to `workers` at once),
+    a line as each ends; ([(budget, seed, run directory)] of the finished runs, in the sweep's
+    order, [(run name, error)] of the failed ones)."""
+    from .distributed import RayUnavailable, check_resources, ray_session, run_tasks
+
+    todo = [p for p in plans if p[4] != "done"]
+    # absolute paths: a worker's working directory may not be this one
+    jobs = [(run_dir.resolve(), cfg, data, state, checkpoint_every, log_every, again)
+            for _, _, run_dir, cfg, state in todo]
+    what = f"--workers {workers}" if workers > 1 else "--ray-address"
+
+    def on_finish(i: int, error: str | None, n: dict) -> None:
+        name = todo[i][2].name
+        counts = (f"{n['done']} done, {n['running']} running, {n['failed']} failed of "
+                  f"{n['total']}")
+        if error is None:
+            console.print(f"{name}: finished ({counts})", markup=False, highlight=False)
+        else:
+            console.print(f"{name}: failed: {error} ({counts})", markup=False, highlight=False,
+                          soft_wrap=True)
+
+    errors: list = []
+    terminated: list = []
+    if jobs:
+        try:
+            with ray_session(address, what) as ray, _terminate_as_interrupt() as terminated:
+                check_resources(ray, {"CPU": cpus, "GPU": gpus}, f"a run with --cpus-per-run "
+                                f"{cpus:g} and --gpus-per-run {gpus:g}")
+                console.print(f"Ray: {len(jobs)} runs, up to {workers} at once ({cpus:g} CPU, "
+                              f"{gpus:g} GPU each)", markup=False, highlight=False)
+                errors = run_tasks(_sweep_task, jobs, workers=workers, num_cpus=cpus,
+                                   num_gpus=gpus, on_finish=on_finish)
+        except RayUnavailable as e:
+            fail(str(e))
+        except KeyboardInterrupt:
+            how = "Terminated" if terminated else "Interrupted"
+            err.print(f"{how}: the running runs were stopped after writing their checkpoints; "
+                      f"continue with: {again}", markup=False, highlight=False)
+            raise typer.Exit(code=143 if terminated else 130)
+    failed_at = {id(p): e for p, e in zip(todo, errors) if e is not None}
+    finished = [p[:3] for p in plans if id(p) not in failed_at]
+    failed = [(p[2].name, failed_at[id(p)]) for p in plans if id(p) in failed_at]
+    return finished, failed
+
+
+def _sweep_task(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int,
+                log_every: int, again: str) -> str | None:
+    """One run of a sweep as a Ray task (`distributed.run_tasks`): `_run_sweep_run`, as the
+    sweep runs it in this process. None when the run finished; else its error in one line (a
+    failed start or write; a stop by Ctrl-C or SIGTERM, after its checkpoint was written)."""
+    try:
+        _run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
+    except _Failed as e:
+        return e.message
+    except typer.Exit as e:
+        return f"stopped (exit {e.exit_code}) after writing its checkpoint"
+    except Exception as e:  # noqa: BLE001 - the run's error; the sweep's other runs go on
+        return " ".join(f"{type(e).__name__}: {e}".split())
+    return None
 
 
 #: Config keys that say how a run runs, not what it computes: a sweep run again with other
