@@ -16,7 +16,8 @@ from rich import box
 from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperGroup
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                           TimeRemainingColumn)
 from rich.table import Table
 
 from . import bt
@@ -50,7 +51,7 @@ class _OneLineErrors(TyperGroup):
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, cls=_OneLineErrors,
+app = typer.Typer(add_completion=False, no_args_is_help=True, cls=_OneLineErrors, rich_markup_mode=None,
                   help="SwarmCoDe: co-design the behavior trees and hardware of robot swarms.")
 # off a terminal (logs, pipes) Rich would wrap at 80 columns; tables need a little more
 console = Console(width=None if sys.stdout.isatty() else 120)
@@ -63,6 +64,20 @@ class _Failed(typer.Exit):
     def __init__(self, message: str):
         super().__init__(code=2)
         self.message = message
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from . import __version__
+        console.print(f"swarmcode-torch {__version__}", highlight=False)
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(version: Annotated[Optional[bool], typer.Option(
+        "--version", callback=_print_version, is_eager=True,
+        help="Print the version and exit.")] = None) -> None:
+    """SwarmCoDe: co-design the behavior trees and hardware of robot swarms."""
 
 
 def fail(msg: str) -> None:
@@ -109,9 +124,9 @@ class _Progress:
         self.every = every
         self.bar = None
         if self.tty:
-            self.bar = Progress(TextColumn("gen"), MofNCompleteColumn(), BarColumn(),
+            self.bar = Progress(TextColumn("done"), MofNCompleteColumn(), BarColumn(),
                                 TextColumn("{task.description}"), TimeElapsedColumn(),
-                                console=console)
+                                TextColumn("left"), TimeRemainingColumn(), console=console)
             self.task = self.bar.add_task("", total=total, completed=start)
 
     def on_start(self, ev) -> None:
@@ -119,13 +134,16 @@ class _Progress:
             self.bar.start()
 
     def on_generation(self, ev, m: dict) -> None:
-        text = (f"best {m['fitness/best']:.1f}  species {m['species/count']}  "
-                f"team {m['team/species']} sp ${m['team/cost']:.0f}  "
-                f"{m['perf/generation_seconds']:.2f}s/gen")
+        # generations are numbered from 0 (summary.json, teams.jsonl, TensorBoard steps); the
+        # count "done" is how many have finished: generation g is the (g + 1)-th
+        text = (f"generation {m['generation']}  best team {m['best']['fitness']:.1f} "
+                f"(this generation {m['team/fitness']:.1f})  species {m['species/count']}  "
+                f"team {m['team/species']} sp, {m['team/niches']} niches, "
+                f"${m['team/cost']:.0f}  {m['perf/generation_seconds']:.2f}s/gen")
         if self.bar:
             self.bar.update(self.task, completed=ev.state.generation, description=text)
-        elif ev.state.generation % self.every == 0 or ev.done:
-            print(f"gen {ev.state.generation}/{ev.cfg.generations}  {text}", flush=True)
+        elif m["generation"] % self.every == 0 or ev.done:
+            print(f"done {ev.state.generation}/{ev.cfg.generations}  {text}", flush=True)
 
     def on_end(self, ev) -> None:
         self.stop()
@@ -328,9 +346,10 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     terminated: list[int] = []
     try:
         with _quiet_thread_os_errors():
-            from .reporting import TensorBoardReporter
+            from .reporting import CsvReporter, TensorBoardReporter
 
-            reporters += [TensorBoardReporter(run_dir, render_every=render_every), checkpoints]
+            reporters += [CsvReporter(run_dir),
+                          TensorBoardReporter(run_dir, render_every=render_every), checkpoints]
             with _terminate_as_interrupt() as terminated:
                 run(ev, run_dir, reporters)
     except KeyboardInterrupt:

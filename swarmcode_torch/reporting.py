@@ -134,9 +134,9 @@ class TensorBoardReporter:
             self.writer.add_scalar(tag, float(v) if v is not None else math.nan, step)
         for tag in ("hist/radius", "hist/dominance", "hist/selectivity"):
             self.writer.add_histogram(tag, metrics[tag], step)
-        if ev.state.generation % self.figure_every == 0:
+        if step % self.figure_every == 0:
             self._figure(ev, step)
-        if self.render_every and ev.state.generation % self.render_every == 0:
+        if self.render_every and step % self.render_every == 0:
             img = replay_strip(ev, metrics["team"]["designs"], seed=step)
             self.writer.add_image("team/replay", img, step, dataformats="HWC")
         self.writer.flush()

@@ -50,7 +50,8 @@ def test_evolve_writes_a_complete_run_directory(tmp_path):
     summary = json.loads((run / "summary.json").read_text())
     assert (summary["generation"], summary["generations"]) == (1, 2)
     assert (summary["device"], summary["tick"]) == ("cpu", "eager")
-    assert "gen 2/2" in r.output  # plain progress lines off a terminal
+    assert "done 2/2" in r.output and "generation 1 " in r.output  # plain lines off a terminal
+    assert "done 1/2" in r.output                   # the first generation is reported at once
     r = invoke("inspect", run)
     assert r.exit_code == 0, r.output
     assert "Robots per design" in r.output and "species" in r.output
@@ -78,7 +79,7 @@ def test_resume_extends_a_finished_run(tmp_path):
     run = only_run(tmp_path)
     r = invoke("evolve", "--resume", run, "--generations", 3)
     assert r.exit_code == 0, r.output
-    assert "Resuming" in r.output and "gen 3/3" in r.output
+    assert "Resuming" in r.output and "done 3/3" in r.output
     d = torch.load(run / "checkpoint.pt", weights_only=True)
     assert d["generation"] == 3
     assert "generations = 3" in (run / "config.toml").read_text()
