@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 from pathlib import Path
 
@@ -38,6 +39,8 @@ def run_row(run: Path, last: int, founding_from: int) -> dict:
 
 
 def mean_std(values: list[float], fmt: str) -> str:
+    """Mean ± sample std of the values that are numbers (a window with no data gives NaN)."""
+    values = [v for v in values if v is not None and not math.isnan(v)]
     if len(values) < 2:
         return fmt.format(values[0]) if values else "-"
     return f"{fmt.format(statistics.mean(values))} ± {fmt.format(statistics.stdev(values))}"
@@ -45,7 +48,8 @@ def mean_std(values: list[float], fmt: str) -> str:
 
 def cell(values: list[float], fmt: str) -> str:
     """'mean ± std (v1, v2, v3)'."""
-    return mean_std(values, fmt) + " (" + ", ".join(fmt.format(v) for v in values) + ")"
+    return mean_std(values, fmt) + " (" + ", ".join(
+        "-" if v is None or math.isnan(v) else fmt.format(v) for v in values) + ")"
 
 
 def main() -> None:
