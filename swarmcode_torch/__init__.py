@@ -13,7 +13,7 @@ heterogeneous robot swarms.
 algorithm, not matplotlib, TensorBoard or the CLI's libraries: they load when first used.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 import inspect as _inspect
 import types as _types
