@@ -3,14 +3,13 @@ generations (`swarmcode-torch dynamics RUN_DIR`), and the capability of each tea
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Sequence
 
 from .dynamics import median, niche_count, replay, window_stats
 from .hardware import genome_phenotype
-from .runs import TEAMS_FILE, RunError, load_checkpoint, read_config
-from .scenario import Scenario, load_scenario
+from .runs import RunError, load_checkpoint, read_config, read_teams, run_scenario
+from .scenario import Scenario
 from .world import WorldParams, capabilities
 
 
@@ -27,20 +26,15 @@ def design_capabilities(designs: Sequence[dict], scenario: Scenario) -> list[lis
 
 
 def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:
-    """generation -> {"niches", "score"} of its best team, from teams.jsonl (the last record of
-    a generation wins; a line cut short by an interruption is skipped)."""
-    path = Path(run_dir) / TEAMS_FILE
+    """generation -> {"niches", "score"} of its best team, from teams.jsonl (`runs.read_teams`;
+    a record without the fields it needs is skipped)."""
     out: dict[int, dict] = {}
-    if not path.is_file():
-        return out
-    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+    for g, rec in read_teams(run_dir).items():
         try:
-            rec = json.loads(line)
-            g = int(rec["generation"])
             niches = int(rec["niches"]) if "niches" in rec else \
                 niche_count(design_capabilities(rec["designs"], scenario))
             out[g] = {"niches": niches, "score": float(rec["fitness"])}
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+        except (KeyError, TypeError, ValueError):
             continue
     return out
 
@@ -62,7 +56,7 @@ def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None
     if not history:
         raise RunError(f"{run_dir} has no finished generation")
     try:
-        scenario = load_scenario(cfg.scenario)
+        scenario = run_scenario(run_dir, cfg)      # the run's own copy where it kept one
     except ValueError as e:
         raise RunError(f"{run_dir}: its scenario cannot be loaded ({e})") from None
     turnover, rows = replay(history)

@@ -743,22 +743,32 @@ def read_summary(run_dir: Path, figures: bool = True) -> dict:
     return s
 
 
-def generation_team(run_dir: Path, generation: int) -> dict:
-    """The best team of one generation, from teams.jsonl (the last record wins after a resume;
-    a line that is not a JSON object, cut short by an interruption, is skipped); its designs are
-    checked (`check_designs`)."""
+def read_teams(run_dir: Path) -> dict[int, dict]:
+    """generation -> its best-team record, from teams.jsonl (the last record of a generation
+    wins after a resume; a line that is not a JSON object, cut short by an interruption, is
+    skipped); {} when the run has no teams.jsonl."""
     path = Path(run_dir) / TEAMS_FILE
+    out: dict[int, dict] = {}
     if not path.is_file():
-        raise RunError(f"{run_dir} has no {TEAMS_FILE}")
-    found = None
+        return out
     for line in read_text(path).splitlines():
         try:
             rec = json.loads(line)
         except json.JSONDecodeError:
             continue  # a line cut short by an interruption
-        if isinstance(rec, dict) and rec.get("generation") == generation \
-                and not isinstance(rec.get("generation"), bool):
-            found = rec
+        g = rec.get("generation") if isinstance(rec, dict) else None
+        if isinstance(g, int) and not isinstance(g, bool):
+            out[g] = rec
+    return out
+
+
+def generation_team(run_dir: Path, generation: int) -> dict:
+    """The best team of one generation, from teams.jsonl (`read_teams`); its designs are
+    checked (`check_designs`)."""
+    path = Path(run_dir) / TEAMS_FILE
+    if not path.is_file():
+        raise RunError(f"{run_dir} has no {TEAMS_FILE}")
+    found = read_teams(run_dir).get(generation)
     if found is None:
         raise RunError(f"{run_dir} has no record of generation {generation}")
     check_designs(found.get("designs"), f"{path} (generation {generation})")
