@@ -18,7 +18,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import RESULTS_DIR, now, run_metadata, write_json  # noqa: E402
-from swarmcode_torch import bt  # noqa: E402
+from swarmcode_torch.sim import bt  # noqa: E402
 
 
 def timed(fn: Callable[[], object], device: torch.device, repeats: int, warmup: int = 2) -> list[float]:

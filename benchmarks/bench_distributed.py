@@ -36,9 +36,10 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import int_list, median, now, parse_configs, run_metadata, write_json  # noqa: E402
-from swarmcode_torch import evaluation, evolve  # noqa: E402
-from swarmcode_torch.distributed import ShardedEvaluator  # noqa: E402
-from swarmcode_torch.evolve import Evolution, EvolveConfig  # noqa: E402
+from swarmcode_torch.coevo import evaluation, evolve  # noqa: E402
+from swarmcode_torch.app.distributed import ShardedEvaluator  # noqa: E402
+from swarmcode_torch.coevo.evolve import Evolution  # noqa: E402
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
 
 
 # ------------------------------------------------------------------ 1. sweeps
@@ -110,7 +111,7 @@ def _same_state(a, b) -> bool:
 
 
 def bench_generations(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
-    cfg = EvolveConfig(scenario=name, swarm_size=swarm, population=pop, trials=args.trials,
+    cfg = SwarmCoDeConfig(scenario=name, swarm_size=swarm, population=pop, trials=args.trials,
                        ticks=args.ticks, generations=10_000, device=str(device),
                        compile=args.compile, seed=0, budget=args.budget)
     ev = Evolution(cfg)

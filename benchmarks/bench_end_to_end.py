@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def run_one(name: str, swarm: int, pop: int, args) -> dict:
     with tempfile.TemporaryDirectory() as logdir:
-        cmd = [sys.executable, "-m", "swarmcode_torch.cli", "evolve", "--scenario", name,
+        cmd = [sys.executable, "-m", "swarmcode_torch.app.cli", "evolve", "--scenario", name,
                "--swarm-size", str(swarm), "--population", str(pop),
                "--generations", str(args.generations), "--seed", str(args.seed),
                "--device", args.device, "--logdir", logdir, "--render-every", "0",

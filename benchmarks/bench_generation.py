@@ -19,13 +19,14 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import median, now, parse_configs, run_metadata, write_json  # noqa: E402
-from swarmcode_torch.evolve import Evolution, EvolveConfig  # noqa: E402
+from swarmcode_torch.coevo.evolve import Evolution  # noqa: E402
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
 
 DEFAULT_CONFIGS = "four-niche:20:50,budget:20:100,swarm200:200:50,swarm1000:1000:50"
 
 
 def bench(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
-    cfg = EvolveConfig(scenario=name, swarm_size=swarm, population=pop, trials=args.trials,
+    cfg = SwarmCoDeConfig(scenario=name, swarm_size=swarm, population=pop, trials=args.trials,
                        ticks=args.ticks, generations=args.warmup + args.generations,
                        device=str(device), compile=args.compile, seed=0,
                        cuda_graphs=args.cuda_graphs)

@@ -28,13 +28,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import (RESULTS_DIR, add_run_options, apply_run_options, int_list,  # noqa: E402
                     load_average, median, now, run_metadata, write_json)
-from swarmcode_torch import bt  # noqa: E402
-from swarmcode_torch.genome import R_MAX, R_MIN  # noqa: E402
-from swarmcode_torch.hardware import phenotype  # noqa: E402
-from swarmcode_torch.layout import make_layouts  # noqa: E402
-from swarmcode_torch.scenario import Scenario, builtin_names, load_scenario  # noqa: E402
-from swarmcode_torch.world import (CudaGraphTicks, Robots, WorldParams, compatible,  # noqa: E402
-                                  random_keys, reset, step)
+from swarmcode_torch.sim import bt  # noqa: E402
+from swarmcode_torch.coevo.population import R_MAX, R_MIN  # noqa: E402
+from swarmcode_torch.sim.hardware import phenotype  # noqa: E402
+from swarmcode_torch.sim.layout import make_layouts  # noqa: E402
+from swarmcode_torch.sim.scenario import Scenario, builtin_names, load_scenario  # noqa: E402
+from swarmcode_torch.sim.world import (CudaGraphTicks, Robots, WorldParams, compatible,
+                                       random_keys, reset, step)
 
 PROGRAM_LENGTH = 32
 

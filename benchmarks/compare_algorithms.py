@@ -27,9 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import RESULTS_DIR, int_list, run_metadata, write_json  # noqa: E402
-from swarmcode_torch.baselines import (ALGORITHMS, HELD_OUT_SEED, compare,  # noqa: E402
-                                       plan_generations, summarize)
-from swarmcode_torch.evolve import resolve_device  # noqa: E402
+from swarmcode_torch.baselines import (ALGORITHMS, HELD_OUT_SEED, compare, plan_generations,
+                                       summarize)
+from swarmcode_torch.coevo.evolve import resolve_device  # noqa: E402
 
 LABELS = {
     "swarmcode": "SwarmCoDe",

@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_sim import Workload, scenario_for  # noqa: E402
 from common import RESULTS_DIR, now, run_metadata, write_json  # noqa: E402
-from swarmcode_torch.world import CudaGraphTicks, step  # noqa: E402
+from swarmcode_torch.sim.world import CudaGraphTicks, step  # noqa: E402
 
 
 def _device_us(evt) -> float:

@@ -1,6 +1,6 @@
 """`python -m swarmcode_torch ...`: the `swarmcode-torch` command line."""
 
-from .cli import main
+from .app.cli import main
 
 if __name__ == "__main__":
     main()

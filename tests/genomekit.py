@@ -2,12 +2,12 @@
 
 import torch
 
-from swarmcode_torch.genome import R_MAX, R_MIN, Genome
+from swarmcode_torch.coevo.population import R_MAX, R_MIN, Population
 
 
 def random_genomes(n, gen, l_tag=8, l_bt=12):
     """n random genomes (tags of l_tag bits, trees of l_bt random opcodes)."""
-    return Genome(
+    return Population(
         tag=torch.rand(n, l_tag, generator=gen) < 0.5,
         selectivity=torch.rand(n, generator=gen), dominance=torch.rand(n, generator=gen),
         bt=torch.randint(0, 14, (n, l_bt), generator=gen),

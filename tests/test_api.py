@@ -14,11 +14,11 @@ import pytest
 from typer.testing import CliRunner
 
 import swarmcode_torch as sc
-from swarmcode_torch.api import scenario_to_toml
-from swarmcode_torch.cli import app
-from swarmcode_torch.reporting import (HPARAM_METRICS, METRICS_FILE, SCALAR_TAGS, CsvReporter,
-                                       read_metrics_csv)
-from swarmcode_torch.scenario import builtin_names, load_scenario
+from swarmcode_torch.app.api import scenario_to_toml
+from swarmcode_torch.app.cli import app
+from swarmcode_torch.app.reporting import (HPARAM_METRICS, METRICS_FILE, SCALAR_TAGS, CsvReporter,
+                                           read_metrics_csv)
+from swarmcode_torch.sim.scenario import builtin_names, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
@@ -140,7 +140,7 @@ def test_in_memory_run_writes_nothing_and_matches_the_files(runs, tmp_path, monk
     _, on_disk = runs
     monkeypatch.chdir(tmp_path)
     seen = []
-    result = sc.evolve(sc.EvolveConfig(**SETTINGS, generations=2), logdir=None,
+    result = sc.evolve(sc.SwarmCoDeConfig(**SETTINGS, generations=2), logdir=None,
                        callback=lambda m: seen.append(m["generation"]))
     assert result.run_dir is None and list(tmp_path.iterdir()) == []
     assert seen == [0, 1]
@@ -261,18 +261,18 @@ def test_package_exports_and_cheap_import():
     code = ("import sys, swarmcode_torch as sc; "
             "heavy = sorted({m.split('.')[0] for m in sys.modules} & "
             "{'matplotlib', 'tensorboard', 'typer', 'rich', 'pandas', 'PIL'}); "
-            "import swarmcode_torch.evolve as E; "
-            "print(heavy, callable(sc.evolve), E is sc.evolve, hasattr(E, 'generation'), "
+            "import swarmcode_torch.coevo.evolve as E; "
+            "print(heavy, callable(sc.evolve), sc.evolve.__module__, hasattr(E, 'generation'), "
             "sc.__version__)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=300, check=True).stdout.split()
-    assert out[:4] == ["[]", "True", "True", "True"], out
+    assert out[:4] == ["[]", "True", "swarmcode_torch.app.api", "True"], out
     assert out[4] == sc.__version__
-    for name in ("evolve", "resume", "load", "RunResult", "EvolveConfig", "Evolution",
+    for name in ("evolve", "resume", "load", "RunResult", "SwarmCoDeConfig", "Evolution",
                  "load_scenario", "Scenario", "__version__"):
         assert name in sc.__all__ and hasattr(sc, name)
-    from swarmcode_torch.evolve import EvolveConfig      # the module is still the module
-    assert EvolveConfig is sc.EvolveConfig
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+    assert SwarmCoDeConfig is sc.SwarmCoDeConfig is sc.EvolveConfig   # the name before 0.3
 
 
 def test_python_dash_m_runs_the_cli():

@@ -6,15 +6,21 @@ import pytest
 import torch
 
 from swarmcode_torch.baselines import (ALGORITHMS, FixedSpeciesCCEA, HomogeneousGA, SwarmCoDeRun,
-                                       compare, distinct_per_row, evaluate_team, fixed_species_ccea,
-                                       homogeneous_ga, plan_generations, reproduce_groups,
-                                       split_evenly, summarize, swarmcode, swarmcode_no_dominance)
-from swarmcode_torch.evolve import EvolveConfig, _design, random_population
-from swarmcode_torch.genome import Genome
-from swarmcode_torch.hardware import genome_phenotype
-from swarmcode_torch.world import step as world_step
 
-TINY = EvolveConfig(scenario="four-niche", population=8, swarm_size=5, trials=2, ticks=12,
+                                       compare, distinct_per_row, evaluate_team,
+
+                                       fixed_species_ccea, homogeneous_ga, plan_generations,
+
+                                       reproduce_groups, split_evenly, summarize, swarmcode,
+
+                                       swarmcode_no_dominance)
+from swarmcode_torch.coevo.evolve import _design, random_population
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.coevo.population import Population
+from swarmcode_torch.coevo.population import genome_phenotype
+from swarmcode_torch.sim.world import step as world_step
+
+TINY = SwarmCoDeConfig(scenario="four-niche", population=8, swarm_size=5, trials=2, ticks=12,
                     seed=3, device="cpu")
 CPU = torch.device("cpu")
 
@@ -23,7 +29,7 @@ def gen(seed=0):
     return torch.Generator().manual_seed(seed)
 
 
-def same_genome(a: Genome, b: Genome) -> bool:
+def same_genome(a: Population, b: Population) -> bool:
     return all(torch.equal(getattr(a, f), getattr(b, f)) for f in a.__dataclass_fields__)
 
 

@@ -6,14 +6,15 @@ import pytest
 import torch
 from hypothesis import given, settings, strategies as st
 
-from swarmcode_torch import bt
-from swarmcode_torch.bt import (
-    ACT_DROP, ACT_MOVE_TO_BASE, ACT_MOVE_TO_PACK, ACT_MOVE_TO_RANDOM_PACK, ACT_PICK_UP,
-    ACT_RANDOM_WALK, COND_AM_I_STUCK, COND_HAS_PACKAGE, COND_NEAR_BASE, COND_NEAR_PACKAGE, END,
-    FAILURE, NOP, NUM_COMBOS, NUM_OPCODES, RUNNING, SEL, SEQ, SUCCESS, TEMPLATES, build_tables,
-    combo_index, combo_statuses, compute_jumps, encode, format_tree, interpret,
-    interpret_reference, lookup, random_programs, template_tensor, unpack,
-)
+from swarmcode_torch.sim import bt
+from swarmcode_torch.sim.bt import (ACT_DROP, ACT_MOVE_TO_BASE, ACT_MOVE_TO_PACK,
+                                    ACT_MOVE_TO_RANDOM_PACK, ACT_PICK_UP, ACT_RANDOM_WALK,
+                                    COND_AM_I_STUCK, COND_HAS_PACKAGE, COND_NEAR_BASE,
+                                    COND_NEAR_PACKAGE, END, FAILURE, NOP, NUM_COMBOS, NUM_OPCODES,
+                                    RUNNING, SEL, SEQ, SUCCESS, TEMPLATES, build_tables,
+                                    combo_index, combo_statuses, compute_jumps, encode,
+                                    format_tree, interpret, interpret_reference, lookup,
+                                    random_programs, template_tensor, unpack)
 
 S, F, R = SUCCESS, FAILURE, RUNNING
 A, B, C = ACT_MOVE_TO_PACK, ACT_MOVE_TO_BASE, ACT_RANDOM_WALK  # short names for actions

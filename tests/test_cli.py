@@ -7,8 +7,8 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from swarmcode_torch.cli import app
-from swarmcode_torch.scenario import builtin_names
+from swarmcode_torch.app.cli import app
+from swarmcode_torch.sim.scenario import builtin_names
 
 runner = CliRunner()
 TINY = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
@@ -68,7 +68,7 @@ def test_set_writes_algorithm_keys_into_the_run_config(tmp_path):
                "--set", "p_tag_flip=0.25", "--set", "quota_basis=mean", "--set", "dominance=false")
     assert r.exit_code == 0, r.output
     run = only_run(tmp_path)
-    from swarmcode_torch.runs import read_config
+    from swarmcode_torch.app.runs import read_config
     cfg = read_config(run)
     assert (cfg.p_tag_flip, cfg.quota_basis, cfg.dominance) == (0.25, "mean", False)
     assert_clean_error(invoke("evolve", "--resume", run, "--set", "delta=0.5"), "--set")
@@ -167,7 +167,7 @@ def test_sweep_set_applies_to_every_run_and_refuses_clearly(tmp_path):
                "--population", 6, "--swarm-size", 4, "--trials", 1, "--ticks", 10,
                "--out", out, "--set", "p_tag_flip=0.5", "--set", "min_share=0")
     assert r.exit_code == 0, r.output
-    from swarmcode_torch.runs import read_config
+    from swarmcode_torch.app.runs import read_config
     cfg = read_config(out / "budget-1500_seed-0")
     assert (cfg.p_tag_flip, cfg.min_share) == (0.5, 0.0)
     assert_clean_error(invoke("sweep", "--set", "seed=3", "--out", tmp_path / "a"),
@@ -185,7 +185,7 @@ def test_sigterm_writes_the_last_finished_generation(tmp_path):
     import subprocess
     import sys
     import time
-    proc = subprocess.Popen([sys.executable, "-m", "swarmcode_torch.cli", "evolve", *TINY,
+    proc = subprocess.Popen([sys.executable, "-m", "swarmcode_torch.app.cli", "evolve", *TINY,
                              "--generations", "100000", "--checkpoint-every", "1000",
                              "--log-every", "1", "--render-every", "0", "--device", "cpu", "--no-compile",
                              "--logdir", str(tmp_path)],

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from swarmcode_torch.world import rollout, step
+from swarmcode_torch.sim.world import rollout, step
 
 from worldkit import random_world
 

@@ -22,11 +22,14 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from swarmcode_torch import distributed, evaluation
-from swarmcode_torch.cli import app
-from swarmcode_torch.evolve import Evolution, EvolveConfig
-from swarmcode_torch.runs import RunLock, read_checkpoint
-from swarmcode_torch.speciation import speciate
+from swarmcode_torch.app import distributed
+
+from swarmcode_torch.coevo import evaluation
+from swarmcode_torch.app.cli import app
+from swarmcode_torch.coevo.evolve import Evolution
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.app.runs import RunLock, read_checkpoint
+from swarmcode_torch.coevo.speciation import speciate
 
 runner = CliRunner()
 SIZE = ["--scenario", "one-niche", "--population", "7", "--swarm-size", "3", "--trials", "1",
@@ -202,13 +205,13 @@ class _InProcessShards:
 
 
 def test_shards_score_exactly_like_one_batch():
-    ev = Evolution(EvolveConfig(scenario="four-niche", population=8, swarm_size=4, trials=2,
+    ev = Evolution(SwarmCoDeConfig(scenario="four-niche", population=8, swarm_size=4, trials=2,
                                 ticks=10, generations=3, device="cpu", compile=False,
                                 budget=500.0))
     ev.step()                                  # species, elites and fitness to choose from
     st, ctx = ev.state, ev.ctx
     sp = speciate(st.genome, st.species_hint, st.proto, st.proto_ids, st.next_species_id,
-                  ctx.cfg.delta, w=ctx.weights)
+                  ctx.speciation.delta, w=ctx.speciation.weights)
     call = (st.genome, sp.species, sp.proto_ids, sp.proto_index, st.fitness, st.has_fitness,
             ctx.scenario, ctx.eval_cfg)
     whole = evaluation.evaluate(*call, torch.Generator().manual_seed(1), ctx.params, ctx.step_fn)

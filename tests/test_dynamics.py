@@ -7,12 +7,12 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from swarmcode_torch.analysis import design_capabilities
-from swarmcode_torch.cli import app
-from swarmcode_torch.dynamics import Turnover, lifetimes, niche_count, replay, window_stats
-from swarmcode_torch.hardware import phenotype
-from swarmcode_torch.scenario import load_scenario
-from swarmcode_torch.world import WorldParams, capabilities
+from swarmcode_torch.app.analysis import design_capabilities
+from swarmcode_torch.app.cli import app
+from swarmcode_torch.coevo.dynamics import Turnover, lifetimes, niche_count, replay, window_stats
+from swarmcode_torch.sim.hardware import phenotype
+from swarmcode_torch.sim.scenario import load_scenario
+from swarmcode_torch.sim.world import WorldParams, capabilities
 
 FOUR = load_scenario("four-niche")
 
@@ -116,7 +116,7 @@ def test_a_run_records_niches_and_dynamics_everywhere(tiny_run):
                 "team/median_age"):
         assert key in last
     # generation 0 founds every species of the population
-    from swarmcode_torch.runs import load_checkpoint
+    from swarmcode_torch.app.runs import load_checkpoint
     history = load_checkpoint(tiny_run)["history"]
     _, rows = replay(history)
     assert rows[0]["founded"] == len(history[0]["population"])

@@ -6,15 +6,17 @@ import pytest
 import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from swarmcode_torch.evaluation import EvalConfig, evaluate
-from swarmcode_torch.evolve import Evolution, EvolveConfig, random_population
-from swarmcode_torch.reporting import SCALAR_TAGS, TensorBoardReporter
-from swarmcode_torch.runs import (CheckpointReporter, SummaryReporter, load_checkpoint, resume,
-                                  run, write_config)
-from swarmcode_torch.scenario import load_scenario
-from swarmcode_torch.world import step as world_step
+from swarmcode_torch.coevo.evaluation import EvalConfig, evaluate
+from swarmcode_torch.app.runs import migrate_config
+from swarmcode_torch.coevo.evolve import Evolution, random_population
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.app.reporting import SCALAR_TAGS, TensorBoardReporter
+from swarmcode_torch.app.runs import (CheckpointReporter, SummaryReporter, load_checkpoint, resume,
+                                      run, write_config)
+from swarmcode_torch.sim.scenario import load_scenario
+from swarmcode_torch.sim.world import step as world_step
 
-TINY = EvolveConfig(scenario="one-niche", population=8, swarm_size=5, trials=2, ticks=15,
+TINY = SwarmCoDeConfig(scenario="one-niche", population=8, swarm_size=5, trials=2, ticks=15,
                     generations=4, seed=1)
 
 
@@ -154,78 +156,78 @@ def test_swarm_larger_than_the_population():
 
 
 def test_config_saved_before_quota_basis_keeps_its_algorithm():
-    from swarmcode_torch.evolve import make_context
+    from swarmcode_torch.coevo.evolve import make_context
 
-    new = EvolveConfig(scenario="one-niche", population=8)
+    new = SwarmCoDeConfig(scenario="one-niche", population=8)
     legacy = {k: v for k, v in new.to_dict().items()
               if k not in ("quota_basis", "hw_sigma", "social_sigma", "p_categorical")}
-    old = EvolveConfig.from_dict(legacy)
+    old = SwarmCoDeConfig.from_dict(migrate_config(legacy))
     assert (old.quota_basis, old.hw_sigma, old.social_sigma, old.p_categorical) == \
         ("mean", 0.1, 0.1, 0.1)
     pinned = make_context(new).cfg                               # what a run saves
-    assert EvolveConfig.from_dict(pinned.to_dict()) == pinned    # a current config round-trips
+    assert SwarmCoDeConfig.from_dict(pinned.to_dict()) == pinned    # a current config round-trips
     repro = make_context(old).repro
     assert (repro.quota_basis, repro.hw_sigma, repro.p_categorical) == ("mean", 0.1, 0.1)
     with pytest.raises(ValueError, match="p_categorical"):
-        EvolveConfig(p_categorical=1.5).validate()
+        SwarmCoDeConfig(p_categorical=1.5).validate()
 
 
 def test_runs_pin_the_episode_and_old_configs_keep_250_ticks(tmp_path):
-    from swarmcode_torch.evolve import make_context
-    from swarmcode_torch.runs import read_config, write_config
+    from swarmcode_torch.coevo.evolve import make_context
+    from swarmcode_torch.app.runs import read_config, write_config
 
     # a new run saves the scenario's episode length and team size, so later scenario changes
     # cannot alter it
-    ev = Evolution(EvolveConfig(scenario="four-niche", population=4, generations=1,
+    ev = Evolution(SwarmCoDeConfig(scenario="four-niche", population=4, generations=1,
                                 device="cpu", compile=False))
     assert (ev.cfg.ticks, ev.cfg.swarm_size) == (200, 20) == (ev.ctx.eval_cfg.ticks,
                                                                 ev.ctx.eval_cfg.swarm_size)
     write_config(tmp_path, ev.cfg)
     assert read_config(tmp_path).ticks == 200
     # a config saved before runs pinned it ran the niche scenarios' episode of that time
-    old = {k: v for k, v in EvolveConfig(scenario="four-niche").to_dict().items() if k != "ticks"}
-    assert make_context(EvolveConfig.from_dict(old)).eval_cfg.ticks == 250
+    old = {k: v for k, v in SwarmCoDeConfig(scenario="four-niche").to_dict().items() if k != "ticks"}
+    assert make_context(SwarmCoDeConfig.from_dict(migrate_config(old))).eval_cfg.ticks == 250
     old["scenario"] = "budget"                                   # unchanged scenario: its own
-    assert make_context(EvolveConfig.from_dict(old)).eval_cfg.ticks == 250
+    assert make_context(SwarmCoDeConfig.from_dict(migrate_config(old))).eval_cfg.ticks == 250
     old["scenario"] = "swarm200"
-    assert make_context(EvolveConfig.from_dict(old)).eval_cfg.ticks == 500
+    assert make_context(SwarmCoDeConfig.from_dict(migrate_config(old))).eval_cfg.ticks == 500
 
 
 def test_config_saved_before_p_tag_flip_keeps_one_flip_in_l():
-    from swarmcode_torch.evolve import make_context
+    from swarmcode_torch.coevo.evolve import make_context
 
-    new = EvolveConfig(scenario="one-niche", population=8, tag_length=8)
+    new = SwarmCoDeConfig(scenario="one-niche", population=8, tag_length=8)
     assert make_context(new).repro.p_tag_flip == new.p_tag_flip == 0.01
     old = {k: v for k, v in new.to_dict().items() if k != "p_tag_flip"}
-    assert EvolveConfig.from_dict(old).p_tag_flip == 1 / 8
-    assert make_context(EvolveConfig.from_dict(old)).repro.p_tag_flip == 1 / 8
+    assert SwarmCoDeConfig.from_dict(migrate_config(old)).p_tag_flip == 1 / 8
+    assert make_context(SwarmCoDeConfig.from_dict(migrate_config(old))).repro.p_tag_flip == 1 / 8
 
 
 def test_config_saved_before_min_share_keeps_every_species_share():
-    from swarmcode_torch.evolve import make_context
+    from swarmcode_torch.coevo.evolve import make_context
 
-    new = EvolveConfig(scenario="one-niche", population=8)
+    new = SwarmCoDeConfig(scenario="one-niche", population=8)
     assert make_context(new).repro.min_share == new.min_share == 1.0
-    old = EvolveConfig.from_dict({k: v for k, v in new.to_dict().items() if k != "min_share"})
+    old = SwarmCoDeConfig.from_dict(migrate_config({k: v for k, v in new.to_dict().items() if k != "min_share"}))
     assert old.min_share == 0.0 and make_context(old).repro.min_share == 0.0
 
 
 def test_config_saved_before_the_paper_text_fixes_keeps_the_old_operators():
-    from swarmcode_torch.evolve import make_context
+    from swarmcode_torch.coevo.evolve import make_context
 
-    new = EvolveConfig(scenario="one-niche", population=8)
+    new = SwarmCoDeConfig(scenario="one-niche", population=8)
     ctx = make_context(new)
-    assert (ctx.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (False, True)
+    assert (ctx.speciation.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (False, True)
     assert (ctx.repro.bt_mutation_rate, ctx.repro.p_gene_mutation) == (0.5, 0.2)
     saved = {k: v for k, v in new.to_dict().items()
              if k not in ("d_hw_tiers", "bt_point_on_nodes", "bt_mutation_rate", "p_gene_mutation")}
-    ctx = make_context(EvolveConfig.from_dict(saved))
-    assert (ctx.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (True, False)
+    ctx = make_context(SwarmCoDeConfig.from_dict(migrate_config(saved)))
+    assert (ctx.speciation.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (True, False)
     assert (ctx.repro.bt_mutation_rate, ctx.repro.p_gene_mutation) == (1.0, 1.0)
 
 
 def test_parse_settings_types_and_refusals():
-    from swarmcode_torch.evolve import parse_settings
+    from swarmcode_torch.app.settings import parse_settings
 
     assert parse_settings(["delta=0.5", "max-elite=2", "dominance=False", "quota_basis=mean"]) == \
         {"delta": 0.5, "max_elite": 2, "dominance": False, "quota_basis": "mean"}
@@ -239,7 +241,7 @@ def test_parse_settings_types_and_refusals():
 def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
     """The generation's best team is the focal team of the highest gated fitness, which need not
     be the highest focal team score (a focal that weakens its team is penalised)."""
-    import swarmcode_torch.evolve as E
+    import swarmcode_torch.coevo.evolve as E
 
     seen = {}
     real = E.evaluate
@@ -250,7 +252,7 @@ def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
 
     monkeypatch.setattr(E, "evaluate", spy)
     # a run in which the two definitions are known to disagree (the operators before 0.2)
-    ev = Evolution(EvolveConfig(scenario="two-niche", population=12, swarm_size=6, trials=1,
+    ev = Evolution(SwarmCoDeConfig(scenario="two-niche", population=12, swarm_size=6, trials=1,
                                 ticks=40, generations=6, seed=1, device="cpu", compile=False,
                                 d_hw_tiers=True, bt_point_on_nodes=False,
                                 bt_mutation_rate=1.0, p_gene_mutation=1.0))
@@ -267,15 +269,16 @@ def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
 
 
 def test_cuda_graphs_need_cuda_and_the_compiled_tick():
-    from swarmcode_torch.evolve import make_context, parse_settings
-    from swarmcode_torch.runs import config_to_toml
+    from swarmcode_torch.coevo.evolve import make_context
+    from swarmcode_torch.app.settings import parse_settings
+    from swarmcode_torch.app.runs import config_to_toml
 
     with pytest.raises(ValueError, match="cuda_graphs needs --device cuda"):
-        make_context(EvolveConfig(scenario="one-niche", population=4, device="cpu",
+        make_context(SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu",
                                   cuda_graphs=True))
     # unset (the default) is "on where the tick runs compiled on CUDA": off on the CPU
     for compiled, mode in ((False, "eager"), (True, "compiled")):
-        ctx = make_context(EvolveConfig(scenario="one-niche", population=4, device="cpu",
+        ctx = make_context(SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu",
                                         compile=compiled))
         assert ctx.cfg.cuda_graphs is None and ctx.tick_mode == mode
     assert parse_settings(["cuda_graphs=false"]) == {"cuda_graphs": False}
@@ -283,10 +286,10 @@ def test_cuda_graphs_need_cuda_and_the_compiled_tick():
     with pytest.raises(ValueError, match="cuda_graphs: expected a value of type bool"):
         parse_settings(["cuda_graphs=auto"])
     # a compiled tick that fell back to eager says so
-    ctx = make_context(EvolveConfig(scenario="one-niche", population=4, device="cpu",
+    ctx = make_context(SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu",
                                     compile=True))
     ctx.step_fn.error = RuntimeError("no compiler")
     assert ctx.tick_mode == "eager (compiling failed)"
     # unset is not written, so a resumed run decides again on its device; a choice is kept
-    assert "cuda_graphs" not in config_to_toml(EvolveConfig())
-    assert "cuda_graphs = false" in config_to_toml(EvolveConfig(cuda_graphs=False))
+    assert "cuda_graphs" not in config_to_toml(SwarmCoDeConfig())
+    assert "cuda_graphs = false" in config_to_toml(SwarmCoDeConfig(cuda_graphs=False))

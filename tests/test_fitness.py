@@ -3,8 +3,9 @@ import math
 import pytest
 import torch
 
-from swarmcode_torch.fitness import (FitnessWeights, budget_penalty, ema, gate, raw_fitness,
-                                     team_cost)
+from swarmcode_torch.coevo.fitness import (FitnessWeights, budget_penalty, ema, gate, raw_fitness,
+
+                                           team_cost)
 
 
 def metrics(**kw):

@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from swarmcode_torch.cli import app
+from swarmcode_torch.app.cli import app
 
 if sys.version_info >= (3, 11):
     import tomllib

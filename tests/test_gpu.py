@@ -5,12 +5,14 @@ from dataclasses import replace
 import pytest
 import torch
 
-from swarmcode_torch.evolve import Evolution, EvolveConfig
+from swarmcode_torch.coevo.evolve import Evolution
+
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
 
 pytestmark = [pytest.mark.gpu,
               pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")]
 
-TINY = EvolveConfig(scenario="budget", budget=4000.0, population=12, swarm_size=10, trials=2,
+TINY = SwarmCoDeConfig(scenario="budget", budget=4000.0, population=12, swarm_size=10, trials=2,
                     ticks=40, generations=3, seed=0, device="cuda")
 
 
@@ -33,7 +35,7 @@ def test_evolve_runs_on_cuda(compiled, graphs, mode):
 
 
 def test_cuda_checkpoint_resumes_on_cuda(tmp_path):
-    from swarmcode_torch.runs import CheckpointReporter, resume, run, write_config
+    from swarmcode_torch.app.runs import CheckpointReporter, resume, run, write_config
 
     cfg = replace(TINY, compile=False)
     write_config(tmp_path, cfg)
@@ -49,7 +51,7 @@ def test_cuda_graph_ticks_match_compiled_rollout():
     new shapes recapture."""
     from worldkit import random_world
 
-    from swarmcode_torch.world import CompiledStep, CudaGraphTicks, rollout
+    from swarmcode_torch.sim.world import CompiledStep, CudaGraphTicks, rollout
 
     compiled = CompiledStep()
     graphs = CudaGraphTicks(CompiledStep(), ticks_per_graph=10)
@@ -67,7 +69,7 @@ def test_cuda_graph_ticks_match_compiled_rollout():
 
 
 def test_evolve_with_cuda_graphs_replays_captured_ticks():
-    from swarmcode_torch.world import CudaGraphTicks
+    from swarmcode_torch.sim.world import CudaGraphTicks
 
     ev = Evolution(replace(TINY, compile=True, cuda_graphs=True))
     assert isinstance(ev.ctx.step_fn, CudaGraphTicks)
@@ -79,7 +81,7 @@ def test_evolve_with_cuda_graphs_replays_captured_ticks():
 
 def test_build_tables_on_cuda_match_the_cpu():
     # on a GPU the walk runs without compaction (no device sync); the tables are the same
-    from swarmcode_torch import bt
+    from swarmcode_torch.sim import bt
 
     g = torch.Generator().manual_seed(0)
     ops = torch.cat([bt.random_programs(60, 32, g),
@@ -92,7 +94,7 @@ def test_cuda_graphs_when_compiling_fails(required):
     # evolve's default (graphs unset) falls back to eager ticks; an explicit choice is an error
     from worldkit import random_world
 
-    from swarmcode_torch.world import CompiledStep, CudaGraphTicks, rollout, step
+    from swarmcode_torch.sim.world import CompiledStep, CudaGraphTicks, rollout, step
 
     def broken(*args):
         raise RuntimeError("no compiler")

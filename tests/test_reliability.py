@@ -7,8 +7,8 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from swarmcode_torch.cli import app
-from swarmcode_torch.runs import RunError, load_checkpoint, read_checkpoint
+from swarmcode_torch.app.cli import app
+from swarmcode_torch.app.runs import RunError, load_checkpoint, read_checkpoint
 
 runner = CliRunner()
 TINY = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
@@ -135,9 +135,9 @@ import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 
-from swarmcode_torch import runs as runs_module  # noqa: E402
-from swarmcode_torch.runs import (LOCK_FILE, RunLock, clean_temporary_files,  # noqa: E402
-                                  new_run_dir, repair_teams)
+from swarmcode_torch.app import runs as runs_module  # noqa: E402
+from swarmcode_torch.app.runs import (LOCK_FILE, RunLock, clean_temporary_files, new_run_dir,
+                                      repair_teams)
 
 FAST = ["--render-every", "0", "--no-compile", "--device", "cpu"]
 RFAST = ["--render-every", "0", "--device", "cpu"]             # what --resume may be given
@@ -175,7 +175,7 @@ def test_repair_teams_without_any_newline_and_with_a_long_tail(tmp_path):
 _WRITER = """
 import sys
 from pathlib import Path
-from swarmcode_torch.runs import atomic_write_bytes
+from swarmcode_torch.app.runs import atomic_write_bytes
 target, i = Path(sys.argv[1]), 0
 while True:
     i += 1
@@ -316,7 +316,7 @@ def _wait_for(path_glob, base: Path, proc, timeout=180):
 
 
 def test_a_live_run_refuses_a_second_process_and_a_killed_runs_lock_is_taken_over(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "swarmcode_torch.cli", "evolve", *TINY,
+    proc = subprocess.Popen([sys.executable, "-m", "swarmcode_torch.app.cli", "evolve", *TINY,
                              "--generations", "100000", "--checkpoint-every", "1", *FAST,
                              "--logdir", str(tmp_path)], cwd=REPO,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -342,7 +342,7 @@ def test_a_live_sweep_refuses_a_second_sweep_and_resume_and_sigterm_releases_its
     args = ["sweep", "--budgets", "1500", "--seeds", "0", "--scenario", "one-niche",
             "--population", "6", "--swarm-size", "4", "--trials", "1", "--ticks", "10",
             "--device", "cpu", "--no-compile", "--checkpoint-every", "1", "--out", str(out)]
-    proc = subprocess.Popen([sys.executable, "-m", "swarmcode_torch.cli", *args,
+    proc = subprocess.Popen([sys.executable, "-m", "swarmcode_torch.app.cli", *args,
                              "--generations", "100000"], cwd=REPO,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
@@ -371,7 +371,7 @@ def test_the_lock_is_released_on_an_error_and_on_ctrl_c(finished_run, tmp_path, 
     one_line_error(invoke("evolve", "--resume", run, "--generations", 3, *RFAST), "seed")
     assert not (run / LOCK_FILE).exists()                 # released on the error
     (run / "config.toml").write_text(good)
-    from swarmcode_torch.evolve import Evolution
+    from swarmcode_torch.coevo.evolve import Evolution
 
     def interrupted(self):
         raise KeyboardInterrupt
@@ -392,7 +392,7 @@ def test_a_stale_lock_of_a_dead_pid_is_taken_over(finished_run, tmp_path):
 
 
 def test_run_directories_made_at_the_same_second_never_collide(tmp_path, monkeypatch):
-    from swarmcode_torch.evolve import EvolveConfig
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
 
     monkeypatch.setattr(runs_module.time, "strftime", lambda fmt: "20250101-000000")
     n = 12
@@ -401,7 +401,7 @@ def test_run_directories_made_at_the_same_second_never_collide(tmp_path, monkeyp
     def make():
         barrier.wait()
         try:
-            made.append(new_run_dir(tmp_path / "logs", EvolveConfig(scenario="budget")))
+            made.append(new_run_dir(tmp_path / "logs", SwarmCoDeConfig(scenario="budget")))
         except Exception as e:  # noqa: BLE001
             errors.append(e)
 
@@ -432,8 +432,8 @@ mass = [1.0, 3.0]
 
 
 def test_a_run_keeps_its_scenario_and_resumes_and_replays_it_from_anywhere(tmp_path, monkeypatch):
-    from swarmcode_torch.runs import hardware_bytes
-    from swarmcode_torch.runs import resume as resume_run
+    from swarmcode_torch.app.runs import hardware_bytes
+    from swarmcode_torch.app.runs import resume as resume_run
 
     work, elsewhere = tmp_path / "work", tmp_path / "elsewhere"
     work.mkdir()
@@ -790,7 +790,7 @@ def test_a_resumed_run_writes_the_same_records_as_one_straight_through(tmp_path)
 
 def test_a_run_stopped_before_its_first_periodic_checkpoint_resumes_from_generation_0(
         tmp_path, monkeypatch):
-    from swarmcode_torch.evolve import Evolution
+    from swarmcode_torch.coevo.evolve import Evolution
 
     def full(self):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))

@@ -7,14 +7,14 @@ import pytest
 import torch
 from PIL import Image
 
-from swarmcode_torch import bt
-from swarmcode_torch.evolve import EvolveConfig
-from swarmcode_torch.genome import PINCHER, SUCTION
-from swarmcode_torch.render import (Episode, frame_image, record_episode, replay_run, save_gif,
-                                    save_png, team_genome)
-from swarmcode_torch.runs import write_config
-from swarmcode_torch.scenario import load_scenario
-from swarmcode_torch.world import HELD
+from swarmcode_torch.sim import bt
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.coevo.population import PINCHER, SUCTION
+from swarmcode_torch.app.render import (Episode, frame_image, record_episode, replay_run, save_gif,
+                                        save_png, team_genome)
+from swarmcode_torch.app.runs import write_config
+from swarmcode_torch.sim.scenario import load_scenario
+from swarmcode_torch.sim.world import HELD
 
 
 def design(effector="pincher", radius=0.4, tiers=(3, 3, 3), count=3, program="forage", **kw):
@@ -101,7 +101,7 @@ def test_save_gif_frame_count(tmp_path):
 def test_replay_run(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
-    write_config(run, EvolveConfig(scenario="one-niche", ticks=5))
+    write_config(run, SwarmCoDeConfig(scenario="one-niche", ticks=5))
     (run / "summary.json").write_text(json.dumps({"designs": DESIGNS}))
     path, metrics = replay_run(run, ticks=4, every=2)
     assert path == run / "team.gif" and path.is_file()

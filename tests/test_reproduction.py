@@ -3,23 +3,25 @@ from dataclasses import fields, replace
 import pytest
 import torch
 
-from swarmcode_torch.bt import (ACT_DROP, ACT_MOVE_TO_BASE, ACT_MOVE_TO_PACK,
-                                ACT_MOVE_TO_RANDOM_PACK, ACT_PICK_UP, ACT_RANDOM_WALK,
-                                COND_HAS_PACKAGE, END, LEAF_OPS, NOP, SEL, SEQ)
-from swarmcode_torch.genome import R_MAX, R_MIN, Genome
-from swarmcode_torch.reproduction import (ReproductionParams, crossover, elite_count,
-                                          mutate, mutate_bt, offspring_quotas, random_subtrees,
-                                          replace_subtree, reproduce, subtree_end)
-from swarmcode_torch.speciation import speciate
+from swarmcode_torch.sim.bt import (ACT_DROP, ACT_MOVE_TO_BASE, ACT_MOVE_TO_PACK,
+
+                                    ACT_MOVE_TO_RANDOM_PACK, ACT_PICK_UP, ACT_RANDOM_WALK,
+
+                                    COND_HAS_PACKAGE, END, LEAF_OPS, NOP, SEL, SEQ)
+from swarmcode_torch.coevo.population import R_MAX, R_MIN, Population
+from swarmcode_torch.coevo.reproduction import (ReproductionParams, crossover, elite_count, mutate,
+                                                mutate_bt, offspring_quotas, random_subtrees,
+                                                replace_subtree, reproduce, subtree_end)
+from swarmcode_torch.coevo.speciation import speciate
 
 from genomekit import random_genomes
 
 
-def genome_equal(a: Genome, b: Genome) -> bool:
-    return all(torch.equal(getattr(a, f.name), getattr(b, f.name)) for f in fields(Genome))
+def genome_equal(a: Population, b: Population) -> bool:
+    return all(torch.equal(getattr(a, f.name), getattr(b, f.name)) for f in fields(Population))
 
 
-def check_bounds(g: Genome):
+def check_bounds(g: Population):
     assert g.bt.dtype == torch.long and int(g.bt.min()) >= 0 and int(g.bt.max()) <= 13
     assert torch.all((g.radius >= R_MIN) & (g.radius <= R_MAX))
     for name in ("selectivity", "dominance", "torque_point", "battery_point"):
@@ -228,7 +230,7 @@ def test_mutate_bounds_and_flip_rate():
 
 def test_default_mutation_seldom_founds_a_species():
     # docs/MODEL.md: one mutation alone crosses delta for well under 1 % of offspring
-    from swarmcode_torch.speciation import distance
+    from swarmcode_torch.coevo.speciation import distance
     gen = torch.Generator().manual_seed(0)
     g = random_genomes(4000, gen, l_tag=16)
     params = ReproductionParams()

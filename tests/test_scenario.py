@@ -5,11 +5,11 @@ import math
 import pytest
 import torch
 
-from swarmcode_torch.genome import R_MAX, R_MIN
-from swarmcode_torch.hardware import default_catalog, phenotype
-from swarmcode_torch.layout import make_layouts, spawn_slots
-from swarmcode_torch.scenario import (ScenarioError, builtin_names, load_scenario,
-                                      scenario_from_dict)
+from swarmcode_torch.coevo.population import R_MAX, R_MIN
+from swarmcode_torch.sim.hardware import default_catalog, phenotype
+from swarmcode_torch.sim.layout import make_layouts, spawn_slots
+from swarmcode_torch.sim.scenario import (ScenarioError, builtin_names, load_scenario,
+                                          scenario_from_dict)
 
 GOOD = {
     "name": "t", "arena": 20.0, "base_radius": 1.5, "num_robots": 4, "episode_ticks": 10,

@@ -1,9 +1,9 @@
 import pytest
 import torch
 
-from swarmcode_torch.bt import ACT_DROP, ACT_PICK_UP, NOP, SEQ
-from swarmcode_torch.genome import R_MAX, R_MIN, Genome
-from swarmcode_torch.speciation import DistanceWeights, distance, hamming, speciate
+from swarmcode_torch.sim.bt import ACT_DROP, ACT_PICK_UP, NOP, SEQ
+from swarmcode_torch.coevo.population import R_MAX, R_MIN, Population
+from swarmcode_torch.coevo.speciation import DistanceWeights, distance, hamming, speciate
 
 from genomekit import random_genomes as _random_genomes
 
@@ -19,7 +19,7 @@ def make(n, l_tag=8, l_bt=6, **kw):
         effector=torch.zeros(n, dtype=torch.long))
     for k, v in kw.items():
         g[k] = torch.as_tensor(v, dtype=g[k].dtype)
-    return Genome(**g)
+    return Population(**g)
 
 
 def random_genomes(n, gen, l_tag=8, l_bt=6):

@@ -2,7 +2,7 @@
 
 import json
 
-from swarmcode_torch.sweep import csv_text, markdown, table_rows
+from swarmcode_torch.app.sweep import csv_text, markdown, table_rows
 
 
 def _summary(d, **kw):

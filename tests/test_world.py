@@ -3,12 +3,13 @@
 import pytest
 import torch
 
-from swarmcode_torch import bt
-from swarmcode_torch.hardware import phenotype
-from swarmcode_torch.layout import make_layouts
-from swarmcode_torch.scenario import builtin_names, load_scenario
-from swarmcode_torch.world import (DELIVERED, GROUND, CompiledStep, Robots, WorldParams, collide,
-                                   compatible, episode_metrics, random_keys, reset, rollout, step)
+from swarmcode_torch.sim import bt
+from swarmcode_torch.sim.hardware import phenotype
+from swarmcode_torch.sim.layout import make_layouts
+from swarmcode_torch.sim.scenario import builtin_names, load_scenario
+from swarmcode_torch.sim.world import (DELIVERED, GROUND, CompiledStep, Robots, WorldParams,
+                                       collide, compatible, episode_metrics, random_keys, reset,
+                                       rollout, step)
 from worldkit import build, package, random_world, robot
 
 
@@ -235,7 +236,7 @@ def test_compiled_step_falls_back_to_eager_when_compiling_fails(monkeypatch):
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="checks the error without CUDA")
 def test_cuda_graph_ticks_need_cuda():
-    from swarmcode_torch.world import CudaGraphTicks
+    from swarmcode_torch.sim.world import CudaGraphTicks
 
     with pytest.raises(RuntimeError, match="CUDA graphs need a CUDA device"):
         CudaGraphTicks()
@@ -243,7 +244,7 @@ def test_cuda_graph_ticks_need_cuda():
 
 def test_waypoints_are_the_counter_hash_of_seed_robot_axis_and_tick():
     # the per-robot keys are precomputed outside the tick; the numbers must stay the hash's
-    from swarmcode_torch.world import _waypoints, hash_uniform, waypoint_keys
+    from swarmcode_torch.sim.world import _waypoints, hash_uniform, waypoint_keys
 
     seed = torch.tensor([0, 7, 2**40, -(2**35)])
     params = WorldParams(arena=30.0)

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import torch
 
-from swarmcode_torch import bt
-from swarmcode_torch.genome import R_MAX, R_MIN
-from swarmcode_torch.hardware import phenotype
-from swarmcode_torch.layout import Layout, make_layouts
-from swarmcode_torch.scenario import load_scenario
-from swarmcode_torch.world import Robots, WorldParams
+from swarmcode_torch.sim import bt
+from swarmcode_torch.coevo.population import R_MAX, R_MIN
+from swarmcode_torch.sim.hardware import phenotype
+from swarmcode_torch.sim.layout import Layout, make_layouts
+from swarmcode_torch.sim.scenario import load_scenario
+from swarmcode_torch.sim.world import Robots, WorldParams
 
 PROGRAMS = ["forage", "forage_random", "collaborative", "cautious"]
 

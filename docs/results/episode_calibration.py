@@ -3,12 +3,12 @@
 at several episode lengths: where do good teams sit against the paper's 4-12 range?"""
 import json, glob, torch
 from dataclasses import replace
-from swarmcode_torch import bt
-from swarmcode_torch.render import team_genome
-from swarmcode_torch.evaluation import simulate_teams
-from swarmcode_torch.layout import make_layouts
-from swarmcode_torch.scenario import load_scenario
-from swarmcode_torch.world import WorldParams
+from swarmcode_torch.sim import bt
+from swarmcode_torch.app.render import team_genome
+from swarmcode_torch.coevo.evaluation import simulate_teams
+from swarmcode_torch.sim.layout import make_layouts
+from swarmcode_torch.sim.scenario import load_scenario
+from swarmcode_torch.sim.world import WorldParams
 torch.set_num_threads(2)
 E = 48
 for path in sorted(glob.glob("docs/results/niche/*-seed0/summary.json")) + ["docs/results/budget_sweep/budget-4000_seed-0/summary.json"]:

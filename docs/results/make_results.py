@@ -24,10 +24,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from swarmcode_torch.runs import load_checkpoint  # noqa: E402
+from swarmcode_torch.app.runs import load_checkpoint  # noqa: E402
 
-from swarmcode_torch.reporting import composition_figure  # noqa: E402
-from swarmcode_torch.sweep import table_rows, write_outputs  # noqa: E402
+from swarmcode_torch.app.reporting import composition_figure  # noqa: E402
+from swarmcode_torch.app.sweep import table_rows, write_outputs  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 FIELDS = ["generation", "fitness", "cost", "species", "deliveries", "deliveries_individual",

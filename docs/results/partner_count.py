@@ -23,10 +23,10 @@ from pathlib import Path
 
 import torch
 
-from swarmcode_torch import evaluation
-from swarmcode_torch.evolve import load_state_dict, make_context
-from swarmcode_torch.runs import load_checkpoint, read_config
-from swarmcode_torch.speciation import hamming, speciate
+from swarmcode_torch.coevo import evaluation
+from swarmcode_torch.coevo.evolve import load_state_dict, make_context
+from swarmcode_torch.app.runs import load_checkpoint, read_config
+from swarmcode_torch.coevo.speciation import hamming, speciate
 
 
 def niche_partners(genome, species, proto_ids, proto_index, scenario, elite_rows_of) -> torch.Tensor:

@@ -4,7 +4,7 @@
                                             [--founding-from 100] [--json OUT]
 
 Each group is one setting of one scenario (e.g. `four-niche before=a,b,c`), its runs one seed
-each. For every run, `swarmcode_torch.analysis.run_dynamics` gives the medians over the last
+each. For every run, `swarmcode_torch.app.analysis.run_dynamics` gives the medians over the last
 `--last` generations (species in the best team and in the population, niches, best-team score,
 median species age) and the founding rate and median lifetime from generation
 `--founding-from` to the end; the table shows each run's values and their mean ± std (sample
@@ -19,8 +19,8 @@ import math
 import statistics
 from pathlib import Path
 
-from swarmcode_torch.analysis import run_dynamics
-from swarmcode_torch.runs import load_checkpoint
+from swarmcode_torch.app.analysis import run_dynamics
+from swarmcode_torch.app.runs import load_checkpoint
 
 #: (key, header, format of one run's value); mean and std take one more decimal
 COLUMNS = (("team_species", "team sp", "{:.1f}"), ("population_species", "pop sp", "{:.1f}"),

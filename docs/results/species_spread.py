@@ -23,17 +23,17 @@ from pathlib import Path
 
 import torch
 
-from swarmcode_torch.genome import Genome
-from swarmcode_torch.runs import load_checkpoint, read_checkpoint, read_config
-from swarmcode_torch.speciation import DistanceWeights, distance_terms
+from swarmcode_torch.coevo.population import Population
+from swarmcode_torch.app.runs import load_checkpoint, read_checkpoint, read_config
+from swarmcode_torch.coevo.speciation import DistanceWeights, distance_terms
 
 
 def spread(run: Path, checkpoint: str | None = None) -> dict:
     cfg = read_config(run)
     ck = read_checkpoint(run / checkpoint) if checkpoint else load_checkpoint(run)
     w = DistanceWeights(hw_tiers=cfg.d_hw_tiers)
-    pop = Genome.from_state_dict(ck["genome"])
-    proto = Genome.from_state_dict(ck["proto"])
+    pop = Population.from_state_dict(ck["genome"])
+    proto = Population.from_state_dict(ck["proto"])
     ids = ck["proto_ids"].tolist()
     hint = ck["species_hint"].tolist()
     rows = [i for i, s in enumerate(hint) if s in ids]
@@ -42,7 +42,7 @@ def spread(run: Path, checkpoint: str | None = None) -> dict:
     mine = {k: v[torch.arange(len(rows)), col] for k, v in terms.items()}
     d = sum(mine.values())
     # what one effector flip would do to each child: found a species (no prototype within delta)
-    flipped = Genome.from_state_dict({**ck["genome"], "effector": 1 - pop.effector})
+    flipped = Population.from_state_dict({**ck["genome"], "effector": 1 - pop.effector})
     d_flip = sum(distance_terms(flipped.index(torch.tensor(rows)), proto, w).values())
     # how far each species is from its nearest other species, apart from the effector
     pt = distance_terms(proto, proto, w)

@@ -26,10 +26,12 @@ import collections
 import statistics
 from pathlib import Path
 
-import swarmcode_torch.evolve as evolve
-from swarmcode_torch.genome import Genome
-from swarmcode_torch.runs import load_checkpoint, read_config
-from swarmcode_torch.speciation import distance, distance_terms
+import swarmcode_torch.coevo.evolve as evolve
+from swarmcode_torch.app.settings import parse_settings
+from swarmcode_torch.coevo.config import SwarmCoDeConfig, with_overrides
+from swarmcode_torch.coevo.population import Population
+from swarmcode_torch.app.runs import load_checkpoint, read_config
+from swarmcode_torch.coevo.speciation import distance, distance_terms
 
 AGE_BUCKETS = ((0, 1, "0"), (1, 5, "1-4"), (5, 20, "5-19"), (20, 50, "20-49"), (50, 10**9, "50+"))
 
@@ -61,7 +63,7 @@ def history_report(run: Path) -> None:
           f"{med(young):g} younger than 20 generations, {med(old):g} of 50 or more")
     print("  species in the best team by age (mean per generation): " + ", ".join(
         f"{name}: {team_age[name] / len(window):.2f}" for _, _, name in AGE_BUCKETS))
-    proto, ids = Genome.from_state_dict(ck["proto"]), ck["proto_ids"].tolist()
+    proto, ids = Population.from_state_dict(ck["proto"]), ck["proto_ids"].tolist()
     delta = read_config(run).delta
     d = distance(proto, proto)
     close = [f"{ids[i]}/{ids[j]} ({'SP'[int(proto.effector[i])]} {float(proto.radius[i]):.2f} m, "
@@ -71,7 +73,7 @@ def history_report(run: Path) -> None:
           + ("; ".join(close) if close else "none"))
 
 
-def terms(a: Genome, b: Genome) -> dict:
+def terms(a: Population, b: Population) -> dict:
     """The weighted terms of D between single genomes a and b, and the number of differing tiers."""
     out = {k: float(v) for k, v in distance_terms(a, b).items()}
     out["tiers"] = int((a.chassis != b.chassis).sum() + (a.battery != b.battery).sum()
@@ -111,11 +113,11 @@ def founders_report(args) -> None:
 
     evolve.speciate = recording_speciate
     try:
-        cfg = evolve.with_overrides(
-            evolve.EvolveConfig(scenario=args.founders, population=50, swarm_size=20,
+        cfg = with_overrides(
+            SwarmCoDeConfig(scenario=args.founders, population=50, swarm_size=20,
                                 generations=args.generations, seed=args.seed, device="cpu",
                                 compile=True, ticks=args.ticks),
-            **evolve.parse_settings(args.settings or []))
+            **parse_settings(args.settings or []))
         ev = evolve.Evolution(cfg)
         counts = []
         while not ev.done:

@@ -20,8 +20,8 @@ from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, 
                            TimeRemainingColumn)
 from rich.table import Table
 
-from . import bt
-from .scenario import ScenarioError, builtin_names, load_scenario
+from ..sim import bt
+from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 
 class _OneLineErrors(TyperGroup):
     """The command group, with usage errors (an option value that is not a number, an unknown
@@ -68,7 +68,7 @@ class _Failed(typer.Exit):
 
 def _print_version(value: bool) -> None:
     if value:
-        from . import __version__
+        from .. import __version__
         console.print(f"swarmcode-torch {__version__}", highlight=False)
         raise typer.Exit()
 
@@ -256,11 +256,13 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
     The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
     once the Evolution exists and before any file is written (evaluation shards)."""
-    from .evolve import Evolution, EvolveConfig, parse_settings, with_overrides
-    from .runs import (RunError, RunLock, check_memory, load_run, new_run_dir, write_config,
+    from ..coevo.config import SwarmCoDeConfig, with_overrides
+    from ..coevo.evolve import Evolution
+    from .settings import option_names, parse_settings
+    from .runs import (RunError, RunLock, check_config, load_run, new_run_dir, write_config,
                        write_run_files)
     from .runs import resume as resume_run
-    from .scenario import read_scenario
+    from ..sim.scenario import read_scenario
 
     if checkpoint_every < 1 or log_every < 1 or render_every < 0:
         fail("--checkpoint-every and --log-every must be >= 1, --render-every >= 0")
@@ -296,11 +298,11 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
             console.print(f"Resuming [bold]{escape(str(run_dir))}[/] at generation "
                           f"{ev.state.generation} of {ev.cfg.generations}")
             return ev, run_dir, ev.state.generation
-        cfg = with_overrides(EvolveConfig(), generations=generations, device=device, **given,
+        cfg = with_overrides(SwarmCoDeConfig(), generations=generations, device=device, **given,
                              **parse_settings(settings or []))
-        cfg.validate()
+        cfg.validate(option_names(), bounds=False)
         scen, data = read_scenario(cfg.scenario)  # a clear error before anything is created
-        check_memory(cfg, scen)
+        check_config(cfg, scen, option_names())
         logdir = logdir if logdir is not None else Path("runs")
         if logdir.exists() and not logdir.is_dir():
             fail(f"--logdir {logdir} is not a directory")
@@ -468,9 +470,10 @@ def sweep(
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
     import time
 
-    from .evolve import EvolveConfig, parse_settings, with_overrides
-    from .runs import RunError, RunLock, SWEEP_LOCK_FILE, check_memory, read_summary
-    from .scenario import read_scenario
+    from ..coevo.config import SwarmCoDeConfig, with_overrides
+    from .settings import option_names, parse_settings
+    from .runs import RunError, RunLock, SWEEP_LOCK_FILE, check_config, read_summary
+    from ..sim.scenario import read_scenario
     from .sweep import table_rows, write_outputs
 
     budget_list = _parse_list(budgets, float, "--budgets")
@@ -479,17 +482,19 @@ def sweep(
         fail("--checkpoint-every and --log-every must be >= 1")
     on_ray = _sweep_ray_options(workers, cpus_per_run, gpus_per_run, ray_address, device)
     out = out or Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
-    names = {"seed": "--seeds", "budget": "--budgets"}
+    names = option_names({"seed": "--seeds", "budget": "--budgets"})
     try:
-        base = with_overrides(EvolveConfig(), objective=objective, scenario=scenario,
+        base = with_overrides(SwarmCoDeConfig(), objective=objective, scenario=scenario,
                               generations=generations, population=population,
                               swarm_size=swarm_size, trials=trials, ticks=ticks, device=device,
                               compile=compile, **parse_settings(settings or [], names))
         for b in budget_list:
             for sd in seed_list:
-                with_overrides(base, budget=b, seed=sd).validate(option_names=names)
+                with_overrides(base, budget=b, seed=sd).validate(option_names=names, bounds=False)
         scen, data = read_scenario(base.scenario)
-        check_memory(base, scen)
+        for b in budget_list:
+            for sd in seed_list:
+                check_config(with_overrides(base, budget=b, seed=sd), scen, names)
     except (ScenarioError, ValueError) as e:
         fail(str(e))
     if out.exists() and not out.is_dir():
@@ -635,8 +640,8 @@ def _plan_sweep_run(out: Path, cfg, scenario, data: bytes):
     """(budget, seed, run directory, config, state) of one run of a sweep, state 'done', 'resume'
     or 'new'; refuses (one-line error) an existing run whose config differs from this sweep's
     in anything but how it runs (_HOW_KEYS)."""
-    from .runs import (CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, RunError,
-                       config_differences, load_run, read_config, run_scenario)
+    from .runs import (CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, RunError, config_differences,
+                       load_run, read_config, run_scenario)
     from .sweep import run_name
 
     run_dir = out / run_name(cfg.budget, cfg.seed)
@@ -670,7 +675,7 @@ def _plan_sweep_run(out: Path, cfg, scenario, data: bytes):
 
 def _run_sweep_run(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int,
                    log_every: int, again: str) -> None:
-    from .evolve import Evolution
+    from ..coevo.evolve import Evolution
     from .runs import RunError, RunLock, write_config, write_run_files
     from .runs import resume as resume_run
 
@@ -745,7 +750,7 @@ def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory.")]) -
             console.print(f"  lifts: {lifts}", highlight=False, markup=False)
         console.print(bt.format_tree(d["bt"], root=True), highlight=False)
     if caps is not None:
-        from .dynamics import niche_count
+        from ..coevo.dynamics import niche_count
         console.print(f"{niche_count(caps[1])} niches (distinct capabilities) in "
                       f"{len({d['species'] for d in designs})} species", highlight=False)
 
@@ -820,7 +825,7 @@ def replay(
     from .render import replay_run
     from .runs import RunError
 
-    from .evolve import MAX_SEED, UPPER_BOUNDS
+    from ..coevo.config import MAX_SEED, UPPER_BOUNDS
 
     if every < 1 or (ticks is not None and ticks < 1):
         fail("--every and --ticks must be >= 1")

@@ -10,26 +10,13 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from .config import FitnessWeights
+
 #: Keys `raw_fitness` reads from its metrics dict (all tensors of one common shape).
 METRIC_KEYS = (
     "delivered_individual", "delivered_collab", "grips_delivered", "picked_individual",
     "picked_collab", "mean_final_energy", "proximity", "closeness",
 )
-
-
-@dataclass(frozen=True)
-class FitnessWeights:
-    """Weights of the raw-fitness terms (paper defaults); `inactive_factor` is P_activity when
-    no package was picked up, `floor` the minimum raw fitness."""
-
-    W_delivery: float = 100.0
-    W_collab_bonus: float = 50.0
-    W_pickup: float = 1.0
-    W_energy: float = 0.03
-    W_proximity: float = 1.0
-    W_closeness: float = 30.0
-    inactive_factor: float = 0.5
-    floor: float = 0.1
 
 
 def raw_fitness(m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()) -> Tensor:

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
-from .genome import R_MAX, R_MIN
+from .hardware import R_MAX, R_MIN
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -11,7 +11,7 @@ import io
 import math
 from pathlib import Path
 
-from .evolve import Evolution
+from ..coevo.evolve import Evolution
 
 METRICS_FILE = "metrics.csv"
 

@@ -26,8 +26,9 @@ from typing import Any, Callable, Iterable, Protocol
 
 import torch
 
-from .evolve import Evolution, EvolveConfig
-from .scenario import Scenario, load_scenario
+from ..coevo.config import SwarmCoDeConfig, with_overrides
+from ..coevo.evolve import Evolution
+from ..sim.scenario import Scenario, load_scenario
 
 try:
     import fcntl
@@ -304,7 +305,7 @@ def _toml_value(v: Any) -> str:
     return json.dumps(str(v))
 
 
-def config_to_toml(cfg: EvolveConfig) -> str:
+def config_to_toml(cfg: SwarmCoDeConfig) -> str:
     lines = ["# swarmcode-torch run configuration (re-run with: swarmcode-torch evolve --resume DIR)"]
     for k, v in cfg.to_dict().items():
         if v is not None:
@@ -312,29 +313,63 @@ def config_to_toml(cfg: EvolveConfig) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_config(run_dir: Path, cfg: EvolveConfig) -> None:
+def write_config(run_dir: Path, cfg: SwarmCoDeConfig) -> None:
     atomic_write_bytes(Path(run_dir) / CONFIG_FILE, config_to_toml(cfg).encode())
 
 
 #: The names of config keys in messages about a config file: the keys themselves.
-_FILE_KEY_NAMES = {f.name: f.name for f in dataclasses.fields(EvolveConfig)}
+# ------------------------------------------------------------------ config migrations
+#: Settings of configs saved before `quota_basis` and the mutation steps were config keys.
+LEGACY_DEFAULTS = {"quota_basis": "mean", "hw_sigma": 0.1, "social_sigma": 0.1,
+                   "p_categorical": 0.1}
+
+#: Episode lengths of built-in scenarios whose default has changed since runs began pinning
+#: theirs in config.toml; a saved config without `ticks` ran with these.
+LEGACY_EPISODE_TICKS = {"one-niche": 250, "two-niche": 250, "four-niche": 250}
 
 
-def config_from_dict(d: Any, source: str) -> EvolveConfig:
-    """A validated config from a parsed table (config.toml, a checkpoint's "config"); RunError
-    naming `source` and the key for anything malformed or out of range."""
+def migrate_config(d: Any) -> Any:
+    """A config table written by any version -> this version's keys, with the values the run
+    was made with for every setting added since (the one place config migrations live).
+    Anything but a table is returned as it is (`SwarmCoDeConfig.from_dict` refuses it)."""
+    if not isinstance(d, dict):
+        return d
+    d = {k: (None if v == "none" else v) for k, v in d.items()}
+    if "quota_basis" not in d:
+        # written before these settings existed: keep the run's original algorithm
+        d = {**LEGACY_DEFAULTS, **d}
+    if "p_tag_flip" not in d:
+        # written before the tag flip rate was a setting: it was one bit in L per child
+        tag_length = d.get("tag_length", SwarmCoDeConfig.tag_length)
+        d["p_tag_flip"] = 1.0 / int(tag_length) if isinstance(tag_length, int) else None
+    if "min_share" not in d:
+        d["min_share"] = 0.0     # written before the quota threshold existed
+    # written before the paper-text fixes of d_hw and the tree mutation: the old behaviour
+    d.setdefault("d_hw_tiers", True)
+    d.setdefault("bt_point_on_nodes", False)
+    d.setdefault("bt_mutation_rate", 1.0)
+    d.setdefault("p_gene_mutation", 1.0)
+    if d.get("ticks") is None and d.get("scenario") in LEGACY_EPISODE_TICKS:
+        # written before runs pinned their episode length: the scenario's length of that time
+        d["ticks"] = LEGACY_EPISODE_TICKS[d["scenario"]]
+    return d
+
+
+def config_from_dict(d: Any, source: str) -> SwarmCoDeConfig:
+    """A validated config from a parsed table (config.toml, a checkpoint's "config") of any
+    version; RunError naming `source` and the key for anything malformed or out of range."""
     try:
-        cfg = EvolveConfig.from_dict(d)
+        cfg = SwarmCoDeConfig.from_dict(migrate_config(d))
         # a run made on a larger machine can still be inspected and replayed here; a resume
         # checks the memory it needs (`resume`)
-        cfg.validate(option_names=_FILE_KEY_NAMES, memory=False)
+        cfg.validate()
     except (TypeError, ValueError) as e:
         raise RunError(f"{source}: malformed config ({e})") from None
     return cfg
 
 
-def read_config(run_dir: Path) -> EvolveConfig:
-    """The config of a run directory, every value checked (`EvolveConfig.validate`)."""
+def read_config(run_dir: Path) -> SwarmCoDeConfig:
+    """The config of a run directory, every value checked (`SwarmCoDeConfig.validate`)."""
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise RunError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
@@ -351,7 +386,7 @@ def hardware_bytes() -> bytes:
     return resources.files("swarmcode_torch").joinpath("data/hardware.toml").read_bytes()
 
 
-def write_run_files(run_dir: Path, cfg: EvolveConfig, scenario_data: bytes) -> None:
+def write_run_files(run_dir: Path, cfg: SwarmCoDeConfig, scenario_data: bytes) -> None:
     """config.toml, and the copies that make a new run self-contained: scenario.toml (the bytes
     its scenario was read from) and hardware.toml (the catalog, as read)."""
     run_dir = Path(run_dir)
@@ -360,7 +395,7 @@ def write_run_files(run_dir: Path, cfg: EvolveConfig, scenario_data: bytes) -> N
     atomic_write_bytes(run_dir / HARDWARE_COPY, hardware_bytes())
 
 
-def run_scenario_source(run_dir: Path, cfg: EvolveConfig) -> str:
+def run_scenario_source(run_dir: Path, cfg: SwarmCoDeConfig) -> str:
     """Where the scenario of a run is read from: its scenario.toml copy (an absolute path, so
     any working directory will do), or, in a run directory made before runs kept one, the
     config's scenario."""
@@ -368,7 +403,7 @@ def run_scenario_source(run_dir: Path, cfg: EvolveConfig) -> str:
     return str(copy.resolve()) if copy.is_file() else cfg.scenario
 
 
-def run_scenario(run_dir: Path, cfg: EvolveConfig) -> Scenario:
+def run_scenario(run_dir: Path, cfg: SwarmCoDeConfig) -> Scenario:
     """The scenario a run ran on (see `run_scenario_source`)."""
     return load_scenario(run_scenario_source(run_dir, cfg))
 
@@ -390,7 +425,7 @@ def check_hardware(run_dir: Path) -> None:
                        "resuming or replaying it with this one would mix the two")
 
 
-def config_differences(a: EvolveConfig, b: EvolveConfig, scenario: Scenario | None = None,
+def config_differences(a: SwarmCoDeConfig, b: SwarmCoDeConfig, scenario: Scenario | None = None,
                        ignore: Iterable[str] = ("generations", "device")) -> list[str]:
     """The config keys in which `a` and `b` differ (except `ignore`); an unset swarm_size or
     ticks counts as the scenario's (what a run pins when it starts)."""
@@ -424,7 +459,7 @@ def memory_limit(device: str = "auto") -> tuple[int, str]:
     return FALLBACK_MEMORY, "assumed memory (64 GiB)"
 
 
-def estimate_bytes(cfg: EvolveConfig, scenario: Scenario | None = None) -> int:
+def estimate_bytes(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> int:
     """A rough estimate of the memory one generation needs (a lower bound of the peak, close to
     the measured peak of a swarm1000 generation), in bytes:
 
@@ -435,7 +470,7 @@ def estimate_bytes(cfg: EvolveConfig, scenario: Scenario | None = None) -> int:
       K packages (checked against the O obstacles) and each obstacle: 4 x 32 x (K (O + 4) + 2 O);
     - the programs: population x (4 x 11,664 lookup-table entries + 16 x bt_length + tag_length).
     """
-    from .bt import NUM_COMBOS
+    from ..sim.bt import NUM_COMBOS
 
     P, T = cfg.population, cfg.trials
     if scenario is not None:
@@ -459,7 +494,7 @@ def _size(n: float) -> str:
     return f"{n:.3g} EiB"  # pragma: no cover
 
 
-def check_memory(cfg: EvolveConfig, scenario: Scenario | None = None,
+def check_memory(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
                  option_names: dict[str, str] | None = None) -> None:
     """ValueError, before anything is allocated, when `estimate_bytes` exceeds `memory_limit`:
     the message gives the estimate and the options that size it."""
@@ -478,6 +513,16 @@ def check_memory(cfg: EvolveConfig, scenario: Scenario | None = None,
         f"(2 x population x trials) and the programs of {cfg.population} individuals of "
         f"bt_length {cfg.bt_length}; use a smaller {names['population']}, {names['trials']} or "
         f"{names['swarm_size']}")
+
+
+def check_config(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
+                 option_names: dict[str, str] | None = None) -> None:
+    """Everything a run's config must pass before anything is made: its settings' types and
+    ranges, then the memory its sizes need (so that sizes far too large are told what they
+    would need), then the upper bounds that memory does not bound. ValueError, one line."""
+    cfg.validate(option_names, bounds=False)
+    check_memory(cfg, scenario, option_names)
+    cfg.check_bounds(option_names)
 
 
 # ------------------------------------------------------------------ checkpoints
@@ -533,7 +578,7 @@ def load_checkpoint(run_dir: Path) -> dict:
     return read_checkpoint(path)
 
 
-def load_run(run_dir: Path) -> tuple[EvolveConfig, dict, Scenario]:
+def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     """The config, checkpoint and scenario of a run directory, checked against each other:
     config.toml must agree with the config saved in the checkpoint in every key but generations
     and device, and the run's hardware.toml with the installed catalog (RunError otherwise)."""
@@ -552,18 +597,13 @@ def load_run(run_dir: Path) -> tuple[EvolveConfig, dict, Scenario]:
 
 
 def resume(run_dir: Path, generations: int | None = None, device: str | None = None,
-           loaded: tuple[EvolveConfig, dict, Scenario] | None = None) -> Evolution:
+           loaded: tuple[SwarmCoDeConfig, dict, Scenario] | None = None) -> Evolution:
     """The run in `run_dir`, continued from its checkpoint with its saved config and its own
     copy of the scenario (`load_run`; `loaded` is what `load_run` returned, if it was called)."""
     run_dir = Path(run_dir)
     cfg, d, scenario = loaded or load_run(run_dir)
-    cfg = dataclasses.replace(cfg)
-    if generations is not None:
-        cfg.generations = generations
-    if device is not None:
-        cfg.device = device
-    cfg.validate()
-    check_memory(cfg, scenario)
+    cfg = with_overrides(cfg, generations=generations, device=device)
+    check_config(cfg, scenario)
     source = run_scenario_source(run_dir, cfg)
     try:
         ev = Evolution.from_checkpoint(d, dataclasses.replace(cfg, scenario=source))
@@ -575,7 +615,7 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
     return ev
 
 
-def new_run_dir(logdir: Path, cfg: EvolveConfig) -> Path:
+def new_run_dir(logdir: Path, cfg: SwarmCoDeConfig) -> Path:
     """A new, empty run directory under `logdir`: SCENARIO__SEED__TIME, with -1, -2, ... added
     when that exists. Each candidate is made with one mkdir that fails if it exists, so runs
     started at the same second (threads or processes) never share a directory."""

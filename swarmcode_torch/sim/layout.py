@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import torch
 
-from .genome import R_MAX
+from .hardware import R_MAX
 from .scenario import Scenario
 
 _CANDIDATES = 32  # rejection sampling: candidate positions drawn per object

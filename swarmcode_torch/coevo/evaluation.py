@@ -22,34 +22,18 @@ from typing import Callable
 import torch
 from torch import Tensor
 
-from . import bt
-from .fitness import FitnessWeights, budget_penalty, gate, raw_fitness, team_cost
-from .genome import Genome
-from .hardware import genome_phenotype
-from .layout import Layout, make_layouts
+from ..sim import bt
+from .config import EvalConfig
+from .fitness import budget_penalty, gate, raw_fitness, team_cost
+from .population import Population
+from .population import genome_phenotype
+from ..sim.layout import Layout, make_layouts
 from .partners import Swarms, assemble_swarms, choose_partners, elite_rows
 from .reproduction import elite_count
-from .scenario import Scenario
-from .world import Robots, WorldParams, rollout
+from ..sim.scenario import Scenario
+from ..sim.world import Robots, WorldParams, rollout
 
 StepFn = Callable
-
-
-@dataclass(frozen=True)
-class EvalConfig:
-    """How teams are built and scored."""
-
-    swarm_size: int = 20            # robots per team
-    trials: int = 3                 # random environments per team (focal and baseline share them)
-    ticks: int = 250                # episode length
-    budget: float | None = None     # $; None: no budget penalty
-    objective: str = "fitness"      # "fitness" or "roi" (fitness divided by team cost)
-    lam: float = 0.001              # budget penalty decay
-    p_marginal: float = 0.25        # factor on fitness when the marginal contribution is <= 0
-    max_elite: int = 3              # E in the elite count (partner elites are drawn from these)
-    dominance: bool = True          # False: uniform team composition (an ablation)
-    evaluated_partners: bool = False  # partners are elites with a fitness (none from a new species)
-    weights: FitnessWeights = FitnessWeights()
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,7 +57,7 @@ def team_scores(metrics: dict, cost: Tensor, cfg: EvalConfig) -> Tensor:
     return f
 
 
-def team_robots(genome: Genome, teams: Tensor) -> Robots:
+def team_robots(genome: Population, teams: Tensor) -> Robots:
     """Per-robot constants of teams [E, S] of population rows (-1: an empty slot); each robot
     runs its row's program (row of `bt.build_tables(genome.bt)`)."""
     ph = genome_phenotype(genome)
@@ -83,7 +67,7 @@ def team_robots(genome: Genome, teams: Tensor) -> Robots:
                   present=teams >= 0, program=rows)
 
 
-def simulate_teams(teams: Tensor, genome: Genome, tables: Tensor, layout_ids: Tensor,
+def simulate_teams(teams: Tensor, genome: Population, tables: Tensor, layout_ids: Tensor,
                    layouts: Layout, params: WorldParams, ticks: int,
                    step_fn: StepFn | None = None) -> dict:
     """Run teams [E, S] (population rows, -1 empty) in layouts[layout_ids]; metrics [E] each."""
@@ -111,7 +95,7 @@ class SimBatch:
     """Whole evaluations to simulate, self-contained (what an evaluation shard receives): the
     genome rows their teams use, the teams as rows of that genome, their environments."""
 
-    genome: Genome         # the rows the teams use
+    genome: Population         # the rows the teams use
     focal_team: Tensor     # [B, S] rows of `genome` (-1: an empty slot)
     baseline_team: Tensor  # [B, S]
     layouts: Layout        # [B * trials], as in EvalPlan
@@ -123,7 +107,7 @@ class SimBatch:
                         Layout(*(t.to(device) for t in self.layouts)), self.trials)
 
 
-def plan_evaluation(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
+def plan_evaluation(genome: Population, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
                     fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
                     generator: torch.Generator) -> EvalPlan:
     """The driver's part of an evaluation, every random draw of it from the run's generator:
@@ -141,7 +125,7 @@ def plan_evaluation(genome: Genome, species: Tensor, proto_ids: Tensor, proto_in
     return EvalPlan(swarms, layouts, T)
 
 
-def sim_batch(plan: EvalPlan, genome: Genome, lo: int = 0, hi: int | None = None) -> SimBatch:
+def sim_batch(plan: EvalPlan, genome: Population, lo: int = 0, hi: int | None = None) -> SimBatch:
     """Evaluations lo..hi of a plan as a SimBatch: the genome rows their teams use and the teams
     renumbered into them. The whole plan is the population and its teams as they are."""
     P, T = plan.size, plan.trials
@@ -185,7 +169,7 @@ def gather_metrics(parts: list[dict]) -> dict:
     return {k: torch.cat([p[k].view(2, -1) for p in parts], 1).reshape(-1) for k in parts[0]}
 
 
-def score_plan(plan: EvalPlan, genome: Genome, m: dict, scenario: Scenario, cfg: EvalConfig,
+def score_plan(plan: EvalPlan, genome: Population, m: dict, scenario: Scenario, cfg: EvalConfig,
           sim_seconds: float = 0.0) -> EvalResult:
     """Scores of a plan's evaluations from their per-environment metrics [2 * B * trials]:
     team cost, F_raw times the budget penalty, the mean over trials, the marginal gate."""
@@ -203,7 +187,7 @@ def score_plan(plan: EvalPlan, genome: Genome, m: dict, scenario: Scenario, cfg:
                       sim_seconds=sim_seconds)
 
 
-def evaluate(genome: Genome, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
+def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
              fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
              generator: torch.Generator, params: WorldParams | None = None,
              step_fn: StepFn | None = None, tables: Tensor | None = None,

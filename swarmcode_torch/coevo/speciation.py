@@ -8,27 +8,13 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from .bt import NUM_OPCODES
-from .genome import R_MAX, R_MIN, Genome
+from ..sim.bt import NUM_OPCODES
+from .config import DistanceWeights, SwarmCoDeConfig
+from .population import R_MAX, R_MIN, Population
 
 
 #: speciate precomputes the full [P, P] distance matrix when P * P is at most this.
 _FULL_MATRIX_MAX = 1 << 24
-
-
-@dataclass(frozen=True)
-class DistanceWeights:
-    """Weights of the genome distance D (paper defaults); gamma is the tag-term exponent."""
-
-    w_tag: float = 1.0
-    w_hw: float = 0.5
-    w_bt: float = 0.3
-    w_tool: float = 0.35
-    w_size: float = 0.7
-    gamma: float = 2.0
-    hw_tiers: bool = False
-    """d_hw also over the three tiers (the code before it followed the paper's text; config key
-    `d_hw_tiers`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,7 +41,7 @@ def _one_hot_bt(bt: Tensor) -> Tensor:
     return oh.flatten(1)
 
 
-def distance_terms(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights()) -> dict[str, Tensor]:
+def distance_terms(a: Population, b: Population, w: DistanceWeights = DistanceWeights()) -> dict[str, Tensor]:
     """Genomes [Pa], [Pb] -> the weighted terms of D, each [Pa, Pb] float32, in the order of the sum:
     tag = w_tag (H/L)^gamma, hw = w_hw d_hw, bt = w_bt d_bt, tool = w_tool d_tool, size = w_size d_size.
 
@@ -84,17 +70,17 @@ def distance_terms(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights())
             "tool": w.w_tool * d_tool, "size": w.w_size * d_size}
 
 
-def distance(a: Genome, b: Genome, w: DistanceWeights = DistanceWeights()) -> Tensor:
+def distance(a: Population, b: Population, w: DistanceWeights = DistanceWeights()) -> Tensor:
     """Genomes [Pa], [Pb] -> [Pa, Pb] float32 D = w_tag (H/L)^gamma + w_hw d_hw + w_bt d_bt + w_tool d_tool + w_size d_size
     (the sum of `distance_terms`)."""
     t = distance_terms(a, b, w)
     return t["tag"] + t["hw"] + t["bt"] + t["tool"] + t["size"]
 
 
-def speciate(genome: Genome, species_hint: Tensor, prev_proto: Genome | None,
-             prev_proto_ids: Tensor, next_species_id: int, delta: float = 0.4,
+def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | None,
+             prev_proto_ids: Tensor, next_species_id: int, delta: float = SwarmCoDeConfig.delta,
              w: DistanceWeights = DistanceWeights(), merge: bool = False) -> SpeciationResult:
-    """Genome [P], hint [P] long (-1 none), previous prototypes [Kp] + ids [Kp] -> SpeciationResult.
+    """Population [P], hint [P] long (-1 none), previous prototypes [Kp] + ids [Kp] -> SpeciationResult.
 
     (1) Each previous species with >= 1 member by `species_hint` keeps its id; its new prototype is
     the member closest to the old prototype (ties: lowest row); memberless species go extinct.

@@ -6,11 +6,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Sequence
 
-from .dynamics import median, niche_count, replay, window_stats
-from .hardware import genome_phenotype
+from ..coevo.dynamics import median, niche_count, replay, window_stats
+from ..coevo.population import genome_phenotype
 from .runs import RunError, load_checkpoint, read_config, read_teams, run_scenario
-from .scenario import Scenario
-from .world import WorldParams, capabilities
+from ..sim.scenario import Scenario
+from ..sim.world import WorldParams, capabilities
 
 
 def design_capabilities(designs: Sequence[dict], scenario: Scenario) -> list[list[int]]:

@@ -6,16 +6,11 @@ from dataclasses import dataclass, fields
 
 import torch
 
-# Radius bounds of a robot chassis, in metres (the paper's R_min, R_max).
-R_MIN = 0.15
-R_MAX = 0.5
-NUM_TIERS = 3
-SUCTION = 0
-PINCHER = 1
+from ..sim.hardware import NUM_TIERS, PINCHER, R_MAX, R_MIN, SUCTION, Catalog, Phenotype, phenotype
 
 
 @dataclass
-class Genome:
+class Population:
     """A population of P genomes; every field has leading dimension P.
 
     Tiers are stored as indices 0..2 (the paper's tiers 1..3).
@@ -37,21 +32,21 @@ class Genome:
     def size(self) -> int:
         return int(self.selectivity.shape[0])
 
-    def index(self, idx: torch.Tensor | slice) -> "Genome":
-        """Rows `idx` of every field (a new Genome)."""
-        return Genome(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
+    def index(self, idx: torch.Tensor | slice) -> "Population":
+        """Rows `idx` of every field (a new Population)."""
+        return Population(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
 
-    def to(self, device: torch.device | str) -> "Genome":
-        return Genome(**{f.name: getattr(self, f.name).to(device) for f in fields(self)})
+    def to(self, device: torch.device | str) -> "Population":
+        return Population(**{f.name: getattr(self, f.name).to(device) for f in fields(self)})
 
-    def clone(self) -> "Genome":
-        return Genome(**{f.name: getattr(self, f.name).clone() for f in fields(self)})
+    def clone(self) -> "Population":
+        return Population(**{f.name: getattr(self, f.name).clone() for f in fields(self)})
 
     def state_dict(self) -> dict[str, torch.Tensor]:
         return {f.name: getattr(self, f.name).detach().cpu() for f in fields(self)}
 
     @classmethod
-    def from_state_dict(cls, d: dict[str, torch.Tensor]) -> "Genome":
+    def from_state_dict(cls, d: dict[str, torch.Tensor]) -> "Population":
         names = [f.name for f in fields(cls)]
         missing = [n for n in names if n not in d]
         if missing:
@@ -59,9 +54,9 @@ class Genome:
         return cls(**{n: d[n] for n in names})
 
     @staticmethod
-    def cat(parts: list["Genome"]) -> "Genome":
-        return Genome(**{f.name: torch.cat([getattr(p, f.name) for p in parts])
-                         for f in fields(Genome)})
+    def cat(parts: list["Population"]) -> "Population":
+        return Population(**{f.name: torch.cat([getattr(p, f.name) for p in parts])
+                         for f in fields(Population)})
 
     def hardware_vector(self, tiers: bool = False) -> torch.Tensor:
         """[P, D] the hardware space of d_hw, each axis in [0, 1]: the two continuous operating
@@ -73,3 +68,9 @@ class Genome:
             t = float(NUM_TIERS - 1)
             points = [self.chassis / t, self.battery / t, self.motor / t] + points
         return torch.stack(points, dim=-1).float()
+
+
+def genome_phenotype(genome: "Population", catalog: Catalog | None = None) -> Phenotype:
+    """Phenotype of every individual of a population (`Population`)."""
+    return phenotype(genome.radius, genome.chassis, genome.battery, genome.motor,
+                     genome.torque_point, genome.battery_point, genome.effector, catalog)

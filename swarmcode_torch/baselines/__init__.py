@@ -29,19 +29,19 @@ from typing import Callable, Iterator, Sequence
 import torch
 from torch import Tensor
 
-from . import bt
-from .evaluation import simulate_teams, team_scores
-from .evolve import Context, Evolution, EvolveConfig, make_context, random_population, resolve_device
-from .fitness import team_cost
-from .genome import Genome
-from .hardware import genome_phenotype
-from .layout import Layout, make_layouts
-from .reproduction import ReproductionParams, crossover, elite_count, mutate
+from ..sim import bt
+from ..coevo.evaluation import simulate_teams, team_scores
+from ..coevo.config import SwarmCoDeConfig
+from ..coevo.evolve import (Context, Evolution, make_context, random_population,
+                            resolve_device)
+from ..coevo.fitness import team_cost
+from ..coevo.population import Population
+from ..coevo.population import genome_phenotype
+from ..sim.layout import Layout, make_layouts
+from ..coevo.reproduction import ReproductionParams, crossover, elite_count, mutate
 
 #: Probability that an offspring of the GA / CCEA is a crossover child (else a clone of parent 1).
 P_CROSSOVER = 0.7
-#: Tournament size of the GA / CCEA parent selection.
-TOURNAMENT_SIZE = 3
 #: Seed of the held-out environments on which `compare` scores every algorithm's best team.
 HELD_OUT_SEED = 20240917
 
@@ -67,9 +67,9 @@ def distinct_per_row(teams: Tensor) -> Tensor:
 
 @dataclass(frozen=True, eq=False)
 class BestTeam:
-    """A team found by an algorithm: designs [D] (a Genome) and its S slots (rows into it)."""
+    """A team found by an algorithm: designs [D] (a Population) and its S slots (rows into it)."""
 
-    genome: Genome
+    genome: Population
     team: Tensor            # [S] long rows of `genome`
     fitness: float          # its score in the run (mean over the run's trials)
     cost: float
@@ -81,13 +81,13 @@ class BestTeam:
         return int(torch.unique(self.team).numel())
 
 
-def _team_of(genome: Genome, team: Tensor, fitness: float, cost: float, generation: int) -> BestTeam:
+def _team_of(genome: Population, team: Tensor, fitness: float, cost: float, generation: int) -> BestTeam:
     """A BestTeam holding only the rows of `genome` that `team` [S] uses (copies)."""
     rows, inv = torch.unique(team, return_inverse=True)
     return BestTeam(genome.index(rows).clone(), inv.clone(), fitness, cost, generation)
 
 
-def score_teams(ctx: Context, genome: Genome, teams: Tensor, layouts: Layout,
+def score_teams(ctx: Context, genome: Population, teams: Tensor, layouts: Layout,
                 tables: Tensor | None = None, step_fn=None) -> tuple[Tensor, Tensor, dict]:
     """Teams [B, S] (rows of genome), each run in every one of the T environments `layouts`,
     all B * T team-episodes in one `simulate_teams` batch.
@@ -118,31 +118,32 @@ def new_layouts(ctx: Context, num: int, generator: torch.Generator) -> Layout:
 
 
 # ------------------------------------------------------------------ reproduction
-def _where_rows(mask: Tensor, a: Genome, b: Genome) -> Genome:
-    """[N] bool, Genomes [N] -> Genome [N]: a's row where mask, else b's."""
+def _where_rows(mask: Tensor, a: Population, b: Population) -> Population:
+    """[N] bool, Genomes [N] -> Population [N]: a's row where mask, else b's."""
     out = {}
-    for f in fields(Genome):
+    for f in fields(Population):
         x, y = getattr(a, f.name), getattr(b, f.name)
         out[f.name] = torch.where(mask.view(-1, *([1] * (x.dim() - 1))), x, y)
-    return Genome(**out)
+    return Population(**out)
 
 
-def reproduce_groups(genome: Genome, fitness: Tensor, sizes: Sequence[int], max_elite: int,
+def reproduce_groups(genome: Population, fitness: Tensor, sizes: Sequence[int], max_elite: int,
                      generator: torch.Generator, params: ReproductionParams | None = None,
-                     p_crossover: float = P_CROSSOVER) -> tuple[Genome, Tensor, Tensor]:
+                     p_crossover: float = P_CROSSOVER) -> tuple[Population, Tensor, Tensor]:
     """Generational reproduction inside fixed groups (the GA: one group; the CCEA: K).
 
     genome [P] and fitness [P] hold the groups as consecutive blocks of `sizes` rows; the children
     [P] keep that layout. In each group of size n, the best `elite_count(n, max_elite)` (the
     SwarmCoDe elite rule) are copied unchanged, best first; the rest of the group are offspring:
-    parent 1 by a tournament (size `params.tournament_size`, with replacement) in the group,
+    parent 1 by a tournament (size `params.tournament_size`, with replacement; `params` default:
+    `ReproductionParams`, the run defaults; the algorithms pass their run's) in the group,
     parent 2 by a tournament among the other members (parent 1 again only if the group has one
     member), uniform `crossover` with probability `p_crossover` (else a clone of parent 1), then
     `mutate`. Ties rank the lower row first.
 
     Returns (children [P], is_elite [P] bool, parent [P] row of the elite / of parent 1).
     """
-    params = params or ReproductionParams(tournament_size=TOURNAMENT_SIZE, max_elite=max_elite)
+    params = params or ReproductionParams(max_elite=max_elite)
     dev = genome.bt.device
     P = genome.size
     size_t = torch.tensor(list(sizes), dtype=torch.long, device=dev)
@@ -183,7 +184,7 @@ def reproduce_groups(genome: Genome, fitness: Tensor, sizes: Sequence[int], max_
     # each group's block: its elites then its offspring
     group = torch.cat([pos[elite], off_pos])
     perm = torch.sort(group, stable=True).indices
-    children = Genome.cat([genome.index(elite), child]).index(perm)
+    children = Population.cat([genome.index(elite), child]).index(perm)
     is_elite = torch.cat([torch.ones(elite.numel(), dtype=torch.bool, device=dev),
                           torch.zeros(n_off, dtype=torch.bool, device=dev)])[perm]
     parent = torch.cat([elite, p1])[perm]
@@ -196,7 +197,7 @@ class _Algorithm:
 
     name = "algorithm"
 
-    def __init__(self, cfg: EvolveConfig):
+    def __init__(self, cfg: SwarmCoDeConfig):
         self.cfg = cfg
         self.ctx = make_context(cfg)
         self.generation = 0
@@ -239,7 +240,7 @@ class _Algorithm:
 class _FixedPopulationAlgorithm(_Algorithm):
     """A generational algorithm with P individuals scored by one team each on T environments."""
 
-    def __init__(self, cfg: EvolveConfig, generator: torch.Generator,
+    def __init__(self, cfg: SwarmCoDeConfig, generator: torch.Generator,
                  resample_environments: bool = True):
         super().__init__(cfg)
         if torch.device(generator.device).type != self.ctx.device.type:
@@ -284,7 +285,8 @@ class _FixedPopulationAlgorithm(_Algorithm):
         self._offer(lambda: _team_of(genome, teams[b], gen_best, float(cost[b]), gen), gen_best)
         self.last_scores = score
         self.genome, _, _ = reproduce_groups(self.genome, score, self.group_sizes,
-                                             self.cfg.max_elite, self.generator)
+                                             self.cfg.max_elite, self.generator,
+                                             self.cfg.reproduction)
         self._after_reproduction()
         self.generation += 1
         species = int(distinct_per_row(teams[b:b + 1])[0])
@@ -324,7 +326,7 @@ class FixedSpeciesCCEA(_FixedPopulationAlgorithm):
 
     name = "ccea"
 
-    def __init__(self, cfg: EvolveConfig, num_species: int, generator: torch.Generator,
+    def __init__(self, cfg: SwarmCoDeConfig, num_species: int, generator: torch.Generator,
                  resample_environments: bool = True):
         super().__init__(cfg, generator, resample_environments)
         if not 1 <= num_species <= self.swarm_size:
@@ -371,7 +373,7 @@ class SwarmCoDeRun(_Algorithm):
 
     name = "swarmcode"
 
-    def __init__(self, cfg: EvolveConfig, dominance: bool | None = None):
+    def __init__(self, cfg: SwarmCoDeConfig, dominance: bool | None = None):
         if dominance is not None:
             cfg = replace(cfg, dominance=dominance)
         super().__init__(cfg)
@@ -403,7 +405,7 @@ class SwarmCoDeRun(_Algorithm):
 
 
 # ------------------------------------------------------------------ generator-style API
-def homogeneous_ga(cfg: EvolveConfig, generations: int, generator: torch.Generator,
+def homogeneous_ga(cfg: SwarmCoDeConfig, generations: int, generator: torch.Generator,
                    **kw) -> Iterator[dict]:
     """Run the homogeneous GA for `generations` generations, yielding each one's metrics."""
     algo = HomogeneousGA(cfg, generator, **kw)
@@ -411,7 +413,7 @@ def homogeneous_ga(cfg: EvolveConfig, generations: int, generator: torch.Generat
         yield algo.step()
 
 
-def fixed_species_ccea(cfg: EvolveConfig, num_species: int, generations: int,
+def fixed_species_ccea(cfg: SwarmCoDeConfig, num_species: int, generations: int,
                        generator: torch.Generator, **kw) -> Iterator[dict]:
     """Run the K-species CCEA for `generations` generations, yielding each one's metrics."""
     algo = FixedSpeciesCCEA(cfg, num_species, generator, **kw)
@@ -419,14 +421,14 @@ def fixed_species_ccea(cfg: EvolveConfig, num_species: int, generations: int,
         yield algo.step()
 
 
-def swarmcode(cfg: EvolveConfig, generations: int) -> Iterator[dict]:
+def swarmcode(cfg: SwarmCoDeConfig, generations: int) -> Iterator[dict]:
     """Run SwarmCoDe for `generations` generations, yielding each one's metrics."""
     algo = SwarmCoDeRun(replace(cfg, generations=generations))
     for _ in range(generations):
         yield algo.step()
 
 
-def swarmcode_no_dominance(cfg: EvolveConfig, generations: int) -> Iterator[dict]:
+def swarmcode_no_dominance(cfg: SwarmCoDeConfig, generations: int) -> Iterator[dict]:
     """SwarmCoDe with uniform team composition (dominance genes ignored)."""
     return swarmcode(replace(cfg, dominance=False), generations)
 
@@ -451,7 +453,7 @@ def plan_generations(episodes_budget: int, population: int, trials: int) -> dict
     return {"swarmcode": g, "swarmcode-no-dominance": g, "homogeneous-ga": 2 * g, "ccea": 2 * g}
 
 
-def make_algorithm(name: str, cfg: EvolveConfig, num_species: int = 4) -> _Algorithm:
+def make_algorithm(name: str, cfg: SwarmCoDeConfig, num_species: int = 4) -> _Algorithm:
     """A fresh run of algorithm `name` (see ALGORITHMS) with seed cfg.seed."""
     dev = resolve_device(cfg.device)
     if name == "swarmcode":
@@ -471,7 +473,7 @@ def compare(scenario: str = "four-niche", seeds: Sequence[int] = (0, 1, 2),
             population: int = 16, swarm_size: int | None = 10, trials: int = 1,
             ticks: int | None = 100, budget: float | None = None, objective: str = "fitness",
             device: str = "auto", num_species: int = 4, eval_trials: int = 16,
-            algorithms: Sequence[str] = ALGORITHMS, base: EvolveConfig | None = None,
+            algorithms: Sequence[str] = ALGORITHMS, base: SwarmCoDeConfig | None = None,
             progress: Callable[[dict], None] | None = None) -> list[dict]:
     """Run every algorithm on every seed with the same number of team-episodes.
 
@@ -479,13 +481,13 @@ def compare(scenario: str = "four-niche", seeds: Sequence[int] = (0, 1, 2),
     (= generations * 2 * population * trials episodes); the GA and the CCEA get twice as many
     generations. Each run's best team is then scored on `eval_trials` held-out environments
     (seeded by HELD_OUT_SEED, the same for every algorithm and seed; not counted in the budget).
-    `base` supplies the remaining EvolveConfig settings. `progress(row)` is called after each run.
+    `base` supplies the remaining SwarmCoDeConfig settings. `progress(row)` is called after each run.
 
     Returns one row per (algorithm, seed): algorithm, seed, generations, episodes, best_fitness
     (best team score during the run), species (distinct designs in that team), team_cost,
     heldout_fitness, heldout_deliveries, seconds; SwarmCoDe rows add population_species.
     """
-    base = base or EvolveConfig()
+    base = base or SwarmCoDeConfig()
     cfg0 = replace(base, scenario=scenario, population=population, swarm_size=swarm_size,
                    trials=trials, ticks=ticks, budget=budget, objective=objective, device=device)
     if episodes_budget is None:

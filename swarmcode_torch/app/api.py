@@ -26,10 +26,11 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from . import runs
-from .evolve import Evolution, EvolveConfig
-from .scenario import EFFECTORS, Scenario, parse_scenario, read_scenario
+from ..coevo.config import SwarmCoDeConfig
+from ..coevo.evolve import Evolution
+from ..sim.scenario import EFFECTORS, Scenario, parse_scenario, read_scenario
 
-_CONFIG_KEYS = tuple(f.name for f in fields(EvolveConfig))
+_CONFIG_KEYS = tuple(f.name for f in fields(SwarmCoDeConfig))
 
 
 # ------------------------------------------------------------------ scenarios as TOML
@@ -82,7 +83,7 @@ def _scenario_data(s: Scenario) -> bytes:
     return data
 
 
-def _object_evolution(cfg: EvolveConfig, s: Scenario, data: bytes) -> Evolution:
+def _object_evolution(cfg: SwarmCoDeConfig, s: Scenario, data: bytes) -> Evolution:
     """An Evolution of a Scenario object: built from a temporary copy of its TOML, then named
     by the scenario's name (nothing reloads the scenario during a run; a run directory keeps the
     TOML as its scenario.toml, which resume, replay and inspect read)."""
@@ -106,12 +107,12 @@ class RunResult:
     best_team: the best team of the run (fitness, cost, species, niches, deliveries, energy,
         designs: each design's hardware, behavior tree, count and capability).
     run_dir: the run directory, or None for a run in memory.
-    config: the run's `EvolveConfig` (swarm size and episode length pinned).
+    config: the run's `SwarmCoDeConfig` (swarm size and episode length pinned).
     scenario: the `Scenario` it ran.
     evolution: the `Evolution` (state and context), None for a run loaded with `load`.
     """
 
-    config: EvolveConfig
+    config: SwarmCoDeConfig
     run_dir: Path | None
     history: list[dict]
     species: list[dict]
@@ -206,29 +207,29 @@ def _execute(ev: Evolution, run_dir: Path | None, reporters: list) -> None:
 
 
 # ------------------------------------------------------------------ evolve, resume, load
-def make_config(config: EvolveConfig | None = None, **settings) -> EvolveConfig:
-    """`config` (default `EvolveConfig()`) with `settings` (config keys) replaced; TypeError for
+def make_config(config: SwarmCoDeConfig | None = None, **settings) -> SwarmCoDeConfig:
+    """`config` (default `SwarmCoDeConfig()`) with `settings` (config keys) replaced; TypeError for
     an unknown key. A path scenario becomes a string."""
-    if config is not None and not isinstance(config, EvolveConfig):
-        raise TypeError(f"config must be an EvolveConfig, got {type(config).__name__}")
+    if config is not None and not isinstance(config, SwarmCoDeConfig):
+        raise TypeError(f"config must be an SwarmCoDeConfig, got {type(config).__name__}")
     unknown = sorted(set(settings) - set(_CONFIG_KEYS))
     if unknown:
-        raise TypeError(f"unknown setting(s) {', '.join(unknown)} (the keys of EvolveConfig: "
+        raise TypeError(f"unknown setting(s) {', '.join(unknown)} (the keys of SwarmCoDeConfig: "
                         f"{', '.join(_CONFIG_KEYS)})")
     if isinstance(settings.get("scenario"), os.PathLike):
         settings["scenario"] = os.fspath(settings["scenario"])
-    return replace(config if config is not None else EvolveConfig(), **settings)
+    return replace(config if config is not None else SwarmCoDeConfig(), **settings)
 
 
-def evolve(config: EvolveConfig | None = None, *, scenario: str | os.PathLike | Scenario | None = None,
+def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike | Scenario | None = None,
            logdir: str | os.PathLike | None = "runs", checkpoint_every: int = 10,
            render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
            callback: Callable[[dict], Any] | None = None, **settings) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
-    config: an `EvolveConfig` to start from (default: `EvolveConfig()`, the paper's budget
+    config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
         experiment); `settings` replace its keys: `generations=20, population=30, seed=0,
-        budget=4000.0, delta=0.5, ...` (any key of EvolveConfig / a run's config.toml).
+        budget=4000.0, delta=0.5, ...` (any key of SwarmCoDeConfig / a run's config.toml).
     scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
     logdir: where the run directory is created (named `<scenario>__<seed>__<time>`, as by the
         CLI); None: run in memory, write no file.
@@ -263,17 +264,17 @@ def evolve(config: EvolveConfig | None = None, *, scenario: str | os.PathLike | 
     return _result(ev, run_dir, history.rows)
 
 
-def start_evolution(cfg: EvolveConfig, scenario: Scenario | None = None) -> tuple[Evolution, bytes]:
+def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> tuple[Evolution, bytes]:
     """The checks `swarmcode-torch evolve` makes before it creates anything (the config, the
     scenario, the memory the run needs), then the run's `Evolution` and the bytes of its
     scenario file (a run directory keeps them as scenario.toml). `scenario`: a Scenario object
     to run instead of `cfg.scenario`'s file. ValueError (ScenarioError is one) otherwise."""
-    cfg.validate()
+    cfg.validate(bounds=False)
     if scenario is None:
         scen, data = read_scenario(cfg.scenario)
     else:
         scen, data = scenario, _scenario_data(scenario)
-    runs.check_memory(cfg, scen)
+    runs.check_config(cfg, scen)
     ev = Evolution(cfg) if scenario is None else _object_evolution(cfg, scenario, data)
     if ev.ctx.scenario != scen:
         raise ValueError(f"{cfg.scenario} changed while the run was starting; start it again")

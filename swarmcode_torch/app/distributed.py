@@ -27,10 +27,10 @@ from typing import Any, Callable, Iterator
 
 import torch
 
-from .evaluation import EvalPlan, SimBatch, gather_metrics, sim_batch, simulate_batch
-from .genome import Genome
-from .layout import Layout
-from .world import CompiledStep, CudaGraphTicks, WorldParams, step as world_step
+from ..coevo.evaluation import EvalPlan, SimBatch, gather_metrics, sim_batch, simulate_batch
+from ..coevo.population import Population
+from ..sim.layout import Layout
+from ..sim.world import CompiledStep, CudaGraphTicks, WorldParams, step as world_step
 
 RAY_INSTALL = 'pip install "swarmcode-torch[ray]"'
 #: Seconds to wait for the evaluation actors to start (the cluster may be busy).
@@ -191,7 +191,7 @@ def pack_batch(batch: SimBatch) -> bytes:
     """The bytes a shard is sent: its `SimBatch` (genome rows, teams, environments), pickled
     with `_pack_tensor`'s lossless compaction."""
     p = _pack_tensor
-    tree = ({f.name: p(getattr(batch.genome, f.name)) for f in fields(Genome)},
+    tree = ({f.name: p(getattr(batch.genome, f.name)) for f in fields(Population)},
             p(batch.focal_team), p(batch.baseline_team), [p(t) for t in batch.layouts],
             batch.trials)
     return pickle.dumps(tree, protocol=pickle.HIGHEST_PROTOCOL)
@@ -200,7 +200,7 @@ def pack_batch(batch: SimBatch) -> bytes:
 def unpack_batch(data: bytes, device: torch.device | str = "cpu") -> SimBatch:
     genome, focal, base, layouts, trials = pickle.loads(data)
     u = _unpack_tensor
-    return SimBatch(Genome(**{k: u(v) for k, v in genome.items()}), u(focal), u(base),
+    return SimBatch(Population(**{k: u(v) for k, v in genome.items()}), u(focal), u(base),
                     Layout(*(u(t) for t in layouts)), trials).to(device)
 
 
@@ -303,7 +303,7 @@ class ShardedEvaluator:
                                  f"({one_line(e)})") from None
         self.stats: list[dict] = []
 
-    def simulate(self, plan: EvalPlan, genome: Genome) -> tuple[dict, float]:
+    def simulate(self, plan: EvalPlan, genome: Population) -> tuple[dict, float]:
         """Per-environment metrics of the whole plan (as `simulate_batch` of it), from the
         shards; the seconds are those of the slowest shard's rollout."""
         ray = self.ray

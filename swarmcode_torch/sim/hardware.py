@@ -15,6 +15,13 @@ from typing import NamedTuple
 
 import torch
 
+# Radius bounds of a robot chassis, in metres (the paper's R_min, R_max).
+R_MIN = 0.15
+R_MAX = 0.5
+NUM_TIERS = 3
+SUCTION = 0
+PINCHER = 1
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
@@ -109,9 +116,3 @@ def phenotype(radius: torch.Tensor, chassis: torch.Tensor, battery: torch.Tensor
     mass = cat.base_mass + cat.effector_mass + chassis_mass + motor_mass + battery_mass
     cost = cat.base_cost + cat.effector_cost + chassis_cost + motor_cost + battery_cost
     return Phenotype(r, mass, force, payload, capacity, efficiency, effector.long(), cost)
-
-
-def genome_phenotype(genome, catalog: Catalog | None = None) -> Phenotype:
-    """Phenotype of every individual of a :class:`~swarmcode_torch.genome.Genome`."""
-    return phenotype(genome.radius, genome.chassis, genome.battery, genome.motor,
-                     genome.torque_point, genome.battery_point, genome.effector, catalog)

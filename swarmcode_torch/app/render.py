@@ -1,6 +1,6 @@
 """Replays of one team in one environment: recording, drawing, GIF / PNG export.
 
-`record_episode` runs a team (rows of a :class:`~swarmcode_torch.genome.Genome`) through one
+`record_episode` runs a team (rows of a :class:`~swarmcode_torch.coevo.population.Population`) through one
 random environment of a scenario on the CPU and keeps snapshots of the state; `draw_frame`
 draws a snapshot in true arena coordinates; `save_gif`, `save_png` and `frame_image` turn
 an episode into pictures; `replay_run` does it all for the best team of a run directory.
@@ -18,12 +18,12 @@ from typing import Sequence
 import torch
 from torch import Tensor
 
-from . import bt
-from .genome import Genome, PINCHER, SUCTION
-from .evaluation import team_robots
-from .layout import Layout, make_layouts
-from .scenario import Scenario
-from .world import DELIVERED, Robots, State, WorldParams, compatible, episode_metrics, \
+from ..sim import bt
+from ..coevo.population import Population, PINCHER, SUCTION
+from ..coevo.evaluation import team_robots
+from ..sim.layout import Layout, make_layouts
+from ..sim.scenario import Scenario
+from ..sim.world import DELIVERED, Robots, State, WorldParams, compatible, episode_metrics, \
     random_keys, reset, step
 
 _EFFECTOR_CODES = {"suction": SUCTION, "pincher": PINCHER}
@@ -33,8 +33,8 @@ _TAB10_ORDER = (0, 2, 3, 4, 6, 9, 1, 7, 8, 5)
 
 
 # ------------------------------------------------------------------ teams from summary.json
-def team_genome(designs: Sequence[dict], tag_length: int = 16) -> tuple[Genome, Tensor]:
-    """A Genome with one row per design of a run summary, and the team's slots.
+def team_genome(designs: Sequence[dict], tag_length: int = 16) -> tuple[Population, Tensor]:
+    """A Population with one row per design of a run summary, and the team's slots.
 
     `designs` are summary.json "designs" entries (tiers 1..3, effector by name, "bt" opcode
     list, "count" robots each). Returns the genome (tags all zero) and a ``[S]`` long tensor of
@@ -71,7 +71,7 @@ def team_genome(designs: Sequence[dict], tag_length: int = 16) -> tuple[Genome, 
         raise ValueError(f"design bt lists must hold opcodes 0..{bt.NUM_OPCODES - 1}")
     f = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.float)  # noqa: E731
     i = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.long)  # noqa: E731
-    genome = Genome(
+    genome = Population(
         tag=torch.zeros(len(rows), tag_length, dtype=torch.bool), selectivity=f("selectivity"),
         dominance=f("dominance"), bt=programs, radius=f("radius"), chassis=i("chassis"),
         battery=i("battery"), motor=i("motor"), torque_point=f("torque_point"),
@@ -88,7 +88,7 @@ class Episode:
     """One recorded episode of one environment.
 
     `layout` and `robots` are the simulated batch of one environment (leading dimension 1);
-    each snapshot is a :class:`~swarmcode_torch.world.State` of that environment *without*
+    each snapshot is a :class:`~swarmcode_torch.sim.world.State` of that environment *without*
     the environment dimension (``pos [N, 2]``, ``p_pos [P, 2]``, ``holder [P, G]``, ...).
     `metrics` are the episode metrics of the final state, as floats.
     """
@@ -110,7 +110,7 @@ def _env0(state: State) -> State:
     return State(*(x.clone() if x.dim() == 0 else x[0].clone() for x in state))
 
 
-def record_episode(genome: Genome, team: Tensor, scenario: Scenario, seed: int,
+def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: int,
                    ticks: int | None = None, every: int = 1,
                    params: WorldParams | None = None) -> Episode:
     """Run the team (``[S]`` genome rows, -1 = empty slot) in one random environment on the CPU.

@@ -9,73 +9,15 @@ from typing import Callable
 import torch
 from torch import Tensor
 
-from .bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ, compute_jumps
-from .genome import NUM_TIERS, R_MAX, R_MIN, Genome
+from ..sim.bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ, compute_jumps
+from .config import ReproductionParams, SwarmCoDeConfig
+from .population import NUM_TIERS, R_MAX, R_MIN, Population
 from .speciation import distance
 
-DistanceFn = Callable[[Genome, Genome], Tensor]
+DistanceFn = Callable[[Population, Population], Tensor]
 
 
-@dataclass(frozen=True)
-class ReproductionParams:
-    """Reproduction hyperparameters (paper values where the paper gives one).
-
-    tournament_size: individuals per tournament (with replacement; the fittest wins).
-    crossover_same / crossover_cross: crossover probability when both parents are of the same /
-        of different species (otherwise the child is a clone of parent 1).
-    mate_tries: in-species tournaments tried for a second parent within distance `delta` of parent
-        1 (and not parent 1 itself) before falling back to a global tournament (excluding parent 1).
-    delta: mating compatibility threshold on the genome distance (same as the speciation delta).
-    max_elite: E in the elite count N = max(1, min(E, floor(size / 5) + 1)).
-    quota_basis: what a species' offspring quota is proportional to: "sum", the total of its
-        members' (gated, penalised, smoothed) fitness (the paper's "total adjusted fitness"), or
-        "mean", NEAT's explicit fitness sharing (total / species size). See docs/MODEL.md.
-    min_share: a species whose quota share is below this many individuals gets no slot.
-    bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
-        The defaults of this class are the run defaults of `EvolveConfig`.
-    bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
-    bt_point_count: slots re-drawn by one point mutation (each a uniform slot, may repeat).
-    bt_point_on_nodes: a point mutation re-draws a uniform slot among the tree's nodes (its
-        non-NOP slots; slot 0 of an all-NOP program), not among all slots: the NOP padding is
-        not a node, so it stays padding (the paper mutates tree nodes). False: any slot.
-    point_opcode_weights: weights of opcodes 0..13 for a point mutation; END and NOP at half weight
-        so that structure-breaking / deleting mutations are rarer than changing a node.
-    subtree_leaf_prob: probability that a replacement subtree is a single random leaf; otherwise
-        it is SEQ or SEL (uniform) with 1..subtree_max_leaves (uniform) random leaves and an END.
-    hw_sigma: std of the gaussian perturbation of radius, torque_point and battery_point, as a
-        fraction of each gene's range; applied to every gene of every non-elite offspring, clipped.
-    social_sigma: the same for selectivity and dominance (range [0, 1]).
-    p_categorical: per-gene probability of resampling chassis, battery, motor tier and effector
-        uniformly (the new value may equal the old one).
-    p_tag_flip: per-bit tag flip probability; None means 1 / L_tag.
-    p_gene_mutation: probability that each continuous gene (radius, operating points,
-        selectivity, dominance) of a non-elite offspring gets its Gaussian step (1.0: every gene
-        of every offspring).
-    """
-
-    tournament_size: int = 3
-    crossover_same: float = 0.7
-    crossover_cross: float = 0.025
-    mate_tries: int = 5
-    delta: float = 0.4
-    max_elite: int = 3
-    quota_basis: str = "sum"
-    min_share: float = 0.0
-    bt_mutation_rate: float = 0.5
-    bt_subtree_prob: float = 0.05
-    bt_point_count: int = 1
-    bt_point_on_nodes: bool = True
-    point_opcode_weights: tuple[float, ...] = (1.0,) * 12 + (0.5, 0.5)
-    subtree_leaf_prob: float = 0.5
-    subtree_max_leaves: int = 3
-    hw_sigma: float = 0.05
-    social_sigma: float = 0.05
-    p_categorical: float = 0.02
-    p_tag_flip: float | None = None
-    p_gene_mutation: float = 0.2
-
-
-def elite_count(species_size: Tensor | int, max_elite: int = 3) -> Tensor | int:
+def elite_count(species_size: Tensor | int, max_elite: int = SwarmCoDeConfig.max_elite) -> Tensor | int:
     """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite, size // 5 + 1)); max_elite is the paper's E."""
     if isinstance(species_size, Tensor):
         return torch.clamp(torch.clamp(species_size // 5 + 1, max=max_elite), min=1)
@@ -220,7 +162,7 @@ CROSSOVER_GROUPS: tuple[tuple[str, ...], ...] = (
 )
 
 
-def crossover(a: Genome, b: Genome, generator: torch.Generator) -> Genome:
+def crossover(a: Population, b: Population, generator: torch.Generator) -> Population:
     """Parents [N], [N] -> child [N]: uniform per gene group, uniform per tag bit, one-point BT crossover at the same cut in 1..L-1."""
     n = a.size
     dev = a.bt.device
@@ -238,7 +180,7 @@ def crossover(a: Genome, b: Genome, generator: torch.Generator) -> Genome:
         out["bt"] = torch.where(t < cut, a.bt, b.bt)
     else:
         out["bt"] = a.bt.clone()
-    return Genome(**{f.name: out[f.name] for f in fields(Genome)})
+    return Population(**{f.name: out[f.name] for f in fields(Population)})
 
 
 def _gauss_clip(x: Tensor, lo: float, hi: float, sigma: float, generator: torch.Generator,
@@ -257,13 +199,13 @@ def _resample(x: Tensor, n_values: int, p: float, generator: torch.Generator) ->
     return torch.where(hit, new, x)
 
 
-def mutate(g: Genome, params: ReproductionParams, generator: torch.Generator) -> Genome:
-    """Genome [N] -> mutated Genome [N] (BT, continuous and categorical hardware, tag bits, selectivity, dominance)."""
+def mutate(g: Population, params: ReproductionParams, generator: torch.Generator) -> Population:
+    """Population [N] -> mutated Population [N] (BT, continuous and categorical hardware, tag bits, selectivity, dominance)."""
     l_tag = g.tag.shape[1]
     p_flip = params.p_tag_flip if params.p_tag_flip is not None else (1.0 / l_tag if l_tag else 0.0)
     flips = torch.rand(g.tag.shape, generator=generator, device=g.tag.device) < p_flip
     pg = params.p_gene_mutation
-    return Genome(
+    return Population(
         tag=g.tag ^ flips,
         selectivity=_gauss_clip(g.selectivity, 0.0, 1.0, params.social_sigma, generator, pg),
         dominance=_gauss_clip(g.dominance, 0.0, 1.0, params.social_sigma, generator, pg),
@@ -278,20 +220,20 @@ def mutate(g: Genome, params: ReproductionParams, generator: torch.Generator) ->
     )
 
 
-def _select(mask: Tensor, a: Genome, b: Genome) -> Genome:
-    """[N] bool, Genomes [N] -> Genome [N] taking a's row where mask else b's."""
+def _select(mask: Tensor, a: Population, b: Population) -> Population:
+    """[N] bool, Genomes [N] -> Population [N] taking a's row where mask else b's."""
     out = {}
-    for f in fields(Genome):
+    for f in fields(Population):
         x, y = getattr(a, f.name), getattr(b, f.name)
         m = mask.view(-1, *([1] * (x.dim() - 1)))
         out[f.name] = torch.where(m, x, y)
-    return Genome(**out)
+    return Population(**out)
 
 
-def reproduce(genome: Genome, fitness: Tensor, species: Tensor, proto_index: Tensor,
+def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index: Tensor,
               proto_ids: Tensor, params: ReproductionParams, generator: torch.Generator,
-              distance_fn: DistanceFn = distance) -> tuple[Genome, Tensor, Tensor, Tensor]:
-    """Genome [P], fitness [P], species [P], prototypes [K] -> (children [P], child_species_hint [P], is_elite [P], parent_index [P]).
+              distance_fn: DistanceFn = distance) -> tuple[Population, Tensor, Tensor, Tensor]:
+    """Population [P], fitness [P], species [P], prototypes [K] -> (children [P], child_species_hint [P], is_elite [P], parent_index [P]).
 
     Quotas: proportional to each species' total fitness (`params.quota_basis` "sum") or mean fitness
     ("mean", NEAT's fitness sharing), the species of the global best protected (>= 1). Elites (top
@@ -372,7 +314,7 @@ def reproduce(genome: Genome, fitness: Tensor, species: Tensor, proto_index: Ten
     child = _select(do_cross, crossover(g1, g2, generator), g1)
     child = mutate(child, params, generator)
 
-    children = Genome.cat([genome.index(elite), child])
+    children = Population.cat([genome.index(elite), child])
     hint = torch.cat([species[elite], species[p1]])
     is_elite = torch.cat([torch.ones(elite.numel(), dtype=torch.bool, device=dev),
                           torch.zeros(n_off, dtype=torch.bool, device=dev)])

@@ -1,0 +1,55 @@
+"""How the command line spells the run settings: the options that set a config key, `--set
+KEY=VALUE` for the rest, and the names its error messages use."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ..coevo.config import SETTING_TYPES
+
+#: Config keys that `parse_settings` refuses because the command line has an option for them.
+OPTION_KEYS = frozenset({"scenario", "budget", "objective", "generations", "population",
+                         "swarm_size", "trials", "ticks", "seed", "device", "compile"})
+
+
+def option_names(overrides: dict[str, str] | None = None) -> dict[str, str]:
+    """Config key -> how the command line sets it (--population, --set delta), for
+    `SwarmCoDeConfig.validate` and `runs.check_memory`; `overrides` respells some (a sweep's
+    --seeds)."""
+    names = {k: ("--" + k.replace("_", "-") if k in OPTION_KEYS else f"--set {k}")
+             for k in SETTING_TYPES}
+    names.update(overrides or {})
+    return names
+
+
+def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None) -> dict[str, Any]:
+    """["key=value", ...] -> {key: typed value} for the algorithm's config keys (e.g. delta=0.5,
+    p_tag_flip=0.0625, quota_basis=mean); ValueError with a one-line message for a malformed
+    pair, an unknown key, a key that has its own option (named `option_names[key]`, default
+    --key), or a value of the wrong type."""
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        key, text = key.strip().replace("-", "_"), text.strip()
+        if not sep or not key or not text:
+            raise ValueError(f"--set expects KEY=VALUE, got {pair!r}")
+        if key in out:
+            raise ValueError(f"--set {key} is given twice")
+        if key in OPTION_KEYS:
+            option = (option_names or {}).get(key, "--" + key.replace("_", "-"))
+            raise ValueError(f"--set {key}: use the {option} option")
+        if key not in SETTING_TYPES:
+            settable = ", ".join(sorted(set(SETTING_TYPES) - OPTION_KEYS))
+            raise ValueError(f"--set: unknown key {key!r} (settable: {settable})")
+        kind, _ = SETTING_TYPES[key]
+        try:
+            if kind is bool:
+                if text.lower() not in ("true", "false"):
+                    raise ValueError
+                out[key] = text.lower() == "true"
+            else:
+                out[key] = kind(text)
+        except ValueError:
+            raise ValueError(f"--set {key}: expected a value of type {kind.__name__}, "
+                             f"got {text!r}") from None
+    return out

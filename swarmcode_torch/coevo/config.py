@@ -1,0 +1,364 @@
+"""The settings of a SwarmCoDe run, each with its one default and its range.
+
+`SwarmCoDeConfig` is what a run is (config.toml holds its fields, flat). The algorithm reads it
+through three parts built from it by field name, never by a hand-written copy:
+
+    cfg.evaluation(num_robots, episode_ticks) -> EvalConfig   how teams are built and scored
+    cfg.speciation                            -> SpeciationParams
+    cfg.reproduction                          -> ReproductionParams
+
+A part's setting that is also a run setting takes the run's default (`SwarmCoDeConfig.delta`
+and so on), so `ReproductionParams()` in a notebook is the algorithm a default run uses.
+Migrations of configs written by older versions are the application's (`app.runs`).
+"""
+
+from __future__ import annotations
+
+import math
+import typing
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
+
+@dataclass(frozen=True)
+class SwarmCoDeConfig:
+    """Everything that defines a run (saved as config.toml in the run directory): each setting
+    and its default, once. The algorithm reads it through its parts: `evaluation`,
+    `speciation` and `reproduction`, built from these fields by name."""
+
+    scenario: str = "budget"
+    """Built-in scenario name or path to a scenario TOML file."""
+    budget: float | None = None
+    """Fabrication budget in $; None: no budget penalty."""
+    objective: str = "fitness"
+    """'fitness' or 'roi' (fitness divided by team cost)."""
+    generations: int = 500
+    """Total number of generations of the run."""
+    population: int = 100
+    """Individuals in the evolutionary population."""
+    swarm_size: int | None = None
+    """Robots per team; None: the scenario's robot count."""
+    trials: int = 3
+    """Random environments per team evaluation."""
+    ticks: int | None = None
+    """Episode length in ticks; None: the scenario's."""
+    seed: int = 0
+    """Seed of the run's random generator."""
+    device: str = "auto"
+    """'auto', 'cpu' or 'cuda'."""
+    compile: bool | None = None
+    """torch.compile the tick; None: on CUDA, and on CPU for runs of >= 50 generations."""
+    tag_length: int = 16
+    """Bits in the speciation / partner tag."""
+    bt_length: int = 32
+    """Slots in a behavior-tree program."""
+    delta: float = 0.4
+    """Speciation threshold."""
+    p_marginal: float = 0.25
+    """Fitness factor when the marginal contribution is not positive."""
+    alpha: float = 0.6
+    """EMA decay of fitness (weight of the previous value)."""
+    lam: float = 0.001
+    """Budget penalty decay."""
+    max_elite: int = 3
+    """E in the elite count N = max(1, min(E, floor(size/5) + 1))."""
+    dominance: bool = True
+    """Sample team slots by the dominance genes; False: uniformly (an ablation)."""
+    quota_basis: str = "sum"
+    """Offspring quotas proportional to each species' total ('sum') or mean ('mean') fitness."""
+    min_share: float = 1.0
+    """A species whose quota share is below this many individuals gets no slot (0: none)."""
+    hw_sigma: float = 0.05
+    """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
+    social_sigma: float = 0.05
+    """Mutation: Gaussian step of selectivity and dominance."""
+    p_categorical: float = 0.02
+    """Mutation: probability of resampling each tier and the effector."""
+    p_tag_flip: float = 0.01
+    """Mutation: probability of flipping each tag bit."""
+    d_hw_tiers: bool = False
+    """d_hw also over the three hardware tiers (true: the behaviour before 0.2; the paper's d_hw is
+    over the continuous hardware genes only)."""
+    bt_point_on_nodes: bool = True
+    """A behavior-tree point mutation re-draws one of the tree's nodes, never the NOP padding
+    (false: any slot, the behaviour before 0.2)."""
+    bt_mutation_rate: float = 0.5
+    """Mutation: probability that an offspring gets its behavior-tree mutation event (1.0: every
+    offspring, the behaviour before 0.2)."""
+    p_gene_mutation: float = 0.2
+    """Mutation: probability that each continuous gene (radius, operating points, selectivity,
+    dominance) of an offspring gets its Gaussian step (1.0: every gene, the behaviour before
+    0.2). With every gene stepped in every child, a species' members spread so far from its
+    prototype that any categorical change founds a species (docs/RESULTS.md)."""
+    merge_species: bool = False
+    """Dissolve a species whose prototype comes within delta of an older one's (not in the paper;
+    an experiment)."""
+    evaluated_partners: bool = False
+    """Partners are species elites that have a fitness: a species founded this generation is no
+    one's partner (an experiment, off by default: it did not reduce the species in best teams)."""
+    cuda_graphs: bool | None = None
+    """Replay the compiled tick as CUDA graphs of 10 ticks (`world.CudaGraphTicks`). Unset: on
+    wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
+
+    def validate(self, option_names: dict[str, str] | None = None, bounds: bool = True) -> None:
+        """Raise ValueError with a one-line message for an invalid setting: a value of the wrong
+        type, out of its range, NaN or infinite where a finite number is meant. The message
+        names the setting by its key, or as `option_names[key]` spells it (the command line
+        passes its flags: --population, --set delta). `bounds=False` leaves out the upper
+        bounds (`check_bounds`), so that the application can first tell a run far too large
+        for memory what it would need (`app.runs.check_config`)."""
+        names = option_names or {}
+
+        def name(key: str) -> str:
+            return names.get(key, key)
+
+        for f in fields(self):
+            v = getattr(self, f.name)
+            kind, optional = SETTING_TYPES[f.name]
+            if v is None:
+                if not optional:
+                    raise ValueError(f"{name(f.name)} must be set")
+                continue
+            if not isinstance(v, _ACCEPTS[kind]) or (isinstance(v, bool) and kind is not bool):
+                raise ValueError(f"{name(f.name)} must be {_KIND_TEXT[kind]}, got {v!r}")
+        if self.budget is not None:
+            if not math.isfinite(self.budget):
+                raise ValueError(f"{name('budget')} must be a finite number, got {self.budget}")
+            if self.budget <= 0:
+                raise ValueError(f"{name('budget')} must be > 0, got {self.budget:g}")
+        if not self.scenario:
+            raise ValueError(f"{name('scenario')} must name a scenario")
+        if self.quota_basis not in ("sum", "mean"):
+            raise ValueError(f"{name('quota_basis')} must be 'sum' or 'mean', "
+                             f"got {self.quota_basis!r}")
+        if self.objective not in ("fitness", "roi"):
+            raise ValueError(f"{name('objective')} must be 'fitness' or 'roi', "
+                             f"got {self.objective!r}")
+        dev = self.device
+        if dev not in ("auto", "cpu", "cuda") and not (
+                dev.startswith("cuda:") and dev[5:].isdigit() and dev[5:].isascii()):
+            raise ValueError(f"{name('device')} must be auto, cpu, cuda or cuda:N, got {dev!r}")
+        # lower bounds; the sizes' upper bound is the memory their evaluation needs
+        for key, lo in (("generations", 1), ("population", 2), ("trials", 1), ("tag_length", 1),
+                        ("bt_length", 4), ("max_elite", 1), ("swarm_size", 1), ("ticks", 1),
+                        ("seed", 0)):
+            v = getattr(self, key)
+            if v is not None and v < lo:
+                raise ValueError(f"{name(key)} must be >= {lo}, got {v}")
+        if self.seed > MAX_SEED:
+            raise ValueError(f"{name('seed')} must be in [0, {MAX_SEED}] (2**63 - 1), "
+                             f"got {self.seed}")
+        for key in ("delta", "lam", "hw_sigma", "social_sigma", "min_share"):
+            v = getattr(self, key)
+            if not (v >= 0 and math.isfinite(v)):          # also refuses nan
+                raise ValueError(f"{name(key)} must be a finite number >= 0, got {v}")
+        if not self.delta > 0:
+            raise ValueError(f"{name('delta')} must be a finite number > 0, got {self.delta}")
+        for key in ("p_marginal", "alpha", "p_categorical", "p_tag_flip", "bt_mutation_rate",
+                    "p_gene_mutation"):
+            v = getattr(self, key)
+            if not (v >= 0 and math.isfinite(v)):
+                raise ValueError(f"{name(key)} must be a finite number in [0, 1], got {v}")
+            if v > 1:
+                raise ValueError(f"{name(key)} must be <= 1 (a number in [0, 1]), got {v}")
+        if bounds:
+            self.check_bounds(option_names)
+
+    def check_bounds(self, option_names: dict[str, str] | None = None) -> None:
+        """ValueError for a setting above its upper bound (`UPPER_BOUNDS`)."""
+        names = option_names or {}
+        for key, hi in UPPER_BOUNDS.items():
+            v = getattr(self, key)
+            if v is not None and v > hi:
+                fmt = "g" if isinstance(hi, float) else "d"
+                raise ValueError(f"{names.get(key, key)} must be <= {hi:{fmt}}, got {v:{fmt}}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "SwarmCoDeConfig":
+        """The config of a table of this version's keys ("none" is None); ValueError for an
+        unknown key or a value that is not a single value. Not checked (`validate`); a table
+        written by an older version goes through `app.runs.migrate_config` first."""
+        if not isinstance(d, dict):
+            raise ValueError(f"expected a table of config keys, got {type(d).__name__}")
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown config keys: {', '.join(unknown)}")
+        for k, v in d.items():
+            if v is not None and not isinstance(v, (bool, int, float, str)):
+                raise ValueError(f"{k}: expected a single value, got {v!r}")
+        return cls(**{k: (None if v == "none" else v) for k, v in d.items()})
+
+    def evaluation(self, num_robots: int, episode_ticks: int) -> "EvalConfig":
+        """How teams are scored, with the scenario's team size and episode length where the
+        run leaves them unset."""
+        return _part(EvalConfig, self, swarm_size=self.swarm_size or num_robots,
+                     ticks=self.ticks or episode_ticks)
+
+    @property
+    def speciation(self) -> "SpeciationParams":
+        return SpeciationParams(delta=self.delta, weights=DistanceWeights(hw_tiers=self.d_hw_tiers),
+                                merge_species=self.merge_species)
+
+    @property
+    def reproduction(self) -> "ReproductionParams":
+        return _part(ReproductionParams, self)
+
+
+#: The largest seed a run's generator takes (torch.Generator.manual_seed accepts 64 bits; a seed
+#: is kept non-negative and below 2**63 so that it reads back the same everywhere).
+MAX_SEED = 2 ** 63 - 1
+
+#: Upper bounds of settings that memory does not bound (the application checks memory first
+#: (`app.runs.check_memory`), so that sizes far too large for memory are told what they would need).
+UPPER_BOUNDS = {"generations": 10_000_000, "ticks": 1_000_000, "tag_length": 4096,
+                "bt_length": 4096, "max_elite": 1_000_000, "population": 100_000_000,
+                "trials": 1_000_000, "swarm_size": 10_000_000,
+                # numbers the float32 tensors must hold with room to spare (delta=1e300 is inf
+                # there; social_sigma=1e300 makes NaN genes)
+                "budget": 1e15, "delta": 1e6, "lam": 1e6, "hw_sigma": 1e6,
+                "social_sigma": 1e6, "min_share": 1e9}
+
+
+EvolveConfig = SwarmCoDeConfig
+"""The name of `SwarmCoDeConfig` before 0.3."""
+
+#: SwarmCoDeConfig field -> (its type without None, whether None is allowed); from the resolved
+#: annotations, not their text.
+SETTING_TYPES: dict[str, tuple[type, bool]] = {}
+for _name, _hint in typing.get_type_hints(SwarmCoDeConfig).items():
+    _args = [a for a in typing.get_args(_hint) if a is not type(None)] or [_hint]
+    SETTING_TYPES[_name] = (_args[0], type(None) in typing.get_args(_hint))
+_ACCEPTS = {bool: (bool,), int: (int,), float: (int, float), str: (str,)}
+_KIND_TEXT = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
+
+_RUN = SwarmCoDeConfig          # the run defaults, as class attributes
+
+
+def with_overrides(cfg: SwarmCoDeConfig, **kw) -> SwarmCoDeConfig:
+    """A copy of cfg with the given fields replaced (None values are ignored)."""
+    return replace(cfg, **{k: v for k, v in kw.items() if v is not None})
+
+
+def _part(cls, cfg: SwarmCoDeConfig, **given):
+    """An instance of part `cls` with every field that is also a run setting taken from cfg."""
+    run = {f.name for f in fields(SwarmCoDeConfig)}
+    shared = {f.name: getattr(cfg, f.name) for f in fields(cls) if f.name in run}
+    return cls(**{**shared, **given})
+
+
+# ------------------------------------------------------------------ the parts
+@dataclass(frozen=True)
+class FitnessWeights:
+    """Weights of the raw-fitness terms (paper Table IV); `inactive_factor` is P_activity when
+    no package was picked up, `floor` the minimum raw fitness."""
+
+    W_delivery: float = 100.0
+    W_collab_bonus: float = 50.0
+    W_pickup: float = 1.0
+    W_energy: float = 0.03
+    W_proximity: float = 1.0
+    W_closeness: float = 30.0
+    inactive_factor: float = 0.5
+    floor: float = 0.1
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """How teams are built and scored (`evaluation.evaluate`)."""
+
+    swarm_size: int                 # robots per team
+    ticks: int                      # episode length
+    trials: int = _RUN.trials       # random environments per team (focal and baseline share them)
+    budget: float | None = _RUN.budget  # $; None: no budget penalty
+    objective: str = _RUN.objective  # "fitness" or "roi" (fitness divided by team cost)
+    lam: float = _RUN.lam            # budget penalty decay
+    p_marginal: float = _RUN.p_marginal  # factor on fitness when the marginal contribution is <= 0
+    max_elite: int = _RUN.max_elite  # E in the elite count (partner elites are drawn from these)
+    dominance: bool = _RUN.dominance  # False: uniform team composition (an ablation)
+    evaluated_partners: bool = _RUN.evaluated_partners  # partners are elites with a fitness
+    weights: FitnessWeights = FitnessWeights()
+
+
+@dataclass(frozen=True)
+class DistanceWeights:
+    """Weights of the genome distance D (paper defaults); gamma is the tag-term exponent."""
+
+    w_tag: float = 1.0
+    w_hw: float = 0.5
+    w_bt: float = 0.3
+    w_tool: float = 0.35
+    w_size: float = 0.7
+    gamma: float = 2.0
+    hw_tiers: bool = _RUN.d_hw_tiers
+    """d_hw also over the three tiers (run setting `d_hw_tiers`; the paper's d_hw is over the
+    continuous hardware genes only)."""
+
+
+@dataclass(frozen=True)
+class SpeciationParams:
+    """Dynamic speciation (`speciation.speciate`): the threshold, the distance and merging."""
+
+    delta: float = _RUN.delta
+    weights: DistanceWeights = DistanceWeights()
+    merge_species: bool = _RUN.merge_species
+
+
+@dataclass(frozen=True)
+class ReproductionParams:
+    """Reproduction hyperparameters (paper values where the paper gives one).
+
+    tournament_size: individuals per tournament (with replacement; the fittest wins).
+    crossover_same / crossover_cross: crossover probability when both parents are of the same /
+        of different species (otherwise the child is a clone of parent 1).
+    mate_tries: in-species tournaments tried for a second parent within distance `delta` of parent
+        1 (and not parent 1 itself) before falling back to a global tournament (excluding parent 1).
+    delta: mating compatibility threshold on the genome distance (the speciation delta).
+    max_elite: E in the elite count N = max(1, min(E, floor(size / 5) + 1)).
+    quota_basis: what a species' offspring quota is proportional to: "sum", the total of its
+        members' (gated, penalised, smoothed) fitness (the paper's "total adjusted fitness"), or
+        "mean", NEAT's explicit fitness sharing (total / species size). See docs/MODEL.md.
+    min_share: a species whose quota share is below this many individuals gets no slot.
+    bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
+    bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
+    bt_point_count: slots re-drawn by one point mutation (each a uniform slot, may repeat).
+    bt_point_on_nodes: a point mutation re-draws a uniform slot among the tree's nodes (its
+        non-NOP slots; slot 0 of an all-NOP program), not among all slots: the NOP padding is
+        not a node, so it stays padding (the paper mutates tree nodes). False: any slot.
+    point_opcode_weights: weights of opcodes 0..13 for a point mutation; END and NOP at half weight
+        so that structure-breaking / deleting mutations are rarer than changing a node.
+    subtree_leaf_prob: probability that a replacement subtree is a single random leaf; otherwise
+        it is SEQ or SEL (uniform) with 1..subtree_max_leaves (uniform) random leaves and an END.
+    hw_sigma: std of the gaussian perturbation of radius, torque_point and battery_point, as a
+        fraction of each gene's range; applied to a non-elite offspring's genes, clipped.
+    social_sigma: the same for selectivity and dominance (range [0, 1]).
+    p_categorical: per-gene probability of resampling chassis, battery, motor tier and effector
+        uniformly (the new value may equal the old one).
+    p_tag_flip: per-bit tag flip probability; None means 1 / L_tag.
+    p_gene_mutation: probability that each continuous gene (radius, operating points,
+        selectivity, dominance) of a non-elite offspring gets its Gaussian step (1.0: every gene
+        of every offspring).
+    """
+
+    tournament_size: int = 3
+    crossover_same: float = 0.7
+    crossover_cross: float = 0.025
+    mate_tries: int = 5
+    delta: float = _RUN.delta
+    max_elite: int = _RUN.max_elite
+    quota_basis: str = _RUN.quota_basis
+    min_share: float = _RUN.min_share
+    bt_mutation_rate: float = _RUN.bt_mutation_rate
+    bt_subtree_prob: float = 0.05
+    bt_point_count: int = 1
+    bt_point_on_nodes: bool = _RUN.bt_point_on_nodes
+    point_opcode_weights: tuple[float, ...] = (1.0,) * 12 + (0.5, 0.5)
+    subtree_leaf_prob: float = 0.5
+    subtree_max_leaves: int = 3
+    hw_sigma: float = _RUN.hw_sigma
+    social_sigma: float = _RUN.social_sigma
+    p_categorical: float = _RUN.p_categorical
+    p_tag_flip: float | None = _RUN.p_tag_flip
+    p_gene_mutation: float = _RUN.p_gene_mutation

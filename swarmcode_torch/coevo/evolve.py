@@ -1,0 +1,338 @@
+"""SwarmCoDe end to end: one generation = speciation, evaluation, reproduction (paper Sec. III-A).
+
+`Evolution` owns the population and the run's random generator. `step()` advances one
+generation and returns its metrics; reporters (TensorBoard, summary, checkpoints, progress)
+consume them. Nothing here prints or imports a CLI or logging library.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field, fields, replace
+from functools import partial
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from ..sim import bt
+from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
+from .dynamics import Turnover, median, niche_count, replay
+from .evaluation import evaluate
+from .fitness import ema
+from .population import NUM_TIERS, R_MAX, R_MIN, Population
+from .population import genome_phenotype
+from .reproduction import mutate_bt, reproduce
+from ..sim.scenario import Scenario, load_scenario
+from .speciation import distance, speciate
+from ..sim.world import CompiledStep, CudaGraphTicks, WorldParams, capabilities, step as world_step
+
+CHECKPOINT_VERSION = 1
+# compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
+COMPILE_MIN_GENERATIONS = 50
+
+
+def resolve_device(name: str) -> torch.device:
+    """The torch device for 'auto' / 'cpu' / 'cuda[:i]'; ValueError when CUDA is missing."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError("--device cuda was asked for, but no CUDA device is available")
+    try:
+        dev = torch.device(name)
+    except RuntimeError:
+        raise ValueError(f"--device must be auto, cpu, cuda or cuda:N, got {name!r}") from None
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise ValueError(f"--device {name}: there are only {torch.cuda.device_count()} CUDA "
+                         "devices")
+    return dev
+
+
+# ------------------------------------------------------------------ the population
+def random_population(n: int, cfg: SwarmCoDeConfig, generator: torch.Generator,
+                      device: torch.device) -> Population:
+    """The initial population: random genes, each seeded with a randomised template tree."""
+    g = generator
+
+    def u(*shape):
+        return torch.rand(*shape, generator=g, device=device)
+
+    names = list(bt.TEMPLATES)
+    templates = torch.stack([bt.template_tensor(k, cfg.bt_length) for k in names]).to(device)
+    which = torch.randint(0, len(names), (n,), generator=g, device=device)
+    programs = mutate_bt(templates[which], cfg.reproduction, g)
+    tiers = lambda: torch.randint(0, NUM_TIERS, (n,), generator=g, device=device)  # noqa: E731
+    return Population(
+        tag=u(n, cfg.tag_length) < 0.5, selectivity=u(n), dominance=u(n), bt=programs,
+        radius=R_MIN + (R_MAX - R_MIN) * u(n), chassis=tiers(), battery=tiers(), motor=tiers(),
+        torque_point=u(n), battery_point=u(n),
+        effector=torch.randint(0, 2, (n,), generator=g, device=device))
+
+
+@dataclass
+class EvolutionState:
+    """Everything needed to continue a run after `generation` completed generations."""
+
+    generation: int
+    genome: Population                 # the population to be evaluated next
+    species_hint: Tensor           # [P] species inherited from the parent (-1: none)
+    proto: Population | None           # previous generation's species prototypes
+    proto_ids: Tensor              # [K] their species ids
+    next_species_id: int
+    fitness: Tensor                # [P] smoothed fitness carried by elites
+    has_fitness: Tensor            # [P] bool
+    rng_state: Tensor              # the run generator's state
+    best: dict | None = None       # best team of the run so far
+    history: list = field(default_factory=list)  # per-generation composition records
+    turnover: Turnover = field(default_factory=Turnover)  # species births and deaths (derived
+    #                                                       from history; not saved)
+
+
+@dataclass
+class Context:
+    """Run constants derived from the config (not saved; rebuilt on resume)."""
+
+    cfg: SwarmCoDeConfig
+    scenario: Scenario
+    device: torch.device
+    eval_cfg: EvalConfig
+    repro: ReproductionParams
+    speciation: SpeciationParams
+    params: WorldParams
+    step_fn: Any
+    compiled: bool = False
+    evaluator: Any = None
+    """Where evaluations are simulated: None, in this process; else an object whose
+    `simulate(plan, genome)` returns their per-environment metrics (`evaluation.evaluate`;
+    `distributed.ShardedEvaluator` shards them over Ray actors)."""
+
+    @property
+    def tick_mode(self) -> str:
+        """How the world tick runs: 'eager', 'compiled', 'compiled, CUDA graphs', or 'eager
+        (compiling failed)' once a compiled tick has fallen back."""
+        fn = self.step_fn
+        graphs = isinstance(fn, CudaGraphTicks)
+        compiled_step = fn.step_fn if graphs else fn
+        if isinstance(compiled_step, CompiledStep) and compiled_step.error is not None:
+            return "eager (compiling failed)"
+        if graphs:
+            return "compiled, CUDA graphs"
+        return "compiled" if self.compiled else "eager"
+
+
+def make_context(cfg: SwarmCoDeConfig) -> Context:
+    """Validate the config, load the scenario and pick the device and tick function."""
+    cfg.validate()
+    scenario = load_scenario(cfg.scenario)
+    device = resolve_device(cfg.device)
+    eval_cfg = cfg.evaluation(scenario.num_robots, scenario.episode_ticks)
+    use_compile = cfg.compile if cfg.compile is not None else (
+        device.type == "cuda" or cfg.generations >= COMPILE_MIN_GENERATIONS)
+    if cfg.cuda_graphs and (device.type != "cuda" or not use_compile):
+        raise ValueError("cuda_graphs needs --device cuda and the compiled tick (--compile)")
+    step_fn = CompiledStep() if use_compile else world_step
+    graphs = cfg.cuda_graphs if cfg.cuda_graphs is not None else (
+        device.type == "cuda" and use_compile)
+    if graphs:  # unset (auto): a tick that fails to compile runs eagerly, as without graphs
+        step_fn = CudaGraphTicks(step_fn, required=cfg.cuda_graphs is not None)
+    # pin the scenario's team size and episode length into the config, so that a saved run keeps
+    # them if a built-in scenario's defaults change later
+    cfg = replace(cfg, swarm_size=eval_cfg.swarm_size, ticks=eval_cfg.ticks)
+    return Context(cfg, scenario, device, eval_cfg, cfg.reproduction, cfg.speciation,
+                   WorldParams.for_scenario(scenario), step_fn, use_compile)
+
+
+def new_generator(ctx: Context) -> torch.Generator:
+    return torch.Generator(device=ctx.device).manual_seed(ctx.cfg.seed)
+
+
+def init_state(ctx: Context) -> EvolutionState:
+    """Generation 0: a random population, no species yet."""
+    g = new_generator(ctx)
+    P = ctx.cfg.population
+    genome = random_population(P, ctx.cfg, g, ctx.device)
+    return EvolutionState(
+        generation=0, genome=genome,
+        species_hint=torch.full((P,), -1, dtype=torch.long, device=ctx.device),
+        proto=None, proto_ids=torch.zeros(0, dtype=torch.long, device=ctx.device),
+        next_species_id=0, fitness=torch.zeros(P, device=ctx.device),
+        has_fitness=torch.zeros(P, dtype=torch.bool, device=ctx.device),
+        rng_state=g.get_state())
+
+
+def _design(genome: Population, row: int, species: int, cost: float) -> dict:
+    """A JSON-friendly description of one robot design."""
+    return {
+        "species": species, "effector": "pincher" if int(genome.effector[row]) else "suction",
+        "radius": round(float(genome.radius[row]), 4),
+        "chassis_tier": int(genome.chassis[row]) + 1, "battery_tier": int(genome.battery[row]) + 1,
+        "motor_tier": int(genome.motor[row]) + 1,
+        "torque_point": round(float(genome.torque_point[row]), 4),
+        "battery_point": round(float(genome.battery_point[row]), 4),
+        "dominance": round(float(genome.dominance[row]), 4),
+        "selectivity": round(float(genome.selectivity[row]), 4),
+        "cost": round(cost, 2), "bt": [int(x) for x in genome.bt[row].tolist()],
+    }
+
+
+def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dict]:
+    """Advance one generation; the new state and this generation's metrics."""
+    t0 = time.perf_counter()
+    cfg = ctx.cfg
+    g = torch.Generator(device=ctx.device)
+    g.set_state(state.rng_state)
+    genome = state.genome
+
+    # 1. dynamic speciation
+    sp = speciate(genome, state.species_hint, state.proto, state.proto_ids,
+                  state.next_species_id, ctx.speciation.delta, w=ctx.speciation.weights,
+                  merge=ctx.speciation.merge_species)
+
+    # 2. evaluation of every individual, all teams and trials in one batch
+    t_eval = time.perf_counter()
+    res = evaluate(genome, sp.species, sp.proto_ids, sp.proto_index, state.fitness,
+                   state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn,
+                   evaluator=ctx.evaluator)
+    eval_seconds = time.perf_counter() - t_eval
+    fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
+
+    # the best team of this generation: the team of the individual with the highest fitness
+    # score (gated: a focal whose marginal contribution is not positive is penalised, so a strong
+    # team carried by its partners is not credited to a focal that weakens it)
+    b = int(res.fitness.argmax())
+    team = res.swarms.focal_team[b]
+    rows, counts = torch.unique(team[team >= 0], return_counts=True)
+    cost = genome_phenotype(genome).cost
+    # to the host in one transfer per field, not one per value (each is a device sync)
+    host = genome.index(rows).to("cpu")
+    can = capabilities(genome_phenotype(host), ctx.scenario, ctx.params).tolist()  # [R][C]
+    designs = [dict(_design(host, i, s, c), count=n,
+                    capability=[j for j, ok in enumerate(can[i]) if ok])
+               for i, (s, c, n) in enumerate(zip(sp.species[rows].tolist(), cost[rows].tolist(),
+                                                 counts.tolist()))]
+    designs.sort(key=lambda d: -d["count"])
+    tm = dict(zip(res.team_metrics, torch.stack([v[b].float() for v in res.team_metrics.values()])
+                  .tolist()))
+    team_record = {
+        "generation": state.generation, "fitness": float(res.focal[b]),
+        "cost": float(res.team_cost[b]), "species": len(designs),
+        "niches": niche_count(d["capability"] for d in designs),
+        "deliveries_individual": tm["delivered_individual"],
+        "deliveries_collab": tm["delivered_collab"],
+        "deliveries": tm["delivered_individual"] + tm["delivered_collab"],
+        "energy_used": tm["energy_used"], "designs": designs,
+    }
+    best = state.best
+    if best is None or team_record["fitness"] > best["fitness"]:
+        best = team_record
+
+    ids, sizes = torch.unique(sp.species, return_counts=True)
+    composition = {
+        "generation": state.generation,
+        "population": {int(i): int(n) for i, n in zip(ids.tolist(), sizes.tolist())},
+        "team": {str(d["species"]): d["count"] for d in designs},
+    }
+    turnover = state.turnover.copy()
+    founded, extinct = turnover.advance(state.generation, composition["population"])
+
+    # 3. reproduction
+    children, hint, is_elite, parent = reproduce(genome, fit, sp.species, sp.proto_index,
+                                                 sp.proto_ids, ctx.repro, g,
+                                                 partial(distance, w=ctx.speciation.weights))
+    new_state = EvolutionState(
+        generation=state.generation + 1, genome=children, species_hint=hint,
+        proto=genome.index(sp.proto_index), proto_ids=sp.proto_ids,
+        next_species_id=sp.next_species_id,
+        fitness=torch.where(is_elite, fit[parent], 0.0), has_fitness=is_elite,
+        rng_state=g.get_state(), best=best, history=state.history + [composition],
+        turnover=turnover)
+
+    budget = cfg.budget if cfg.budget is not None else float("nan")
+    metrics = {
+        "generation": state.generation,
+        "fitness/best": float(fit.max()), "fitness/mean": float(fit.mean()),
+        "species/count": int(ids.numel()),
+        "species/founded": founded, "species/extinct": extinct,
+        "species/median_age": median(turnover.ages(state.generation, composition["population"])),
+        "team/fitness": team_record["fitness"], "team/species": team_record["species"],
+        "team/niches": team_record["niches"],
+        "team/median_age": median(turnover.ages(state.generation, composition["team"])),
+        "team/focal_max": float(res.focal.max()),
+        "team/cost": team_record["cost"], "team/budget": budget,
+        "team/deliveries": team_record["deliveries"],
+        "team/deliveries_individual": team_record["deliveries_individual"],
+        "team/deliveries_collab": team_record["deliveries_collab"],
+        "team/energy_used": team_record["energy_used"],
+        "perf/generation_seconds": time.perf_counter() - t0,
+        "perf/eval_seconds": eval_seconds,
+        "perf/sim_seconds": res.sim_seconds,
+        # non-scalars, for reporters
+        "team": team_record, "team/rows": team, "best": best, "composition": composition,
+        "hist/radius": genome.radius.detach().cpu(),
+        "hist/dominance": genome.dominance.detach().cpu(),
+        "hist/selectivity": genome.selectivity.detach().cpu(),
+    }
+    return new_state, metrics
+
+
+# ------------------------------------------------------------------ checkpoints
+def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
+    """A CPU, torch.save-able snapshot of the run."""
+    return {
+        "version": CHECKPOINT_VERSION, "config": cfg.to_dict(), "generation": state.generation,
+        "genome": state.genome.state_dict(), "species_hint": state.species_hint.cpu(),
+        "proto": state.proto.state_dict() if state.proto is not None else None,
+        "proto_ids": state.proto_ids.cpu(), "next_species_id": state.next_species_id,
+        "fitness": state.fitness.cpu(), "has_fitness": state.has_fitness.cpu(),
+        "rng_state": state.rng_state.cpu(), "best": state.best, "history": state.history,
+    }
+
+
+def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
+    """Rebuild a state from `state_dict` output; ValueError if it does not fit this run."""
+    if not isinstance(d, dict) or d.get("version") != CHECKPOINT_VERSION:
+        raise ValueError("checkpoint has an unknown format or version")
+    dev = ctx.device
+    genome = Population.from_state_dict(d["genome"]).to(dev)
+    if genome.size != ctx.cfg.population or genome.bt.shape[1] != ctx.cfg.bt_length \
+            or genome.tag.shape[1] != ctx.cfg.tag_length:
+        raise ValueError("checkpoint does not match the run's population, tag or tree length")
+    rng = d["rng_state"]
+    if rng.numel() != torch.Generator(device=dev).get_state().numel():
+        raise ValueError(f"checkpoint was written on another kind of device than {dev.type}; "
+                         "resume it with the --device it was run on")
+    return EvolutionState(
+        generation=int(d["generation"]), genome=genome, species_hint=d["species_hint"].to(dev),
+        proto=Population.from_state_dict(d["proto"]).to(dev) if d["proto"] is not None else None,
+        proto_ids=d["proto_ids"].to(dev), next_species_id=int(d["next_species_id"]),
+        fitness=d["fitness"].to(dev), has_fitness=d["has_fitness"].to(dev), rng_state=rng,
+        best=d["best"], history=list(d["history"]), turnover=replay(d["history"])[0])
+
+
+class Evolution:
+    """A run: config, context and current state; `step()` runs one generation."""
+
+    def __init__(self, cfg: SwarmCoDeConfig, state: EvolutionState | None = None):
+        self.ctx = make_context(cfg)
+        self.cfg = self.ctx.cfg
+        self.state = state if state is not None else init_state(self.ctx)
+
+    @classmethod
+    def from_checkpoint(cls, d: dict, cfg: SwarmCoDeConfig) -> "Evolution":
+        ev = cls.__new__(cls)
+        ev.ctx = make_context(cfg)
+        ev.cfg = ev.ctx.cfg
+        ev.state = load_state_dict(d, ev.ctx)
+        return ev
+
+    @property
+    def done(self) -> bool:
+        return self.state.generation >= self.cfg.generations
+
+    def step(self) -> dict:
+        self.state, metrics = generation(self.state, self.ctx)
+        return metrics
+
+    def state_dict(self) -> dict:
+        return state_dict(self.state, self.cfg)
