@@ -217,7 +217,8 @@ def test_mutate_bounds_and_flip_rate():
     g.radius[:1000] = R_MAX
     g.selectivity[:1000] = 1.0
     g.dominance[1000:] = 0.0
-    params = ReproductionParams(p_categorical=0.3, hw_sigma=0.1, p_gene_mutation=1.0)
+    params = ReproductionParams(p_categorical=0.3, hw_sigma=0.1, p_gene_mutation=1.0,
+                                p_tag_flip=None)            # None: flip each bit w.p. 1 / L_tag
     m = mutate(g, params, gen)
     check_bounds(m)
     flip = (m.tag != g.tag).float().mean().item()

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Callable, Iterator, Sequence
 
 import torch
@@ -39,6 +39,7 @@ from ..coevo.population import Population
 from ..coevo.population import genome_phenotype
 from ..sim.layout import Layout, make_layouts
 from ..coevo.reproduction import ReproductionParams, crossover, elite_count, mutate
+from ..coevo.selection import rank_within_groups, top_per_group
 
 #: Probability that an offspring of the GA / CCEA is a crossover child (else a clone of parent 1).
 P_CROSSOVER = 0.7
@@ -118,15 +119,6 @@ def new_layouts(ctx: Context, num: int, generator: torch.Generator) -> Layout:
 
 
 # ------------------------------------------------------------------ reproduction
-def _where_rows(mask: Tensor, a: Population, b: Population) -> Population:
-    """[N] bool, Genomes [N] -> Population [N]: a's row where mask, else b's."""
-    out = {}
-    for f in fields(Population):
-        x, y = getattr(a, f.name), getattr(b, f.name)
-        out[f.name] = torch.where(mask.view(-1, *([1] * (x.dim() - 1))), x, y)
-    return Population(**out)
-
-
 def reproduce_groups(genome: Population, fitness: Tensor, sizes: Sequence[int], max_elite: int,
                      generator: torch.Generator, params: ReproductionParams | None = None,
                      p_crossover: float = P_CROSSOVER) -> tuple[Population, Tensor, Tensor]:
@@ -154,12 +146,9 @@ def reproduce_groups(genome: Population, fitness: Tensor, sizes: Sequence[int], 
     starts = size_t.cumsum(0) - size_t
     fit = torch.nan_to_num(fitness.float(), nan=-math.inf)
 
-    # rows sorted by (group, fitness desc, row asc)
-    order = torch.sort(fit, descending=True, stable=True).indices
-    order = order[torch.sort(pos[order], stable=True).indices]
-    rank = torch.arange(P, device=dev) - starts[pos[order]]
+    order, rank = rank_within_groups(pos, fit, size_t)        # by (group, fitness desc, row)
     n_elite = torch.minimum(elite_count(size_t, max_elite), size_t)
-    elite = order[rank < n_elite[pos[order]]]                             # by group, best first
+    elite = top_per_group(order, rank, pos, n_elite)                      # by group, best first
 
     off_pos = torch.repeat_interleave(torch.arange(k, device=dev), size_t - n_elite)
     n_off = off_pos.numel()
@@ -179,7 +168,7 @@ def reproduce_groups(genome: Population, fitness: Tensor, sizes: Sequence[int], 
     do_cross = torch.rand(n_off, generator=generator, device=dev) < p_crossover
     g1 = genome.index(p1)
     cross = crossover(g1, genome.index(p2), generator)
-    child = mutate(_where_rows(do_cross, cross, g1), params, generator)
+    child = mutate(cross.where(do_cross, g1), params, generator)
 
     # each group's block: its elites then its offspring
     group = torch.cat([pos[elite], off_pos])

@@ -9,6 +9,7 @@ import torch
 from torch import Tensor
 
 from .reproduction import elite_count
+from .selection import rank_within_groups, top_table
 from .speciation import hamming
 
 
@@ -78,22 +79,9 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
         pos = torch.where(has_fitness, pos, torch.full_like(pos, k))
     f = torch.where(has_fitness, torch.nan_to_num(fitness.float(), nan=-torch.inf),
                     torch.full_like(fitness, -torch.inf, dtype=torch.float))
-    order = torch.sort(f, descending=True, stable=True).indices
-    order = order[torch.sort((~has_fitness[order]).to(torch.uint8), stable=True).indices]
-    order = order[torch.sort(pos[order], stable=True).indices]
-    sizes_all = torch.bincount(pos, minlength=k + 1)
-    sizes = sizes_all[:k]
-    n = torch.minimum(n_wanted.long(), sizes)
-    m = int(n.max())
-    starts = sizes_all.cumsum(0) - sizes_all
-    pos_sorted = pos[order]
-    rank = torch.arange(p, device=dev) - starts[pos_sorted]
-    n_ext = torch.cat([n, torch.zeros(1, dtype=torch.long, device=dev)])
-    keep = rank < n_ext[pos_sorted]
-    flat = torch.full((k * m + 1,), -1, dtype=torch.long, device=dev)
-    target = torch.where(keep, pos_sorted * m + rank, torch.full_like(rank, k * m))
-    flat.scatter_(0, target, torch.where(keep, order, torch.full_like(order, -1)))
-    return flat[:k * m].view(k, m)
+    sizes = torch.bincount(pos, minlength=k + 1)
+    order, rank = rank_within_groups(pos, f, sizes, first=has_fitness)
+    return top_table(order, rank, pos, torch.minimum(n_wanted.long(), sizes[:k]))
 
 
 def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swarm_size: int,

@@ -3,7 +3,7 @@ crossover and mutation of whole populations as batched tensor operations."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from typing import Callable
 
 import torch
@@ -11,7 +11,8 @@ from torch import Tensor
 
 from ..sim.bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ, compute_jumps
 from .config import ReproductionParams, SwarmCoDeConfig
-from .population import NUM_TIERS, R_MAX, R_MIN, Population
+from .population import CROSSOVER_GROUPS, GENE_BOUNDS, GENE_VALUES, SOCIAL_GENES, Population
+from .selection import rank_within_groups, top_per_group
 from .speciation import distance
 
 DistanceFn = Callable[[Population, Population], Tensor]
@@ -155,13 +156,6 @@ def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator
 # ---------------------------------------------------------------------------------------------
 # Whole-genome operators
 
-#: Gene groups inherited together in uniform crossover (tier + operating point of one part move together).
-CROSSOVER_GROUPS: tuple[tuple[str, ...], ...] = (
-    ("selectivity",), ("dominance",), ("radius",), ("chassis",),
-    ("battery", "battery_point"), ("motor", "torque_point"), ("effector",),
-)
-
-
 def crossover(a: Population, b: Population, generator: torch.Generator) -> Population:
     """Parents [N], [N] -> child [N]: uniform per gene group, uniform per tag bit, one-point BT crossover at the same cut in 1..L-1."""
     n = a.size
@@ -200,33 +194,26 @@ def _resample(x: Tensor, n_values: int, p: float, generator: torch.Generator) ->
 
 
 def mutate(g: Population, params: ReproductionParams, generator: torch.Generator) -> Population:
-    """Population [N] -> mutated Population [N] (BT, continuous and categorical hardware, tag bits, selectivity, dominance)."""
+    """Population [N] -> mutated Population [N] (BT, continuous and categorical hardware, tag bits, selectivity, dominance).
+
+    Genes are drawn in field order: tag bits flip w.p. p_tag_flip (None: 1 / L_tag), the BT by
+    `mutate_bt`, continuous genes by `_gauss_clip` in their GENE_BOUNDS (social_sigma for
+    SOCIAL_GENES, else hw_sigma; each w.p. p_gene_mutation), categorical ones by `_resample`.
+    """
     l_tag = g.tag.shape[1]
     p_flip = params.p_tag_flip if params.p_tag_flip is not None else (1.0 / l_tag if l_tag else 0.0)
-    flips = torch.rand(g.tag.shape, generator=generator, device=g.tag.device) < p_flip
-    pg = params.p_gene_mutation
-    return Population(
-        tag=g.tag ^ flips,
-        selectivity=_gauss_clip(g.selectivity, 0.0, 1.0, params.social_sigma, generator, pg),
-        dominance=_gauss_clip(g.dominance, 0.0, 1.0, params.social_sigma, generator, pg),
-        bt=mutate_bt(g.bt, params, generator),
-        radius=_gauss_clip(g.radius, R_MIN, R_MAX, params.hw_sigma, generator, pg),
-        chassis=_resample(g.chassis, NUM_TIERS, params.p_categorical, generator),
-        battery=_resample(g.battery, NUM_TIERS, params.p_categorical, generator),
-        motor=_resample(g.motor, NUM_TIERS, params.p_categorical, generator),
-        torque_point=_gauss_clip(g.torque_point, 0.0, 1.0, params.hw_sigma, generator, pg),
-        battery_point=_gauss_clip(g.battery_point, 0.0, 1.0, params.hw_sigma, generator, pg),
-        effector=_resample(g.effector, 2, params.p_categorical, generator),
-    )
-
-
-def _select(mask: Tensor, a: Population, b: Population) -> Population:
-    """[N] bool, Genomes [N] -> Population [N] taking a's row where mask else b's."""
     out = {}
-    for f in fields(Population):
-        x, y = getattr(a, f.name), getattr(b, f.name)
-        m = mask.view(-1, *([1] * (x.dim() - 1)))
-        out[f.name] = torch.where(m, x, y)
+    for name in (f.name for f in fields(Population)):
+        x = getattr(g, name)
+        if name == "tag":
+            out[name] = x ^ (torch.rand(x.shape, generator=generator, device=x.device) < p_flip)
+        elif name == "bt":
+            out[name] = mutate_bt(x, params, generator)
+        elif name in GENE_BOUNDS:
+            sigma = params.social_sigma if name in SOCIAL_GENES else params.hw_sigma
+            out[name] = _gauss_clip(x, *GENE_BOUNDS[name], sigma, generator, params.p_gene_mutation)
+        else:
+            out[name] = _resample(x, GENE_VALUES[name], params.p_categorical, generator)
     return Population(**out)
 
 
@@ -272,13 +259,9 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
                                            min_share=params.min_share)
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
 
-    # Population sorted by (species position, fitness desc, row asc).
-    order = torch.sort(fit, descending=True, stable=True).indices
-    order = order[torch.sort(pos[order], stable=True).indices]
+    order, rank = rank_within_groups(pos, fit, sizes)       # by (species, fitness desc, row)
+    elite = top_per_group(order, rank, pos, n_elite)
     starts = sizes.cumsum(0) - sizes
-    pos_sorted = pos[order]
-    rank = torch.arange(p, device=dev) - starts[pos_sorted]
-    elite = order[rank < n_elite[pos_sorted]]
 
     off_pos = torch.repeat_interleave(torch.arange(k, device=dev), quota - n_elite)
     n_off = off_pos.numel()
@@ -311,7 +294,7 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
                           torch.full((n_off,), params.crossover_cross, device=dev))
     do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
     g1, g2 = genome.index(p1), genome.index(p2)
-    child = _select(do_cross, crossover(g1, g2, generator), g1)
+    child = crossover(g1, g2, generator).where(do_cross, g1)
     child = mutate(child, params, generator)
 
     children = Population.cat([genome.index(elite), child])

@@ -1,0 +1,50 @@
+"""Ranking within groups: rows sorted by (group, fitness desc, row asc) and the top n of each
+group, shared by the elites of SwarmCoDe's reproduction, its partners' elite rows and the
+baselines' fixed-group reproduction."""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+
+def rank_within_groups(group: Tensor, fitness: Tensor, sizes: Tensor | None = None,
+                       first: Tensor | None = None) -> tuple[Tensor, Tensor]:
+    """group [P] long >= 0, fitness [P] -> (order [P], rank [P]).
+
+    order: the rows sorted by (group asc, fitness desc, row asc) (stable sorts, so equal fitness
+    keeps the lower row first; NaN sorts as torch.sort puts it); with `first` [P] bool, rows
+    where it holds rank above the others of equal fitness, (group, first desc, fitness desc, row).
+    rank[j]: the position of order[j] within its group (0: its best). `sizes` [G] (G > the
+    largest group) are the rows per group, `torch.bincount(group)` when not given.
+    """
+    order = torch.sort(fitness, descending=True, stable=True).indices
+    if first is not None:
+        order = order[torch.sort((~first[order]).to(torch.uint8), stable=True).indices]
+    order = order[torch.sort(group[order], stable=True).indices]
+    if sizes is None:
+        sizes = torch.bincount(group)
+    starts = sizes.cumsum(0) - sizes
+    rank = torch.arange(group.numel(), device=group.device) - starts[group[order]]
+    return order, rank
+
+
+def top_per_group(order: Tensor, rank: Tensor, group: Tensor, n: Tensor) -> Tensor:
+    """`rank_within_groups`' (order, rank) of `group` [P], n [G] -> the rows of the best n[g] of
+    every group g, by group, best first (every row's group must be < G)."""
+    return order[rank < n[group[order]]]
+
+
+def top_table(order: Tensor, rank: Tensor, group: Tensor, n: Tensor) -> Tensor:
+    """`rank_within_groups`' (order, rank) of `group` [P], n [G] (G >= 1) -> [G, M] long: row g
+    holds the rows of the best n[g] of group g, best first, -1 padded; M = max(n). Rows of group
+    G (no group) are left out."""
+    k = n.numel()
+    m = int(n.max())
+    dev = order.device
+    g = group[order]
+    keep = rank < torch.cat([n, torch.zeros(1, dtype=n.dtype, device=dev)])[g]
+    flat = torch.full((k * m + 1,), -1, dtype=torch.long, device=dev)
+    target = torch.where(keep, g * m + rank, torch.full_like(rank, k * m))
+    flat.scatter_(0, target, torch.where(keep, order, torch.full_like(order, -1)))
+    return flat[:k * m].view(k, m)
