@@ -33,8 +33,10 @@ from swarmcode_torch.coevo.population import R_MAX, R_MIN  # noqa: E402
 from swarmcode_torch.sim.hardware import phenotype  # noqa: E402
 from swarmcode_torch.sim.layout import make_layouts  # noqa: E402
 from swarmcode_torch.sim.scenario import Scenario, builtin_names, load_scenario  # noqa: E402
-from swarmcode_torch.sim.world import (CudaGraphTicks, Robots, WorldParams, compatible,
-                                       random_keys, reset, step)
+from swarmcode_torch.sim.runtime import CudaGraphTicks  # noqa: E402
+from swarmcode_torch.sim.state import (Robots, TickInputs, WorldParams, compatible,  # noqa: E402
+                                       random_keys, reset)
+from swarmcode_torch.sim.step import step  # noqa: E402
 
 PROGRAM_LENGTH = 32
 
@@ -142,7 +144,7 @@ def run_mode(w: Workload, mode: str, args, device: torch.device) -> dict[str, An
         torch._dynamo.reset()
         g = CudaGraphTicks(torch.compile(step, dynamic=False, fullgraph=args.fullgraph),
                            ticks_per_graph=args.graph_ticks)
-        inputs = (w.layout, w.robots, w.compat, w.keys, w.tables)
+        inputs = TickInputs(w.layout, w.robots, w.compat, w.keys, w.tables)
         t0 = now(device)
         g.run_ticks(state, inputs, w.params, args.graph_ticks)   # compile + capture + replay
         rec["compile_seconds"] = now(device) - t0

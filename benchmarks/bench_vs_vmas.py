@@ -11,7 +11,7 @@ redrawn when reached (and every 100 ticks), with robot-robot collisions. No obst
   over environments; a Python loop over agents, which is how VMAS's API works). One timed VMAS
   tick is that controller plus ``env.step(actions)``; the goals are redrawn in the scenario's
   ``post_step``.
-* Ours: ``swarmcode_torch.sim.world.step``, eager and ``torch.compile(step, dynamic=False,
+* Ours: ``swarmcode_torch.sim.step.step``, eager and ``torch.compile(step, dynamic=False,
   fullgraph=True)``, with every robot running the one-leaf behavior tree ``ACT_RANDOM_WALK``
   (drive to a random waypoint, redrawn when reached and every ``waypoint_period`` ticks). The
   scenario is bench_sim's (``scenario_for(N)``: four-niche for N <= 20, swarm200 for N = 200)
@@ -52,7 +52,7 @@ from swarmcode_torch.sim import bt  # noqa: E402
 from swarmcode_torch.sim.hardware import phenotype  # noqa: E402
 from swarmcode_torch.sim.layout import make_layouts  # noqa: E402
 from swarmcode_torch.sim.scenario import Scenario  # noqa: E402
-from swarmcode_torch.sim.world import Robots, WorldParams, compatible, random_keys, reset  # noqa: E402
+from swarmcode_torch.sim.state import Robots, WorldParams, compatible, random_keys, reset  # noqa: E402
 
 try:
     import vmas
@@ -309,7 +309,7 @@ def vmas_description(args) -> dict[str, Any]:
 
 
 OURS_COMPUTES = (
-    "swarmcode_torch.sim.world.step: sensing (distances from every robot to every grip point "
+    "swarmcode_torch.sim.step.step: sensing (distances from every robot to every grip point "
     "[E, N, P*G], nearest / randomly preferred takeable grip, 14 leaf statuses); behavior-tree "
     "table lookup (every robot runs the one-leaf tree ACT_RANDOM_WALK); drop / pick-up / "
     "delivery bookkeeping and package states; force-limited cascaded PD control toward the "

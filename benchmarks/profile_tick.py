@@ -22,7 +22,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_sim import Workload, scenario_for  # noqa: E402
 from common import RESULTS_DIR, now, run_metadata, write_json  # noqa: E402
-from swarmcode_torch.sim.world import CudaGraphTicks, step  # noqa: E402
+from swarmcode_torch.sim.runtime import CudaGraphTicks  # noqa: E402
+from swarmcode_torch.sim.state import TickInputs  # noqa: E402
+from swarmcode_torch.sim.step import step  # noqa: E402
 
 
 def _device_us(evt) -> float:
@@ -47,7 +49,7 @@ def profile_config(E: int, N: int, args, device: torch.device) -> dict:
 
     if args.cuda_graphs:  # the compiled tick replayed from CUDA graphs of 10 ticks, as evolve
         replay = CudaGraphTicks(fn, ticks_per_graph=10)
-        inputs = (w.layout, w.robots, w.compat, w.keys, w.tables)
+        inputs = TickInputs(w.layout, w.robots, w.compat, w.keys, w.tables)
 
         def ticks(s):
             return replay.run_ticks(s, inputs, w.params, args.ticks)
@@ -96,7 +98,7 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=8)
     ap.add_argument("--compile-mode", default=None)
     ap.add_argument("--cuda-graphs", action="store_true",
-                    help="profile the compiled tick replayed from CUDA graphs (world.CudaGraphTicks)")
+                    help="profile the compiled tick replayed from CUDA graphs (runtime.CudaGraphTicks)")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     device = torch.device(args.device)

@@ -18,7 +18,7 @@ from swarmcode_torch.coevo.evolve import _design, random_population
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.population import Population
 from swarmcode_torch.coevo.population import genome_phenotype
-from swarmcode_torch.sim.world import step as world_step
+from swarmcode_torch.sim.step import step as world_step
 
 TINY = SwarmCoDeConfig(scenario="four-niche", population=8, swarm_size=5, trials=2, ticks=12,
                     seed=3, device="cpu")

@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from swarmcode_torch.coevo.population import R_MAX, R_MIN
-from swarmcode_torch.sim.world import WorldParams, cell_overflow, collide, neighbour_candidates
+from swarmcode_torch.sim.contacts import cell_overflow, collide, neighbour_candidates
+from swarmcode_torch.sim.state import WorldParams
 
 
 def crowd(E=3, N=300, arena=12.0, seed=0):

@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from swarmcode_torch.sim.world import rollout, step
+from swarmcode_torch.sim.rollout import rollout
+from swarmcode_torch.sim.step import step
 
 from worldkit import random_world
 

@@ -12,7 +12,7 @@ from swarmcode_torch.app.cli import app
 from swarmcode_torch.coevo.dynamics import Turnover, lifetimes, niche_count, replay, window_stats
 from swarmcode_torch.sim.hardware import phenotype
 from swarmcode_torch.sim.scenario import load_scenario
-from swarmcode_torch.sim.world import WorldParams, capabilities
+from swarmcode_torch.sim.state import WorldParams, capabilities
 
 FOUR = load_scenario("four-niche")
 

@@ -14,7 +14,7 @@ from swarmcode_torch.app.reporting import SCALAR_TAGS, TensorBoardReporter
 from swarmcode_torch.app.runs import (CheckpointReporter, SummaryReporter, load_checkpoint, resume,
                                       run, write_config)
 from swarmcode_torch.sim.scenario import load_scenario
-from swarmcode_torch.sim.world import step as world_step
+from swarmcode_torch.sim.step import step as world_step
 
 TINY = SwarmCoDeConfig(scenario="one-niche", population=8, swarm_size=5, trials=2, ticks=15,
                     generations=4, seed=1)

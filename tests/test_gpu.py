@@ -51,7 +51,8 @@ def test_cuda_graph_ticks_match_compiled_rollout():
     new shapes recapture."""
     from worldkit import random_world
 
-    from swarmcode_torch.sim.world import CompiledStep, CudaGraphTicks, rollout
+    from swarmcode_torch.sim.rollout import rollout
+    from swarmcode_torch.sim.runtime import CompiledStep, CudaGraphTicks
 
     compiled = CompiledStep()
     graphs = CudaGraphTicks(CompiledStep(), ticks_per_graph=10)
@@ -69,7 +70,7 @@ def test_cuda_graph_ticks_match_compiled_rollout():
 
 
 def test_evolve_with_cuda_graphs_replays_captured_ticks():
-    from swarmcode_torch.sim.world import CudaGraphTicks
+    from swarmcode_torch.sim.runtime import CudaGraphTicks
 
     ev = Evolution(replace(TINY, compile=True, cuda_graphs=True))
     assert isinstance(ev.ctx.step_fn, CudaGraphTicks)
@@ -94,7 +95,9 @@ def test_cuda_graphs_when_compiling_fails(required):
     # evolve's default (graphs unset) falls back to eager ticks; an explicit choice is an error
     from worldkit import random_world
 
-    from swarmcode_torch.sim.world import CompiledStep, CudaGraphTicks, rollout, step
+    from swarmcode_torch.sim.rollout import rollout
+    from swarmcode_torch.sim.runtime import CompiledStep, CudaGraphTicks
+    from swarmcode_torch.sim.step import step
 
     def broken(*args):
         raise RuntimeError("no compiler")

@@ -14,7 +14,7 @@ from swarmcode_torch.app.render import (Episode, frame_image, record_episode, re
                                         save_png, team_genome)
 from swarmcode_torch.app.runs import write_config
 from swarmcode_torch.sim.scenario import load_scenario
-from swarmcode_torch.sim.world import HELD
+from swarmcode_torch.sim.state import HELD
 
 
 def design(effector="pincher", radius=0.4, tiers=(3, 3, 3), count=3, program="forage", **kw):

@@ -4,23 +4,26 @@ import pytest
 import torch
 
 from swarmcode_torch.sim import bt
+from swarmcode_torch.sim.contacts import collide
 from swarmcode_torch.sim.hardware import phenotype
 from swarmcode_torch.sim.layout import make_layouts
+from swarmcode_torch.sim.rollout import episode_metrics, rollout
+from swarmcode_torch.sim.runtime import CompiledStep
 from swarmcode_torch.sim.scenario import builtin_names, load_scenario
-from swarmcode_torch.sim.world import (DELIVERED, GROUND, CompiledStep, Robots, WorldParams,
-                                       collide, compatible, episode_metrics, random_keys, reset,
-                                       rollout, step)
+from swarmcode_torch.sim.state import (DELIVERED, GROUND, Robots, WorldParams, compatible,
+                                       random_keys, reset)
+from swarmcode_torch.sim.step import step
 from worldkit import build, package, random_world, robot
 
 
 def run(layout, rob, tables, params, ticks, each=None):
-    compat, keys = compatible(layout, rob, params), random_keys(layout, rob.radius.shape[1])
-    s = reset(layout, rob, params)
-    for _ in range(ticks):
-        s = step(s, layout, rob, compat, keys, tables, params)
-        if each:
+    """The state after `ticks` ticks; `each(state)` after every tick (not after the reset)."""
+    def observe(t, s):
+        if t > 0:
             each(s)
-    return s
+
+    return rollout(layout, rob, tables, params, ticks, return_state=True,
+                   observe=observe if each else None)[1]
 
 
 # ------------------------------------------------------------------ physics invariants
@@ -236,7 +239,7 @@ def test_compiled_step_falls_back_to_eager_when_compiling_fails(monkeypatch):
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="checks the error without CUDA")
 def test_cuda_graph_ticks_need_cuda():
-    from swarmcode_torch.sim.world import CudaGraphTicks
+    from swarmcode_torch.sim.runtime import CudaGraphTicks
 
     with pytest.raises(RuntimeError, match="CUDA graphs need a CUDA device"):
         CudaGraphTicks()
@@ -244,7 +247,7 @@ def test_cuda_graph_ticks_need_cuda():
 
 def test_waypoints_are_the_counter_hash_of_seed_robot_axis_and_tick():
     # the per-robot keys are precomputed outside the tick; the numbers must stay the hash's
-    from swarmcode_torch.sim.world import _waypoints, hash_uniform, waypoint_keys
+    from swarmcode_torch.sim.state import _waypoints, hash_uniform, waypoint_keys
 
     seed = torch.tensor([0, 7, 2**40, -(2**35)])
     params = WorldParams(arena=30.0)

@@ -9,7 +9,7 @@ from swarmcode_torch.coevo.population import R_MAX, R_MIN
 from swarmcode_torch.sim.hardware import phenotype
 from swarmcode_torch.sim.layout import Layout, make_layouts
 from swarmcode_torch.sim.scenario import load_scenario
-from swarmcode_torch.sim.world import Robots, WorldParams
+from swarmcode_torch.sim.state import Robots, WorldParams
 
 PROGRAMS = ["forage", "forage_random", "collaborative", "cautious"]
 

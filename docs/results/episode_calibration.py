@@ -8,7 +8,7 @@ from swarmcode_torch.app.render import team_genome
 from swarmcode_torch.coevo.evaluation import simulate_teams
 from swarmcode_torch.sim.layout import make_layouts
 from swarmcode_torch.sim.scenario import load_scenario
-from swarmcode_torch.sim.world import WorldParams
+from swarmcode_torch.sim.state import WorldParams
 torch.set_num_threads(2)
 E = 48
 for path in sorted(glob.glob("docs/results/niche/*-seed0/summary.json")) + ["docs/results/budget_sweep/budget-4000_seed-0/summary.json"]:

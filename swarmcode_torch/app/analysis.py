@@ -10,7 +10,7 @@ from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..coevo.population import genome_phenotype
 from .runs import RunError, load_checkpoint, read_config, read_teams, run_scenario
 from ..sim.scenario import Scenario
-from ..sim.world import WorldParams, capabilities
+from ..sim.state import WorldParams, capabilities
 
 
 def design_capabilities(designs: Sequence[dict], scenario: Scenario) -> list[list[int]]:

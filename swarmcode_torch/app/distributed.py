@@ -30,7 +30,9 @@ import torch
 from ..coevo.evaluation import EvalPlan, SimBatch, gather_metrics, sim_batch, simulate_batch
 from ..coevo.population import Population
 from ..sim.layout import Layout
-from ..sim.world import CompiledStep, CudaGraphTicks, WorldParams, step as world_step
+from ..sim.runtime import CompiledStep, CudaGraphTicks
+from ..sim.state import WorldParams
+from ..sim.step import step as world_step
 
 RAY_INSTALL = 'pip install "swarmcode-torch[ray]"'
 #: Seconds to wait for the evaluation actors to start (the cluster may be busy).

@@ -23,8 +23,8 @@ from ..coevo.population import Population, PINCHER, SUCTION
 from ..coevo.evaluation import team_robots
 from ..sim.layout import Layout, make_layouts
 from ..sim.scenario import Scenario
-from ..sim.world import DELIVERED, Robots, State, WorldParams, compatible, episode_metrics, \
-    random_keys, reset, step
+from ..sim.rollout import rollout
+from ..sim.state import DELIVERED, Robots, State, WorldParams
 
 _EFFECTOR_CODES = {"suction": SUCTION, "pincher": PINCHER}
 _EFFECTOR_NAMES = {SUCTION: "suction", PINCHER: "pincher"}
@@ -88,7 +88,7 @@ class Episode:
     """One recorded episode of one environment.
 
     `layout` and `robots` are the simulated batch of one environment (leading dimension 1);
-    each snapshot is a :class:`~swarmcode_torch.sim.world.State` of that environment *without*
+    each snapshot is a :class:`~swarmcode_torch.sim.state.State` of that environment *without*
     the environment dimension (``pos [N, 2]``, ``p_pos [P, 2]``, ``holder [P, G]``, ...).
     `metrics` are the episode metrics of the final state, as floats.
     """
@@ -137,16 +137,14 @@ def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: i
     robots = team_robots(genome, teams)  # exactly as the evaluation builds them
     tables = bt.build_tables(genome.bt)
 
+    snaps = []
+
+    def keep(t: int, state: State) -> None:
+        if t % every == 0 or t == ticks:
+            snaps.append(_env0(state))
+
     with torch.no_grad():
-        compat = compatible(layout, robots, params)
-        keys = random_keys(layout, S)
-        state = reset(layout, robots, params)
-        snaps = [_env0(state)]
-        for t in range(1, ticks + 1):
-            state = step(state, layout, robots, compat, keys, tables, params)
-            if t % every == 0 or t == ticks:
-                snaps.append(_env0(state))
-        m = episode_metrics(state, layout, robots, params)
+        m = rollout(layout, robots, tables, params, ticks, observe=keep)
     metrics = {k: float(v[0]) for k, v in m.items()}
 
     labels = []

@@ -31,7 +31,8 @@ from ..sim.layout import Layout, make_layouts
 from .partners import Swarms, assemble_swarms, choose_partners, elite_rows
 from .reproduction import elite_count
 from ..sim.scenario import Scenario
-from ..sim.world import Robots, WorldParams, rollout
+from ..sim.rollout import rollout
+from ..sim.state import Robots, WorldParams
 
 StepFn = Callable
 

@@ -26,7 +26,9 @@ from .population import genome_phenotype
 from .reproduction import mutate_bt, reproduce
 from ..sim.scenario import Scenario, load_scenario
 from .speciation import distance, speciate
-from ..sim.world import CompiledStep, CudaGraphTicks, WorldParams, capabilities, step as world_step
+from ..sim.runtime import CompiledStep, CudaGraphTicks
+from ..sim.state import WorldParams, capabilities
+from ..sim.step import step as world_step
 
 CHECKPOINT_VERSION = 1
 # compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)

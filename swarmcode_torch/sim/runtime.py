@@ -1,0 +1,160 @@
+"""How the tick runs: compiled (`CompiledStep`, eager fallback), replayed from CUDA graphs
+(`CudaGraphTicks`), and the choice between them for a run (`tick_function`, `tick_mode`)."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import torch
+
+from .layout import Layout
+from .state import Robots, State, TickInputs, WorldParams
+from .step import step
+
+# compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
+COMPILE_MIN_GENERATIONS = 50
+
+
+class CompiledStep:
+    """`torch.compile(step)`, falling back to eager `step` (with a warning) when the first call
+    cannot compile, e.g. on a machine without the C++ compiler that inductor's CPU backend needs."""
+
+    def __init__(self, **compile_kwargs):
+        self.compiled = torch.compile(step, dynamic=False, **compile_kwargs)
+        self.fn = None
+        self.error: Exception | None = None
+
+    def __call__(self, *args):
+        if self.fn is None:
+            try:
+                out = self.compiled(*args)
+                self.fn = self.compiled
+                return out
+            except Exception as e:  # noqa: BLE001 - any compiler failure means: run eager
+                import warnings
+
+                self.error, self.fn = e, step
+                lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()
+                         and not ln.strip().startswith(("Set TORCH", "For even more developer"))]
+                parts = [lines[0]] + ([lines[-1]] if len(lines) > 1 else []) if lines else []
+                why = f"{type(e).__name__}: {' ... '.join(p[:160] for p in parts)}" \
+                    if parts else type(e).__name__
+                warnings.warn(f"torch.compile failed ({why}); running the tick eagerly",
+                              RuntimeWarning, stacklevel=2)
+        return self.fn(*args)
+
+
+class CudaGraphTicks:
+    """Run a rollout's ticks as replays of one captured CUDA graph of `ticks_per_graph` ticks.
+
+    `step_fn` (typically a compiled `step`) is warmed up on a side stream, then captured with
+    `torch.cuda.graph` on static copies of the state and of every input; each tick's output
+    state is copied back into the static state inside the graph. A later rollout with the same
+    shapes and params copies its inputs into the static buffers and replays: one launch per
+    `ticks_per_graph` ticks instead of one per kernel. Different shapes or params recapture.
+    Pass it as `step_fn` to `rollout`. CUDA only.
+    """
+
+    def __init__(self, step_fn: Callable | None = None, ticks_per_graph: int = 10,
+                 required: bool = True):
+        if not torch.cuda.is_available():
+            raise RuntimeError("CUDA graphs need a CUDA device")
+        if ticks_per_graph < 1:
+            raise ValueError("ticks_per_graph must be >= 1")
+        # the eager tick makes small host-to-device copies, which a capture does not allow
+        self.step_fn = step_fn if step_fn is not None else CompiledStep()
+        self.k = ticks_per_graph
+        self.key = None
+        self.graph: torch.cuda.CUDAGraph | None = None
+        # required: a tick that fails to compile is an error; otherwise the ticks run one by one
+        # with the step's eager fallback
+        self.required = required
+        self.disabled = False
+
+    def __call__(self, *args):  # a single tick, outside any graph
+        return self.step_fn(*args)
+
+    @staticmethod
+    def _tensors(state: State, inputs: TickInputs) -> list[torch.Tensor]:
+        layout, robots, compat, keys, tables = inputs
+        return [*state, *layout, *robots, compat, keys, tables]
+
+    def _capture(self, state: State, inputs: TickInputs, params: WorldParams) -> None:
+        if any(t.device.type != "cuda" for t in self._tensors(state, inputs)):
+            raise ValueError("CudaGraphTicks needs every state and input tensor on the GPU")
+        layout, robots, compat, keys, tables = inputs
+        self.state = State(*(t.clone() for t in state))
+        self.inputs = TickInputs(Layout(*(t.clone() for t in layout)),
+                                 Robots(*(t.clone() for t in robots)),
+                                 compat.clone(), keys.clone(), tables.clone())
+
+        def ticks(n: int) -> None:
+            for _ in range(n):
+                out = self.step_fn(self.state, *self.inputs, params)
+                for a, b in zip(self.state, out):
+                    if a is not b:
+                        a.copy_(b)
+
+        side = torch.cuda.Stream()
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side):
+            ticks(2)                        # compile and allocate outside the capture
+        torch.cuda.current_stream().wait_stream(side)
+        if isinstance(self.step_fn, CompiledStep) and self.step_fn.error is not None:
+            if self.required:
+                raise RuntimeError("CudaGraphTicks needs the compiled tick, and compiling "
+                                   f"failed: {self.step_fn.error}")
+            self.disabled = True
+            return
+        self.graph = torch.cuda.CUDAGraph()
+        with torch.cuda.graph(self.graph):
+            ticks(self.k)
+
+    def run_ticks(self, state: State, inputs: TickInputs, params: WorldParams,
+                  ticks: int) -> State:
+        """`ticks` ticks from `state` (`inputs`: a `TickInputs` or a tuple in its order)."""
+        key = (tuple((t.shape, t.dtype, t.device) for t in self._tensors(state, inputs)), params)
+        if key != self.key and not self.disabled:
+            self._capture(state, inputs, params)
+            self.key = key
+        if self.disabled:  # compiling failed and graphs were optional: tick by tick
+            for _ in range(ticks):
+                state = self.step_fn(state, *inputs, params)
+            return state
+        for a, b in zip(self._tensors(self.state, self.inputs), self._tensors(state, inputs)):
+            a.copy_(b)
+        for _ in range(ticks // self.k):
+            self.graph.replay()
+        out = State(*(t.clone() for t in self.state))
+        for _ in range(ticks % self.k):
+            out = self.step_fn(out, *self.inputs, params)
+        return out
+
+
+def tick_function(device: torch.device, compile: bool | None = None,
+                  cuda_graphs: bool | None = None, generations: int = 0) -> tuple[Callable, bool]:
+    """The tick function of a run on `device` and whether it is compiled. `compile` unset: on
+    CUDA, or for runs of at least COMPILE_MIN_GENERATIONS generations; `cuda_graphs` unset: on
+    CUDA with the compiled tick, and a tick that fails to compile then runs eagerly."""
+    use_compile = compile if compile is not None else (
+        device.type == "cuda" or generations >= COMPILE_MIN_GENERATIONS)
+    if cuda_graphs and (device.type != "cuda" or not use_compile):
+        raise ValueError("cuda_graphs needs --device cuda and the compiled tick (--compile)")
+    step_fn = CompiledStep() if use_compile else step
+    graphs = cuda_graphs if cuda_graphs is not None else (
+        device.type == "cuda" and use_compile)
+    if graphs:  # unset (auto): a tick that fails to compile runs eagerly, as without graphs
+        step_fn = CudaGraphTicks(step_fn, required=cuda_graphs is not None)
+    return step_fn, use_compile
+
+
+def tick_mode(step_fn: Callable, compiled: bool) -> str:
+    """How the tick runs: 'eager', 'compiled', 'compiled, CUDA graphs', or 'eager (compiling
+    failed)' once a compiled tick has fallen back."""
+    graphs = isinstance(step_fn, CudaGraphTicks)
+    compiled_step = step_fn.step_fn if graphs else step_fn
+    if isinstance(compiled_step, CompiledStep) and compiled_step.error is not None:
+        return "eager (compiling failed)"
+    if graphs:
+        return "compiled, CUDA graphs"
+    return "compiled" if compiled else "eager"

@@ -1,0 +1,154 @@
+"""One tick of the batched world: sensing -> behavior trees -> drop / pick-up -> PD control
+-> physics and contacts -> energy, stuck detection and waypoints.
+
+One call of :func:`step` is one tick for the whole batch: fixed shapes, no Python loop over
+robots, packages or environments, and no host synchronisation, so it compiles to few kernels.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from . import bt
+from .contacts import _gather, collide
+from .layout import Layout
+from .sense import _INF, sense
+from .state import DELIVERED, GROUND, HELD, Robots, State, WorldParams, _waypoints
+
+_MOVE_ACTIONS = (bt.ACT_MOVE_TO_PACK, bt.ACT_MOVE_TO_BASE, bt.ACT_RANDOM_WALK,
+                 bt.ACT_MOVE_TO_RANDOM_PACK)
+
+
+def _scatter_sum(values: torch.Tensor, index: torch.Tensor, size: int) -> torch.Tensor:
+    """Sum values [E, N, *] into [E, size, *] by index [E, N] (index == size is dropped)."""
+    E = index.shape[0]
+    shape = (E, size + 1) + tuple(values.shape[2:])
+    idx = index.reshape(index.shape + (1,) * (values.dim() - 2)).expand_as(values)
+    return values.new_zeros(shape).scatter_add(1, idx, values)[:, :size]
+
+
+def _cap(v: torch.Tensor, vmax: float, vmin: float = 0.0) -> torch.Tensor:
+    """Limit speeds to vmax; speeds below vmin become 0 (static friction)."""
+    n = v.norm(dim=-1, keepdim=True)
+    return torch.where(n < vmin, 0.0, v * (vmax / n.clamp_min(vmax)))
+
+
+# ---------------------------------------------------------------- one tick
+def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, keys: torch.Tensor,
+         tables: torch.Tensor, params: WorldParams) -> State:
+    """Advance every environment by one tick."""
+    E, N = robots.radius.shape
+    P, G = layout.g_effector.shape[1:]
+    C = P * G
+    dev = state.pos.device
+    base = state.pos.new_tensor([params.arena / 2, params.arena / 2])
+    s = sense(state, layout, robots, compat, keys, params)
+
+    # --- the behavior trees
+    alive = robots.present & (state.energy > 0)
+    action, fired, _ = bt.lookup(tables, robots.program, s.leaf)
+    action = torch.where(alive, action, bt.NOP)
+    fired = fired & alive[..., None]
+
+    holder = state.holder.reshape(E, C)
+    holding, grip = state.holding, state.grip
+    robot_ids = torch.arange(N, device=dev).expand(E, N)
+
+    # --- drop: release the grip; inside the base the package is delivered
+    drop = fired[..., bt.ACT_DROP] & (holding >= 0)
+    my_grip = torch.where(holding >= 0, holding * G + grip, C)
+    released = _scatter_sum(drop.float(), torch.where(drop, my_grip, C), C) > 0      # [E, C]
+    deliver = drop & (s.d_base <= params.base_radius)
+    delivered_now = _scatter_sum(deliver.float(), torch.where(deliver, holding, P), P) > 0
+    delivered = (state.p_status == DELIVERED) | delivered_now                       # [E, P]
+    gone = delivered.repeat_interleave(G, dim=1)
+    holder = torch.where(released | gone, -1, holder)
+    lost = (holding >= 0) & _gather(delivered.long(), holding).bool()
+    holding = torch.where(drop | lost, -1, holding)
+
+    # --- pick up: the nearest takeable grip in reach; ties go to the lowest robot index
+    pick = fired[..., bt.ACT_PICK_UP] & (holding < 0) & (s.best_d <= params.reach)
+    claim = torch.where(pick, s.best, C)
+    winner = torch.full((E, C + 1), N, dtype=torch.long, device=dev).scatter_reduce(
+        1, claim, robot_ids, reduce="amin")
+    got = pick & (winner.gather(1, claim) == robot_ids)
+    holder = torch.cat([holder, holder.new_full((E, 1), -1)], 1).scatter(
+        1, torch.where(got, s.best, C), robot_ids)[:, :C]
+    holding = torch.where(got, s.best // G, holding)
+    grip = torch.where(got, s.best % G, grip)
+
+    holder3 = holder.reshape(E, P, G)
+    exists = layout.g_effector >= 0
+    held_any = (holder3 >= 0).any(-1)
+    lifted = ((holder3 >= 0) | ~exists).all(-1) & exists.any(-1) & ~delivered
+    p_status = torch.where(delivered, DELIVERED, torch.where(held_any, HELD, GROUND))
+    p_picked = state.p_picked | lifted
+
+    # --- where each robot wants to go
+    target = state.pos
+    target = torch.where((action == bt.ACT_MOVE_TO_PACK)[..., None] & (s.best_d < _INF)[..., None],
+                         _gather(s.gpos, s.best), target)
+    target = torch.where((action == bt.ACT_MOVE_TO_RANDOM_PACK)[..., None] & (s.rand_d < _INF)[..., None],
+                         _gather(s.gpos, s.rand), target)
+    target = torch.where((action == bt.ACT_MOVE_TO_BASE)[..., None], base.expand(E, N, 2), target)
+    target = torch.where((action == bt.ACT_RANDOM_WALK)[..., None], state.waypoint, target)
+
+    # --- PD control (cascaded: position error -> desired velocity -> force), force-limited
+    carrying = holding >= 0
+    n_grips = exists.sum(-1).clamp_min(1)
+    share = torch.where(carrying, _gather(layout.p_mass / n_grips, holding), 0.0)
+    m_ctrl = robots.mass + share
+    v_des = _cap(params.kp * (target - state.pos), params.v_cap)
+    f_cmd = m_ctrl[..., None] * (params.kv * (v_des - state.vel) + params.drag * v_des)
+    f_max = torch.where(alive, robots.force, 0.0)[..., None]
+    f_cmd = f_cmd * (f_max / f_cmd.norm(dim=-1, keepdim=True).clamp_min(1e-9)).clamp(max=1.0)
+
+    # --- free robots: semi-implicit Euler
+    vel = _cap(state.vel + params.dt * (f_cmd / robots.mass[..., None] - params.drag * state.vel),
+               params.v_cap, params.rest_speed)
+    pos = state.pos + params.dt * vel
+
+    # --- lifted packages move as one rigid body with their carriers
+    in_lifted = carrying & _gather(lifted.long(), holding).bool()
+    pidx = torch.where(in_lifted, holding, P)
+    f_pkg = _scatter_sum(f_cmd, pidx, P)
+    m_pkg = layout.p_mass + _scatter_sum(robots.mass, pidx, P)
+    p_vel = torch.where(lifted[..., None],
+                        _cap(state.p_vel + params.dt * (f_pkg / m_pkg[..., None] - params.drag * state.p_vel),
+                             params.v_cap, params.rest_speed), 0.0)
+    p_pos = state.p_pos + params.dt * p_vel
+    g_off = _gather(layout.g_offset.reshape(E, C, 2), holding * G + grip)
+    pos = torch.where(carrying[..., None], _gather(p_pos, holding) + g_off, pos)
+    vel = torch.where(carrying[..., None], _gather(p_vel, holding), vel)
+
+    # --- contacts; carriers pass their correction on to the package they hold
+    waiting = carrying & ~in_lifted
+    m_col = torch.where(waiting, params.anchor_mass, robots.mass + share)
+    pos_c, vel_c = collide(pos, vel, robots.radius, m_col, robots.present, layout.o_pos,
+                           layout.o_radius, layout.o_present, params)
+    cnt = _scatter_sum(torch.ones_like(robots.mass), pidx, P).clamp_min(1)[..., None]
+    p_pos = p_pos + torch.where(lifted[..., None], _scatter_sum(pos_c - pos, pidx, P) / cnt, 0.0)
+    p_vel = torch.where(lifted[..., None], _scatter_sum(vel_c, pidx, P) / cnt, p_vel)
+    pos = torch.where(carrying[..., None], _gather(p_pos, holding) + g_off, pos_c)
+    vel = torch.where(carrying[..., None], _gather(p_vel, holding), vel_c)
+
+    # --- energy: mechanical power through the motor efficiency, plus idle draw
+    p_mech = (f_cmd * vel).sum(-1).clamp_min(0)
+    used = params.dt * (p_mech / robots.efficiency + params.idle_power)
+    energy = torch.where(robots.present, (state.energy - used).clamp_min(0), 0.0)
+
+    # --- stuck detection and random-walk waypoints
+    moving = torch.zeros_like(alive)
+    for a in _MOVE_ACTIONS:
+        moving = moving | (action == a)
+    trying = moving & ((target - state.pos).norm(dim=-1) > params.reach)
+    slow = (pos - state.pos).norm(dim=-1) < params.stuck_speed * params.dt
+    stuck = torch.where(trying & slow, state.stuck + 1, 0)
+    t = state.t + 1
+    redraw = ((state.waypoint - pos).norm(dim=-1) <= params.reach) | (t % params.waypoint_period == 0)
+    waypoint = torch.where(redraw[..., None], _waypoints(state.wp_key, t, params), state.waypoint)
+
+    # contiguous, like reset()'s holder: a strided view here would make a compiled step (which
+    # guards on input strides) compile a second time on its second call
+    return State(t, pos, vel, energy, holding, grip, stuck, waypoint, p_pos, p_vel, p_status,
+                 holder.reshape(E, P, G).contiguous(), p_picked, state.wp_key)
