@@ -136,7 +136,7 @@ def bench_generations(name: str, swarm: int, pop: int, args, device: torch.devic
                 t = now(device)
                 m = ev.step()
                 gen_s.append(now(device) - t)
-                rollout_s.append(m["perf/sim_seconds"])
+                rollout_s.append(m.sim_seconds)
                 metrics.append(json.dumps({k: v for k, v in m.items() if isinstance(v, (int, float))
                                            and not k.startswith("perf/")}, sort_keys=True))
                 states.append(ev.state)

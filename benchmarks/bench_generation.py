@@ -42,8 +42,8 @@ def bench(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
         t = now(device)
         m = ev.step()
         gen_s.append(now(device) - t)
-        eval_s.append(m["perf/eval_seconds"])
-        sim_s.append(m["perf/sim_seconds"])
+        eval_s.append(m.eval_seconds)
+        sim_s.append(m.sim_seconds)
     ticks = ev.ctx.eval_cfg.ticks
     envs = 2 * pop * args.trials
     row = {

@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import RESULTS_DIR, int_list, run_metadata, write_json  # noqa: E402
 from swarmcode_torch.baselines import (ALGORITHMS, HELD_OUT_SEED, compare, plan_generations,
                                        summarize)
-from swarmcode_torch.coevo.evolve import resolve_device  # noqa: E402
+from swarmcode_torch.sim.runtime import resolve_device  # noqa: E402
 
 LABELS = {
     "swarmcode": "SwarmCoDe",

@@ -31,9 +31,9 @@ def main(argv: list[str] | None = None) -> sc.RunResult:
     result = sc.evolve(scenario=str(SCENARIO), generations=args.generations,
                        population=args.population, swarm_size=args.swarm_size, ticks=args.ticks,
                        trials=args.trials, seed=args.seed, device="cpu", logdir=args.logdir,
-                       callback=lambda m: print(f"gen {m['generation']}: best fitness "
-                                                f"{m['fitness/best']:.1f}, species "
-                                                f"{m['species/count']}"))
+                       callback=lambda r: print(f"gen {r.generation}: best fitness "
+                                                f"{r.best_fitness:.1f}, species "
+                                                f"{r.num_species}"))
     best = result.best_team
     print(f"best team: fitness {best['fitness']:.1f}, cost ${best['cost']:.0f}, "
           f"{best['species']} species, {best['niches']} niches")

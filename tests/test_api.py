@@ -141,7 +141,7 @@ def test_in_memory_run_writes_nothing_and_matches_the_files(runs, tmp_path, monk
     monkeypatch.chdir(tmp_path)
     seen = []
     result = sc.evolve(sc.SwarmCoDeConfig(**SETTINGS, generations=2), logdir=None,
-                       callback=lambda m: seen.append(m["generation"]))
+                       callback=lambda r: seen.append(r.generation))
     assert result.run_dir is None and list(tmp_path.iterdir()) == []
     assert seen == [0, 1]
     assert all(same(a[k], b[k]) for a, b in zip(result.history, on_disk.history)
@@ -189,8 +189,14 @@ def test_csv_reporter_drops_repeated_generations_on_resume(tmp_path):
     rep = CsvReporter(tmp_path)
     rep.on_start(SimpleNamespace(state=SimpleNamespace(generation=2)))     # checkpoint at 2
     assert path.read_text() == "generation,fitness/best\n0,1.0\n1,2.0\n"
-    metrics = {"generation": 2, **{t: 1.5 for t in SCALAR_TAGS}}
-    rep.on_generation(None, metrics)               # a header without the new tags gets them
+    from dataclasses import fields
+
+    from swarmcode_torch.coevo.evolve import GenerationResult
+    team = dict.fromkeys(("fitness", "species", "niches", "cost", "deliveries",
+                          "deliveries_individual", "deliveries_collab", "energy_used"), 1.5)
+    result = GenerationResult(**{**{f.name: 1.5 for f in fields(GenerationResult)},
+                                 "generation": 2, "team": team})
+    rep.on_generation(None, result)                # a header without the new tags gets them
     rows, columns = read_metrics_csv(path)
     assert columns == ["generation", "fitness/best", *SCALAR_TAGS[1:]]
     assert [r["generation"] for r in rows] == [0, 1, 2]

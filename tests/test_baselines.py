@@ -14,7 +14,8 @@ from swarmcode_torch.baselines import (ALGORITHMS, FixedSpeciesCCEA, Homogeneous
                                        reproduce_groups, split_evenly, summarize, swarmcode,
 
                                        swarmcode_no_dominance)
-from swarmcode_torch.coevo.evolve import _design, random_population
+from swarmcode_torch.coevo.evolve import random_population
+from swarmcode_torch.coevo.population import design_record
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.population import Population
 from swarmcode_torch.coevo.population import genome_phenotype
@@ -181,16 +182,16 @@ def test_swarmcode_wrapper_matches_evolution_and_counts_episodes():
     run = SwarmCoDeRun(TINY)
     for i in range(1, 3):
         m = run.step()
-        full = run.last_metrics
+        full = run.last_result
         assert m["episodes"] == i * 2 * TINY.population * TINY.trials
-        assert m["best"] == full["best"]["fitness"] == run.best.fitness
-        assert m["team/species"] == full["team/species"]
+        assert m["best"] == full.best["fitness"] == run.best.fitness
+        assert m["team/species"] == full.team["species"]
     # the recovered best team has exactly the recorded designs and slot counts
-    best = full["best"]
+    best = full.best
     assert run.best.species == best["species"] and run.best.team.numel() == 5
     counts = torch.bincount(run.best.team, minlength=run.best.genome.size).tolist()
     cost = genome_phenotype(run.best.genome).cost
-    got = sorted((_design(run.best.genome, r, 0, float(cost[r]))["bt"], counts[r])
+    got = sorted((design_record(run.best.genome, r, 0, float(cost[r]))["bt"], counts[r])
                  for r in range(run.best.genome.size))
     want = sorted((d["bt"], d["count"]) for d in best["designs"])
     assert got == want

@@ -75,18 +75,18 @@ def test_generations_keep_population_and_report_metrics():
     for _ in range(3):
         m = ev.step()
         assert ev.state.genome.size == TINY.population
-        assert m["species/count"] >= 1 and m["team/species"] >= 1
-        assert 1 <= sum(d["count"] for d in m["team"]["designs"]) == TINY.swarm_size
-        assert m["fitness/best"] >= m["fitness/mean"] > 0
-        assert m["team/cost"] > 0
+        assert m.num_species >= 1 and m.team["species"] >= 1
+        assert 1 <= sum(d["count"] for d in m.team["designs"]) == TINY.swarm_size
+        assert m.best_fitness >= m.mean_fitness > 0
+        assert m.team["cost"] > 0
     assert ev.state.generation == 3 and len(ev.state.history) == 3
-    assert m["best"]["fitness"] >= m["team/fitness"]
+    assert m.best["fitness"] >= m.team["fitness"]
 
 
 def test_roi_objective_divides_by_cost():
     ev = Evolution(replace(TINY, objective="roi"))
     m = ev.step()
-    assert m["team/fitness"] < 1.0  # fitness (~100s) divided by a team cost (~$500+)
+    assert m.team["fitness"] < 1.0  # fitness (~100s) divided by a team cost (~$500+)
 
 
 def _same_state(a, b):
@@ -151,8 +151,8 @@ def test_swarm_larger_than_the_population():
     ev = Evolution(replace(TINY, population=4, swarm_size=12, generations=2))
     for _ in range(2):
         m = ev.step()
-        assert sum(d["count"] for d in m["team"]["designs"]) == 12
-        assert m["team/rows"].shape == (12,) and int(m["team/rows"].max()) < 4
+        assert sum(d["count"] for d in m.team["designs"]) == 12
+        assert m.team_rows.shape == (12,) and int(m.team_rows.max()) < 4
 
 
 def test_config_saved_before_quota_basis_keeps_its_algorithm():
@@ -261,9 +261,9 @@ def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
         m = ev.step()
         r = seen["r"]
         b = int(r.fitness.argmax())
-        assert torch.equal(m["team/rows"], r.swarms.focal_team[b])
-        assert m["team/fitness"] == pytest.approx(float(r.focal[b]))
-        assert m["team/focal_max"] == pytest.approx(float(r.focal.max()))
+        assert torch.equal(m.team_rows, r.swarms.focal_team[b])
+        assert m.team["fitness"] == pytest.approx(float(r.focal[b]))
+        assert m.focal_max == pytest.approx(float(r.focal.max()))
         differed += int(int(r.focal.argmax()) != b)
     assert differed > 0         # the two definitions disagree in some generation of this run
 
@@ -273,7 +273,7 @@ def test_cuda_graphs_need_cuda_and_the_compiled_tick():
     from swarmcode_torch.app.settings import parse_settings
     from swarmcode_torch.app.runs import config_to_toml
 
-    with pytest.raises(ValueError, match="cuda_graphs needs --device cuda"):
+    with pytest.raises(ValueError, match="cuda_graphs needs device cuda"):
         make_context(SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu",
                                   cuda_graphs=True))
     # unset (the default) is "on where the tick runs compiled on CUDA": off on the CPU

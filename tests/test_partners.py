@@ -1,7 +1,7 @@
 import torch
 
 from swarmcode_torch.coevo.partners import assemble_swarms, choose_partners, elite_rows
-from swarmcode_torch.coevo.reproduction import elite_count
+from swarmcode_torch.coevo.selection import elite_count
 
 
 def tags_at_distance(ds, l=16):

@@ -10,7 +10,8 @@ from PIL import Image
 from swarmcode_torch.sim import bt
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.population import PINCHER, SUCTION
-from swarmcode_torch.app.render import (Episode, frame_image, record_episode, replay_run, save_gif,
+from swarmcode_torch.app.analysis import replay_run
+from swarmcode_torch.app.render import (Episode, frame_image, record_episode, save_gif,
                                         save_png, team_genome)
 from swarmcode_torch.app.runs import write_config
 from swarmcode_torch.sim.scenario import load_scenario

@@ -9,7 +9,8 @@ from swarmcode_torch.sim.bt import (ACT_DROP, ACT_MOVE_TO_BASE, ACT_MOVE_TO_PACK
 
                                     COND_HAS_PACKAGE, END, LEAF_OPS, NOP, SEL, SEQ)
 from swarmcode_torch.coevo.population import R_MAX, R_MIN, Population
-from swarmcode_torch.coevo.reproduction import (ReproductionParams, crossover, elite_count, mutate,
+from swarmcode_torch.coevo.selection import elite_count
+from swarmcode_torch.coevo.reproduction import (ReproductionParams, crossover, mutate,
                                                 mutate_bt, offspring_quotas, random_subtrees,
                                                 replace_subtree, reproduce, subtree_end)
 from swarmcode_torch.coevo.speciation import speciate

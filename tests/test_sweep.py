@@ -2,12 +2,19 @@
 
 import json
 
+import torch
+
 from swarmcode_torch.app.sweep import csv_text, markdown, table_rows
+from swarmcode_torch.coevo.population import Population, design_record
+
+_POP = Population.random(1, 16, 8, torch.Generator().manual_seed(0), torch.device("cpu"))
+DESIGN = dict(design_record(_POP, 0, species=0, cost=500.0), count=4)
 
 
 def _summary(d, **kw):
     base = dict(best_fitness=100.0, team_cost=2500.0, deliveries=4.0, deliveries_individual=4.0,
-                deliveries_collab=0.0, energy_used=50.0, num_species=1)
+                deliveries_collab=0.0, energy_used=50.0, num_species=1, best_generation=0,
+                budget=None, designs=[DESIGN])
     base.update(kw)
     d.mkdir()
     (d / "summary.json").write_text(json.dumps(base))
@@ -20,8 +27,9 @@ def test_rows_average_seeds_per_budget(tmp_path):
             (2500.0, 0, _summary(tmp_path / "c", best_fitness=50.0))]
     rows = table_rows(runs)
     assert [r["budget"] for r in rows] == [2500.0, 3000.0]
-    assert rows[1]["best_fitness"] == 150.0 and rows[1]["best_fitness_std"] == 50.0
+    # the sample standard deviation over seeds, as in every table (dynamics.mean_std)
+    assert rows[1]["best_fitness"] == 150.0 and rows[1]["best_fitness_std"] == 50.0 * 2 ** 0.5
     assert rows[1]["num_species"] == 2.0 and rows[1]["seeds"] == 2
     md = markdown(rows)
-    assert "| 3000 | 150.0 ± 50.0 |" in md
+    assert "| 3000 | 150.0 ± 70.7 |" in md
     assert csv_text(rows).splitlines()[0].startswith("budget,seeds,best_fitness,best_fitness_std")

@@ -122,7 +122,7 @@ def founders_report(args) -> None:
         counts = []
         while not ev.done:
             m = ev.step()
-            counts.append((m["species/count"], m["team/species"]))
+            counts.append((m.num_species, m.team["species"]))
     finally:
         evolve.speciate = original
     late = [r for r in log if r["generation"] >= 50]

@@ -1,5 +1,6 @@
-"""Species dynamics of a run directory: species, niches, founding and lifetimes over windows of
-generations (`swarmcode-torch dynamics RUN_DIR`), and the capability of each team design."""
+"""What a run directory holds, worked out: species dynamics (species, niches, founding and
+lifetimes over windows of generations; `swarmcode-torch dynamics RUN_DIR`), the capability of
+each team design, and a replay of its best team as a GIF (`swarmcode-torch replay RUN_DIR`)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,9 @@ from typing import Sequence
 
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..coevo.population import genome_phenotype
-from .runs import RunError, load_checkpoint, read_config, read_teams, run_scenario
+from .render import record_episode, save_gif, team_genome
+from .runs import (REPLAY_FILE, RunError, check_hardware, generation_team, load_checkpoint,
+                   read_config, read_summary, read_teams, run_scenario)
 from ..sim.scenario import Scenario
 from ..sim.state import WorldParams, capabilities
 
@@ -16,8 +19,6 @@ from ..sim.state import WorldParams, capabilities
 def design_capabilities(designs: Sequence[dict], scenario: Scenario) -> list[list[int]]:
     """For each summary / teams.jsonl design, the indices of the scenario's package classes it
     can lift (the `capability` the run recorded, or computed from its genes for older runs)."""
-    from .render import team_genome
-
     if all("capability" in d for d in designs):
         return [list(d["capability"]) for d in designs]
     genome, _ = team_genome(designs)
@@ -69,3 +70,38 @@ def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None
         st["team_score"] = median([t["score"] for g, t in teams.items() if a <= g < b])
         out.append(st)
     return out
+
+
+def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0,
+               ticks: int | None = None, every: int = 2, generation: int | None = None,
+               fps: float = 10, dpi: int = 80) -> tuple[Path, dict]:
+    """Render the best team of a run (summary.json "designs"), or the best team of one
+    `generation` (teams.jsonl), as a GIF.
+
+    The run's config gives the episode length (``ticks`` overrides it) and its scenario.toml
+    copy the scenario (the config's scenario in a run made before runs kept one); the
+    environment is drawn from `seed`. RunError for an `out` whose folder does not exist, a run
+    file that cannot be read or is malformed, or a run whose hardware.toml differs from the
+    installed catalog. Returns the GIF path (default ``run_dir/team.gif``) and
+    the episode metrics as floats.
+    """
+    run_dir = Path(run_dir)
+    out = Path(out) if out is not None else run_dir / REPLAY_FILE
+    if out.is_dir():
+        raise RunError(f"--out {out} is a directory; give a file name such as {out / REPLAY_FILE}")
+    if not out.parent.is_dir():
+        raise RunError(f"--out {out}: the folder {out.parent} does not exist")
+    cfg = read_config(run_dir)
+    if generation is not None:
+        designs = generation_team(run_dir, generation)["designs"]
+    else:
+        designs = read_summary(run_dir, figures=False)["designs"]
+    scenario = run_scenario(run_dir, cfg)        # the run's own copy, when it has one
+    check_hardware(run_dir)
+    genome, team = team_genome(designs, cfg.tag_length)
+    if ticks is None:
+        ticks = cfg.ticks or scenario.episode_ticks
+    ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every)
+    ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
+    save_gif(ep, out, fps=fps, dpi=dpi)
+    return out, dict(ep.metrics)

@@ -25,9 +25,9 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from . import runs
+from . import records, runs
 from ..coevo.config import SwarmCoDeConfig
-from ..coevo.evolve import Evolution
+from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.scenario import EFFECTORS, Scenario, parse_scenario, read_scenario
 
 _CONFIG_KEYS = tuple(f.name for f in fields(SwarmCoDeConfig))
@@ -145,22 +145,20 @@ class RunResult:
 
 
 class _History:
-    """Reporter: collects every generation's scalars; calls a user callback with the metrics."""
+    """Reporter: collects every generation's scalars (`records.scalars`); calls a user callback
+    with each generation's `GenerationResult`."""
 
-    def __init__(self, callback: Callable[[dict], Any] | None = None):
-        from .reporting import scalar_metrics
-
+    def __init__(self, callback: Callable[[GenerationResult], Any] | None = None):
         self.rows: list[dict] = []
-        self._scalars = scalar_metrics
         self.callback = callback
 
     def on_start(self, ev: Evolution) -> None:
         pass
 
-    def on_generation(self, ev: Evolution, metrics: dict) -> None:
-        self.rows.append(self._scalars(metrics))
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        self.rows.append(records.scalars(result))
         if self.callback is not None:
-            self.callback(metrics)
+            self.callback(result)
 
     def on_end(self, ev: Evolution) -> None:
         pass
@@ -199,9 +197,9 @@ def _execute(ev: Evolution, run_dir: Path | None, reporters: list) -> None:
     for r in reporters:                     # in memory: runs.run less the interrupt checkpoint
         r.on_start(ev)
     while not ev.done:
-        metrics = ev.step()
+        result = ev.step()
         for r in reporters:
-            r.on_generation(ev, metrics)
+            r.on_generation(ev, result)
     for r in reporters:
         r.on_end(ev)
 
@@ -224,7 +222,7 @@ def make_config(config: SwarmCoDeConfig | None = None, **settings) -> SwarmCoDeC
 def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike | Scenario | None = None,
            logdir: str | os.PathLike | None = "runs", checkpoint_every: int = 10,
            render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
-           callback: Callable[[dict], Any] | None = None, **settings) -> RunResult:
+           callback: Callable[[GenerationResult], Any] | None = None, **settings) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
     config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
@@ -236,8 +234,9 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     checkpoint_every, render_every, figure_every: as `swarmcode-torch evolve`'s options
         (generations between checkpoints, TensorBoard replay images (0: never), composition
         figures).
-    reporters: more reporters (objects with on_start(ev), on_generation(ev, metrics),
-        on_end(ev)); callback: called with each generation's metrics dict.
+    reporters: more reporters (objects with on_start(ev), on_generation(ev, result),
+        on_end(ev)); callback: called with each generation's `GenerationResult`
+        (`result.best_fitness`, `result.team`, ...; `records.scalars(result)` under the tags).
 
     Raises ValueError (`ScenarioError` is one) for an invalid setting or scenario before any
     file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
@@ -282,7 +281,8 @@ def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> t
 
 
 def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
-    from .reporting import METRICS_FILE, read_metrics_csv
+    from .reporting import read_metrics_csv
+    from .runs import METRICS_FILE
 
     path = Path(run_dir) / METRICS_FILE
     if not path.is_file():

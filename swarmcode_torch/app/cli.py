@@ -133,16 +133,17 @@ class _Progress:
         if self.bar:
             self.bar.start()
 
-    def on_generation(self, ev, m: dict) -> None:
+    def on_generation(self, ev, r) -> None:
         # generations are numbered from 0 (summary.json, teams.jsonl, TensorBoard steps); the
         # count "done" is how many have finished: generation g is the (g + 1)-th
-        text = (f"generation {m['generation']}  best team {m['best']['fitness']:.1f} "
-                f"(this generation {m['team/fitness']:.1f})  species {m['species/count']}  "
-                f"team {m['team/species']} sp, {m['team/niches']} niches, "
-                f"${m['team/cost']:.0f}  {m['perf/generation_seconds']:.2f}s/gen")
+        team = r.team
+        text = (f"generation {r.generation}  best team {r.best['fitness']:.1f} "
+                f"(this generation {team['fitness']:.1f})  species {r.num_species}  "
+                f"team {team['species']} sp, {team['niches']} niches, "
+                f"${team['cost']:.0f}  {r.seconds:.2f}s/gen")
         if self.bar:
             self.bar.update(self.task, completed=ev.state.generation, description=text)
-        elif m["generation"] % self.every == 0 or ev.done:
+        elif r.generation % self.every == 0 or ev.done:
             print(f"done {ev.state.generation}/{ev.cfg.generations}  {text}", flush=True)
 
     def on_end(self, ev) -> None:
@@ -408,15 +409,23 @@ def _quiet_thread_os_errors():
         threading.excepthook = previous
 
 
+#: Set once SIGTERM has arrived in this process (the exit status is then 143, not 130).
+_TERMINATED: list[int] = []
+
+
 @contextmanager
 def _terminate_as_interrupt():
     """Within the block SIGTERM (a scheduler's or `kill`'s stop) acts as Ctrl-C: the run writes
-    the checkpoint of its last finished generation. Yields a list that is non-empty once
-    SIGTERM has arrived."""
+    the checkpoint of its last finished generation. A second SIGTERM while that checkpoint is
+    written is ignored, so the write completes. Yields a list that is non-empty once SIGTERM
+    has arrived."""
     terminated: list[int] = []
 
     def handler(signum, frame):
+        if terminated:
+            return                         # already stopping: let the checkpoint be written
         terminated.append(signum)
+        _TERMINATED.append(signum)
         raise KeyboardInterrupt
 
     try:
@@ -472,7 +481,7 @@ def sweep(
 
     from ..coevo.config import SwarmCoDeConfig, with_overrides
     from .settings import option_names, parse_settings
-    from .runs import RunError, RunLock, SWEEP_LOCK_FILE, check_config, read_summary
+    from .runs import SWEEP_LOCK_FILE, TABLE_MD, RunError, RunLock, check_config, read_summary
     from ..sim.scenario import read_scenario
     from .sweep import table_rows, write_outputs
 
@@ -534,7 +543,7 @@ def sweep(
             fail(str(e))
         except OSError as e:
             _os_fail(e, f"--out {out}: cannot write the table")
-    console.print((out / "table.md").read_text(), highlight=False, markup=False)
+    console.print((out / TABLE_MD).read_text(), highlight=False, markup=False)
     console.print("Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False)
     if failed:
         names = ", ".join(name for name, _ in failed)
@@ -631,46 +640,23 @@ def _sweep_task(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: i
     return None
 
 
-#: Config keys that say how a run runs, not what it computes: a sweep run again with other
-#: values of these resumes its runs with their saved ones.
-_HOW_KEYS = ("generations", "device", "compile", "cuda_graphs")
-
-
 def _plan_sweep_run(out: Path, cfg, scenario, data: bytes):
-    """(budget, seed, run directory, config, state) of one run of a sweep, state 'done', 'resume'
-    or 'new'; refuses (one-line error) an existing run whose config differs from this sweep's
-    in anything but how it runs (_HOW_KEYS)."""
-    from .runs import (CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, RunError, config_differences,
-                       load_run, read_config, run_scenario)
-    from .sweep import run_name
+    """(budget, seed, run directory, config, state) of one run of a sweep (`sweep.plan_run`),
+    state 'done', 'resume' or 'new'; a one-line error for a run it cannot take over."""
+    from .runs import RunError
+    from .sweep import plan_run, run_name
 
-    run_dir = out / run_name(cfg.budget, cfg.seed)
     try:
-        if not (run_dir / CONFIG_FILE).is_file():
-            return cfg.budget, cfg.seed, run_dir, cfg, "new"
-        has_checkpoint = (run_dir / CHECKPOINT_FILE).is_file()
-        saved = load_run(run_dir)[0] if has_checkpoint else read_config(run_dir)
-        diff = config_differences(saved, cfg, scenario, ignore=_HOW_KEYS)
-        if "scenario" not in diff and (run_dir / SCENARIO_COPY).is_file() \
-                and run_scenario(run_dir, saved) != scenario:
-            diff.append("scenario (the file's content)")
-        if diff:
-            fail(f"{run_dir} holds a run with other settings than this sweep's (differing keys: "
-                 f"{', '.join(diff)}); use another --out, or the options it was run with")
-        if not has_checkpoint:
-            return cfg.budget, cfg.seed, run_dir, cfg, "new"
-        from .runs import load_checkpoint
-        done = load_checkpoint(run_dir)["generation"]
+        p = plan_run(out, cfg, scenario)
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
     except OSError as e:
-        _os_fail(e, f"{run_dir}: cannot read the run")
-    if done >= cfg.generations:
-        more = f" (it has {done}, more than the {cfg.generations} asked for)" \
-            if done > cfg.generations else ""
-        console.print(f"{run_dir.name}: already done{more}", markup=False, highlight=False)
-        return cfg.budget, cfg.seed, run_dir, cfg, "done"
-    return cfg.budget, cfg.seed, run_dir, cfg, "resume"
+        _os_fail(e, f"{out / run_name(cfg.budget, cfg.seed)}: cannot read the run")
+    if p.state == "done":
+        more = f" (it has {p.done}, more than the {cfg.generations} asked for)" \
+            if p.done > cfg.generations else ""
+        console.print(f"{p.run_dir.name}: already done{more}", markup=False, highlight=False)
+    return p.budget, p.seed, p.run_dir, p.cfg, p.state
 
 
 def _run_sweep_run(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int,
@@ -822,7 +808,7 @@ def replay(
     every: Annotated[int, typer.Option(help="Draw every k-th tick.")] = 2,
 ) -> None:
     """Render a rollout of the best team headless, as an animated GIF."""
-    from .render import replay_run
+    from .analysis import replay_run
     from .runs import RunError
 
     from ..coevo.config import MAX_SEED, UPPER_BOUNDS
@@ -850,7 +836,13 @@ def replay(
 
 
 def main() -> None:
-    app()
+    try:
+        app()
+    except KeyboardInterrupt:
+        # an interrupt outside a run's own handling (while starting, or while a stopped run is
+        # closing): no traceback, and the exit status of a stop, never death by SIGINT
+        err.print("Interrupted", markup=False, highlight=False)
+        sys.exit(143 if _TERMINATED else 130)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,8 @@
 `record_episode` runs a team (rows of a :class:`~swarmcode_torch.coevo.population.Population`) through one
 random environment of a scenario on the CPU and keeps snapshots of the state; `draw_frame`
 draws a snapshot in true arena coordinates; `save_gif`, `save_png` and `frame_image` turn
-an episode into pictures; `replay_run` does it all for the best team of a run directory.
+an episode into pictures (`analysis.replay_run` does it all for the best team of a run
+directory).
 
 Matplotlib (Agg canvas, no pyplot) and PIL are imported inside the functions that need them.
 """
@@ -19,14 +20,13 @@ import torch
 from torch import Tensor
 
 from ..sim import bt
-from ..coevo.population import Population, PINCHER, SUCTION
+from ..coevo.population import PINCHER, SUCTION, Population, from_designs
 from ..coevo.evaluation import team_robots
 from ..sim.layout import Layout, make_layouts
 from ..sim.scenario import Scenario
 from ..sim.rollout import rollout
 from ..sim.state import DELIVERED, Robots, State, WorldParams
 
-_EFFECTOR_CODES = {"suction": SUCTION, "pincher": PINCHER}
 _EFFECTOR_NAMES = {SUCTION: "suction", PINCHER: "pincher"}
 # tab10, most distinct hues first; brown / olive / grey last (packages are drawn in browns).
 _TAB10_ORDER = (0, 2, 3, 4, 6, 9, 1, 7, 8, 5)
@@ -40,46 +40,8 @@ def team_genome(designs: Sequence[dict], tag_length: int = 16) -> tuple[Populati
     list, "count" robots each). Returns the genome (tags all zero) and a ``[S]`` long tensor of
     the design row of every robot, `count` robots per design in design order.
     """
-    if not designs:
-        raise ValueError("no designs: a team needs at least one robot design")
-    rows = []
-    for i, d in enumerate(designs):
-        try:
-            eff = d["effector"]
-            if isinstance(eff, str):
-                if eff not in _EFFECTOR_CODES:
-                    raise ValueError(f"design {i}: unknown effector {eff!r} (suction or pincher)")
-                eff = _EFFECTOR_CODES[eff]
-            tiers = [int(d[k]) - 1 for k in ("chassis_tier", "battery_tier", "motor_tier")]
-            if not all(0 <= t <= 2 for t in tiers):
-                raise ValueError(f"design {i}: tiers must be 1..3, got {[t + 1 for t in tiers]}")
-            count = int(d.get("count", 1))
-            if count < 0:
-                raise ValueError(f"design {i}: count must be >= 0, got {count}")
-            rows.append(dict(
-                radius=float(d["radius"]), chassis=tiers[0], battery=tiers[1], motor=tiers[2],
-                torque_point=float(d["torque_point"]), battery_point=float(d["battery_point"]),
-                effector=int(eff), dominance=float(d.get("dominance", 0.5)),
-                selectivity=float(d.get("selectivity", 0.5)),
-                bt=[int(x) for x in d["bt"]], count=count))
-        except KeyError as e:
-            raise ValueError(f"design {i}: missing field {e.args[0]!r}") from None
-    length = max(max(len(r["bt"]) for r in rows), 1)
-    programs = torch.tensor([r["bt"] + [bt.NOP] * (length - len(r["bt"])) for r in rows],
-                            dtype=torch.long)
-    if ((programs < 0) | (programs >= bt.NUM_OPCODES)).any():
-        raise ValueError(f"design bt lists must hold opcodes 0..{bt.NUM_OPCODES - 1}")
-    f = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.float)  # noqa: E731
-    i = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.long)  # noqa: E731
-    genome = Population(
-        tag=torch.zeros(len(rows), tag_length, dtype=torch.bool), selectivity=f("selectivity"),
-        dominance=f("dominance"), bt=programs, radius=f("radius"), chassis=i("chassis"),
-        battery=i("battery"), motor=i("motor"), torque_point=f("torque_point"),
-        battery_point=f("battery_point"), effector=i("effector"))
-    team = torch.arange(len(rows)).repeat_interleave(i("count"))
-    if team.numel() == 0:
-        raise ValueError("the designs' counts add up to no robot")
-    return genome, team
+    genome, counts = from_designs(designs, tag_length)
+    return genome, torch.arange(counts.numel()).repeat_interleave(counts)
 
 
 # ------------------------------------------------------------------ recording
@@ -370,39 +332,3 @@ def save_gif(episode: Episode, path: str | Path, fps: float = 10, dpi: int = 80)
 
 
 # ------------------------------------------------------------------ run directories
-def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0,
-               ticks: int | None = None, every: int = 2, generation: int | None = None,
-               fps: float = 10, dpi: int = 80) -> tuple[Path, dict]:
-    """Render the best team of a run (summary.json "designs"), or the best team of one
-    `generation` (teams.jsonl), as a GIF.
-
-    The run's config gives the episode length (``ticks`` overrides it) and its scenario.toml
-    copy the scenario (the config's scenario in a run made before runs kept one); the
-    environment is drawn from `seed`. RunError for an `out` whose folder does not exist, a run
-    file that cannot be read or is malformed, or a run whose hardware.toml differs from the
-    installed catalog. Returns the GIF path (default ``run_dir/team.gif``) and
-    the episode metrics as floats.
-    """
-    from .runs import RunError, check_hardware, generation_team, read_config, read_summary, \
-        run_scenario
-
-    run_dir = Path(run_dir)
-    out = Path(out) if out is not None else run_dir / "team.gif"
-    if out.is_dir():
-        raise RunError(f"--out {out} is a directory; give a file name such as {out / 'team.gif'}")
-    if not out.parent.is_dir():
-        raise RunError(f"--out {out}: the folder {out.parent} does not exist")
-    cfg = read_config(run_dir)
-    if generation is not None:
-        designs = generation_team(run_dir, generation)["designs"]
-    else:
-        designs = read_summary(run_dir, figures=False)["designs"]
-    scenario = run_scenario(run_dir, cfg)        # the run's own copy, when it has one
-    check_hardware(run_dir)
-    genome, team = team_genome(designs, cfg.tag_length)
-    if ticks is None:
-        ticks = cfg.ticks or scenario.episode_ticks
-    ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every)
-    ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
-    save_gif(ep, out, fps=fps, dpi=dpi)
-    return out, dict(ep.metrics)

@@ -11,17 +11,9 @@ import io
 import math
 from pathlib import Path
 
-from ..coevo.evolve import Evolution
-
-METRICS_FILE = "metrics.csv"
-
-SCALAR_TAGS = (
-    "fitness/best", "fitness/mean", "species/count", "species/founded", "species/extinct",
-    "species/median_age", "team/fitness", "team/species", "team/niches", "team/median_age",
-    "team/cost",
-    "team/budget", "team/deliveries", "team/deliveries_individual", "team/deliveries_collab",
-    "team/energy_used", "team/focal_max", "perf/generation_seconds", "perf/eval_seconds", "perf/sim_seconds",
-)
+from ..coevo.evolve import Evolution, GenerationResult
+from .records import HISTOGRAMS, SCALAR_TAGS, scalars
+from .runs import METRICS_FILE
 
 
 def composition_figure(history: list[dict]):
@@ -58,18 +50,6 @@ def figure_image(fig):
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()
-
-
-def scalar_metrics(metrics: dict) -> dict:
-    """`generation` and every scalar metric of one generation (the TensorBoard scalars, then any
-    other number whose key has a '/'), in a fixed order: a row of metrics.csv."""
-    row = {"generation": metrics["generation"]}
-    for tag in SCALAR_TAGS:
-        row[tag] = metrics[tag]
-    for k, v in metrics.items():
-        if k not in row and "/" in k and isinstance(v, (int, float)):
-            row[k] = v
-    return {k: (int(v) if isinstance(v, bool) else v) for k, v in row.items()}
 
 
 #: TensorBoard HParams metrics of a run: tag -> key of the run's best team.
@@ -127,17 +107,18 @@ class TensorBoardReporter:
     def on_start(self, ev: Evolution) -> None:
         self.writer.add_text("config", config_markdown(ev), ev.state.generation)
 
-    def on_generation(self, ev: Evolution, metrics: dict) -> None:
-        step = metrics["generation"]
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        step = result.generation
+        row = scalars(result)
         for tag in SCALAR_TAGS:
-            v = metrics[tag]
+            v = row[tag]
             self.writer.add_scalar(tag, float(v) if v is not None else math.nan, step)
-        for tag in ("hist/radius", "hist/dominance", "hist/selectivity"):
-            self.writer.add_histogram(tag, metrics[tag], step)
+        for tag, name in HISTOGRAMS.items():
+            self.writer.add_histogram(tag, getattr(result, name), step)
         if step % self.figure_every == 0:
             self._figure(ev, step)
         if self.render_every and step % self.render_every == 0:
-            img = replay_strip(ev, metrics["team"]["designs"], seed=step)
+            img = replay_strip(ev, result.team["designs"], seed=step)
             self.writer.add_image("team/replay", img, step, dataformats="HWC")
         self.writer.flush()
 
@@ -167,7 +148,7 @@ class TensorBoardReporter:
 
 
 class CsvReporter:
-    """Appends every generation's scalars (`scalar_metrics`) to metrics.csv in the run directory:
+    """Appends every generation's scalars (`records.scalars`) to metrics.csv in the run directory:
     one row per generation, the header (`generation` and the tags) once; each row is written
     (unbuffered) when its generation ends. On a resume, rows of generations the run repeats (those after its checkpoint)
     are dropped first, so the file keeps one row per generation; a header that lacks some of
@@ -196,8 +177,8 @@ class CsvReporter:
         atomic_write_bytes(self.path, buf.getvalue().encode())
         self.columns = list(columns)
 
-    def on_generation(self, ev: Evolution, metrics: dict) -> None:
-        row = scalar_metrics(metrics)
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        row = {k: (int(v) if isinstance(v, bool) else v) for k, v in scalars(result).items()}
         if self.columns is None or not set(row) <= set(self.columns):
             old, _ = read_metrics_csv(self.path, raw=True) if self.path.is_file() else ([], [])
             self._rewrite((self.columns or []) + [k for k in row if k not in (self.columns or [])],

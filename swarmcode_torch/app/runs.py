@@ -27,7 +27,8 @@ from typing import Any, Callable, Iterable, Protocol
 import torch
 
 from ..coevo.config import SwarmCoDeConfig, with_overrides
-from ..coevo.evolve import Evolution
+from ..coevo.evolve import Evolution, GenerationResult
+from . import records
 from ..sim.scenario import Scenario, load_scenario
 
 try:
@@ -49,10 +50,14 @@ SCENARIO_COPY = "scenario.toml"         # the scenario file the run ran on, as r
 HARDWARE_COPY = "hardware.toml"         # the hardware catalog the run ran with, as read
 LOCK_FILE = "run.lock"                  # held by the live run: "pid=... host=..."
 SWEEP_LOCK_FILE = "sweep.lock"          # held by a live sweep in its --out directory
+METRICS_FILE = "metrics.csv"            # every scalar of every generation (reporting.CsvReporter)
+REPLAY_FILE = "team.gif"                # the default output of `replay`
+#: A sweep's outputs in its --out directory (sweep.write_outputs).
+TABLE_MD, TABLE_CSV, BUDGET_PLOT = "table.md", "table.csv", "budget.png"
 #: Files of a run directory written with `atomic_write_bytes`; a temporary `.NAME.xxxxxxxx` of
 #: one of them (or of any file that exists) left by a killed write is removed on start.
 ATOMIC_FILES = (CONFIG_FILE, CHECKPOINT_FILE, SUMMARY_FILE, SCENARIO_COPY, HARDWARE_COPY,
-                "metrics.csv", "table.md", "table.csv")
+                METRICS_FILE, TABLE_MD, TABLE_CSV)
 #: The memory assumed when the machine's cannot be read.
 FALLBACK_MEMORY = 64 * 2 ** 30
 
@@ -63,7 +68,7 @@ class RunError(ValueError):
 
 class Reporter(Protocol):
     def on_start(self, ev: Evolution) -> None: ...
-    def on_generation(self, ev: Evolution, metrics: dict) -> None: ...
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None: ...
     def on_end(self, ev: Evolution) -> None: ...
 
 
@@ -633,36 +638,6 @@ def new_run_dir(logdir: Path, cfg: SwarmCoDeConfig) -> Path:
 
 
 # ------------------------------------------------------------------ summary.json
-def _clean(x: Any) -> Any:
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    return x
-
-
-def summary(ev: Evolution, metrics: dict) -> dict:
-    """The contents of summary.json after a generation."""
-    best = metrics["best"]
-    return _clean({
-        "generation": metrics["generation"], "generations": ev.cfg.generations,
-        "scenario": ev.cfg.scenario, "objective": ev.cfg.objective,
-        "best_fitness": best["fitness"], "best_generation": best["generation"],
-        "team_cost": best["cost"], "budget": ev.cfg.budget, "num_species": best["species"],
-        "niches": best.get("niches"),
-        "deliveries": best["deliveries"],
-        "deliveries_individual": best["deliveries_individual"],
-        "deliveries_collab": best["deliveries_collab"], "energy_used": best["energy_used"],
-        "species_in_population": metrics["species/count"],
-        "device": str(ev.ctx.device), "tick": ev.ctx.tick_mode,
-        "designs": best["designs"],
-        "last_generation": {k: v for k, v in metrics.items()
-                            if "/" in k and isinstance(v, (int, float))},
-    })
-
-
 class SummaryReporter:
     """Rewrites summary.json (atomically) after every generation and appends the generation's
     best team to teams.jsonl (one JSON object per line)."""
@@ -675,9 +650,9 @@ class SummaryReporter:
     def on_start(self, ev: Evolution) -> None:
         prepare_run_dir(self.run_dir)       # no leftover temporary files, no cut-off line
 
-    def on_generation(self, ev: Evolution, metrics: dict) -> None:
-        atomic_write_bytes(self.path, json.dumps(summary(ev, metrics), indent=2).encode())
-        append_line(self.teams, json.dumps(_clean(metrics["team"])))
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        atomic_write_bytes(self.path, json.dumps(records.summary(ev, result), indent=2).encode())
+        append_line(self.teams, json.dumps(records.team_line(result)))
 
     def on_end(self, ev: Evolution) -> None:
         pass
@@ -702,7 +677,7 @@ class CheckpointReporter:
         save_checkpoint(self.run_dir, ev)
         self.saved = ev.state.generation
 
-    def on_generation(self, ev: Evolution, metrics: dict) -> None:
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
         if ev.state.generation % self.every == 0:
             self._save(ev)
 
@@ -823,9 +798,9 @@ def run(ev: Evolution, run_dir: Path, reporters: Iterable[Reporter],
         r.on_start(ev)
     try:
         while not ev.done:
-            metrics = ev.step()
+            result = ev.step()
             for r in reporters:
-                r.on_generation(ev, metrics)
+                r.on_generation(ev, result)
     except KeyboardInterrupt:
         path = save_checkpoint(run_dir, ev)
         if on_interrupt:

@@ -1,12 +1,20 @@
-"""Budget sweeps: one evolution per (budget, seed), summarised as the paper's Table III."""
+"""Budget sweeps: one evolution per (budget, seed), summarised as the paper's Table III: which
+runs a sweep has to start, resume or leave (`plan_run`), and the table of their summaries."""
 
 from __future__ import annotations
 
 import csv
 import io
-import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
+
+from ..coevo.config import SwarmCoDeConfig
+from ..coevo.dynamics import mean_std
+from ..sim.scenario import Scenario
+from .runs import (BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, TABLE_CSV, TABLE_MD,
+                   RunError, config_differences, load_checkpoint, load_run, read_config,
+                   read_summary, run_scenario)
 
 COLUMNS = ("budget", "best_fitness", "team_cost", "deliveries", "deliveries_individual",
            "deliveries_collab", "energy_used", "num_species")
@@ -19,15 +27,55 @@ def run_name(budget: float | None, seed: int) -> str:
     return f"budget-{b}_seed-{seed}"
 
 
-def read_summary(run_dir: Path) -> dict:
-    path = Path(run_dir) / "summary.json"
-    if not path.is_file():
-        raise ValueError(f"{run_dir} has no summary.json")
-    return json.loads(path.read_text())
+#: Config keys that say how a run runs, not what it computes: a sweep run again with other
+#: values of these resumes its runs with their saved ones.
+HOW_KEYS = ("generations", "device", "compile", "cuda_graphs")
+
+
+@dataclass(frozen=True)
+class PlannedRun:
+    """One run of a sweep: where it is, its config and what the sweep does with it ('new',
+    'resume' or 'done'; `done`: the generations its checkpoint has)."""
+
+    budget: float | None
+    seed: int
+    run_dir: Path
+    cfg: SwarmCoDeConfig
+    state: str
+    done: int | None = None
+
+
+def plan_run(out: Path, cfg: SwarmCoDeConfig, scenario: Scenario) -> PlannedRun:
+    """What the sweep in `out` does with its run of `cfg`: start it, resume it from its
+    checkpoint, or leave it (done). RunError for an existing run whose config differs from this
+    sweep's in anything but how it runs (`HOW_KEYS`); OSError, ScenarioError, RunError for a
+    run directory that cannot be read."""
+    run_dir = Path(out) / run_name(cfg.budget, cfg.seed)
+
+    def planned(state: str, done: int | None = None) -> PlannedRun:
+        return PlannedRun(cfg.budget, cfg.seed, run_dir, cfg, state, done)
+
+    if not (run_dir / CONFIG_FILE).is_file():
+        return planned("new")
+    has_checkpoint = (run_dir / CHECKPOINT_FILE).is_file()
+    saved = load_run(run_dir)[0] if has_checkpoint else read_config(run_dir)
+    diff = config_differences(saved, cfg, scenario, ignore=HOW_KEYS)
+    if "scenario" not in diff and (run_dir / SCENARIO_COPY).is_file() \
+            and run_scenario(run_dir, saved) != scenario:
+        diff.append("scenario (the file's content)")
+    if diff:
+        raise RunError(f"{run_dir} holds a run with other settings than this sweep's (differing "
+                       f"keys: {', '.join(diff)}); use another --out, or the options it was run "
+                       "with")
+    if not has_checkpoint:
+        return planned("new")
+    done = load_checkpoint(run_dir)["generation"]
+    return planned("done" if done >= cfg.generations else "resume", done)
 
 
 def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
-    """One row per budget: each column's mean over seeds (and its std as `<col>_std`)."""
+    """One row per budget: each column's mean over seeds and its sample standard deviation
+    (`<col>_std`, 0 for one seed; `dynamics.mean_std`)."""
     by_budget: dict = {}
     for budget, seed, run_dir in runs:
         by_budget.setdefault(budget, []).append(read_summary(run_dir))
@@ -35,10 +83,7 @@ def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
     for budget, summaries in by_budget.items():
         row = {"budget": budget, "seeds": len(summaries)}
         for col in COLUMNS[1:]:
-            vals = [float(s[col]) for s in summaries]
-            mean = sum(vals) / len(vals)
-            row[col] = mean
-            row[f"{col}_std"] = math.sqrt(sum((v - mean) ** 2 for v in vals) / len(vals))
+            row[col], row[f"{col}_std"] = mean_std([float(s[col]) for s in summaries])
         rows.append(row)
     rows.sort(key=lambda r: math.inf if r["budget"] is None else r["budget"])
     return rows
@@ -101,7 +146,7 @@ def plot(rows: list[dict], path: Path) -> None:
 
 def write_outputs(rows: list[dict], out_dir: Path) -> list[Path]:
     out_dir = Path(out_dir)
-    paths = [out_dir / "table.md", out_dir / "table.csv", out_dir / "budget.png"]
+    paths = [out_dir / TABLE_MD, out_dir / TABLE_CSV, out_dir / BUDGET_PLOT]
     paths[0].write_text(markdown(rows))
     paths[1].write_text(csv_text(rows))
     plot(rows, paths[2])

@@ -32,13 +32,15 @@ from torch import Tensor
 from ..sim import bt
 from ..coevo.evaluation import simulate_teams, team_scores
 from ..coevo.config import SwarmCoDeConfig
-from ..coevo.evolve import (Context, Evolution, make_context, random_population,
-                            resolve_device)
+from ..coevo.evolve import Context, Evolution, GenerationResult, make_context, random_population
+from ..sim.runtime import resolve_device
 from ..coevo.fitness import team_cost
 from ..coevo.population import Population
 from ..coevo.population import genome_phenotype
 from ..sim.layout import Layout, make_layouts
-from ..coevo.reproduction import ReproductionParams, crossover, elite_count, mutate
+from ..coevo.reproduction import ReproductionParams, crossover, mutate
+from ..coevo.dynamics import mean_std
+from ..coevo.selection import elite_count
 from ..coevo.selection import rank_within_groups, top_per_group
 
 #: Probability that an offspring of the GA / CCEA is a crossover child (else a clone of parent 1).
@@ -356,7 +358,7 @@ class SwarmCoDeRun(_Algorithm):
     """SwarmCoDe (`evolve.Evolution`) with the baselines' metrics and best-team bookkeeping.
 
     `dominance=False` is the ablation with uniform team composition. The best team is the best
-    focal team of the run (the same record as `metrics["best"]`); its designs are looked up in the
+    focal team of the run (the same record as `GenerationResult.best`); its designs are looked up in the
     population it was evaluated in, so that it can be re-scored exactly.
     """
 
@@ -368,7 +370,7 @@ class SwarmCoDeRun(_Algorithm):
         super().__init__(cfg)
         self.evolution = Evolution(cfg)
         self.name = "swarmcode" if cfg.dominance else "swarmcode-no-dominance"
-        self.last_metrics: dict | None = None
+        self.last_result: GenerationResult | None = None
 
     @property
     def episodes_per_generation(self) -> int:
@@ -377,19 +379,18 @@ class SwarmCoDeRun(_Algorithm):
     def step(self) -> dict:
         genome = self.evolution.state.genome
         m = self.evolution.step()
-        self.last_metrics = m
+        self.last_result = m
         self.episodes += self.episodes_per_generation
-        team = m["team"]
+        team = m.team
         gen = self.generation
         self.generation += 1
 
         def build() -> BestTeam:
-            return _team_of(genome, m["team/rows"], team["fitness"], team["cost"], gen)
+            return _team_of(genome, m.team_rows, team["fitness"], team["cost"], gen)
 
         self._offer(build, team["fitness"])
-        out = self._metrics(team["fitness"], team["species"], m["fitness/mean"],
-                            m["perf/generation_seconds"])
-        out["species/count"] = m["species/count"]
+        out = self._metrics(team["fitness"], team["species"], m.mean_fitness, m.seconds)
+        out["species/count"] = m.num_species
         return out
 
 
@@ -536,9 +537,6 @@ def summarize(rows: list[dict], columns: Sequence[str] = SUMMARY_COLUMNS) -> lis
         s = {"algorithm": name, "seeds": len(rs), "episodes": rs[0]["episodes"],
              "generations": rs[0]["generations"]}
         for col in columns:
-            vals = [float(r[col]) for r in rs]
-            mean = sum(vals) / len(vals)
-            var = sum((v - mean) ** 2 for v in vals) / (len(vals) - 1) if len(vals) > 1 else 0.0
-            s[col], s[f"{col}_std"] = mean, math.sqrt(var)
+            s[col], s[f"{col}_std"] = mean_std([float(r[col]) for r in rs])
         out.append(s)
     return out

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import typing
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ class SwarmCoDeConfig:
     """Partners are species elites that have a fitness: a species founded this generation is no
     one's partner (an experiment, off by default: it did not reduce the species in best teams)."""
     cuda_graphs: bool | None = None
-    """Replay the compiled tick as CUDA graphs of 10 ticks (`world.CudaGraphTicks`). Unset: on
+    """Replay the compiled tick as CUDA graphs of 10 ticks (`sim.runtime.CudaGraphTicks`). Unset: on
     wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
 
     def validate(self, option_names: dict[str, str] | None = None, bounds: bool = True) -> None:

@@ -52,6 +52,13 @@ def median(values: Sequence[float]) -> float:
     return float(statistics.median(values)) if values else float("nan")
 
 
+def mean_std(values: Sequence[float]) -> tuple[float, float]:
+    """The mean of values and their sample standard deviation (0 for a single value): the
+    "mean ± std over seeds" of every table."""
+    mean = statistics.fmean(values)
+    return mean, statistics.stdev(values) if len(values) > 1 else 0.0
+
+
 def replay(history: Sequence[dict]) -> tuple[Turnover, list[dict]]:
     """The turnover after every record of `history`, and per generation: founded, extinct,
     species (population), team_species, median_age (over the population's species) and

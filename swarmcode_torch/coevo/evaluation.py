@@ -29,7 +29,7 @@ from .population import Population
 from .population import genome_phenotype
 from ..sim.layout import Layout, make_layouts
 from .partners import Swarms, assemble_swarms, choose_partners, elite_rows
-from .reproduction import elite_count
+from .selection import elite_count
 from ..sim.scenario import Scenario
 from ..sim.rollout import rollout
 from ..sim.state import Robots, WorldParams

@@ -1,15 +1,15 @@
 """SwarmCoDe end to end: one generation = speciation, evaluation, reproduction (paper Sec. III-A).
 
 `Evolution` owns the population and the run's random generator. `step()` advances one
-generation and returns its metrics; reporters (TensorBoard, summary, checkpoints, progress)
-consume them. Nothing here prints or imports a CLI or logging library.
+generation and returns its `GenerationResult`; the application's records and reporters
+(TensorBoard, summary, checkpoints, progress) consume it. Nothing here prints, writes files or
+imports a CLI or logging library.
 """
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
 
@@ -21,34 +21,14 @@ from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeC
 from .dynamics import Turnover, median, niche_count, replay
 from .evaluation import evaluate
 from .fitness import ema
-from .population import NUM_TIERS, R_MAX, R_MIN, Population
-from .population import genome_phenotype
+from .population import Population, design_record, genome_phenotype
 from .reproduction import mutate_bt, reproduce
 from ..sim.scenario import Scenario, load_scenario
 from .speciation import distance, speciate
-from ..sim.runtime import CompiledStep, CudaGraphTicks
+from ..sim.runtime import resolve_device, tick_function, tick_mode
 from ..sim.state import WorldParams, capabilities
-from ..sim.step import step as world_step
 
 CHECKPOINT_VERSION = 1
-# compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
-COMPILE_MIN_GENERATIONS = 50
-
-
-def resolve_device(name: str) -> torch.device:
-    """The torch device for 'auto' / 'cpu' / 'cuda[:i]'; ValueError when CUDA is missing."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise ValueError("--device cuda was asked for, but no CUDA device is available")
-    try:
-        dev = torch.device(name)
-    except RuntimeError:
-        raise ValueError(f"--device must be auto, cpu, cuda or cuda:N, got {name!r}") from None
-    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
-        raise ValueError(f"--device {name}: there are only {torch.cuda.device_count()} CUDA "
-                         "devices")
-    return dev
 
 
 # ------------------------------------------------------------------ the population
@@ -56,20 +36,11 @@ def random_population(n: int, cfg: SwarmCoDeConfig, generator: torch.Generator,
                       device: torch.device) -> Population:
     """The initial population: random genes, each seeded with a randomised template tree."""
     g = generator
-
-    def u(*shape):
-        return torch.rand(*shape, generator=g, device=device)
-
     names = list(bt.TEMPLATES)
     templates = torch.stack([bt.template_tensor(k, cfg.bt_length) for k in names]).to(device)
     which = torch.randint(0, len(names), (n,), generator=g, device=device)
     programs = mutate_bt(templates[which], cfg.reproduction, g)
-    tiers = lambda: torch.randint(0, NUM_TIERS, (n,), generator=g, device=device)  # noqa: E731
-    return Population(
-        tag=u(n, cfg.tag_length) < 0.5, selectivity=u(n), dominance=u(n), bt=programs,
-        radius=R_MIN + (R_MAX - R_MIN) * u(n), chassis=tiers(), battery=tiers(), motor=tiers(),
-        torque_point=u(n), battery_point=u(n),
-        effector=torch.randint(0, 2, (n,), generator=g, device=device))
+    return Population.random(n, cfg.tag_length, programs, g, device)
 
 
 @dataclass
@@ -113,14 +84,7 @@ class Context:
     def tick_mode(self) -> str:
         """How the world tick runs: 'eager', 'compiled', 'compiled, CUDA graphs', or 'eager
         (compiling failed)' once a compiled tick has fallen back."""
-        fn = self.step_fn
-        graphs = isinstance(fn, CudaGraphTicks)
-        compiled_step = fn.step_fn if graphs else fn
-        if isinstance(compiled_step, CompiledStep) and compiled_step.error is not None:
-            return "eager (compiling failed)"
-        if graphs:
-            return "compiled, CUDA graphs"
-        return "compiled" if self.compiled else "eager"
+        return tick_mode(self.step_fn, self.compiled)
 
 
 def make_context(cfg: SwarmCoDeConfig) -> Context:
@@ -129,15 +93,7 @@ def make_context(cfg: SwarmCoDeConfig) -> Context:
     scenario = load_scenario(cfg.scenario)
     device = resolve_device(cfg.device)
     eval_cfg = cfg.evaluation(scenario.num_robots, scenario.episode_ticks)
-    use_compile = cfg.compile if cfg.compile is not None else (
-        device.type == "cuda" or cfg.generations >= COMPILE_MIN_GENERATIONS)
-    if cfg.cuda_graphs and (device.type != "cuda" or not use_compile):
-        raise ValueError("cuda_graphs needs --device cuda and the compiled tick (--compile)")
-    step_fn = CompiledStep() if use_compile else world_step
-    graphs = cfg.cuda_graphs if cfg.cuda_graphs is not None else (
-        device.type == "cuda" and use_compile)
-    if graphs:  # unset (auto): a tick that fails to compile runs eagerly, as without graphs
-        step_fn = CudaGraphTicks(step_fn, required=cfg.cuda_graphs is not None)
+    step_fn, use_compile = tick_function(device, cfg.compile, cfg.cuda_graphs, cfg.generations)
     # pin the scenario's team size and episode length into the config, so that a saved run keeps
     # them if a built-in scenario's defaults change later
     cfg = replace(cfg, swarm_size=eval_cfg.swarm_size, ticks=eval_cfg.ticks)
@@ -163,23 +119,35 @@ def init_state(ctx: Context) -> EvolutionState:
         rng_state=g.get_state())
 
 
-def _design(genome: Population, row: int, species: int, cost: float) -> dict:
-    """A JSON-friendly description of one robot design."""
-    return {
-        "species": species, "effector": "pincher" if int(genome.effector[row]) else "suction",
-        "radius": round(float(genome.radius[row]), 4),
-        "chassis_tier": int(genome.chassis[row]) + 1, "battery_tier": int(genome.battery[row]) + 1,
-        "motor_tier": int(genome.motor[row]) + 1,
-        "torque_point": round(float(genome.torque_point[row]), 4),
-        "battery_point": round(float(genome.battery_point[row]), 4),
-        "dominance": round(float(genome.dominance[row]), 4),
-        "selectivity": round(float(genome.selectivity[row]), 4),
-        "cost": round(cost, 2), "bt": [int(x) for x in genome.bt[row].tolist()],
-    }
+@dataclass(frozen=True, eq=False)
+class GenerationResult:
+    """What one generation measured (`generation` returns it; `app.records` turns it into
+    TensorBoard tags, metrics.csv rows, summary.json and teams.jsonl)."""
+
+    generation: int                # the generation evaluated (0-based)
+    best_fitness: float            # highest smoothed fitness in the population
+    mean_fitness: float
+    num_species: int               # species in the population
+    founded: int                   # species founded this generation
+    extinct: int                   # species gone since the previous generation
+    species_median_age: float      # generations since founding, median over the population's species
+    team: dict                     # this generation's best team: its teams.jsonl record
+    team_rows: Tensor              # [S] population rows of that team's robots (-1: empty slot)
+    team_median_age: float         # median age of the team's species
+    focal_max: float               # highest focal team score (ungated)
+    best: dict                     # best team of the run so far (a `team` record)
+    composition: dict              # species sizes in the population and in the team
+    budget: float | None
+    seconds: float                 # wall time of the generation
+    eval_seconds: float            # of which evaluation
+    sim_seconds: float             # of which the rollout (device synchronised)
+    radius: Tensor                 # [P] genes of the evaluated population, on the CPU
+    dominance: Tensor              # [P]
+    selectivity: Tensor            # [P]
 
 
-def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dict]:
-    """Advance one generation; the new state and this generation's metrics."""
+def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, GenerationResult]:
+    """Advance one generation; the new state and what this generation measured."""
     t0 = time.perf_counter()
     cfg = ctx.cfg
     g = torch.Generator(device=ctx.device)
@@ -209,7 +177,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
     # to the host in one transfer per field, not one per value (each is a device sync)
     host = genome.index(rows).to("cpu")
     can = capabilities(genome_phenotype(host), ctx.scenario, ctx.params).tolist()  # [R][C]
-    designs = [dict(_design(host, i, s, c), count=n,
+    designs = [dict(design_record(host, i, s, c), count=n,
                     capability=[j for j, ok in enumerate(can[i]) if ok])
                for i, (s, c, n) in enumerate(zip(sp.species[rows].tolist(), cost[rows].tolist(),
                                                  counts.tolist()))]
@@ -250,32 +218,19 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, dic
         rng_state=g.get_state(), best=best, history=state.history + [composition],
         turnover=turnover)
 
-    budget = cfg.budget if cfg.budget is not None else float("nan")
-    metrics = {
-        "generation": state.generation,
-        "fitness/best": float(fit.max()), "fitness/mean": float(fit.mean()),
-        "species/count": int(ids.numel()),
-        "species/founded": founded, "species/extinct": extinct,
-        "species/median_age": median(turnover.ages(state.generation, composition["population"])),
-        "team/fitness": team_record["fitness"], "team/species": team_record["species"],
-        "team/niches": team_record["niches"],
-        "team/median_age": median(turnover.ages(state.generation, composition["team"])),
-        "team/focal_max": float(res.focal.max()),
-        "team/cost": team_record["cost"], "team/budget": budget,
-        "team/deliveries": team_record["deliveries"],
-        "team/deliveries_individual": team_record["deliveries_individual"],
-        "team/deliveries_collab": team_record["deliveries_collab"],
-        "team/energy_used": team_record["energy_used"],
-        "perf/generation_seconds": time.perf_counter() - t0,
-        "perf/eval_seconds": eval_seconds,
-        "perf/sim_seconds": res.sim_seconds,
-        # non-scalars, for reporters
-        "team": team_record, "team/rows": team, "best": best, "composition": composition,
-        "hist/radius": genome.radius.detach().cpu(),
-        "hist/dominance": genome.dominance.detach().cpu(),
-        "hist/selectivity": genome.selectivity.detach().cpu(),
-    }
-    return new_state, metrics
+    result = GenerationResult(
+        generation=state.generation, best_fitness=float(fit.max()),
+        mean_fitness=float(fit.mean()), num_species=int(ids.numel()), founded=founded,
+        extinct=extinct,
+        species_median_age=median(turnover.ages(state.generation, composition["population"])),
+        team=team_record, team_rows=team,
+        team_median_age=median(turnover.ages(state.generation, composition["team"])),
+        focal_max=float(res.focal.max()), best=best, composition=composition,
+        budget=cfg.budget, seconds=time.perf_counter() - t0, eval_seconds=eval_seconds,
+        sim_seconds=res.sim_seconds, radius=genome.radius.detach().cpu(),
+        dominance=genome.dominance.detach().cpu(),
+        selectivity=genome.selectivity.detach().cpu())
+    return new_state, result
 
 
 # ------------------------------------------------------------------ checkpoints
@@ -332,9 +287,9 @@ class Evolution:
     def done(self) -> bool:
         return self.state.generation >= self.cfg.generations
 
-    def step(self) -> dict:
-        self.state, metrics = generation(self.state, self.ctx)
-        return metrics
+    def step(self) -> GenerationResult:
+        self.state, result = generation(self.state, self.ctx)
+        return result
 
     def state_dict(self) -> dict:
         return state_dict(self.state, self.cfg)

@@ -5,8 +5,6 @@ Everything here is a pure, element-wise function of tensors (any batch shape).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import torch
 from torch import Tensor
 

@@ -8,8 +8,7 @@ from typing import Callable
 import torch
 from torch import Tensor
 
-from .reproduction import elite_count
-from .selection import rank_within_groups, top_table
+from .selection import elite_count, rank_within_groups, top_table
 from .speciation import hamming
 
 

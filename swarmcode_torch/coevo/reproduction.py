@@ -10,19 +10,12 @@ import torch
 from torch import Tensor
 
 from ..sim.bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ, compute_jumps
-from .config import ReproductionParams, SwarmCoDeConfig
+from .config import ReproductionParams
 from .population import CROSSOVER_GROUPS, GENE_BOUNDS, GENE_VALUES, SOCIAL_GENES, Population
-from .selection import rank_within_groups, top_per_group
+from .selection import elite_count, rank_within_groups, top_per_group
 from .speciation import distance
 
 DistanceFn = Callable[[Population, Population], Tensor]
-
-
-def elite_count(species_size: Tensor | int, max_elite: int = SwarmCoDeConfig.max_elite) -> Tensor | int:
-    """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite, size // 5 + 1)); max_elite is the paper's E."""
-    if isinstance(species_size, Tensor):
-        return torch.clamp(torch.clamp(species_size // 5 + 1, max=max_elite), min=1)
-    return max(1, min(max_elite, int(species_size) // 5 + 1))
 
 
 def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,

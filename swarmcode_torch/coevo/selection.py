@@ -1,11 +1,20 @@
 """Ranking within groups: rows sorted by (group, fitness desc, row asc) and the top n of each
 group, shared by the elites of SwarmCoDe's reproduction, its partners' elite rows and the
-baselines' fixed-group reproduction."""
+baselines' fixed-group reproduction; and the elite count of a species of a given size."""
 
 from __future__ import annotations
 
 import torch
 from torch import Tensor
+
+from .config import SwarmCoDeConfig
+
+
+def elite_count(species_size: Tensor | int, max_elite: int = SwarmCoDeConfig.max_elite) -> Tensor | int:
+    """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite, size // 5 + 1)); max_elite is the paper's E."""
+    if isinstance(species_size, Tensor):
+        return torch.clamp(torch.clamp(species_size // 5 + 1, max=max_elite), min=1)
+    return max(1, min(max_elite, int(species_size) // 5 + 1))
 
 
 def rank_within_groups(group: Tensor, fitness: Tensor, sizes: Tensor | None = None,

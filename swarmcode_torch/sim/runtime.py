@@ -1,5 +1,6 @@
 """How the tick runs: compiled (`CompiledStep`, eager fallback), replayed from CUDA graphs
-(`CudaGraphTicks`), and the choice between them for a run (`tick_function`, `tick_mode`)."""
+(`CudaGraphTicks`), the choice between them for a run (`tick_function`, `tick_mode`), and the
+device of a run (`resolve_device`)."""
 
 from __future__ import annotations
 
@@ -131,6 +132,22 @@ class CudaGraphTicks:
         return out
 
 
+def resolve_device(name: str) -> torch.device:
+    """The torch device for 'auto' / 'cpu' / 'cuda[:i]'; ValueError when CUDA is missing."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(f"device {name!r} was asked for, but no CUDA device is available")
+    try:
+        dev = torch.device(name)
+    except RuntimeError:
+        raise ValueError(f"device must be auto, cpu, cuda or cuda:N, got {name!r}") from None
+    if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
+        raise ValueError(f"device {name!r}: there are only {torch.cuda.device_count()} CUDA "
+                         "devices")
+    return dev
+
+
 def tick_function(device: torch.device, compile: bool | None = None,
                   cuda_graphs: bool | None = None, generations: int = 0) -> tuple[Callable, bool]:
     """The tick function of a run on `device` and whether it is compiled. `compile` unset: on
@@ -139,7 +156,7 @@ def tick_function(device: torch.device, compile: bool | None = None,
     use_compile = compile if compile is not None else (
         device.type == "cuda" or generations >= COMPILE_MIN_GENERATIONS)
     if cuda_graphs and (device.type != "cuda" or not use_compile):
-        raise ValueError("cuda_graphs needs --device cuda and the compiled tick (--compile)")
+        raise ValueError("cuda_graphs needs device cuda and the compiled tick (compile)")
     step_fn = CompiledStep() if use_compile else step
     graphs = cuda_graphs if cuda_graphs is not None else (
         device.type == "cuda" and use_compile)
