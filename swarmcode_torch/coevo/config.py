@@ -60,7 +60,7 @@ class SwarmCoDeConfig:
     lam: float = 0.001
     """Budget penalty decay."""
     max_elite: int = 3
-    """E in the elite count N = max(1, min(E, floor(size/5) + 1))."""
+    """The cap of a species' elite count max(1, min(max_elite, floor(size / 5) + 1)) (the paper's E)."""
     dominance: bool = True
     """Sample team slots by the dominance genes; False: uniformly (an ablation)."""
     quota_basis: str = "sum"
@@ -276,7 +276,7 @@ class EvalConfig:
     objective: str = _RUN.objective  # "fitness" or "roi" (fitness divided by team cost)
     lam: float = _RUN.lam            # budget penalty decay
     p_marginal: float = _RUN.p_marginal  # factor on fitness when the marginal contribution is <= 0
-    max_elite: int = _RUN.max_elite  # E in the elite count (partner elites are drawn from these)
+    max_elite: int = _RUN.max_elite  # the elite cap (partner elites are drawn from the elites)
     dominance: bool = _RUN.dominance  # False: uniform team composition (an ablation)
     evaluated_partners: bool = _RUN.evaluated_partners  # partners are elites with a fitness
     weights: FitnessWeights = FitnessWeights()
@@ -316,7 +316,7 @@ class ReproductionParams:
     mate_tries: in-species tournaments tried for a second parent within distance `delta` of parent
         1 (and not parent 1 itself) before falling back to a global tournament (excluding parent 1).
     delta: mating compatibility threshold on the genome distance (the speciation delta).
-    max_elite: E in the elite count N = max(1, min(E, floor(size / 5) + 1)).
+    max_elite: the elite cap (the paper's E): a species keeps max(1, min(max_elite, size // 5 + 1)).
     quota_basis: what a species' offspring quota is proportional to: "sum", the total of its
         members' (gated, penalised, smoothed) fitness (the paper's "total adjusted fitness"), or
         "mean", NEAT's explicit fitness sharing (total / species size). See docs/MODEL.md.

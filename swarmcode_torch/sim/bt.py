@@ -331,43 +331,43 @@ def _continuations(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = True
                  ) -> torch.Tensor:
-    """ops [P, L], col_status [14 * C] (status of opcode o under combo c at o*C+c) -> int32 [P, C]."""
+    """ops [P, L], col_status [14 * NC] (status of opcode o under combo c at o*NC+c) -> int32 [P, NC]."""
     P, L = ops.shape
-    C = NUM_COMBOS
+    NC = NUM_COMBOS
     dev = ops.device
     start, cont = _continuations(ops)
     # States per program: 0..L-1 leaf slots, L / L+1 ended SUCCESS / FAILURE, L+2+i RUNNING at i.
-    S = 2 * L + 2
-    base = (torch.arange(P, device=dev) * S).unsqueeze(1)
+    NS = 2 * L + 2
+    base = (torch.arange(P, device=dev) * NS).unsqueeze(1)
     slot = torch.arange(L, device=dev)
     fire = torch.where(_is_action(ops), 1 << (_FIRED_SHIFT + (ops - ACT_MOVE_TO_PACK).clamp(min=0)), 0)
     nxt = torch.cat([cont, (L + 2 + slot).expand(P, L).unsqueeze(-1)], -1)  # [P, L, 3]
     word = ((base.unsqueeze(-1) + nxt) << _CODE_SHIFT)
     word[:, :, SUCCESS] |= fire
-    term = ((base + torch.arange(L, S, device=dev)) << _CODE_SHIFT).unsqueeze(-1).expand(P, S - L, 3)
-    trans = torch.cat([word, term], 1).reshape(-1)  # [P * S * 3], terminal states loop
-    colx = torch.cat([ops, torch.full((P, S - L), NOP, device=dev)], 1) * C
-    colx = colx.reshape(-1)  # [P * S], combo-table column of each state's opcode
-    final = torch.full((P, S), NOP, dtype=torch.long, device=dev)
+    term = ((base + torch.arange(L, NS, device=dev)) << _CODE_SHIFT).unsqueeze(-1).expand(P, NS - L, 3)
+    trans = torch.cat([word, term], 1).reshape(-1)  # [P * NS * 3], terminal states loop
+    colx = torch.cat([ops, torch.full((P, NS - L), NOP, device=dev)], 1) * NC
+    colx = colx.reshape(-1)  # [P * NS], combo-table column of each state's opcode
+    final = torch.full((P, NS), NOP, dtype=torch.long, device=dev)
     final[:, L] |= SUCCESS << _STATUS_SHIFT
     final[:, L + 1] |= FAILURE << _STATUS_SHIFT
     final[:, L + 2:] = ops | (RUNNING << _STATUS_SHIFT)
     # Walk every (program, combination) pair; finished pairs are set aside after each step.
-    g = (base + start.unsqueeze(1)).expand(P, C).reshape(-1)  # current state, global index
-    pos = torch.arange(P * C, device=dev)  # flat output position of each walking pair
+    g = (base + start.unsqueeze(1)).expand(P, NC).reshape(-1)  # current state, global index
+    pos = torch.arange(P * NC, device=dev)  # flat output position of each walking pair
     acc = torch.zeros_like(g)  # fired bits so far
     fired_mask = 0x3F << _FIRED_SHIFT
     if not compact:
         # terminal states loop onto themselves and add no fired bits, so a finished pair can
         # keep stepping; a pair visits each leaf slot at most once, so L + 1 steps end them all
-        combo = pos % C
+        combo = pos % NC
         for _ in range(L + 1):
             w = trans[g * 3 + col_status[colx[g] + combo]]
             g = w >> _CODE_SHIFT
             acc |= w
-        return (final.reshape(-1)[g] | (acc & fired_mask)).to(torch.int32).reshape(P, C)
+        return (final.reshape(-1)[g] | (acc & fired_mask)).to(torch.int32).reshape(P, NC)
     packed = torch.empty_like(g)
-    terminal = NOP * C
+    terminal = NOP * NC
     for _ in range(L + 1):  # each step visits one leaf; a pair visits each slot at most once
         col = colx[g]
         live = col != terminal
@@ -377,10 +377,10 @@ def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = Tr
         if keep.numel() == 0:
             break
         g, pos, acc, col = g[keep], pos[keep], acc[keep], col[keep]
-        w = trans[g * 3 + col_status[col + pos % C]]
+        w = trans[g * 3 + col_status[col + pos % NC]]
         g = w >> _CODE_SHIFT
         acc |= w
-    return packed.to(torch.int32).reshape(P, C)
+    return packed.to(torch.int32).reshape(P, NC)
 
 
 def build_tables(opcodes: torch.Tensor, chunk: int | None = None,
@@ -416,7 +416,7 @@ def unpack(packed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tens
 
 def lookup(tables: torch.Tensor, prog_idx: torch.Tensor, leaf_status: torch.Tensor
            ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """tables [P, C], prog_idx [...], leaf_status [..., 14] -> action [...], fired [..., 14], status [...]."""
+    """tables [P, NUM_COMBOS], prog_idx [...], leaf_status [..., 14] -> action [...], fired [..., 14], status [...]."""
     flat = prog_idx.long() * tables.shape[-1] + combo_index(leaf_status)
     return unpack(torch.take(tables, flat))
 

@@ -20,14 +20,14 @@ _CANDIDATES = 32  # rejection sampling: candidate positions drawn per object
 class Layout(NamedTuple):
     """Robot-independent part of E environments (leading dimension E)."""
 
-    p_present: torch.Tensor   # [E, P] bool
-    p_pos: torch.Tensor       # [E, P, 2] initial package positions
-    p_mass: torch.Tensor      # [E, P]
-    p_band: torch.Tensor      # [E, P, 2] robot radii that may lift it
-    p_size: torch.Tensor      # [E, P] package radius
-    p_collab: torch.Tensor    # [E, P] bool
-    g_effector: torch.Tensor  # [E, P, G] long, -1 where the grip does not exist
-    g_offset: torch.Tensor    # [E, P, G, 2] grip point relative to the package centre
+    p_present: torch.Tensor   # [E, Q] bool
+    p_pos: torch.Tensor       # [E, Q, 2] initial package positions
+    p_mass: torch.Tensor      # [E, Q]
+    p_band: torch.Tensor      # [E, Q, 2] robot radii that may lift it
+    p_size: torch.Tensor      # [E, Q] package radius
+    p_collab: torch.Tensor    # [E, Q] bool
+    g_effector: torch.Tensor  # [E, Q, G] long, -1 where the grip does not exist
+    g_offset: torch.Tensor    # [E, Q, G, 2] grip point relative to the package centre
     o_pos: torch.Tensor       # [E, O, 2]
     o_radius: torch.Tensor    # [E, O]
     o_present: torch.Tensor   # [E, O] bool
@@ -83,21 +83,21 @@ def make_layouts(scenario: Scenario, num: int, generator: torch.Generator,
     o_pos = _first_valid(cand, margin_ok & (dc > spawn_r + o_r[:, None] + 0.5))
 
     # Packages, class by class.
-    P, G = scenario.num_packages, scenario.max_grips
+    Q, G = scenario.num_packages, scenario.max_grips
     cls_rows = []
     for c in scenario.packages:
         cls_rows += [c] * c.count
     d_lo = torch.tensor([c.distance[0] for c in cls_rows], device=gdev)
     d_hi = torch.tensor([c.distance[1] for c in cls_rows], device=gdev)
     size = torch.tensor([c.size for c in cls_rows], device=gdev)
-    u = torch.rand(E, _CANDIDATES, P, generator=g, device=gdev)
-    ang = torch.rand(E, _CANDIDATES, P, generator=g, device=gdev) * 2 * math.pi
+    u = torch.rand(E, _CANDIDATES, Q, generator=g, device=gdev)
+    ang = torch.rand(E, _CANDIDATES, Q, generator=g, device=gdev) * 2 * math.pi
     dist = d_lo + (d_hi - d_lo) * u
     cand = base + dist[..., None] * torch.stack([ang.cos(), ang.sin()], -1)
     clear = size + 0.6  # room for a robot at each grip
     ok = ((cand > clear[:, None]) & (cand < W - clear[:, None])).all(-1)
     if O:
-        do = (cand[:, :, :, None] - o_pos[:, None, None]).norm(dim=-1)  # [E, K, P, O]
+        do = (cand[:, :, :, None] - o_pos[:, None, None]).norm(dim=-1)  # [E, _CANDIDATES, Q, O]
         ok &= (do > o_r[:, None, None] + clear[:, None]).all(-1)
     p_pos = _first_valid(cand, ok)
     d0 = (p_pos - base).norm(dim=-1)
@@ -107,12 +107,12 @@ def make_layouts(scenario: Scenario, num: int, generator: torch.Generator,
     weighted = torch.tensor([c.distance_weighting for c in cls_rows], device=gdev)
     frac = ((d0 - d_lo) / (d_hi - d_lo).clamp_min(1e-6)).clamp(0, 1)
     mass = torch.where(weighted, m_hi - (m_hi - m_lo) * frac,
-                       m_lo + (m_hi - m_lo) * torch.rand(E, P, generator=g, device=gdev))
+                       m_lo + (m_hi - m_lo) * torch.rand(E, Q, generator=g, device=gdev))
 
-    band = torch.tensor([c.radius_band for c in cls_rows], device=gdev).expand(E, P, 2)
-    collab = torch.tensor([c.kind == "collab" for c in cls_rows], device=gdev).expand(E, P)
-    g_eff = torch.full((P, G), -1, dtype=torch.long)      # per-class constants, built on the CPU
-    g_off = torch.zeros(P, G, 2)
+    band = torch.tensor([c.radius_band for c in cls_rows], device=gdev).expand(E, Q, 2)
+    collab = torch.tensor([c.kind == "collab" for c in cls_rows], device=gdev).expand(E, Q)
+    g_eff = torch.full((Q, G), -1, dtype=torch.long)      # per-class constants, built on the CPU
+    g_off = torch.zeros(Q, G, 2)
     for i, c in enumerate(cls_rows):
         k = len(c.grips)
         g_eff[i, :k] = torch.tensor(c.grips)
@@ -121,16 +121,16 @@ def make_layouts(scenario: Scenario, num: int, generator: torch.Generator,
             g_off[i, :k] = (c.size + 0.1) * torch.stack([a.cos(), a.sin()], -1)
     g_eff, g_off = g_eff.to(gdev), g_off.to(gdev)
     # a random orientation of each package's grip ring
-    rot = torch.rand(E, P, generator=g, device=gdev) * 2 * math.pi
+    rot = torch.rand(E, Q, generator=g, device=gdev) * 2 * math.pi
     cs, sn = rot.cos()[..., None], rot.sin()[..., None]
     gx, gy = g_off[..., 0], g_off[..., 1]
     g_off = torch.stack([cs * gx - sn * gy, sn * gx + cs * gy], -1)
 
     seed = torch.randint(0, 2**31 - 1, (E,), generator=g, device=gdev)
     out = Layout(
-        p_present=torch.ones(E, P, dtype=torch.bool, device=gdev), p_pos=p_pos, p_mass=mass,
-        p_band=band.contiguous(), p_size=size.expand(E, P).contiguous(),
-        p_collab=collab.contiguous(), g_effector=g_eff.expand(E, P, G).contiguous(),
+        p_present=torch.ones(E, Q, dtype=torch.bool, device=gdev), p_pos=p_pos, p_mass=mass,
+        p_band=band.contiguous(), p_size=size.expand(E, Q).contiguous(),
+        p_collab=collab.contiguous(), g_effector=g_eff.expand(E, Q, G).contiguous(),
         g_offset=g_off, o_pos=o_pos, o_radius=o_r,
         o_present=torch.ones(E, O, dtype=torch.bool, device=gdev), start=start, seed=seed)
     return Layout(*(t.to(device) for t in out))

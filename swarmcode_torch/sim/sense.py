@@ -19,7 +19,7 @@ class Senses(NamedTuple):
     best_d: torch.Tensor    # [E, N] its distance (_INF if none)
     rand: torch.Tensor      # [E, N] flat grip index of the robot's randomly preferred grip
     rand_d: torch.Tensor    # [E, N] its distance
-    gpos: torch.Tensor      # [E, C, 2] grip point positions, C = P * G
+    gpos: torch.Tensor      # [E, H, 2] grip point positions, H = Q * G
     d_base: torch.Tensor    # [E, N]
 
 
@@ -27,14 +27,14 @@ def sense(state: State, layout: Layout, robots: Robots, compat: torch.Tensor,
           keys: torch.Tensor, params: WorldParams) -> Senses:
     """Leaf statuses of every robot from the current state (`keys`: see :func:`random_keys`)."""
     E, N = robots.radius.shape
-    P, G = layout.g_effector.shape[1:]
-    C = P * G
+    Q, G = layout.g_effector.shape[1:]
+    H = Q * G
     base = state.pos.new_tensor([params.arena / 2, params.arena / 2])
-    gpos = (state.p_pos[:, :, None, :] + layout.g_offset).reshape(E, C, 2)
-    dist = (gpos[:, None, :, :] - state.pos[:, :, None, :]).norm(dim=-1)       # [E, N, C]
+    gpos = (state.p_pos[:, :, None, :] + layout.g_offset).reshape(E, H, 2)
+    dist = (gpos[:, None, :, :] - state.pos[:, :, None, :]).norm(dim=-1)       # [E, N, H]
     avail = ((layout.g_effector >= 0) & (state.holder < 0)
              & (state.p_status != DELIVERED)[..., None]
-             & layout.p_present[..., None]).reshape(E, 1, C)
+             & layout.p_present[..., None]).reshape(E, 1, H)
     alive = robots.present & (state.energy > 0)
     free = alive & (state.holding < 0)
     valid = compat & avail & free[..., None]

@@ -1,8 +1,8 @@
 """The world's data: constants, per-robot constants, the state of an episode and its reset,
 the per-episode tick inputs (grip compatibility, random keys) and the counter-based hashing.
 
-E environments advance together; robots are ``[E, N]``, packages ``[E, P]``, grip points
-``[E, P, G]`` (an individual package has one grip, at its centre), obstacles ``[E, O]``.
+E environments advance together; robots are ``[E, N]``, packages ``[E, Q]``, grip points
+``[E, Q, G]`` (an individual package has one grip, at its centre), obstacles ``[E, O]``.
 """
 
 from __future__ import annotations
@@ -79,11 +79,11 @@ class State(NamedTuple):
     grip: torch.Tensor      # [E, N] long grip slot held
     stuck: torch.Tensor     # [E, N] long ticks spent trying to move without moving
     waypoint: torch.Tensor  # [E, N, 2] random-walk target
-    p_pos: torch.Tensor     # [E, P, 2]
-    p_vel: torch.Tensor     # [E, P, 2]
-    p_status: torch.Tensor  # [E, P] long GROUND / HELD / DELIVERED
-    holder: torch.Tensor    # [E, P, G] long robot holding each grip, -1 none
-    p_picked: torch.Tensor  # [E, P] bool ever lifted (all grips held at once)
+    p_pos: torch.Tensor     # [E, Q, 2]
+    p_vel: torch.Tensor     # [E, Q, 2]
+    p_status: torch.Tensor  # [E, Q] long GROUND / HELD / DELIVERED
+    holder: torch.Tensor    # [E, Q, G] long robot holding each grip, -1 none
+    p_picked: torch.Tensor  # [E, Q] bool ever lifted (all grips held at once)
     wp_key: torch.Tensor    # [E, N, 2] long random-walk stream of each robot (constant)
 
 
@@ -93,8 +93,8 @@ class TickInputs(NamedTuple):
 
     layout: Layout
     robots: Robots
-    compat: torch.Tensor    # [E, N, C] bool, `compatible`
-    keys: torch.Tensor      # [E, N, C] float, `random_keys`
+    compat: torch.Tensor    # [E, N, H] bool, `compatible`
+    keys: torch.Tensor      # [E, N, H] float, `random_keys`
     tables: torch.Tensor    # behavior-tree tables, `bt.build_tables`
 
 
@@ -138,7 +138,7 @@ def _waypoints(wp_key: torch.Tensor, t: torch.Tensor, params: WorldParams) -> to
 def reset(layout: Layout, robots: Robots, params: WorldParams) -> State:
     """The state at tick 0: robots at their start slots with full batteries."""
     E, N = robots.radius.shape
-    P, G = layout.g_effector.shape[1:]
+    Q, G = layout.g_effector.shape[1:]
     dev = robots.radius.device
     t = torch.zeros((), dtype=torch.long, device=dev)
     wp_key = waypoint_keys(layout.seed, N)
@@ -149,22 +149,22 @@ def reset(layout: Layout, robots: Robots, params: WorldParams) -> State:
         grip=torch.zeros(E, N, dtype=torch.long, device=dev),
         stuck=torch.zeros(E, N, dtype=torch.long, device=dev),
         waypoint=_waypoints(wp_key, t, params),
-        p_pos=layout.p_pos.clone(), p_vel=torch.zeros(E, P, 2, device=dev),
-        p_status=torch.full((E, P), GROUND, dtype=torch.long, device=dev),
-        holder=torch.full((E, P, G), -1, dtype=torch.long, device=dev),
-        p_picked=torch.zeros(E, P, dtype=torch.bool, device=dev), wp_key=wp_key,
+        p_pos=layout.p_pos.clone(), p_vel=torch.zeros(E, Q, 2, device=dev),
+        p_status=torch.full((E, Q), GROUND, dtype=torch.long, device=dev),
+        holder=torch.full((E, Q, G), -1, dtype=torch.long, device=dev),
+        p_picked=torch.zeros(E, Q, dtype=torch.bool, device=dev), wp_key=wp_key,
     )
 
 
 # ---------------------------------------------------------------- per-episode constants
 def compatible(layout: Layout, robots: Robots, params: WorldParams) -> torch.Tensor:
-    """[E, N, C] whether each robot could take each grip (effector, size band, load)."""
-    E, P, G = layout.g_effector.shape
-    n_grips = (layout.g_effector >= 0).sum(-1).clamp_min(1)               # [E, P]
-    load = (layout.p_mass / n_grips)[..., None].expand(E, P, G).reshape(E, 1, P * G)
-    band = layout.p_band[:, :, None, :].expand(E, P, G, 2).reshape(E, 1, P * G, 2)
+    """[E, N, H] whether each robot could take each grip (effector, size band, load)."""
+    E, Q, G = layout.g_effector.shape
+    n_grips = (layout.g_effector >= 0).sum(-1).clamp_min(1)               # [E, Q]
+    load = (layout.p_mass / n_grips)[..., None].expand(E, Q, G).reshape(E, 1, Q * G)
+    band = layout.p_band[:, :, None, :].expand(E, Q, G, 2).reshape(E, 1, Q * G, 2)
     r = robots.radius[..., None]
-    ok = robots.effector[..., None] == layout.g_effector.reshape(E, 1, P * G)
+    ok = robots.effector[..., None] == layout.g_effector.reshape(E, 1, Q * G)
     ok = ok & (r >= band[..., 0]) & (r <= band[..., 1])
     ok = ok & (robots.payload[..., None] >= load)
     ok = ok & (robots.force[..., None] >= params.lift_force * (robots.mass[..., None] + load))
@@ -173,7 +173,7 @@ def compatible(layout: Layout, robots: Robots, params: WorldParams) -> torch.Ten
 
 def capabilities(robots: Phenotype | Robots, scenario: Scenario,
                  params: WorldParams) -> torch.Tensor:
-    """[..., C] bool: which of the scenario's C package classes each robot can lift, by the
+    """[..., U] bool: which of the scenario's U package classes each robot can lift, by the
     criteria of `compatible` (a grip of its effector, its radius in the class's band, payload and
     drive force for its share of the class's lightest package). A robot's capability is its
     row; distinct non-empty rows are the niches a team covers."""
@@ -193,10 +193,10 @@ def capabilities(robots: Phenotype | Robots, scenario: Scenario,
 
 
 def random_keys(layout: Layout, n: int) -> torch.Tensor:
-    """[E, N, C] each robot's fixed random preference for each grip (ACT_MOVE_TO_RANDOM_PACK
+    """[E, N, H] each robot's fixed random preference for each grip (ACT_MOVE_TO_RANDOM_PACK
     goes to the takeable grip it prefers most), drawn from the environment's seed."""
-    E, P, G = layout.g_effector.shape
-    m = max(n, P * G)
+    E, Q, G = layout.g_effector.shape
+    m = max(n, Q * G)
     idx = torch.arange(m, device=layout.seed.device)
     u = hash_uniform(layout.seed[:, None], idx, torch.full_like(idx, -7))
-    return torch.frac(u[:, :n, None] + u[:, None, :P * G] * 7.31)
+    return torch.frac(u[:, :n, None] + u[:, None, :Q * G] * 7.31)

@@ -38,8 +38,8 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
          tables: torch.Tensor, params: WorldParams) -> State:
     """Advance every environment by one tick."""
     E, N = robots.radius.shape
-    P, G = layout.g_effector.shape[1:]
-    C = P * G
+    Q, G = layout.g_effector.shape[1:]
+    H = Q * G
     dev = state.pos.device
     base = state.pos.new_tensor([params.arena / 2, params.arena / 2])
     s = sense(state, layout, robots, compat, keys, params)
@@ -50,17 +50,17 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     action = torch.where(alive, action, bt.NOP)
     fired = fired & alive[..., None]
 
-    holder = state.holder.reshape(E, C)
+    holder = state.holder.reshape(E, H)
     holding, grip = state.holding, state.grip
     robot_ids = torch.arange(N, device=dev).expand(E, N)
 
     # --- drop: release the grip; inside the base the package is delivered
     drop = fired[..., bt.ACT_DROP] & (holding >= 0)
-    my_grip = torch.where(holding >= 0, holding * G + grip, C)
-    released = _scatter_sum(drop.float(), torch.where(drop, my_grip, C), C) > 0      # [E, C]
+    my_grip = torch.where(holding >= 0, holding * G + grip, H)
+    released = _scatter_sum(drop.float(), torch.where(drop, my_grip, H), H) > 0      # [E, H]
     deliver = drop & (s.d_base <= params.base_radius)
-    delivered_now = _scatter_sum(deliver.float(), torch.where(deliver, holding, P), P) > 0
-    delivered = (state.p_status == DELIVERED) | delivered_now                       # [E, P]
+    delivered_now = _scatter_sum(deliver.float(), torch.where(deliver, holding, Q), Q) > 0
+    delivered = (state.p_status == DELIVERED) | delivered_now                       # [E, Q]
     gone = delivered.repeat_interleave(G, dim=1)
     holder = torch.where(released | gone, -1, holder)
     lost = (holding >= 0) & _gather(delivered.long(), holding).bool()
@@ -68,16 +68,16 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
 
     # --- pick up: the nearest takeable grip in reach; ties go to the lowest robot index
     pick = fired[..., bt.ACT_PICK_UP] & (holding < 0) & (s.best_d <= params.reach)
-    claim = torch.where(pick, s.best, C)
-    winner = torch.full((E, C + 1), N, dtype=torch.long, device=dev).scatter_reduce(
+    claim = torch.where(pick, s.best, H)
+    winner = torch.full((E, H + 1), N, dtype=torch.long, device=dev).scatter_reduce(
         1, claim, robot_ids, reduce="amin")
     got = pick & (winner.gather(1, claim) == robot_ids)
     holder = torch.cat([holder, holder.new_full((E, 1), -1)], 1).scatter(
-        1, torch.where(got, s.best, C), robot_ids)[:, :C]
+        1, torch.where(got, s.best, H), robot_ids)[:, :H]
     holding = torch.where(got, s.best // G, holding)
     grip = torch.where(got, s.best % G, grip)
 
-    holder3 = holder.reshape(E, P, G)
+    holder3 = holder.reshape(E, Q, G)
     exists = layout.g_effector >= 0
     held_any = (holder3 >= 0).any(-1)
     lifted = ((holder3 >= 0) | ~exists).all(-1) & exists.any(-1) & ~delivered
@@ -110,14 +110,14 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
 
     # --- lifted packages move as one rigid body with their carriers
     in_lifted = carrying & _gather(lifted.long(), holding).bool()
-    pidx = torch.where(in_lifted, holding, P)
-    f_pkg = _scatter_sum(f_cmd, pidx, P)
-    m_pkg = layout.p_mass + _scatter_sum(robots.mass, pidx, P)
+    pidx = torch.where(in_lifted, holding, Q)
+    f_pkg = _scatter_sum(f_cmd, pidx, Q)
+    m_pkg = layout.p_mass + _scatter_sum(robots.mass, pidx, Q)
     p_vel = torch.where(lifted[..., None],
                         _cap(state.p_vel + params.dt * (f_pkg / m_pkg[..., None] - params.drag * state.p_vel),
                              params.v_cap, params.rest_speed), 0.0)
     p_pos = state.p_pos + params.dt * p_vel
-    g_off = _gather(layout.g_offset.reshape(E, C, 2), holding * G + grip)
+    g_off = _gather(layout.g_offset.reshape(E, H, 2), holding * G + grip)
     pos = torch.where(carrying[..., None], _gather(p_pos, holding) + g_off, pos)
     vel = torch.where(carrying[..., None], _gather(p_vel, holding), vel)
 
@@ -126,9 +126,9 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     m_col = torch.where(waiting, params.anchor_mass, robots.mass + share)
     pos_c, vel_c = collide(pos, vel, robots.radius, m_col, robots.present, layout.o_pos,
                            layout.o_radius, layout.o_present, params)
-    cnt = _scatter_sum(torch.ones_like(robots.mass), pidx, P).clamp_min(1)[..., None]
-    p_pos = p_pos + torch.where(lifted[..., None], _scatter_sum(pos_c - pos, pidx, P) / cnt, 0.0)
-    p_vel = torch.where(lifted[..., None], _scatter_sum(vel_c, pidx, P) / cnt, p_vel)
+    cnt = _scatter_sum(torch.ones_like(robots.mass), pidx, Q).clamp_min(1)[..., None]
+    p_pos = p_pos + torch.where(lifted[..., None], _scatter_sum(pos_c - pos, pidx, Q) / cnt, 0.0)
+    p_vel = torch.where(lifted[..., None], _scatter_sum(vel_c, pidx, Q) / cnt, p_vel)
     pos = torch.where(carrying[..., None], _gather(p_pos, holding) + g_off, pos_c)
     vel = torch.where(carrying[..., None], _gather(p_vel, holding), vel_c)
 
@@ -151,4 +151,4 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     # contiguous, like reset()'s holder: a strided view here would make a compiled step (which
     # guards on input strides) compile a second time on its second call
     return State(t, pos, vel, energy, holding, grip, stuck, waypoint, p_pos, p_vel, p_status,
-                 holder.reshape(E, P, G).contiguous(), p_picked, state.wp_key)
+                 holder.reshape(E, Q, G).contiguous(), p_picked, state.wp_key)
