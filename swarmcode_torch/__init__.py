@@ -15,10 +15,15 @@ algorithm, not matplotlib, TensorBoard or the CLI's libraries: they load when fi
 
 __version__ = "0.2.0"
 
+from .app.analysis import replay_run, run_dynamics
 from .app.api import RunResult, evolve, load, resume
+from .app.reporting import composition_figure
 from .coevo.config import EvolveConfig, SwarmCoDeConfig
-from .coevo.evolve import Evolution
-from .sim.scenario import Scenario, load_scenario
+from .coevo.evolve import Evolution, GenerationResult
+from .coevo.population import Population
+from .sim.bt import format_tree
+from .sim.scenario import Scenario, builtin_names, load_scenario
 
-__all__ = ["evolve", "resume", "load", "RunResult", "SwarmCoDeConfig", "EvolveConfig", "Evolution", "load_scenario",
-           "Scenario", "__version__"]
+__all__ = ["evolve", "resume", "load", "RunResult", "SwarmCoDeConfig", "EvolveConfig", "Evolution",
+           "GenerationResult", "Population", "load_scenario", "builtin_names", "Scenario",
+           "composition_figure", "replay_run", "run_dynamics", "format_tree", "__version__"]

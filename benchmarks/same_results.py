@@ -1,0 +1,147 @@
+"""Does a change keep the results bit for bit? Run two fixed small CLI runs and the three
+baselines with the code of one source tree, then compare two such outputs.
+
+    git worktree add /tmp/before <commit>
+    python benchmarks/same_results.py run --src /tmp/before --out /tmp/same/before
+    python benchmarks/same_results.py run --src . --out /tmp/same/after
+    python benchmarks/same_results.py compare /tmp/same/before /tmp/same/after
+
+`run` works on any commit since the CLI existed (it tries the module paths of the 0.3 layout,
+then those before it). `compare` prints one line per file and exits 1 if any differs:
+summary.json (less its timings), teams.jsonl, metrics.csv and TensorBoard scalars (less
+perf/*), config.toml, checkpoint.pt (every tensor and value), and the baselines' per-generation
+metrics (less seconds). CPU only; about a minute on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+RUNS = (
+    ["--scenario", "four-niche", "--population", "16", "--swarm-size", "6", "--trials", "2",
+     "--ticks", "40", "--seed", "7", "--generations", "8", "--checkpoint-every", "3",
+     "--render-every", "4", "--log-every", "4"],
+    ["--scenario", "budget", "--budget", "2500", "--population", "12", "--swarm-size", "5",
+     "--trials", "1", "--ticks", "30", "--seed", "3", "--generations", "5", "--render-every",
+     "0", "--set", "p_tag_flip=0.05"],
+)
+
+BASELINES = """
+import json, sys
+try:
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig as C
+except ImportError:
+    from swarmcode_torch.evolve import EvolveConfig as C
+from swarmcode_torch.baselines import make_algorithm
+out = {}
+for name in ("homogeneous-ga", "ccea", "swarmcode"):
+    cfg = C(scenario="four-niche", population=12, swarm_size=6, trials=1, ticks=30, seed=5,
+            generations=3, device="cpu", compile=False)
+    algo = make_algorithm(name, cfg)
+    out[name] = [{k: v for k, v in algo.step().items()
+                  if isinstance(v, (int, float)) and "seconds" not in k} for _ in range(3)]
+json.dump(out, open(sys.argv[1], "w"), indent=1, sort_keys=True)
+"""
+
+UNTIMED_SUMMARY = {"wall_seconds", "seconds_per_generation", "elapsed_seconds"}
+
+
+def run(src: Path, out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    env = {**os.environ, "PYTHONPATH": str(src.resolve())}
+    for args in RUNS:
+        cmd = [sys.executable, "-m", "swarmcode_torch", "evolve", *args, "--device", "cpu",
+               "--no-compile", "--logdir", str(out)]
+        r = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        if r.returncode:
+            sys.exit(f"{' '.join(cmd)} failed:\n{r.stdout[-2000:]}\n{r.stderr[-2000:]}")
+    subprocess.run([sys.executable, "-c", BASELINES, str(out / "baselines.json")], env=env,
+                   check=True)
+    print(f"wrote {out}")
+
+
+def _untimed(x):
+    if isinstance(x, dict):
+        return {k: _untimed(v) for k, v in x.items()
+                if k not in UNTIMED_SUMMARY and not k.startswith("perf/")}
+    if isinstance(x, list):
+        return [_untimed(v) for v in x]
+    return "nan" if isinstance(x, float) and math.isnan(x) else x
+
+
+def _scalars(run_dir: Path) -> dict:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
+    acc.Reload()
+    return {t: [(e.step, _untimed(e.value)) for e in acc.Scalars(t)]
+            for t in acc.Tags()["scalars"] if not t.startswith("perf/")}
+
+
+def _checkpoint(run_dir: Path) -> dict:
+    import torch
+
+    def flat(x, path=""):
+        if isinstance(x, dict):
+            for k, v in x.items():
+                yield from flat(v, f"{path}.{k}")
+        elif isinstance(x, torch.Tensor):
+            yield path, (x.dtype, tuple(x.shape), x.flatten().tolist())
+        else:
+            yield path, json.dumps(x, sort_keys=True, default=str)
+
+    return dict(flat(torch.load(run_dir / "checkpoint.pt", weights_only=True)))
+
+
+def compare(a: Path, b: Path) -> int:
+    def runs(root: Path) -> dict[str, Path]:
+        return {p.name.split("__")[0]: p for p in root.iterdir() if p.is_dir()}
+
+    ra, rb = runs(a), runs(b)
+    different = 0
+    for name in sorted(ra):
+        x, y = ra[name], rb.get(name)
+        checks = {
+            "summary.json": lambda d: _untimed(json.loads((d / "summary.json").read_text())),
+            "teams.jsonl": lambda d: (d / "teams.jsonl").read_text(),
+            "metrics.csv": lambda d: _untimed(list(csv.DictReader(open(d / "metrics.csv")))),
+            "tensorboard scalars": _scalars,
+            "config.toml": lambda d: (d / "config.toml").read_text(),
+            "checkpoint.pt": _checkpoint,
+        }
+        for what, read in checks.items():
+            same = y is not None and read(x) == read(y)
+            different += not same
+            print(f"{name:12s} {what:20s} {'identical' if same else 'DIFFERENT'}")
+    same = json.loads((a / "baselines.json").read_text()) == \
+        json.loads((b / "baselines.json").read_text())
+    different += not same
+    print(f"{'baselines':12s} {'metrics':20s} {'identical' if same else 'DIFFERENT'}")
+    return 1 if different else 0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("--src", type=Path, required=True, help="source tree (a checkout or worktree)")
+    r.add_argument("--out", type=Path, required=True)
+    c = sub.add_parser("compare")
+    c.add_argument("a", type=Path)
+    c.add_argument("b", type=Path)
+    args = ap.parse_args()
+    if args.cmd == "run":
+        run(args.src, args.out)
+    else:
+        sys.exit(compare(args.a, args.b))
+
+
+if __name__ == "__main__":
+    main()
