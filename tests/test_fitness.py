@@ -85,3 +85,90 @@ def test_team_cost():
     present = torch.tensor([[True, False, True], [True, False, False]])
     out = team_cost(cost, present, torch.tensor([2, 1]), overhead=10.0)
     assert torch.allclose(out, torch.tensor([25.0, 18.0]))
+
+
+# ------------------------------------------------------------------ the weights as run settings
+WEIGHT_KEYS = ("w_delivery", "w_collab_bonus", "w_pickup", "w_energy", "w_proximity",
+               "w_closeness", "inactive_factor", "fitness_floor")
+
+
+def test_fitness_weights_are_run_settings_with_one_default():
+    from swarmcode_torch.coevo.config import FITNESS_KEYS, SwarmCoDeConfig
+
+    assert sorted(FITNESS_KEYS.values()) == sorted(WEIGHT_KEYS)
+    cfg = SwarmCoDeConfig()
+    # the defaults are the run's, and FitnessWeights() is what a default run scores with
+    assert cfg.fitness_weights == FitnessWeights() == cfg.evaluation(5, 10).weights
+    assert (FitnessWeights().inactive_factor, FitnessWeights().floor) == (0.5, 0.1)
+    custom = SwarmCoDeConfig(w_delivery=10, w_closeness=0.0, inactive_factor=1.0,
+                             fitness_floor=0.0)
+    w = custom.evaluation(5, 10).weights
+    assert (w.W_delivery, w.W_closeness, w.inactive_factor, w.floor) == (10.0, 0.0, 1.0, 0.0)
+    assert isinstance(w.W_delivery, float)
+    m = metrics(delivered_individual=1, picked_individual=1, closeness=1.0)
+    assert raw_fitness(m, w).item() == pytest.approx(10.0 + 1.0)
+
+
+@pytest.mark.parametrize("key, value, needle", [
+    ("w_delivery", -1.0, ">= 0"), ("w_energy", math.nan, ">= 0"), ("w_pickup", math.inf, ">= 0"),
+    ("fitness_floor", -0.1, ">= 0"), ("inactive_factor", 1.5, "<= 1"),
+    ("inactive_factor", -0.5, "in \\[0, 1\\]"), ("w_closeness", 1e20, "<= 1e\\+12"),
+    ("w_collab_bonus", "50", "a number")])
+def test_fitness_weights_are_validated(key, value, needle):
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+
+    with pytest.raises(ValueError, match=f"{key} must .*{needle}"):
+        SwarmCoDeConfig(**{key: value}).validate()
+
+
+def test_fitness_weights_by_set_and_by_api_keyword():
+    import swarmcode_torch as sc
+    from swarmcode_torch.app.settings import parse_settings
+
+    assert parse_settings(["w_delivery=20", "inactive_factor=1"]) == \
+        {"w_delivery": 20.0, "inactive_factor": 1.0}
+    r = sc.evolve(scenario="one-niche", population=4, swarm_size=3, trials=1, ticks=6,
+                  generations=1, device="cpu", compile=False, logdir=None, w_delivery=20.0,
+                  fitness_floor=0.0)
+    assert r.evolution.ctx.eval_cfg.weights == FitnessWeights(W_delivery=20.0, floor=0.0)
+
+
+def test_the_weights_change_the_scores():
+    from dataclasses import replace
+
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+    from swarmcode_torch.coevo.evolve import Evolution
+
+    cfg = SwarmCoDeConfig(scenario="one-niche", population=6, swarm_size=3, trials=1, ticks=10,
+                          generations=1, seed=2, device="cpu", compile=False)
+    base = Evolution(cfg).step()
+    floor = Evolution(replace(cfg, **dict.fromkeys(WEIGHT_KEYS[:6], 0.0),
+                              fitness_floor=7.0)).step()
+    assert base.best_fitness != floor.best_fitness
+    assert floor.team["fitness"] == pytest.approx(7.0)    # every term 0: the floor
+
+
+def test_a_run_saved_before_the_weights_were_keys_resumes_with_the_same_values(tmp_path):
+    import torch
+
+    import swarmcode_torch as sc
+    from swarmcode_torch.app.runs import read_config
+
+    tiny = dict(scenario="one-niche", population=4, swarm_size=3, trials=1, ticks=6, seed=3,
+                device="cpu", compile=False, render_every=0)
+    first = sc.evolve(generations=2, logdir=tmp_path / "old", checkpoint_every=1, **tiny)
+    run = first.run_dir
+    text = (run / "config.toml").read_text()
+    (run / "config.toml").write_text("".join(
+        line for line in text.splitlines(keepends=True) if line.split(" = ")[0] not in WEIGHT_KEYS))
+    assert "w_delivery" not in (run / "config.toml").read_text()
+    ck = torch.load(run / "checkpoint.pt", weights_only=True)
+    ck["config"] = {k: v for k, v in ck["config"].items() if k not in WEIGHT_KEYS}
+    torch.save(ck, run / "checkpoint.pt")
+    assert read_config(run).fitness_weights == FitnessWeights()
+    assert sc.load(run).config.w_delivery == 100.0
+    resumed = sc.resume(run, generations=3, render_every=0)
+    assert resumed.config.fitness_weights == FitnessWeights()
+    straight = sc.evolve(generations=3, logdir=tmp_path / "new", **tiny)
+    assert (run / "teams.jsonl").read_text() == (straight.run_dir / "teams.jsonl").read_text()
+    assert "w_delivery = 100.0" in (run / "config.toml").read_text()   # written back in full

@@ -98,6 +98,23 @@ class SwarmCoDeConfig:
     cuda_graphs: bool | None = None
     """Replay the compiled tick as CUDA graphs of 10 ticks (`sim.runtime.CudaGraphTicks`). Unset: on
     wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
+    # the raw-fitness weights of the paper's Table IV (`fitness.raw_fitness`, `FitnessWeights`)
+    w_delivery: float = 100.0
+    """Raw fitness: points per package delivered (and per grip of a delivered collaborative one)."""
+    w_collab_bonus: float = 50.0
+    """Raw fitness: bonus points per collaborative package delivered."""
+    w_pickup: float = 1.0
+    """Raw fitness: points per package picked up."""
+    w_energy: float = 0.03
+    """Raw fitness: points per unit of mean final battery energy."""
+    w_proximity: float = 1.0
+    """Raw fitness: weight of the proximity term (robots near packages)."""
+    w_closeness: float = 30.0
+    """Raw fitness: weight of the closeness term (packages brought near the base)."""
+    inactive_factor: float = 0.5
+    """Raw fitness: factor (P_activity, in [0, 1]) on a team's score when it picked up nothing."""
+    fitness_floor: float = 0.1
+    """Raw fitness: the lowest raw fitness a team-episode gets."""
 
     def validate(self, option_names: dict[str, str] | None = None, bounds: bool = True) -> None:
         """Raise ValueError with a one-line message for an invalid setting: a value of the wrong
@@ -153,8 +170,13 @@ class SwarmCoDeConfig:
                 raise ValueError(f"{name(key)} must be a finite number >= 0, got {v}")
         if not self.delta > 0:
             raise ValueError(f"{name('delta')} must be a finite number > 0, got {self.delta}")
+        for key in ("w_delivery", "w_collab_bonus", "w_pickup", "w_energy", "w_proximity",
+                    "w_closeness", "fitness_floor"):
+            v = getattr(self, key)
+            if not (v >= 0 and math.isfinite(v)):
+                raise ValueError(f"{name(key)} must be a finite number >= 0, got {v}")
         for key in ("p_marginal", "alpha", "p_categorical", "p_tag_flip", "bt_mutation_rate",
-                    "p_gene_mutation"):
+                    "p_gene_mutation", "inactive_factor"):
             v = getattr(self, key)
             if not (v >= 0 and math.isfinite(v)):
                 raise ValueError(f"{name(key)} must be a finite number in [0, 1], got {v}")
@@ -195,7 +217,12 @@ class SwarmCoDeConfig:
         """How teams are scored, with the scenario's team size and episode length where the
         run leaves them unset."""
         return _part(EvalConfig, self, swarm_size=self.swarm_size or num_robots,
-                     ticks=self.ticks or episode_ticks)
+                     ticks=self.ticks or episode_ticks, weights=self.fitness_weights)
+
+    @property
+    def fitness_weights(self) -> "FitnessWeights":
+        """The raw-fitness weights of the run (`w_delivery`, ..., `fitness_floor`)."""
+        return FitnessWeights(**{f: float(getattr(self, key)) for f, key in FITNESS_KEYS.items()})
 
     @property
     def speciation(self) -> "SpeciationParams":
@@ -219,7 +246,10 @@ UPPER_BOUNDS = {"generations": 10_000_000, "ticks": 1_000_000, "tag_length": 409
                 # numbers the float32 tensors must hold with room to spare (delta=1e300 is inf
                 # there; social_sigma=1e300 makes NaN genes)
                 "budget": 1e15, "delta": 1e6, "lam": 1e6, "hw_sigma": 1e6,
-                "social_sigma": 1e6, "min_share": 1e9}
+                "social_sigma": 1e6, "min_share": 1e9,
+                # a team-episode's raw fitness is a float32 sum of these times counts
+                "w_delivery": 1e12, "w_collab_bonus": 1e12, "w_pickup": 1e12, "w_energy": 1e12,
+                "w_proximity": 1e12, "w_closeness": 1e12, "fitness_floor": 1e12}
 
 
 EvolveConfig = SwarmCoDeConfig
@@ -253,16 +283,24 @@ def _part(cls, cfg: SwarmCoDeConfig, **given):
 @dataclass(frozen=True)
 class FitnessWeights:
     """Weights of the raw-fitness terms (paper Table IV); `inactive_factor` is P_activity when
-    no package was picked up, `floor` the minimum raw fitness."""
+    no package was picked up, `floor` the minimum raw fitness. Each is a run setting
+    (`FITNESS_KEYS`: W_delivery is `w_delivery`, floor is `fitness_floor`)."""
 
-    W_delivery: float = 100.0
-    W_collab_bonus: float = 50.0
-    W_pickup: float = 1.0
-    W_energy: float = 0.03
-    W_proximity: float = 1.0
-    W_closeness: float = 30.0
-    inactive_factor: float = 0.5
-    floor: float = 0.1
+    W_delivery: float = _RUN.w_delivery
+    W_collab_bonus: float = _RUN.w_collab_bonus
+    W_pickup: float = _RUN.w_pickup
+    W_energy: float = _RUN.w_energy
+    W_proximity: float = _RUN.w_proximity
+    W_closeness: float = _RUN.w_closeness
+    inactive_factor: float = _RUN.inactive_factor
+    floor: float = _RUN.fitness_floor
+
+
+#: FitnessWeights field -> the run setting that gives it.
+FITNESS_KEYS = {"W_delivery": "w_delivery", "W_collab_bonus": "w_collab_bonus",
+                "W_pickup": "w_pickup", "W_energy": "w_energy", "W_proximity": "w_proximity",
+                "W_closeness": "w_closeness", "inactive_factor": "inactive_factor",
+                "floor": "fitness_floor"}
 
 
 @dataclass(frozen=True)
