@@ -27,6 +27,7 @@ from typing import Any, Callable, Iterable
 
 from . import records, runs
 from ..coevo.config import SwarmCoDeConfig
+from ..coevo.evaluation import ScoreFn
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.scenario import EFFECTORS, Scenario, parse_scenario, read_scenario
 
@@ -83,14 +84,15 @@ def _scenario_data(s: Scenario) -> bytes:
     return data
 
 
-def _object_evolution(cfg: SwarmCoDeConfig, s: Scenario, data: bytes) -> Evolution:
+def _object_evolution(cfg: SwarmCoDeConfig, s: Scenario, data: bytes,
+                      fitness: ScoreFn | None = None) -> Evolution:
     """An Evolution of a Scenario object: built from a temporary copy of its TOML, then named
     by the scenario's name (nothing reloads the scenario during a run; a run directory keeps the
     TOML as its scenario.toml, which resume, replay and inspect read)."""
     with tempfile.TemporaryDirectory(prefix="swarmcode-scenario-") as tmp:
         path = Path(tmp) / f"{_scenario_stem(s)}.toml"
         path.write_bytes(data)
-        ev = Evolution(replace(cfg, scenario=str(path)))
+        ev = Evolution(replace(cfg, scenario=str(path)), fitness=fitness)
     ev.cfg = ev.ctx.cfg = replace(ev.cfg, scenario=s.name)
     return ev
 
@@ -222,7 +224,8 @@ def make_config(config: SwarmCoDeConfig | None = None, **settings) -> SwarmCoDeC
 def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike | Scenario | None = None,
            logdir: str | os.PathLike | None = "runs", checkpoint_every: int = 10,
            render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
-           callback: Callable[[GenerationResult], Any] | None = None, **settings) -> RunResult:
+           callback: Callable[[GenerationResult], Any] | None = None,
+           fitness: ScoreFn | None = None, **settings) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
     config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
@@ -237,6 +240,13 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     reporters: more reporters (objects with on_start(ev), on_generation(ev, result),
         on_end(ev)); callback: called with each generation's `GenerationResult`
         (`result.best_fitness`, `result.team`, ...; `records.scalars(result)` under the tags).
+    fitness: a function `fitness(metrics, cost, cfg) -> Tensor [E]` that scores each
+        team-episode instead of the built-in fitness (`evaluation.team_scores`: F_raw times the
+        budget penalty, / cost for roi): `metrics` maps names (`fitness.METRIC_KEYS`,
+        "energy_used", ...) to [E] tensors, `cost` is the [E] team cost in $, `cfg` the run's
+        `EvalConfig` (weights, budget, lam, objective). The marginal gate, the mean over trials
+        and the EMA apply to its scores. The run records its name (config.toml's
+        `fitness_function`, summary.json's "fitness"), and `resume` needs it again.
 
     Raises ValueError (`ScenarioError` is one) for an invalid setting or scenario before any
     file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
@@ -249,7 +259,7 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     cfg = make_config(config, **settings)
     if scenario_obj is not None:
         cfg = replace(cfg, scenario=scenario_obj.name)
-    ev, data = start_evolution(cfg, scenario_obj)
+    ev, data = start_evolution(cfg, scenario_obj, fitness)
     history = _History(callback)
     if logdir is None:
         _execute(ev, None, [history, *reporters])
@@ -263,18 +273,24 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     return _result(ev, run_dir, history.rows)
 
 
-def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> tuple[Evolution, bytes]:
+def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
+                    fitness: ScoreFn | None = None) -> tuple[Evolution, bytes]:
     """The checks `swarmcode-torch evolve` makes before it creates anything (the config, the
     scenario, the memory the run needs), then the run's `Evolution` and the bytes of its
     scenario file (a run directory keeps them as scenario.toml). `scenario`: a Scenario object
-    to run instead of `cfg.scenario`'s file. ValueError (ScenarioError is one) otherwise."""
+    to run instead of `cfg.scenario`'s file; `fitness`: a user score function (`evolve`).
+    ValueError (ScenarioError is one) otherwise."""
+    if fitness is not None and not callable(fitness):
+        raise TypeError(f"fitness must be a function (metrics, cost, cfg) -> Tensor, "
+                        f"got {type(fitness).__name__}")
     cfg.validate(bounds=False)
     if scenario is None:
         scen, data = read_scenario(cfg.scenario)
     else:
         scen, data = scenario, _scenario_data(scenario)
     runs.check_config(cfg, scen)
-    ev = Evolution(cfg) if scenario is None else _object_evolution(cfg, scenario, data)
+    ev = (Evolution(cfg, fitness=fitness) if scenario is None
+          else _object_evolution(cfg, scenario, data, fitness))
     if ev.ctx.scenario != scen:
         raise ValueError(f"{cfg.scenario} changed while the run was starting; start it again")
     return ev, data
@@ -292,9 +308,11 @@ def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
 
 def resume(run_dir: str | os.PathLike, generations: int | None = None, device: str | None = None,
            *, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50,
-           reporters: Iterable = (), callback: Callable[[dict], Any] | None = None) -> RunResult:
+           reporters: Iterable = (), callback: Callable[[dict], Any] | None = None,
+           fitness: ScoreFn | None = None) -> RunResult:
     """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
-    to `generations` in all (default: the run's), on `device` (default: the run's). The
+    to `generations` in all (default: the run's), on `device` (default: the run's);
+    `fitness`: the run's own fitness function, for a run started with one (`evolve`). The
     result's history has every generation: those before the checkpoint from metrics.csv (when
     the run has one), then this part's. RunError (a ValueError) for a directory, config or
     checkpoint that cannot be used."""
@@ -304,7 +322,8 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
         raise runs.RunError(f"{run_dir} is not a run directory (no such directory)")
     with runs.RunLock(run_dir):
         loaded = runs.load_run(run_dir)
-        ev = runs.resume(run_dir, generations=generations, device=device, loaded=loaded)
+        ev = runs.resume(run_dir, generations=generations, device=device, loaded=loaded,
+                         fitness=fitness)
         earlier = _earlier_rows(run_dir, ev.state.generation)
         if ev.done:                         # nothing to run: no file changes (as the CLI)
             return _result(ev, run_dir, earlier)

@@ -72,6 +72,9 @@ def summary(ev: Evolution, r: GenerationResult) -> dict:
         "device": str(ev.ctx.device), "tick": ev.ctx.tick_mode,
         "designs": best["designs"],
         "last_generation": {k: v for k, v in scalars(r).items() if k != "generation"},
+        # only a run scored by a user function says so (the built-in is the paper's fitness)
+        **({"fitness": f"custom: {ev.cfg.fitness_function}"}
+           if ev.cfg.fitness_function is not None else {}),
     })
 
 

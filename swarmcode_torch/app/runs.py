@@ -602,16 +602,27 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
 
 
 def resume(run_dir: Path, generations: int | None = None, device: str | None = None,
-           loaded: tuple[SwarmCoDeConfig, dict, Scenario] | None = None) -> Evolution:
+           loaded: tuple[SwarmCoDeConfig, dict, Scenario] | None = None,
+           fitness=None) -> Evolution:
     """The run in `run_dir`, continued from its checkpoint with its saved config and its own
-    copy of the scenario (`load_run`; `loaded` is what `load_run` returned, if it was called)."""
+    copy of the scenario (`load_run`; `loaded` is what `load_run` returned, if it was called).
+    `fitness`: the user fitness function of a run started with one (`api.evolve(fitness=)`),
+    which a run directory records by name only; RunError without it, or with one for a run
+    scored by the built-in fitness."""
     run_dir = Path(run_dir)
     cfg, d, scenario = loaded or load_run(run_dir)
+    if cfg.fitness_function is not None and fitness is None:
+        raise RunError(f"{run_dir} was scored by a custom fitness function "
+                       f"({cfg.fitness_function}): resume it from Python with the same "
+                       "function, swarmcode_torch.resume(run_dir, fitness=fn)")
+    if cfg.fitness_function is None and fitness is not None:
+        raise RunError(f"{run_dir} was scored by the built-in fitness; a resume cannot change "
+                       "its fitness function (start a new run with fitness=fn)")
     cfg = with_overrides(cfg, generations=generations, device=device)
     check_config(cfg, scenario)
     source = run_scenario_source(run_dir, cfg)
     try:
-        ev = Evolution.from_checkpoint(d, dataclasses.replace(cfg, scenario=source))
+        ev = Evolution.from_checkpoint(d, dataclasses.replace(cfg, scenario=source), fitness)
     except (KeyError, TypeError, RuntimeError) as e:
         raise RunError(f"checkpoint in {run_dir} is incompatible ({type(e).__name__}: {e})") from None
     if source != cfg.scenario:     # the run keeps the scenario it names; only the file differs

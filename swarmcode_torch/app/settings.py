@@ -12,6 +12,11 @@ OPTION_KEYS = frozenset({"scenario", "budget", "objective", "generations", "popu
                          "swarm_size", "trials", "ticks", "seed", "device", "compile"})
 
 
+#: Config keys that only the Python API sets (`parse_settings` refuses them), and how.
+API_KEYS = {"fitness_function": "a fitness function is given from Python: "
+                                "swarmcode_torch.evolve(fitness=fn) (examples/custom_fitness.py)"}
+
+
 def option_names(overrides: dict[str, str] | None = None) -> dict[str, str]:
     """Config key -> how the command line sets it (--population, --set delta), for
     `SwarmCoDeConfig.validate` and `runs.check_memory`; `overrides` respells some (a sweep's
@@ -38,8 +43,10 @@ def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None)
         if key in OPTION_KEYS:
             option = (option_names or {}).get(key, "--" + key.replace("_", "-"))
             raise ValueError(f"--set {key}: use the {option} option")
+        if key in API_KEYS:
+            raise ValueError(f"--set {key}: {API_KEYS[key]}")
         if key not in SETTING_TYPES:
-            settable = ", ".join(sorted(set(SETTING_TYPES) - OPTION_KEYS))
+            settable = ", ".join(sorted(set(SETTING_TYPES) - OPTION_KEYS - set(API_KEYS)))
             raise ValueError(f"--set: unknown key {key!r} (settable: {settable})")
         kind, _ = SETTING_TYPES[key]
         try:

@@ -98,6 +98,10 @@ class SwarmCoDeConfig:
     cuda_graphs: bool | None = None
     """Replay the compiled tick as CUDA graphs of 10 ticks (`sim.runtime.CudaGraphTicks`). Unset: on
     wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
+    fitness_function: str | None = None
+    """None: teams are scored by the built-in fitness (`evaluation.team_scores`); else the name
+    of the user function that scored them ("module.qualname"; a function is given to the API,
+    `swarmcode_torch.evolve(fitness=fn)`, and again to `resume`: a config records its name only)."""
     # the raw-fitness weights of the paper's Table IV (`fitness.raw_fitness`, `FitnessWeights`)
     w_delivery: float = 100.0
     """Raw fitness: points per package delivered (and per grip of a delivered collaborative one)."""
@@ -144,6 +148,8 @@ class SwarmCoDeConfig:
                 raise ValueError(f"{name('budget')} must be > 0, got {self.budget:g}")
         if not self.scenario:
             raise ValueError(f"{name('scenario')} must name a scenario")
+        if self.fitness_function is not None and not self.fitness_function.strip():
+            raise ValueError(f"{name('fitness_function')} must name a function or be unset")
         if self.quota_basis not in ("sum", "mean"):
             raise ValueError(f"{name('quota_basis')} must be 'sum' or 'mean', "
                              f"got {self.quota_basis!r}")

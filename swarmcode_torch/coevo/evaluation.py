@@ -51,11 +51,44 @@ class EvalResult:
 
 
 def team_scores(metrics: dict, cost: Tensor, cfg: EvalConfig) -> Tensor:
-    """[E] score of each team-episode: F_raw times the budget penalty (divided by cost for ROI)."""
+    """[E] score of each team-episode: F_raw times the budget penalty (divided by cost for ROI).
+    The built-in `ScoreFn`: a run may be given another (`Context.score_fn`)."""
     f = raw_fitness(metrics, cfg.weights) * budget_penalty(cost, cfg.budget, cfg.lam)
     if cfg.objective == "roi":
         f = f / cost.clamp_min(1.0)
     return f
+
+
+ScoreFn = Callable[[dict, Tensor, EvalConfig], Tensor]
+"""A team-episode score: (metrics: name -> [E] tensor (`rollout.episode_metrics`: deliveries,
+pick-ups, energy, proximity, closeness, ...), cost: [E] team cost in $, cfg: the run's
+EvalConfig) -> [E] score. The gate, the mean over trials and the EMA apply to it as to
+`team_scores`'s."""
+
+
+def score_fn_name(fn: ScoreFn) -> str:
+    """How a config records a user score function: "module.qualname"."""
+    module = getattr(fn, "__module__", None) or "?"
+    qualname = getattr(fn, "__qualname__", None) or type(fn).__qualname__
+    return f"{module}.{qualname}"
+
+
+def _scores(score_fn: ScoreFn, m: dict, cost: Tensor, cfg: EvalConfig) -> Tensor:
+    """score_fn's [E] scores, checked when it is not the built-in one."""
+    if score_fn is team_scores:
+        return team_scores(m, cost, cfg)
+    out = score_fn(m, cost, cfg)
+    who = f"the fitness function {score_fn_name(score_fn)}"
+    if not isinstance(out, Tensor):
+        raise TypeError(f"{who} must return a tensor of shape {tuple(cost.shape)}, "
+                        f"got {type(out).__name__}")
+    if out.shape != cost.shape:
+        raise ValueError(f"{who} must return one score per team-episode, shape "
+                         f"{tuple(cost.shape)}, got {tuple(out.shape)}")
+    out = out.to(device=cost.device, dtype=torch.float32)
+    if not bool(torch.isfinite(out).all()):
+        raise ValueError(f"{who} returned a NaN or infinite score")
+    return out
 
 
 def team_robots(genome: Population, teams: Tensor) -> Robots:
@@ -171,16 +204,17 @@ def gather_metrics(parts: list[dict]) -> dict:
 
 
 def score_plan(plan: EvalPlan, genome: Population, m: dict, scenario: Scenario, cfg: EvalConfig,
-          sim_seconds: float = 0.0) -> EvalResult:
+          sim_seconds: float = 0.0, score_fn: ScoreFn = team_scores) -> EvalResult:
     """Scores of a plan's evaluations from their per-environment metrics [2 * B * trials]:
-    team cost, F_raw times the budget penalty, the mean over trials, the marginal gate."""
+    team cost, each team-episode's score (`score_fn`: F_raw times the budget penalty), the mean
+    over trials, the marginal gate."""
     P, T = plan.size, plan.trials
     swarms = plan.swarms
     teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
     robot_cost = genome_phenotype(genome).cost[teams.clamp_min(0)]
     counts = torch.cat([swarms.focal_species_count, swarms.baseline_species_count]).repeat_interleave(T)
     cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
-    scores = team_scores(m, cost, cfg).view(2, P, T).mean(-1)
+    scores = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1)
     focal, base = scores[0], scores[1]
     team_m = {k: v.view(2, P, T)[0].mean(-1) for k, v in m.items()}
     return EvalResult(fitness=gate(focal, base, cfg.p_marginal), focal=focal, baseline=base,
@@ -192,13 +226,13 @@ def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index
              fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
              generator: torch.Generator, params: WorldParams | None = None,
              step_fn: StepFn | None = None, tables: Tensor | None = None,
-             evaluator=None) -> EvalResult:
+             evaluator=None, score_fn: ScoreFn = team_scores) -> EvalResult:
     """Score every individual of the population by its marginal contribution to a team:
     `plan_evaluation` (teams and environments, drawn here), the simulation, `score`. The
     simulation runs here (`simulate_batch` of the whole plan), or, given an `evaluator`, where
     its `simulate(plan, genome)` runs it (`distributed.ShardedEvaluator`: shards of whole
     evaluations on Ray actors), which returns the same per-environment metrics. `score_plan`
-    then scores them here."""
+    then scores them here, each team-episode by `score_fn`."""
     params = params or WorldParams.for_scenario(scenario)
     plan = plan_evaluation(genome, species, proto_ids, proto_index, fitness, has_fitness,
                            scenario, cfg, generator)
@@ -207,7 +241,7 @@ def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index
                                         tables)
     else:
         m, sim_seconds = evaluator.simulate(plan, genome)
-    return score_plan(plan, genome, m, scenario, cfg, sim_seconds)
+    return score_plan(plan, genome, m, scenario, cfg, sim_seconds, score_fn)
 
 
 def _now(device: torch.device) -> float:

@@ -19,7 +19,7 @@ from torch import Tensor
 from ..sim import bt
 from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
 from .dynamics import Turnover, median, niche_count, replay
-from .evaluation import evaluate
+from .evaluation import ScoreFn, evaluate, score_fn_name, team_scores
 from .fitness import ema
 from .population import Population, design_record, genome_phenotype
 from .reproduction import mutate_bt, reproduce
@@ -79,6 +79,9 @@ class Context:
     """Where evaluations are simulated: None, in this process; else an object whose
     `simulate(plan, genome)` returns their per-environment metrics (`evaluation.evaluate`;
     `distributed.ShardedEvaluator` shards them over Ray actors)."""
+    score_fn: ScoreFn = team_scores
+    """The score of a team-episode (`evaluation.ScoreFn`): the built-in fitness, or the user
+    function the run was given (`cfg.fitness_function` names it)."""
 
     @property
     def tick_mode(self) -> str:
@@ -87,8 +90,17 @@ class Context:
         return tick_mode(self.step_fn, self.compiled)
 
 
-def make_context(cfg: SwarmCoDeConfig) -> Context:
-    """Validate the config, load the scenario and pick the device and tick function."""
+def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None) -> Context:
+    """Validate the config, load the scenario and pick the device and tick function.
+    `score_fn`: a user function that scores team-episodes instead of the built-in fitness (the
+    config records its name as `fitness_function`); a config that names one needs it (ValueError)."""
+    if score_fn is not None:
+        if not callable(score_fn):
+            raise TypeError(f"the fitness function must be callable, got {type(score_fn).__name__}")
+        cfg = replace(cfg, fitness_function=score_fn_name(score_fn))
+    elif cfg.fitness_function is not None:
+        raise ValueError(f"the run is scored by a custom fitness function "
+                         f"({cfg.fitness_function}): give the function again")
     cfg.validate()
     scenario = load_scenario(cfg.scenario)
     device = resolve_device(cfg.device)
@@ -98,7 +110,8 @@ def make_context(cfg: SwarmCoDeConfig) -> Context:
     # them if a built-in scenario's defaults change later
     cfg = replace(cfg, swarm_size=eval_cfg.swarm_size, ticks=eval_cfg.ticks)
     return Context(cfg, scenario, device, eval_cfg, cfg.reproduction, cfg.speciation,
-                   WorldParams.for_scenario(scenario), step_fn, use_compile)
+                   WorldParams.for_scenario(scenario), step_fn, use_compile,
+                   score_fn=score_fn or team_scores)
 
 
 def new_generator(ctx: Context) -> torch.Generator:
@@ -163,7 +176,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     t_eval = time.perf_counter()
     res = evaluate(genome, sp.species, sp.proto_ids, sp.proto_index, state.fitness,
                    state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn,
-                   evaluator=ctx.evaluator)
+                   evaluator=ctx.evaluator, score_fn=ctx.score_fn)
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
 
@@ -268,17 +281,20 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
 
 
 class Evolution:
-    """A run: config, context and current state; `step()` runs one generation."""
+    """A run: config, context and current state; `step()` runs one generation. `fitness`: a
+    user `evaluation.ScoreFn` that scores team-episodes instead of the built-in fitness."""
 
-    def __init__(self, cfg: SwarmCoDeConfig, state: EvolutionState | None = None):
-        self.ctx = make_context(cfg)
+    def __init__(self, cfg: SwarmCoDeConfig, state: EvolutionState | None = None,
+                 fitness: ScoreFn | None = None):
+        self.ctx = make_context(cfg, fitness)
         self.cfg = self.ctx.cfg
         self.state = state if state is not None else init_state(self.ctx)
 
     @classmethod
-    def from_checkpoint(cls, d: dict, cfg: SwarmCoDeConfig) -> "Evolution":
+    def from_checkpoint(cls, d: dict, cfg: SwarmCoDeConfig,
+                        fitness: ScoreFn | None = None) -> "Evolution":
         ev = cls.__new__(cls)
-        ev.ctx = make_context(cfg)
+        ev.ctx = make_context(cfg, fitness)
         ev.cfg = ev.ctx.cfg
         ev.state = load_state_dict(d, ev.ctx)
         return ev
