@@ -172,6 +172,7 @@ def evolve(
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines when not on a terminal.")] = 10,
     render_every: Annotated[int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")] = 50,
+    figure_every: Annotated[int, typer.Option(help="Generations between species-composition figures in TensorBoard (one is also drawn at the end of every run).")] = 50,
     resume: Annotated[Optional[Path], typer.Option(help="Continue the run in this directory.")] = None,
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key, e.g. --set p_tag_flip=0.0625 (repeatable; keys as in the run's config.toml).")] = None,
     eval_workers: Annotated[int, typer.Option(help="Evaluate each generation in this many shards on Ray actors, one GPU each on CUDA, else CPUs (needs Ray; same results as 1).")] = 1,
@@ -187,10 +188,12 @@ def evolve(
             generations=generations, population=population, swarm_size=swarm_size,
             trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
             logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
-            render_every=render_every, resume=resume, settings=settings, attach=attach)
+            render_every=render_every, resume=resume, settings=settings, attach=attach,
+            figure_every=figure_every)
         if ev is None:
             return
-        _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved)
+        _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
+                 figure_every=figure_every)
         if shards is not None:
             _print_shard_traffic(ev.ctx.evaluator)
     console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
@@ -252,7 +255,7 @@ def _print_shard_traffic(evaluator) -> None:
 
 def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
                   swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
-                  log_every, render_every, resume, settings, attach=None):
+                  log_every, render_every, resume, settings, attach=None, figure_every=50):
     """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
     The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
@@ -265,8 +268,9 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
     from .runs import resume as resume_run
     from ..sim.scenario import read_scenario
 
-    if checkpoint_every < 1 or log_every < 1 or render_every < 0:
-        fail("--checkpoint-every and --log-every must be >= 1, --render-every >= 0")
+    if checkpoint_every < 1 or log_every < 1 or figure_every < 1 or render_every < 0:
+        fail("--checkpoint-every, --log-every and --figure-every must be >= 1, "
+             "--render-every >= 0")
     given = dict(scenario=scenario, budget=budget, objective=objective, population=population,
                  swarm_size=swarm_size, trials=trials, ticks=ticks, seed=seed, compile=compile)
     try:
@@ -330,7 +334,7 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
 
 def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
              render_every: int = 0, saved: int | None = None,
-             again: str | None = None) -> None:
+             again: str | None = None, figure_every: int = 50) -> None:
     """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints.
     Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
     failed write (a full disk: OSError from the checkpoint, summary.json, teams.jsonl or
@@ -352,7 +356,8 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
             from .reporting import CsvReporter, TensorBoardReporter
 
             reporters += [CsvReporter(run_dir),
-                          TensorBoardReporter(run_dir, render_every=render_every), checkpoints]
+                          TensorBoardReporter(run_dir, figure_every=figure_every,
+                                              render_every=render_every), checkpoints]
             with _terminate_as_interrupt() as terminated:
                 run(ev, run_dir, reporters)
     except KeyboardInterrupt:

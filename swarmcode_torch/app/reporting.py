@@ -16,9 +16,11 @@ from .records import HISTOGRAMS, SCALAR_TAGS, scalars
 from .runs import METRICS_FILE
 
 
-def composition_figure(history: list[dict]):
+def composition_figure(history: list[dict], legend: int = 8):
     """A matplotlib `Figure`: species composition of the population and of the best team per
-    generation (stacked areas, one colour per species id; paper Fig. 5).
+    generation (stacked areas, one colour per species id; paper Fig. 5). Each panel's legend
+    names its `legend` largest species (most individuals, or robots, over the generations
+    shown) by the ids `swarmcode-torch inspect` prints, largest first (0: no legend).
 
     Drawn object-oriented (`matplotlib.figure.Figure`): no pyplot, no backend change, so a
     notebook keeps its inline plots; the figure displays as the value of a cell
@@ -27,14 +29,21 @@ def composition_figure(history: list[dict]):
     from matplotlib.figure import Figure
 
     gens = [h["generation"] for h in history]
-    fig = Figure(figsize=(11, 3.6))
+    fig = Figure(figsize=(12, 3.6))
     axes = fig.subplots(1, 2, sharex=True)
     for ax, key, title in ((axes[0], "population", "population"), (axes[1], "team", "best team")):
         ids = sorted({int(s) for h in history for s in h[key]})
         rows = [[h[key].get(s, h[key].get(str(s), 0)) for h in history] for s in ids]
         if ids:
             cmap = colormaps["tab20"]
-            ax.stackplot(gens, rows, colors=[cmap(i % 20) for i in ids], linewidth=0)
+            bands = ax.stackplot(gens, rows, colors=[cmap(i % 20) for i in ids], linewidth=0)
+            largest = sorted(range(len(ids)), key=lambda j: (-sum(rows[j]), ids[j]))[:legend]
+            if largest:
+                more = len(ids) - len(largest)
+                ax.legend([bands[j] for j in largest], [str(ids[j]) for j in largest],
+                          title="species" + (f"\n(+{more} more)" if more else ""),
+                          loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8,
+                          title_fontsize=8, frameon=False, handlelength=1.2)
         ax.set_title(f"species in the {title}")
         ax.set_xlabel("generation")
         ax.set_ylabel("individuals" if key == "population" else "robots")
@@ -103,6 +112,7 @@ class TensorBoardReporter:
         self.writer = SummaryWriter(log_dir=str(run_dir))
         self.figure_every = max(1, figure_every)
         self.render_every = render_every
+        self._figure_step: int | None = None      # the generation of the last figure drawn
 
     def on_start(self, ev: Evolution) -> None:
         self.writer.add_text("config", config_markdown(ev), ev.state.generation)
@@ -126,11 +136,13 @@ class TensorBoardReporter:
         if ev.state.history:
             img = figure_image(composition_figure(ev.state.history))
             self.writer.add_image("species/composition", img, step, dataformats="HWC")
+            self._figure_step = step
 
     def on_end(self, ev: Evolution) -> None:
         if ev.state.history:
             step = ev.state.history[-1]["generation"]
-            self._figure(ev, step)
+            if self._figure_step != step:       # the last generation's figure, once
+                self._figure(ev, step)
             self._hparams(ev, step)
         self.writer.close()
 
