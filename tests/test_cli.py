@@ -161,6 +161,26 @@ def test_sweep_writes_table_iii_and_resumes(tmp_path):
     assert_clean_error(invoke("sweep", "--budgets", "-1", "--out", tmp_path / "x"), "--budget")
 
 
+def test_sweep_logdir_holds_a_new_sweep_directory_as_evolves_holds_runs(tmp_path):
+    logdir = tmp_path / "runs"
+    args = ["sweep", "--budgets", "1500", "--scenario", "one-niche", "--generations", 1,
+            "--population", 6, "--swarm-size", 4, "--trials", 1, "--ticks", 8]
+    r = invoke(*args, "--logdir", logdir)
+    assert r.exit_code == 0, r.output
+    sweep = only_run(logdir)
+    assert sweep.name.startswith("sweep-") and (sweep / "table.md").is_file()
+    assert (sweep / "budget-1500_seed-0" / "summary.json").is_file()
+    assert f"Sweep directory: {sweep} (resume with --out {sweep})" in " ".join(r.output.split())
+    r = invoke(*args, "--out", sweep)                       # resumed by its own directory
+    assert r.exit_code == 0 and "already done" in r.output, r.output
+    assert_clean_error(invoke(*args, "--logdir", logdir, "--out", sweep),
+                       "--logdir and --out cannot both be given")
+    (tmp_path / "file").write_text("")
+    assert_clean_error(invoke(*args, "--logdir", tmp_path / "file"), "is not a directory")
+    r = runner.invoke(app, ["sweep", "--help"], env={"COLUMNS": "200"})
+    assert "--logdir" in r.output and "sweep-<time>" in r.output
+
+
 def test_sweep_set_applies_to_every_run_and_refuses_clearly(tmp_path):
     out = tmp_path / "sweep"
     r = invoke("sweep", "--budgets", "1500", "--scenario", "one-niche", "--generations", 1,

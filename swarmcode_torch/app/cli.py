@@ -472,7 +472,8 @@ def sweep(
     ticks: Annotated[Optional[int], typer.Option(help="Episode length [default: the scenario's].")] = None,
     device: Annotated[Optional[str], typer.Option(help="auto, cpu or cuda.")] = None,
     compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick.")] = None,
-    out: Annotated[Optional[Path], typer.Option(help="Sweep directory; run again with the same --out to resume.")] = None,
+    logdir: Annotated[Optional[Path], typer.Option(help="Directory that holds the new sweep directory, sweep-<time>, as evolve's --logdir holds run directories [default: runs].")] = None,
+    out: Annotated[Optional[Path], typer.Option(help="The sweep directory itself [default: LOGDIR/sweep-<time>]; run again with the same --out to resume.")] = None,
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines off a terminal.")] = 50,
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key of every run (repeatable), as in evolve.")] = None,
@@ -495,7 +496,12 @@ def sweep(
     if checkpoint_every < 1 or log_every < 1:
         fail("--checkpoint-every and --log-every must be >= 1")
     on_ray = _sweep_ray_options(workers, cpus_per_run, gpus_per_run, ray_address, device)
-    out = out or Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
+    if logdir is not None and out is not None:
+        fail(f"--logdir and --out cannot both be given: --out is the sweep directory itself "
+             f"({out}), --logdir the directory a new one is made in ({logdir})")
+    if logdir is not None and logdir.exists() and not logdir.is_dir():
+        fail(f"--logdir {logdir} is not a directory")
+    out = out or (logdir or Path("runs")) / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     names = option_names({"seed": "--seeds", "budget": "--budgets"})
     try:
         base = with_overrides(SwarmCoDeConfig(), objective=objective, scenario=scenario,
@@ -528,6 +534,8 @@ def sweep(
         plans = [_plan_sweep_run(out, with_overrides(base, budget=b, seed=sd), scen, data)
                  for b in budget_list for sd in seed_list]      # every refusal before any run
         again = f"swarmcode-torch sweep with the same options and --out {out}"
+        console.print(f"Sweep directory: {out} (resume with --out {out})", markup=False,
+                      highlight=False, soft_wrap=True)
         failed: list[tuple[str, str]] = []
         if on_ray is None:
             for b, sd, run_dir, cfg, state in plans:
