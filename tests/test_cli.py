@@ -8,7 +8,7 @@ import torch
 from typer.testing import CliRunner
 
 from swarmcode_torch.app.cli import app
-from swarmcode_torch.sim.scenario import builtin_names
+from swarmcode_torch.sim.scenario import builtin_names, load_scenario
 
 runner = CliRunner()
 TINY = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
@@ -38,6 +38,42 @@ def test_scenarios_lists_every_builtin():
     assert r.exit_code == 0, r.output
     for name in builtin_names():
         assert name in r.output
+
+
+def test_scenarios_off_a_terminal_prints_whole_descriptions(monkeypatch):
+    from dataclasses import replace
+
+    import swarmcode_torch.app.cli as cli
+
+    r = invoke("scenarios")                      # CliRunner's output is not a terminal
+    for name in builtin_names():
+        assert load_scenario(name).description in r.output, name
+    long = "a very long description, " * 12 + "the end"
+    monkeypatch.setattr(cli, "load_scenario", lambda n: replace(load_scenario(n), description=long))
+    r = invoke("scenarios")
+    assert r.exit_code == 0 and r.output.count(long) == len(builtin_names())
+
+
+def test_device_and_objective_offer_their_choices_in_help_and_completion():
+    r = runner.invoke(app, ["evolve", "--help"], env={"COLUMNS": "200"})
+    assert "--objective <fitness|roi>" in r.output
+    assert "--device [auto|cpu|cuda|cuda:N]" in r.output
+    r = runner.invoke(app, ["sweep", "--help"], env={"COLUMNS": "200"})
+    assert "--objective <fitness|roi>" in r.output and "[auto|cpu|cuda|cuda:N]" in r.output
+    assert "--install-completion" in runner.invoke(app, ["--help"]).output
+
+    def complete(words: str) -> list[str]:
+        r = runner.invoke(app, [], prog_name="swarmcode-torch",
+                          env={"_SWARMCODE_TORCH_COMPLETE": "complete_bash", "COMP_WORDS": words,
+                               "COMP_CWORD": str(len(words.split(" ")) - 1)})
+        assert r.exit_code == 0, r.output
+        return r.output.split()
+
+    assert complete("swarmcode-torch evolve --objective ") == ["fitness", "roi"]
+    assert complete("swarmcode-torch sweep --objective r") == ["roi"]
+    assert complete("swarmcode-torch evolve --device ") == ["auto", "cpu", "cuda", "cuda:0"]
+    assert complete("swarmcode-torch evolve --device cu") == ["cuda", "cuda:0"]
+    assert_clean_error(invoke("evolve", "--objective", "profit"), "--objective", "'fitness', 'roi'")
 
 
 def test_evolve_writes_a_complete_run_directory(tmp_path):

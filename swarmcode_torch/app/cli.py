@@ -8,6 +8,7 @@ import signal
 import sys
 import threading
 from contextlib import ExitStack, contextmanager
+from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -51,11 +52,35 @@ class _OneLineErrors(TyperGroup):
         sys.exit(rv if isinstance(rv, int) else 0)
 
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, cls=_OneLineErrors, rich_markup_mode=None,
+# shell completion (--install-completion) is on: it is how --device, --objective and the other
+# choices reach a shell; each completion runs the CLI's import (torch), so it takes a second or two
+app = typer.Typer(add_completion=True, no_args_is_help=True, cls=_OneLineErrors, rich_markup_mode=None,
                   help="SwarmCoDe: co-design the behavior trees and hardware of robot swarms.")
 # off a terminal (logs, pipes) Rich would wrap at 80 columns; tables need a little more
 console = Console(width=None if sys.stdout.isatty() else 120)
 err = Console(stderr=True, width=None if sys.stderr.isatty() else 200)
+
+
+class Objective(str, Enum):
+    """--objective: its choices, in --help and in shell completion."""
+
+    fitness = "fitness"
+    roi = "roi"
+
+
+#: --device: shown in --help as its choices; the value is checked with the run's other settings
+#: (`SwarmCoDeConfig.validate`), so that its error reads as theirs.
+DEVICE_METAVAR = "[auto|cpu|cuda|cuda:N]"
+DEVICES = ("auto", "cpu", "cuda", "cuda:0")
+
+
+def _complete_device(incomplete: str) -> list[str]:
+    """Shell completion of --device."""
+    return [d for d in DEVICES if d.startswith(incomplete)]
+
+
+def _objective(value: "Objective | None") -> str | None:
+    return None if value is None else Objective(value).value
 
 
 class _Failed(typer.Exit):
@@ -113,7 +138,9 @@ def scenarios() -> None:
                      min_width=max(len(col), *(len(r[i]) for r in rows)) if fixed else None)
     for r in rows:
         t.add_row(*r)
-    console.print(t)
+    # on a terminal a description is cut to the window; off one (a pipe, a file) every row is
+    # one whole line, however long
+    (console if console.is_terminal else Console(width=100_000, highlight=False)).print(t)
 
 
 class _Progress:
@@ -159,14 +186,14 @@ class _Progress:
 def evolve(
     scenario: Annotated[Optional[str], typer.Option(help="Built-in scenario name or a scenario .toml file.")] = None,
     budget: Annotated[Optional[float], typer.Option(help="Fabrication budget in $ (default: none, no penalty).")] = None,
-    objective: Annotated[Optional[str], typer.Option(help="'fitness' or 'roi' (fitness / team cost).")] = None,
+    objective: Annotated[Optional[Objective], typer.Option(help="fitness, or roi: fitness / team cost [default: fitness].")] = None,
     generations: Annotated[Optional[int], typer.Option(help="Total generations (with --resume: extend to this many).")] = None,
     population: Annotated[Optional[int], typer.Option(help="Individuals in the population [default: 100].")] = None,
     swarm_size: Annotated[Optional[int], typer.Option(help="Robots per team [default: the scenario's].")] = None,
     trials: Annotated[Optional[int], typer.Option(help="Random environments per team evaluation [default: 3].")] = None,
     ticks: Annotated[Optional[int], typer.Option(help="Episode length in ticks [default: the scenario's].")] = None,
     seed: Annotated[Optional[int], typer.Option(help="Random seed [default: 0].")] = None,
-    device: Annotated[Optional[str], typer.Option(help="auto, cpu or cuda [default: auto].")] = None,
+    device: Annotated[Optional[str], typer.Option(metavar=DEVICE_METAVAR, autocompletion=_complete_device, help="Where the run computes: auto (cuda if available), cpu, cuda or cuda:N [default: auto].")] = None,
     compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick [default: on CUDA, and on CPU for >= 50 generations].")] = None,
     logdir: Annotated[Optional[Path], typer.Option(help="Directory that holds run directories [default: runs].")] = None,
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
@@ -184,7 +211,7 @@ def evolve(
     with ExitStack() as stack:
         attach = None if shards is None else (lambda ev: _attach_shards(stack, ev, *shards))
         ev, run_dir, saved = _start_evolve(
-            stack, scenario=scenario, budget=budget, objective=objective,
+            stack, scenario=scenario, budget=budget, objective=_objective(objective),
             generations=generations, population=population, swarm_size=swarm_size,
             trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
             logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
@@ -463,14 +490,14 @@ def _parse_list(text: str, kind, option: str) -> list:
 def sweep(
     budgets: Annotated[str, typer.Option(help="Comma-separated budgets in $.")] = "2500,3000,4000,5000,6000,8000",
     seeds: Annotated[str, typer.Option(help="Comma-separated seeds; one run per budget and seed.")] = "0",
-    objective: Annotated[Optional[str], typer.Option(help="'fitness' or 'roi'.")] = None,
+    objective: Annotated[Optional[Objective], typer.Option(help="fitness, or roi: fitness / team cost [default: fitness].")] = None,
     scenario: Annotated[Optional[str], typer.Option(help="Scenario [default: budget].")] = None,
     generations: Annotated[Optional[int], typer.Option(help="Generations per run [default: 500].")] = None,
     population: Annotated[Optional[int], typer.Option(help="Population [default: 100].")] = None,
     swarm_size: Annotated[Optional[int], typer.Option(help="Robots per team [default: the scenario's].")] = None,
     trials: Annotated[Optional[int], typer.Option(help="Environments per evaluation [default: 3].")] = None,
     ticks: Annotated[Optional[int], typer.Option(help="Episode length [default: the scenario's].")] = None,
-    device: Annotated[Optional[str], typer.Option(help="auto, cpu or cuda.")] = None,
+    device: Annotated[Optional[str], typer.Option(metavar=DEVICE_METAVAR, autocompletion=_complete_device, help="auto (cuda if available), cpu, cuda or cuda:N [default: auto].")] = None,
     compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick.")] = None,
     logdir: Annotated[Optional[Path], typer.Option(help="Directory that holds the new sweep directory, sweep-<time>, as evolve's --logdir holds run directories [default: runs].")] = None,
     out: Annotated[Optional[Path], typer.Option(help="The sweep directory itself [default: LOGDIR/sweep-<time>]; run again with the same --out to resume.")] = None,
@@ -504,8 +531,8 @@ def sweep(
     out = out or (logdir or Path("runs")) / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     names = option_names({"seed": "--seeds", "budget": "--budgets"})
     try:
-        base = with_overrides(SwarmCoDeConfig(), objective=objective, scenario=scenario,
-                              generations=generations, population=population,
+        base = with_overrides(SwarmCoDeConfig(), objective=_objective(objective),
+                              scenario=scenario, generations=generations, population=population,
                               swarm_size=swarm_size, trials=trials, ticks=ticks, device=device,
                               compile=compile, **parse_settings(settings or [], names))
         for b in budget_list:
