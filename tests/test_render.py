@@ -89,6 +89,28 @@ def test_frame_image_and_png(forage_episode, tmp_path):
         assert im.format == "PNG"
 
 
+def test_robots_show_their_effector_and_light_packages_are_not_grip_white():
+    from matplotlib.figure import Figure
+
+    from swarmcode_torch.app.render import _mass_colors, draw_frame
+
+    g, team = team_genome(DESIGNS)                         # 4 pinchers, 2 suction robots
+    ep = record_episode(g, team, load_scenario("budget"), seed=2, ticks=4, every=2)
+    ax = Figure().add_subplot()
+    draw_frame(ax, ep, ep.snapshots[0])
+    (marks,) = [c for c in ax.collections if c.get_zorder() == 4.5]
+    assert all(c[3] == 0 for c in marks.get_facecolor())     # outlines, over the robot colour
+    corners = sorted(len(path.vertices) for path in marks.get_paths())
+    assert corners[:4] == [5] * 4 and min(corners[4:]) > 8   # 4 squares (pincher), 2 rings
+    # the legend shows each design with its mark
+    legend = ax.get_legend()
+    assert [t.get_text() for t in legend.get_texts()][:2] == ep.labels[:2]
+    # the lightest package is a clear colour, not the white of a free grip marker
+    lightest = min(_mass_colors(ep, ep.layout.p_mass[0][ep.layout.p_present[0]]),
+                   key=lambda c: -sum(c[:3]))
+    assert sum(lightest[:3]) < 2.6 and lightest[2] < 0.7, lightest
+
+
 def test_save_gif_frame_count(tmp_path):
     g, team = team_genome(DESIGNS)
     ep = record_episode(g, team, load_scenario("budget"), seed=2, ticks=6, every=2)

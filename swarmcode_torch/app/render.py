@@ -126,14 +126,15 @@ def design_colors(n: int) -> list:
 
 
 def _mass_colors(episode: Episode, mass: Tensor) -> list:
-    """Package face colours: light (light packages) to dark brown (heavy), over the episode."""
+    """Package face colours: light orange (light packages) to dark brown (heavy), over the
+    episode; the lightest is a clear orange, never the white of a free grip marker."""
     from matplotlib import colormaps
     cmap = colormaps["YlOrBr"]
     lay = episode.layout
     all_m = lay.p_mass[0][lay.p_present[0]]
     lo, hi = (float(all_m.min()), float(all_m.max())) if all_m.numel() else (0.0, 1.0)
     frac = ((mass - lo) / max(hi - lo, 1e-6)).clamp(0, 1)
-    return [cmap(0.15 + 0.8 * float(f)) for f in frac]
+    return [cmap(0.35 + 0.6 * float(f)) for f in frac]
 
 
 def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = None,
@@ -143,8 +144,9 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
     Grey discs: obstacles; green disc: the base. Packages on the ground or carried: squares
     need a pincher, circles suction, shaded light to dark brown by mass; collaborative packages
     are hexagons with a marker per grip point (square pincher / circle suction, filled black
-    when held). Robots: discs of their true radius coloured by design row; a thick black
-    outline when carrying, faded when the battery is flat.
+    when held). Robots: discs of their true radius coloured by design row, marked with their
+    effector (an inner square outline: pincher, an inner ring: suction, the shapes of the
+    packages each lifts); a thick black outline when carrying, faded when the battery is flat.
     """
     from matplotlib.collections import PatchCollection
     from matplotlib.colors import to_rgba
@@ -226,11 +228,18 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
     pos = s.pos.tolist()
     carrying = (s.holding >= 0).tolist()
     alive = (s.energy > 0).tolist()
-    discs, fc, ec, lw = [], [], [], []
+    effector = rob.effector[0].tolist()
+    discs, fc, ec, lw, marks = [], [], [], [], []
     for i in range(len(keep)):
         if not keep[i]:
             continue
         discs.append(Circle(tuple(pos[i]), radius[i]))
+        x, y = pos[i]
+        if effector[i] == PINCHER:
+            h = 0.42 * radius[i]
+            marks.append(Rectangle((x - h, y - h), 2 * h, 2 * h))
+        else:
+            marks.append(Circle((x, y), 0.48 * radius[i]))
         c = to_rgba(colors[prog[i] % len(colors)])
         fc.append(c if alive[i] else c[:3] + (0.3,))
         ec.append("black" if carrying[i] else "#444444")
@@ -238,6 +247,8 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
     if discs:
         ax.add_collection(PatchCollection(discs, facecolor=fc, edgecolor=ec, linewidths=lw,
                                           zorder=4))
+        ax.add_collection(PatchCollection(marks, facecolor="none", edgecolor="#1a1a1a",
+                                          linewidths=0.9, zorder=4.5))
     if carried:
         ax.add_collection(PatchCollection(carried, facecolor=carried_c, edgecolor="black",
                                           lw=0.6, zorder=5))
@@ -259,29 +270,36 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
     if legend and episode.labels:
         from matplotlib.lines import Line2D
         used = sorted(set(p for p, k in zip(prog, keep) if k))
-        handles = [Line2D([], [], marker="o", ls="", markersize=7, markeredgecolor="#333333",
-                          markerfacecolor=colors[r % len(colors)],
-                          label=episode.labels[r] if r < len(episode.labels) else f"design {r}")
+        eff_of = {p: e for p, e, k in zip(prog, effector, keep) if k}
+        handles = [(Line2D([], [], marker="o", ls="", markersize=9, markeredgecolor="#333333",
+                           markerfacecolor=colors[r % len(colors)]),
+                    Line2D([], [], marker="s" if eff_of[r] == PINCHER else "o", ls="",
+                           markersize=4, markeredgecolor="#1a1a1a", markerfacecolor="none",
+                           markeredgewidth=0.9))
                    for r in used]
+        labels = [episode.labels[r] if r < len(episode.labels) else f"design {r}" for r in used]
         kinds = lay.p_present[0]
         indiv_eff = set(g_eff[kinds & ~collab, 0].tolist())
         pkg = "#d9a35b"
         for e, m in ((PINCHER, "s"), (SUCTION, "o")):
             if e in indiv_eff:
                 handles.append(Line2D([], [], marker=m, ls="", markersize=6, markeredgecolor="black",
-                                      markerfacecolor=pkg, label=f"{_EFFECTOR_NAMES[e]} package"))
+                                      markerfacecolor=pkg))
+                labels.append(f"{_EFFECTOR_NAMES[e]} package")
         if bool((kinds & collab).any()):
             handles.append(Line2D([], [], marker="h", ls="", markersize=8, markeredgecolor="black",
-                                  markerfacecolor=pkg, label="collab package"))
+                                  markerfacecolor=pkg))
+            labels.append("collab package")
             grip_eff = set(g_eff[kinds & collab].flatten().tolist())
             for e, m in ((PINCHER, "s"), (SUCTION, "o")):
                 if e in grip_eff:
                     handles.append(Line2D([], [], marker=m, ls="", markersize=4,
-                                          markeredgecolor="black", markerfacecolor="white",
-                                          label=f"{_EFFECTOR_NAMES[e]} grip"))
+                                          markeredgecolor="black", markerfacecolor="white"))
+                    labels.append(f"{_EFFECTOR_NAMES[e]} grip")
             handles.append(Line2D([], [], marker="o", ls="", markersize=4, markeredgecolor="black",
-                                  markerfacecolor="black", label="held grip"))
-        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+                                  markerfacecolor="black"))
+            labels.append("held grip")
+        ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
                   frameon=False, handletextpad=0.3, borderaxespad=0.0,
                   title="darker = heavier", title_fontsize=7)
 
