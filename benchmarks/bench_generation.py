@@ -3,6 +3,25 @@
 Each configuration is `scenario:swarm_size:population`. The first `--warmup` generations
 (which include torch.compile's compile time, reported separately) are not timed.
 
+After the timed generations, one more generation is counted (`--count`, on by default; not
+timed): under `torch.profiler`, with the rollout (the tick loop, `evaluation.simulate_teams`)
+marked by a `record_function` range, it counts per generation, split into the rollout and the
+rest (speciation, partners, team assembly, fitness, reproduction, records):
+- `aten_ops`: every aten op call (nested ones included), `aten_top_ops`: those not called by
+  another aten op (the dispatches the Python code makes; on the CPU, what launches kernels);
+- `local_scalar_dense`: `aten::_local_scalar_dense` calls (`.item()`, `int(t)`, `float(t)`,
+  `bool(t)` of a tensor: a device sync on CUDA);
+- on CUDA, `kernel_launches` (`cudaLaunchKernel` and kin), `graph_launches` (`cudaGraphLaunch`),
+  `dtoh_copies` (device-to-host memcpys), `syncs` (`cudaStreamSynchronize`,
+  `cudaDeviceSynchronize`, `cudaEventSynchronize`);
+- `host_reads`: device values read on the host, counted on any device by a `TorchFunctionMode`
+  (`.item()`, `.tolist()`, `int()`, `float()`, `bool()`, `__index__`, `.numpy()`, `.cpu()`,
+  `.to(cpu)` of a tensor that is not a host copy or computed from one: on CUDA, each is a device
+  sync; on the CPU, what would be one), with the `host_read_sites` (file:line in the package,
+  kind: calls) outside the rollout.
+  With a compiled tick the rollout's host reads are not counted (the mode is left off there so
+  the compiled tick does not recompile).
+
     python benchmarks/bench_generation.py --device cpu --configs four-niche:20:50 --generations 2
     python benchmarks/bench_generation.py --device cuda          # the issue's four setups
 """
@@ -10,8 +29,11 @@ Each configuration is `scenario:swarm_size:population`. The first `--warmup` gen
 from __future__ import annotations
 
 import argparse
+import collections
+import contextlib
 import sys
 import time
+import traceback
 from pathlib import Path
 
 import torch
@@ -20,7 +42,164 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import median, now, parse_configs, run_metadata, write_json  # noqa: E402
 from swarmcode_torch.coevo.evolve import Evolution  # noqa: E402
-from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.coevo.config import SwarmCoDeConfig  # noqa: E402
+from swarmcode_torch.coevo import evaluation  # noqa: E402
+
+ROLLOUT = "bench::rollout"
+HOST_READS = ("item", "tolist", "__bool__", "__int__", "__float__", "__index__", "cpu", "numpy",
+              "to")
+SHAPE_SYNCS = ("nonzero", "argwhere", "unique", "unique_consecutive", "masked_select",
+               "bincount", "repeat_interleave")
+LAUNCHES = ("cudaLaunchKernel", "cudaLaunchKernelExC", "cuLaunchKernel", "cuLaunchKernelEx")
+SYNCS = ("cudaStreamSynchronize", "cudaDeviceSynchronize", "cudaEventSynchronize")
+PACKAGE = str(Path(evaluation.__file__).resolve().parents[1])
+
+
+class HostReads(torch.overrides.TorchFunctionMode):
+    """Counts the Tensor methods that read a device value on the host, by call site in the
+    package. Host copies (`.cpu()`, `.to(cpu)`: one read each, of a tensor not on the CPU) and
+    what is computed from them are host tensors, whose reads are not counted; on a CUDA run, nor
+    are reads of any CPU tensor. So a CPU run counts what would be a sync on CUDA."""
+
+    def __init__(self, device: torch.device):
+        super().__init__()
+        self.device = device
+        self.host = torch.utils.weak.WeakIdKeyDictionary()  # host tensors (copies, and derived)
+        self.counts = collections.Counter()          # (part, kind) -> calls
+        self.sites = collections.Counter()           # (part, "file:line kind") -> calls
+        self.part = "rest"
+
+    def _on_host(self, t: torch.Tensor) -> bool:
+        return t in self.host or (self.device.type != "cpu" and t.device.type == "cpu")
+
+    def _shape_sync(self, name, args, kwargs) -> bool:
+        """An op whose output shape depends on tensor values (a sync on CUDA): nonzero, unique,
+        masked_select, bincount, repeat_interleave by a tensor of repeats, indexing or assigning
+        by a bool mask."""
+        if not args or not isinstance(args[0], torch.Tensor) or self._on_host(args[0]):
+            return False
+        if name in SHAPE_SYNCS:
+            if name == "repeat_interleave":       # by a tensor of repeats, unless sized
+                reps = args[1] if len(args) > 1 else kwargs.get("repeats", args[0])
+                return "output_size" not in kwargs and isinstance(reps, torch.Tensor)
+            return True
+        if name in ("__getitem__", "__setitem__") and len(args) > 1:
+            idx = args[1] if isinstance(args[1], tuple) else (args[1],)
+            return any(isinstance(i, torch.Tensor) and i.dtype == torch.bool for i in idx)
+        return False
+
+    def __torch_function__(self, func, types, args=(), kwargs=None):
+        kwargs = kwargs or {}
+        name = getattr(func, "__name__", "")
+        copy = False
+        if name in HOST_READS and args and isinstance(args[0], torch.Tensor):
+            copy = name == "cpu" or (name == "to" and _to_cpu(args[1:], kwargs, self.device))
+            if (copy or name not in ("to", "cpu")) and not self._on_host(args[0]):
+                self.counts[self.part, name] += 1
+                self.sites[self.part, f"{_caller()} {name}"] += 1
+        elif self._shape_sync(name, args, kwargs):
+            self.counts[self.part, "shape"] += 1
+            self.sites[self.part, f"{_caller()} shape:{name}"] += 1
+        out = func(*args, **kwargs)
+        if copy or (len(self.host) and any(
+                isinstance(t, torch.Tensor) and t in self.host
+                for t in torch.utils._pytree.tree_leaves((args, kwargs)))):
+            for t in torch.utils._pytree.tree_leaves(out):
+                if isinstance(t, torch.Tensor):
+                    self.host[t] = True
+        return out
+
+
+def _to_cpu(args, kwargs, run_device: torch.device) -> bool:
+    """Whether `.to(*args, **kwargs)` copies to the host: to the CPU named as a string (how the
+    package asks for host copies), or to any CPU device on a run that is not on the CPU (where
+    `.to(device)` of a run on the CPU is a move to the run's device, not a copy to the host)."""
+    dev = kwargs.get("device", args[0] if args else None)
+    if isinstance(dev, torch.Tensor):
+        dev = dev.device
+    if dev is None or isinstance(dev, torch.dtype):
+        return False
+    try:
+        cpu = torch.device(dev).type == "cpu"
+    except (TypeError, RuntimeError):
+        return False
+    return cpu and (isinstance(dev, str) or run_device.type != "cpu")
+
+
+def _caller() -> str:
+    """file:line of the innermost frame in the package (else the innermost outside torch)."""
+    for fr in reversed(traceback.extract_stack()[:-2]):
+        if fr.filename.startswith(PACKAGE):
+            return f"{Path(fr.filename).relative_to(Path(PACKAGE).parent)}:{fr.lineno}"
+    return "elsewhere"
+
+
+def count_generation(ev: Evolution, device: torch.device) -> dict:
+    """Ops, host syncs and kernel launches of one generation, split into rollout and rest."""
+    reads = HostReads(device)
+    inner = evaluation.simulate_teams
+    keep_mode = not ev.ctx.compiled    # a compiled tick would recompile under the mode
+
+    def marked(*a, **k):
+        with contextlib.ExitStack() as stack:
+            if not keep_mode:
+                stack.enter_context(torch.overrides._pop_mode_temporarily())
+            stack.enter_context(torch.profiler.record_function(ROLLOUT))
+            reads.part = "rollout"
+            try:
+                out = inner(*a, **k)
+                if device.type == "cuda":
+                    torch.cuda.synchronize(device)
+                return out
+            finally:
+                reads.part = "rest"
+
+    acts = [torch.profiler.ProfilerActivity.CPU]
+    if device.type == "cuda":
+        acts.append(torch.profiler.ProfilerActivity.CUDA)
+    evaluation.simulate_teams = marked
+    try:
+        with torch.profiler.profile(activities=acts) as prof, reads:
+            ev.step()
+    finally:
+        evaluation.simulate_teams = inner
+    events = prof.events()
+    spans = [(e.time_range.start, e.time_range.end) for e in events if e.name == ROLLOUT]
+    zero = dict.fromkeys(("aten_ops", "aten_top_ops", "local_scalar_dense", "kernel_launches",
+                          "graph_launches", "dtoh_copies", "syncs"), 0)
+    out = {"rollout": dict(zero), "rest": dict(zero)}
+    for e in events:
+        if e.device_type != torch.autograd.DeviceType.CPU or e.name == ROLLOUT:
+            continue
+        t = e.time_range.start
+        c = out["rollout" if any(a <= t <= b for a, b in spans) else "rest"]
+        if e.name.startswith("aten::"):
+            c["aten_ops"] += 1
+            p = e.cpu_parent
+            while p is not None and not p.name.startswith("aten::"):
+                p = p.cpu_parent
+            c["aten_top_ops"] += p is None
+            c["local_scalar_dense"] += e.name == "aten::_local_scalar_dense"
+            c["dtoh_copies"] += sum("DtoH" in k.name or "Device -> Pageable" in k.name
+                                    or "Device -> Pinned" in k.name for k in e.kernels)
+        c["kernel_launches"] += e.name in LAUNCHES
+        c["graph_launches"] += e.name == "cudaGraphLaunch"
+        c["syncs"] += e.name in SYNCS
+    for part in out:
+        out[part]["host_reads"] = sum(n for (p, k), n in reads.counts.items()
+                                      if p == part and k != "shape")
+        out[part]["shape_syncs"] = reads.counts[part, "shape"]
+        out[part]["host_reads_by_kind"] = {k: n for (p, k), n in sorted(reads.counts.items())
+                                           if p == part and k != "shape"}
+        if device.type != "cuda":
+            for k in ("kernel_launches", "graph_launches", "dtoh_copies", "syncs"):
+                del out[part][k]
+    out["rollout_counted"] = {"host_reads": keep_mode}
+    out["rollouts"] = len(spans)
+    for part in ("rollout", "rest"):
+        out[part]["host_read_sites"] = {k: n for (p, k), n in reads.sites.most_common()
+                                        if p == part}
+    return out
 
 DEFAULT_CONFIGS = "four-niche:20:50,budget:20:100,swarm200:200:50,swarm1000:1000:50"
 
@@ -59,6 +238,8 @@ def bench(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
     }
     if device.type == "cuda":
         row["peak_memory_bytes"] = torch.cuda.max_memory_allocated(device)
+    if args.count:
+        row["counts_per_generation"] = count_generation(ev, device)
     return row
 
 
@@ -75,6 +256,9 @@ def main() -> None:
     ap.add_argument("--cuda-graphs", action=argparse.BooleanOptionalAction, default=None,
                     help="replay the compiled tick as CUDA graphs (evolve's cuda_graphs key) "
                          "[default: as evolve, on where the tick runs compiled on CUDA]")
+    ap.add_argument("--count", action=argparse.BooleanOptionalAction, default=True,
+                    help="count ops, host syncs and kernel launches in one more generation "
+                         "(untimed, under torch.profiler)")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     device = torch.device(args.device)
@@ -89,6 +273,11 @@ def main() -> None:
               f"{r['robot_ticks_per_s'] / 1e6:.2f} M robot-ticks/s "
               f"(warm-up {r['warmup_seconds']:.1f} s; {time.perf_counter() - t:.0f} s total)",
               flush=True)
+        if "counts_per_generation" in r:
+            c = r["counts_per_generation"]
+            for part in ("rollout", "rest"):
+                print(f"  {part:8s} " + ", ".join(f"{k} {v}" for k, v in c[part].items()
+                                                   if not isinstance(v, dict)), flush=True)
         write_json({**run_metadata(device), "results": rows}, out)  # keep what is done
     write_json({**run_metadata(device), "results": rows}, out)
     print(f"wrote {out}")

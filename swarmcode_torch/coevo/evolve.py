@@ -9,7 +9,7 @@ imports a CLI or logging library.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from functools import partial
 from typing import Any
 
@@ -183,23 +183,32 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     # the best team of this generation: the team of the individual with the highest fitness
     # score (gated: a focal whose marginal contribution is not positive is penalised, so a strong
     # team carried by its partners is not credited to a focal that weakens it)
-    b = int(res.fitness.argmax())
+    b = res.fitness.argmax()
     team = res.swarms.focal_team[b]
     rows, counts = torch.unique(team[team >= 0], return_counts=True)
+    ids, sizes = torch.unique(sp.species, return_counts=True)
     cost = genome_phenotype(genome).cost
-    # to the host in one transfer per field, not one per value (each is a device sync)
-    host = genome.index(rows).to("cpu")
+    # every value the records need, to the host in one transfer (each transfer is a device sync)
+    sel = genome.index(rows)
+    names = [f.name for f in fields(Population)]
+    h = _to_host([getattr(sel, n) for n in names] + [
+        sp.species[rows], cost[rows], counts,
+        torch.stack([v[b].float() for v in res.team_metrics.values()]), res.focal[b],
+        res.team_cost[b], ids, sizes, fit.max(), fit.mean(), res.focal.max(),
+        genome.radius.detach(), genome.dominance.detach(), genome.selectivity.detach()])
+    host, h = Population(**dict(zip(names, h))), h[len(names):]
+    (team_species, team_cost, team_counts, team_m, focal_b, team_cost_b, ids, sizes, fit_max,
+     fit_mean, focal_max, radius, dominance, selectivity) = h
     can = capabilities(genome_phenotype(host), ctx.scenario, ctx.params).tolist()  # [R][C]
     designs = [dict(design_record(host, i, s, c), count=n,
                     capability=[j for j, ok in enumerate(can[i]) if ok])
-               for i, (s, c, n) in enumerate(zip(sp.species[rows].tolist(), cost[rows].tolist(),
-                                                 counts.tolist()))]
+               for i, (s, c, n) in enumerate(zip(team_species.tolist(), team_cost.tolist(),
+                                                 team_counts.tolist()))]
     designs.sort(key=lambda d: -d["count"])
-    tm = dict(zip(res.team_metrics, torch.stack([v[b].float() for v in res.team_metrics.values()])
-                  .tolist()))
+    tm = dict(zip(res.team_metrics, team_m.tolist()))
     team_record = {
-        "generation": state.generation, "fitness": float(res.focal[b]),
-        "cost": float(res.team_cost[b]), "species": len(designs),
+        "generation": state.generation, "fitness": float(focal_b),
+        "cost": float(team_cost_b), "species": len(designs),
         "niches": niche_count(d["capability"] for d in designs),
         "deliveries_individual": tm["delivered_individual"],
         "deliveries_collab": tm["delivered_collab"],
@@ -210,7 +219,6 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     if best is None or team_record["fitness"] > best["fitness"]:
         best = team_record
 
-    ids, sizes = torch.unique(sp.species, return_counts=True)
     composition = {
         "generation": state.generation,
         "population": {int(i): int(n) for i, n in zip(ids.tolist(), sizes.tolist())},
@@ -232,18 +240,30 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
         turnover=turnover)
 
     result = GenerationResult(
-        generation=state.generation, best_fitness=float(fit.max()),
-        mean_fitness=float(fit.mean()), num_species=int(ids.numel()), founded=founded,
+        generation=state.generation, best_fitness=float(fit_max),
+        mean_fitness=float(fit_mean), num_species=int(ids.numel()), founded=founded,
         extinct=extinct,
         species_median_age=median(turnover.ages(state.generation, composition["population"])),
         team=team_record, team_rows=team,
         team_median_age=median(turnover.ages(state.generation, composition["team"])),
-        focal_max=float(res.focal.max()), best=best, composition=composition,
+        focal_max=float(focal_max), best=best, composition=composition,
         budget=cfg.budget, seconds=time.perf_counter() - t0, eval_seconds=eval_seconds,
-        sim_seconds=res.sim_seconds, radius=genome.radius.detach().cpu(),
-        dominance=genome.dominance.detach().cpu(),
-        selectivity=genome.selectivity.detach().cpu())
+        sim_seconds=res.sim_seconds, radius=radius, dominance=dominance,
+        selectivity=selectivity)
     return new_state, result
+
+
+def _to_host(tensors: list[Tensor]) -> list[Tensor]:
+    """CPU copies of tensors of one device, in one transfer: their bytes are concatenated on the
+    device, copied, and split (bit for bit the tensors, their dtypes and shapes)."""
+    flat = [t.detach().contiguous().reshape(-1) for t in tensors]
+    data = torch.cat([t.view(torch.uint8) for t in flat]).cpu()
+    out, i = [], 0
+    for t, src in zip(flat, tensors):
+        n = t.numel() * t.element_size()
+        out.append(data[i:i + n].clone().view(t.dtype).view(src.shape))
+        i += n
+    return out
 
 
 # ------------------------------------------------------------------ checkpoints

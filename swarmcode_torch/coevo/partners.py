@@ -8,7 +8,7 @@ from typing import Callable
 import torch
 from torch import Tensor
 
-from .selection import elite_count, rank_within_groups, top_table
+from .selection import elite_count, group_sizes, rank_within_groups, top_table
 from .speciation import hamming
 
 
@@ -73,12 +73,12 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
     match = species[:, None] == proto_ids[None, :]
     pos = torch.where(match.any(1), match.to(torch.int32).argmax(1).long(),
                       torch.full((p,), k, dtype=torch.long, device=dev))  # k: not in any species
-    n_wanted = torch.as_tensor(n_elite_fn(torch.bincount(pos, minlength=k + 1)[:k]), device=dev)
+    n_wanted = torch.as_tensor(n_elite_fn(group_sizes(pos, k + 1)[:k]), device=dev)
     if evaluated_only and bool(has_fitness.any()):
         pos = torch.where(has_fitness, pos, torch.full_like(pos, k))
     f = torch.where(has_fitness, torch.nan_to_num(fitness.float(), nan=-torch.inf),
                     torch.full_like(fitness, -torch.inf, dtype=torch.float))
-    sizes = torch.bincount(pos, minlength=k + 1)
+    sizes = group_sizes(pos, k + 1)
     order, rank = rank_within_groups(pos, f, sizes, first=has_fitness)
     return top_table(order, rank, pos, torch.minimum(n_wanted.long(), sizes[:k]))
 

@@ -12,7 +12,7 @@ from torch import Tensor
 from ..sim.bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ, compute_jumps
 from .config import ReproductionParams
 from .population import CROSSOVER_GROUPS, GENE_BOUNDS, GENE_VALUES, SOCIAL_GENES, Population
-from .selection import elite_count, rank_within_groups, top_per_group
+from .selection import elite_count, group_sizes, rank_within_groups, top_per_group
 from .speciation import distance
 
 DistanceFn = Callable[[Population, Population], Tensor]
@@ -34,27 +34,27 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
     k = adjusted_fitness_sum.numel()
     if k == 0:
         return torch.zeros(0, dtype=torch.long, device=dev)
+    # no value is read on the host here (each would be a device sync): the branches are
+    # torch.where over tensors, `protect` may be a 0-d tensor
     f = torch.nan_to_num(adjusted_fitness_sum.double(), nan=0.0).clamp(min=0.0)
-    if not bool(f.sum() > 0):
-        f = torch.ones_like(f)
+    f = torch.where(f.sum() > 0, f, torch.ones_like(f))
     if min_share > 0:
         # a relative tolerance, so that an exact share of min_share is not lost to rounding
         keep = f / f.sum() * population_size >= min_share * (1 - 1e-9)
-        if bool((f * keep).sum() > 0):             # else no species qualifies: no threshold
-            if protect is not None:
-                keep[protect] = True
-            f = torch.where(keep, f, torch.zeros_like(f))
+        any_kept = (f * keep).sum() > 0           # else no species qualifies: no threshold
+        if protect is not None:
+            keep[protect] = True
+        f = torch.where(any_kept & ~keep, torch.zeros_like(f), f)
     share = f / f.sum() * population_size
     base = share.floor()
     q = base.long()
-    rem = int(population_size - int(q.sum()))
-    rem = max(0, min(rem, k))
-    if rem > 0:
-        order = torch.sort(share - base, descending=True, stable=True).indices
-        q[order[:rem]] += 1
-    if protect is not None and int(q[protect]) == 0 and population_size > 0:
-        q[int(q.argmax())] -= 1
-        q[protect] = 1
+    rem = (population_size - q.sum()).clamp(0, k)  # +1 to the rem largest remainders
+    order = torch.sort(share - base, descending=True, stable=True).indices
+    q[order] += (torch.arange(k, device=dev) < rem).long()
+    if protect is not None and population_size > 0:
+        need = q[protect] == 0                    # take 1 from the largest quota
+        q[q.argmax()] -= need.long()
+        q[protect] = torch.where(need, 1, q[protect])
     return q
 
 
@@ -234,7 +234,7 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     if p and not bool(match.any(1).all()):
         raise ValueError("every individual's species must be listed in proto_ids")
     pos = match.to(torch.int32).argmax(1).long()
-    sizes = torch.bincount(pos, minlength=k)
+    sizes = group_sizes(pos, k)
     fit = fitness.float()
     fsum = torch.zeros(k, dtype=torch.float64, device=dev).index_add_(0, pos, fit.double())
     if params.quota_basis == "sum":
@@ -246,8 +246,8 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     quota = torch.zeros(k, dtype=torch.long, device=dev)
     nonempty = (sizes > 0).nonzero().squeeze(1)                           # empty species get 0
     if p:
-        best_pos = pos[int(fit.argmax())]
-        protect = int((nonempty == best_pos).to(torch.int32).argmax())
+        best_pos = pos[fit.argmax()]
+        protect = (nonempty == best_pos).to(torch.int32).argmax()
         quota[nonempty] = offspring_quotas(adjusted[nonempty], p, protect=protect,
                                            min_share=params.min_share)
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)

@@ -17,6 +17,13 @@ def elite_count(species_size: Tensor | int, max_elite: int = SwarmCoDeConfig.max
     return max(1, min(max_elite, int(species_size) // 5 + 1))
 
 
+def group_sizes(group: Tensor, n: int) -> Tensor:
+    """group [P] long in 0..n-1 -> [n] long rows per group: `torch.bincount(group, minlength=n)`
+    without its device sync (bincount reads the largest value on the host to size its output)."""
+    return torch.zeros(n, dtype=torch.long, device=group.device).scatter_add_(
+        0, group, torch.ones_like(group))
+
+
 def rank_within_groups(group: Tensor, fitness: Tensor, sizes: Tensor | None = None,
                        first: Tensor | None = None) -> tuple[Tensor, Tensor]:
     """group [P] long >= 0, fitness [P] -> (order [P], rank [P]).

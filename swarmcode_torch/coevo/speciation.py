@@ -136,11 +136,12 @@ def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | 
 
     # (2) sequential founding, in rounds.
     new_rows: list[int] = []
-    while True:
+    while p > 0:
         cand = ~assigned & (min_d > delta)
-        if not bool(cand.any()):
+        # the first founder candidate, -1 if none: one read on the host per round
+        f = int(torch.where(cand.any(), cand.to(torch.int32).argmax(), -1))
+        if f < 0:
             break
-        f = int(cand.to(torch.int32).argmax())                           # first founder candidate
         block = ~assigned & (idx < f)
         assign_pos = torch.where(block, arg, assign_pos)
         assigned = assigned | block

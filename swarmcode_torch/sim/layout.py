@@ -6,6 +6,7 @@ so the focal and baseline trials of an evaluation can share it exactly.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -51,6 +52,13 @@ def spawn_slots(n: int, spacing: float, device=None) -> torch.Tensor:
     return pts.float()
 
 
+@functools.lru_cache(maxsize=64)
+def _spawn_extent(n: int, spacing: float, device: torch.device) -> float:
+    """The largest distance of `spawn_slots(n, spacing, device)` from the origin, read on the host
+    once per (n, spacing, device), not once per call of `make_layouts` (each a device sync)."""
+    return float(spawn_slots(n, spacing, device).norm(dim=-1).max())
+
+
 def _first_valid(cand: torch.Tensor, ok: torch.Tensor) -> torch.Tensor:
     """cand [E, K, M, 2], ok [E, K, M] -> [E, M, 2]: the first valid candidate (else the last)."""
     k = cand.shape[1]
@@ -67,7 +75,7 @@ def make_layouts(scenario: Scenario, num: int, generator: torch.Generator,
     E, N, W = num, scenario.num_robots, scenario.arena
     base = torch.tensor([W / 2, W / 2], device=gdev)
     slots = spawn_slots(N, 2 * R_MAX + 0.1, gdev)
-    spawn_r = float(slots.norm(dim=-1).max()) + R_MAX
+    spawn_r = _spawn_extent(N, 2 * R_MAX + 0.1, gdev) + R_MAX
 
     # Robots: a random assignment of robots to spawn slots.
     perm = torch.rand(E, N, generator=g, device=gdev).argsort(-1)
