@@ -16,10 +16,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import statistics
 from pathlib import Path
 
 from swarmcode_torch.app.analysis import run_dynamics
+from swarmcode_torch.coevo.dynamics import mean_std as mean_std_of
 from swarmcode_torch.app.runs import load_checkpoint
 
 #: (key, header, format of one run's value); mean and std take one more decimal
@@ -43,7 +43,8 @@ def mean_std(values: list[float], fmt: str) -> str:
     values = [v for v in values if v is not None and not math.isnan(v)]
     if len(values) < 2:
         return fmt.format(values[0]) if values else "-"
-    return f"{fmt.format(statistics.mean(values))} ± {fmt.format(statistics.stdev(values))}"
+    mean, std = mean_std_of(values)
+    return f"{fmt.format(mean)} ± {fmt.format(std)}"
 
 
 def cell(values: list[float], fmt: str) -> str:
