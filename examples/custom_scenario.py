@@ -3,6 +3,10 @@ API, then print the best team and the last generations' metrics.
 
     python examples/custom_scenario.py                     # 10 generations, about a minute on a CPU
     python examples/custom_scenario.py --generations 50 --logdir runs
+    python examples/custom_scenario.py --scenario examples/three-niche-carbon.toml
+
+three-niche-carbon.toml is the same world with a hardware catalog of its own
+(carbon-hardware.toml beside it: `hardware = "carbon-hardware.toml"`).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ SCENARIO = Path(__file__).with_name("three-niche.toml")
 
 def main(argv: list[str] | None = None) -> sc.RunResult:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default=str(SCENARIO), help="a scenario TOML file")
     ap.add_argument("--generations", type=int, default=10)
     ap.add_argument("--population", type=int, default=20)
     ap.add_argument("--swarm-size", type=int, default=10)
@@ -26,9 +31,10 @@ def main(argv: list[str] | None = None) -> sc.RunResult:
     ap.add_argument("--logdir", default=None, help="write a run directory here (default: none, in memory)")
     args = ap.parse_args(argv)
 
-    scenario = sc.load_scenario(str(SCENARIO))     # a Scenario object: check it, change it, ...
+    scenario = sc.load_scenario(args.scenario)     # a Scenario object: check it, change it, ...
     print(f"{scenario.name}: {scenario.description}")
-    result = sc.evolve(scenario=str(SCENARIO), generations=args.generations,
+    print(f"chassis strength per tier (kg/m^2): {scenario.hardware.chassis_strength}")
+    result = sc.evolve(scenario=args.scenario, generations=args.generations,
                        population=args.population, swarm_size=args.swarm_size, ticks=args.ticks,
                        trials=args.trials, seed=args.seed, device="cpu", logdir=args.logdir,
                        callback=lambda r: print(f"gen {r.generation}: best fitness "

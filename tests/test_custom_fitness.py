@@ -105,3 +105,15 @@ def test_examples_custom_fitness_runs(tmp_path, monkeypatch, capsys):
     (run_dir,) = [d for d in tmp_path.iterdir() if d.is_dir()]
     assert json.loads((run_dir / "summary.json").read_text())["fitness"] == \
         "custom: __main__.deliveries_only"
+
+
+def test_examples_custom_fitness_by_weights_sets_the_table_iv_keys(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(sys, "argv", ["custom_fitness.py", "--weights", "--generations", "1",
+                                      "--population", "4", "--swarm-size", "3", "--ticks", "6",
+                                      "--logdir", str(tmp_path)])
+    runpy.run_path(str(ROOT / "examples" / "custom_fitness.py"), run_name="__main__")
+    out = capsys.readouterr().out
+    assert "fitness function: built-in, weights w_delivery=100 w_pickup=0 w_closeness=0" in out
+    (run_dir,) = [d for d in tmp_path.iterdir() if d.is_dir()]
+    config = (run_dir / "config.toml").read_text()
+    assert "w_pickup = 0.0" in config and "w_closeness = 0.0" in config

@@ -10,7 +10,7 @@ from typing import Sequence
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..coevo.population import genome_phenotype
 from .render import record_episode, save_gif, team_genome
-from .runs import (REPLAY_FILE, RunError, check_hardware, generation_team, load_checkpoint,
+from .runs import (REPLAY_FILE, RunError, generation_team, load_checkpoint,
                    read_config, read_summary, read_teams, run_scenario)
 from ..sim.scenario import Scenario
 from ..sim.state import WorldParams, capabilities
@@ -22,7 +22,8 @@ def design_capabilities(designs: Sequence[dict], scenario: Scenario) -> list[lis
     if all("capability" in d for d in designs):
         return [list(d["capability"]) for d in designs]
     genome, _ = team_genome(designs)
-    can = capabilities(genome_phenotype(genome), scenario, WorldParams.for_scenario(scenario))
+    can = capabilities(genome_phenotype(genome, scenario.hardware), scenario,
+                       WorldParams.for_scenario(scenario))
     return [[j for j, ok in enumerate(row) if ok] for row in can.tolist()]
 
 
@@ -81,8 +82,8 @@ def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0
     The run's config gives the episode length (``ticks`` overrides it) and its scenario.toml
     copy the scenario (the config's scenario in a run made before runs kept one); the
     environment is drawn from `seed`. RunError for an `out` whose folder does not exist, a run
-    file that cannot be read or is malformed, or a run whose hardware.toml differs from the
-    installed catalog. Returns the GIF path (default ``run_dir/team.gif``) and
+    file that cannot be read or is malformed (its robots are built from the run's hardware.toml
+    copy). Returns the GIF path (default ``run_dir/team.gif``) and
     the episode metrics as floats.
     """
     run_dir = Path(run_dir)
@@ -96,8 +97,7 @@ def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0
         designs = generation_team(run_dir, generation)["designs"]
     else:
         designs = read_summary(run_dir, figures=False)["designs"]
-    scenario = run_scenario(run_dir, cfg)        # the run's own copy, when it has one
-    check_hardware(run_dir)
+    scenario = run_scenario(run_dir, cfg)        # the run's own copies, when it has them
     genome, team = team_genome(designs, cfg.tag_length)
     if ticks is None:
         ticks = cfg.ticks or scenario.episode_ticks

@@ -20,7 +20,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import tempfile
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -29,6 +28,7 @@ from . import records, runs
 from ..coevo.config import SwarmCoDeConfig
 from ..coevo.evaluation import ScoreFn
 from ..coevo.evolve import Evolution, GenerationResult
+from ..sim.hardware import catalog_toml_lines, default_catalog
 from ..sim.scenario import EFFECTORS, Scenario, parse_scenario, read_scenario
 
 _CONFIG_KEYS = tuple(f.name for f in fields(SwarmCoDeConfig))
@@ -67,6 +67,8 @@ def scenario_to_toml(s: Scenario) -> str:
                   f"radius_band = {_toml([float(x) for x in p.radius_band])}",
                   f"size = {_toml(float(p.size))}",
                   f"distance_weighting = {_toml(bool(p.distance_weighting))}"]
+    if s.hardware != default_catalog():                 # its own catalog, inline
+        lines += catalog_toml_lines(s.hardware, prefix="hardware.")
     return "\n".join(lines) + "\n"
 
 
@@ -86,15 +88,10 @@ def _scenario_data(s: Scenario) -> bytes:
 
 def _object_evolution(cfg: SwarmCoDeConfig, s: Scenario, data: bytes,
                       fitness: ScoreFn | None = None) -> Evolution:
-    """An Evolution of a Scenario object: built from a temporary copy of its TOML, then named
-    by the scenario's name (nothing reloads the scenario during a run; a run directory keeps the
-    TOML as its scenario.toml, which resume, replay and inspect read)."""
-    with tempfile.TemporaryDirectory(prefix="swarmcode-scenario-") as tmp:
-        path = Path(tmp) / f"{_scenario_stem(s)}.toml"
-        path.write_bytes(data)
-        ev = Evolution(replace(cfg, scenario=str(path)), fitness=fitness)
-    ev.cfg = ev.ctx.cfg = replace(ev.cfg, scenario=s.name)
-    return ev
+    """An Evolution of a Scenario object, named by the scenario's name (nothing reloads the
+    scenario during a run; a run directory keeps `data`, its TOML, as its scenario.toml, which
+    resume, replay and inspect read)."""
+    return Evolution(replace(cfg, scenario=s.name), fitness=fitness, scenario=s)
 
 
 # ------------------------------------------------------------------ results
@@ -267,7 +264,7 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     name = cfg if scenario_obj is None else replace(cfg, scenario=_scenario_stem(scenario_obj))
     run_dir = runs.new_run_dir(Path(logdir), name)
     with runs.RunLock(run_dir):
-        runs.write_run_files(run_dir, ev.cfg, data)
+        runs.write_run_files(run_dir, ev.cfg, data, ev.ctx.scenario.hardware)
         reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
         _execute(ev, run_dir, [*reps, history, *reporters])
     return _result(ev, run_dir, history.rows)

@@ -348,7 +348,7 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
         except OSError as e:
             _os_fail(e, f"--logdir {logdir}: cannot make a run directory")
         stack.enter_context(RunLock(run_dir))
-        write_run_files(run_dir, ev.cfg, data)
+        write_run_files(run_dir, ev.cfg, data, ev.ctx.scenario.hardware)
         console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
                       f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
                       f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})")
@@ -716,7 +716,7 @@ def _run_sweep_run(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every
                 ev = Evolution(cfg)            # a config error leaves no directory behind
                 run_dir.mkdir(exist_ok=True)
                 stack.enter_context(RunLock(run_dir))
-                write_run_files(run_dir, ev.cfg, data)
+                write_run_files(run_dir, ev.cfg, data, ev.ctx.scenario.hardware)
                 saved = None
         except (ScenarioError, RunError, ValueError) as e:
             fail(str(e))

@@ -22,13 +22,14 @@ import os
 import pickle
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any, Callable, Iterator
 
 import torch
 
 from ..coevo.evaluation import EvalPlan, SimBatch, gather_metrics, sim_batch, simulate_batch
 from ..coevo.population import Population
+from ..sim.hardware import Catalog, default_catalog
 from ..sim.layout import Layout
 from ..sim.runtime import CompiledStep, CudaGraphTicks
 from ..sim.state import WorldParams
@@ -220,7 +221,8 @@ def unpack_metrics(data: bytes, device: torch.device | str = "cpu") -> tuple[dic
 @dataclass(frozen=True)
 class ShardSpec:
     """What an evaluation actor needs to build its simulator: the world constants, the episode
-    length, its device kind and how the tick runs (as the driver's `evolve.make_context` chose)."""
+    length, its device kind and how the tick runs (as the driver's `evolve.make_context` chose),
+    and the scenario's hardware catalog its robots are built from."""
 
     params: WorldParams
     ticks: int
@@ -229,6 +231,7 @@ class ShardSpec:
     cuda_graphs: bool           # replay it as CUDA graphs
     cuda_graphs_required: bool  # cuda_graphs was set explicitly (a failure is an error)
     threads: int                # torch CPU threads
+    hardware: Catalog = field(default_factory=default_catalog)
 
 
 class EvalShard:
@@ -256,7 +259,8 @@ class EvalShard:
     def simulate(self, payload: bytes) -> bytes:
         """`pack_batch` bytes -> `pack_metrics` bytes of its per-environment metrics."""
         batch = unpack_batch(payload, self.device)
-        m, seconds = simulate_batch(batch, self.spec.params, self.spec.ticks, self.step_fn)
+        m, seconds = simulate_batch(batch, self.spec.params, self.spec.ticks, self.step_fn,
+                                    catalog=self.spec.hardware)
         return pack_metrics(m, seconds)
 
 
@@ -292,7 +296,8 @@ class ShardedEvaluator:
                          device="cuda" if gpu else "cpu", compiled=ctx.compiled,
                          cuda_graphs=graphs,
                          cuda_graphs_required=graphs and ctx.cfg.cuda_graphs is not None,
-                         threads=max(1, int(cpus_per_worker)))
+                         threads=max(1, int(cpus_per_worker)),
+                         hardware=ctx.scenario.hardware)
         actor = ray.remote(num_cpus=cpus_per_worker, num_gpus=1 if gpu else 0,
                            max_restarts=0)(EvalShard)
         self.actors = [actor.remote(spec) for _ in range(workers)]

@@ -96,7 +96,7 @@ def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: i
     layout = make_layouts(dataclasses.replace(scenario, num_robots=S), 1,
                           torch.Generator().manual_seed(int(seed)))
 
-    robots = team_robots(genome, teams)  # exactly as the evaluation builds them
+    robots = team_robots(genome, teams, scenario.hardware)  # as the evaluation builds them
     tables = bt.build_tables(genome.bt)
 
     snaps = []
@@ -299,9 +299,9 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
             handles.append(Line2D([], [], marker="o", ls="", markersize=4, markeredgecolor="black",
                                   markerfacecolor="black"))
             labels.append("held grip")
-        ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+        ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
                   frameon=False, handletextpad=0.3, borderaxespad=0.0,
-                  title="darker = heavier", title_fontsize=7)
+                  title="darker = heavier", title_fontsize=8)
 
 
 class _Canvas:

@@ -82,8 +82,9 @@ def config_markdown(ev: Evolution) -> str:
     return f"|parameter|value|\n|-|-|\n{rows}"
 
 
-def replay_strip(ev: Evolution, designs: list[dict], seed: int, frames: int = 3):
-    """[H, W, 3] uint8: frames of one episode of a team (start to end), side by side."""
+def replay_strip(ev: Evolution, designs: list[dict], seed: int, frames: int = 3, dpi: int = 80):
+    """[H, W, 3] uint8: frames of one episode of a team (start to end), side by side, each as
+    a GIF frame is drawn (dpi 80: the legend's 8-point text is about 9 pixels high)."""
     import numpy as np
 
     from .render import frame_image, record_episode, team_genome
@@ -93,7 +94,7 @@ def replay_strip(ev: Evolution, designs: list[dict], seed: int, frames: int = 3)
     ep = record_episode(genome, team, ev.ctx.scenario, seed, ticks=ticks,
                         every=max(1, ticks // (frames - 1)))
     picks = np.linspace(0, len(ep.snapshots) - 1, frames).round().astype(int)
-    return np.concatenate([frame_image(ep, int(i), dpi=60) for i in picks], axis=1)
+    return np.concatenate([frame_image(ep, int(i), dpi=dpi) for i in picks], axis=1)
 
 
 class TensorBoardReporter:

@@ -8,7 +8,6 @@ into it. docs/RELIABILITY.md lists what the files promise and the tests that sho
 
 from __future__ import annotations
 
-import dataclasses
 import errno
 import io
 import json
@@ -20,7 +19,6 @@ import socket
 import sys
 import tempfile
 import time
-from importlib import resources
 from pathlib import Path
 from typing import Any, Callable, Iterable, Protocol
 
@@ -29,6 +27,8 @@ import torch
 from ..coevo.config import SwarmCoDeConfig, with_overrides
 from ..coevo.evolve import Evolution, GenerationResult
 from . import records
+from ..sim.hardware import (Catalog, CatalogError, catalog_toml_lines, default_catalog,
+                            default_catalog_bytes, parse_catalog)
 from ..sim.scenario import Scenario, load_scenario
 
 try:
@@ -386,18 +386,26 @@ def read_config(run_dir: Path) -> SwarmCoDeConfig:
 
 
 # ------------------------------------------------------------------ a run's own scenario
-def hardware_bytes() -> bytes:
-    """The installed hardware catalog file (swarmcode_torch/data/hardware.toml), as read."""
-    return resources.files("swarmcode_torch").joinpath("data/hardware.toml").read_bytes()
+def hardware_bytes(hardware: Catalog | None = None) -> bytes:
+    """What a run keeps as its hardware.toml: the installed catalog file as read
+    (swarmcode_torch/data/hardware.toml) when the run uses it, else the run's scenario's own
+    catalog written out as TOML (it parses back to the same catalog)."""
+    if hardware is None or hardware == default_catalog():
+        return default_catalog_bytes()
+    head = ["# The hardware catalog of this run's scenario (its `hardware` key), as the run read it.",
+            "# Tiers are listed 1, 2, 3. Units and the meaning of each field: data/hardware.toml."]
+    return ("\n".join(head + catalog_toml_lines(hardware)) + "\n").encode("utf-8")
 
 
-def write_run_files(run_dir: Path, cfg: SwarmCoDeConfig, scenario_data: bytes) -> None:
+def write_run_files(run_dir: Path, cfg: SwarmCoDeConfig, scenario_data: bytes,
+                    hardware: Catalog | None = None) -> None:
     """config.toml, and the copies that make a new run self-contained: scenario.toml (the bytes
-    its scenario was read from) and hardware.toml (the catalog, as read)."""
+    its scenario was read from) and hardware.toml (the catalog its robots are built from,
+    `hardware_bytes`)."""
     run_dir = Path(run_dir)
     write_config(run_dir, cfg)
     atomic_write_bytes(run_dir / SCENARIO_COPY, scenario_data)
-    atomic_write_bytes(run_dir / HARDWARE_COPY, hardware_bytes())
+    atomic_write_bytes(run_dir / HARDWARE_COPY, hardware_bytes(hardware))
 
 
 def run_scenario_source(run_dir: Path, cfg: SwarmCoDeConfig) -> str:
@@ -408,26 +416,29 @@ def run_scenario_source(run_dir: Path, cfg: SwarmCoDeConfig) -> str:
     return str(copy.resolve()) if copy.is_file() else cfg.scenario
 
 
-def run_scenario(run_dir: Path, cfg: SwarmCoDeConfig) -> Scenario:
-    """The scenario a run ran on (see `run_scenario_source`)."""
-    return load_scenario(run_scenario_source(run_dir, cfg))
-
-
-def check_hardware(run_dir: Path) -> None:
-    """RunError when the run's hardware.toml differs from the installed catalog: resuming or
-    replaying it would use another catalog than the one it ran with (the tool reads only the
-    installed one). A run without the copy is not checked."""
+def run_catalog(run_dir: Path) -> Catalog | None:
+    """The hardware catalog a run ran with: its hardware.toml copy (RunError when that cannot be
+    read or is not a valid catalog), or None for a run made before runs kept one (it used the
+    installed catalog)."""
     copy = Path(run_dir) / HARDWARE_COPY
     if not copy.is_file():
-        return
+        return None
     try:
-        saved = tomllib.loads(read_text(copy))
-    except tomllib.TOMLDecodeError as e:
-        raise RunError(f"{copy}: not valid TOML ({e})") from None
-    if saved != tomllib.loads(hardware_bytes().decode("utf-8")):
-        raise RunError(f"{copy} differs from the installed hardware catalog "
-                       "(swarmcode_torch/data/hardware.toml): the run used another catalog, and "
-                       "resuming or replaying it with this one would mix the two")
+        data = copy.read_bytes()
+    except OSError as e:
+        raise RunError(f"{copy}: cannot be read ({e.strerror or type(e).__name__})") from None
+    try:
+        return parse_catalog(data, str(copy))
+    except CatalogError as e:
+        raise RunError(str(e)) from None
+
+
+def run_scenario(run_dir: Path, cfg: SwarmCoDeConfig) -> Scenario:
+    """The scenario a run ran on (see `run_scenario_source`), its robots built from the run's
+    own hardware.toml (`run_catalog`): whatever has become of the installed catalog or of the
+    file the scenario named, a resumed or replayed run computes with the catalog it started
+    with."""
+    return load_scenario(run_scenario_source(run_dir, cfg), run_catalog(run_dir))
 
 
 def config_differences(a: SwarmCoDeConfig, b: SwarmCoDeConfig, scenario: Scenario | None = None,
@@ -502,12 +513,13 @@ def _size(n: float) -> str:
 def check_memory(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
                  option_names: dict[str, str] | None = None) -> None:
     """ValueError, before anything is allocated, when `estimate_bytes` exceeds `memory_limit`:
-    the message gives the estimate and the options that size it."""
+    the message gives the estimate and the settings that size it, by their config keys
+    (`population`, as the API takes them) or as `option_names` spells them (--population)."""
     need = estimate_bytes(cfg, scenario)
     limit, what = memory_limit(cfg.device if isinstance(cfg.device, str) else "auto")
     if need <= limit:
         return
-    names = {"population": "--population", "trials": "--trials", "swarm_size": "--swarm-size",
+    names = {"population": "population", "trials": "trials", "swarm_size": "swarm_size",
              **(option_names or {})}
     N = cfg.swarm_size or (scenario.num_robots if scenario is not None else 1)
     robots = f"{N} robots" if cfg.swarm_size or scenario is None else \
@@ -586,7 +598,7 @@ def load_checkpoint(run_dir: Path) -> dict:
 def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     """The config, checkpoint and scenario of a run directory, checked against each other:
     config.toml must agree with the config saved in the checkpoint in every key but generations
-    and device, and the run's hardware.toml with the installed catalog (RunError otherwise)."""
+    and device (RunError otherwise); the scenario is built with the run's own catalog."""
     run_dir = Path(run_dir)
     cfg = read_config(run_dir)
     d = load_checkpoint(run_dir)
@@ -597,7 +609,6 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
         raise RunError(f"{run_dir / CONFIG_FILE} does not match the config saved in "
                        f"{CHECKPOINT_FILE} (differing keys: {', '.join(diff)}); restore "
                        f"{CONFIG_FILE} or start a new run")
-    check_hardware(run_dir)
     return cfg, d, scenario
 
 
@@ -620,15 +631,10 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
                        "its fitness function (start a new run with fitness=fn)")
     cfg = with_overrides(cfg, generations=generations, device=device)
     check_config(cfg, scenario)
-    source = run_scenario_source(run_dir, cfg)
-    try:
-        ev = Evolution.from_checkpoint(d, dataclasses.replace(cfg, scenario=source), fitness)
+    try:                           # the run keeps the scenario it names; it runs on its copy
+        return Evolution.from_checkpoint(d, cfg, fitness, scenario)
     except (KeyError, TypeError, RuntimeError) as e:
         raise RunError(f"checkpoint in {run_dir} is incompatible ({type(e).__name__}: {e})") from None
-    if source != cfg.scenario:     # the run keeps the scenario it names; only the file differs
-        ev.ctx.cfg = dataclasses.replace(ev.ctx.cfg, scenario=cfg.scenario)
-        ev.cfg = ev.ctx.cfg
-    return ev
 
 
 def new_run_dir(logdir: Path, cfg: SwarmCoDeConfig) -> Path:

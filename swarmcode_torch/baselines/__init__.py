@@ -106,8 +106,8 @@ def score_teams(ctx: Context, genome: Population, teams: Tensor, layouts: Layout
     if tables is None:
         tables = bt.build_tables(genome.bt)
     m = simulate_teams(flat, genome, tables, layout_ids, layouts, ctx.params, ctx.eval_cfg.ticks,
-                       step_fn)
-    robot_cost = genome_phenotype(genome).cost[flat.clamp_min(0)]
+                       step_fn, ctx.scenario.hardware)
+    robot_cost = genome_phenotype(genome, ctx.scenario.hardware).cost[flat.clamp_min(0)]
     cost = team_cost(robot_cost, flat >= 0, distinct_per_row(flat), ctx.scenario.species_overhead)
     score = team_scores(m, cost, ctx.eval_cfg).view(B, T).mean(1)
     means = {k: v.float().view(B, T).mean(1) for k, v in m.items()}

@@ -27,6 +27,7 @@ from .config import EvalConfig
 from .fitness import budget_penalty, gate, raw_fitness, team_cost
 from .population import Population
 from .population import genome_phenotype
+from ..sim.hardware import Catalog
 from ..sim.layout import Layout, make_layouts
 from .partners import Swarms, assemble_swarms, choose_partners, elite_rows
 from .selection import elite_count
@@ -91,10 +92,11 @@ def _scores(score_fn: ScoreFn, m: dict, cost: Tensor, cfg: EvalConfig) -> Tensor
     return out
 
 
-def team_robots(genome: Population, teams: Tensor) -> Robots:
-    """Per-robot constants of teams [E, S] of population rows (-1: an empty slot); each robot
-    runs its row's program (row of `bt.build_tables(genome.bt)`)."""
-    ph = genome_phenotype(genome)
+def team_robots(genome: Population, teams: Tensor, catalog: Catalog | None = None) -> Robots:
+    """Per-robot constants of teams [E, S] of population rows (-1: an empty slot), built from
+    `catalog` (the scenario's `hardware`; default: the built-in one); each robot runs its row's
+    program (row of `bt.build_tables(genome.bt)`)."""
+    ph = genome_phenotype(genome, catalog)
     rows = teams.clamp_min(0)
     return Robots(*(t[rows] for t in (ph.radius, ph.mass, ph.force, ph.payload, ph.capacity,
                                         ph.efficiency, ph.effector)),
@@ -103,10 +105,11 @@ def team_robots(genome: Population, teams: Tensor) -> Robots:
 
 def simulate_teams(teams: Tensor, genome: Population, tables: Tensor, layout_ids: Tensor,
                    layouts: Layout, params: WorldParams, ticks: int,
-                   step_fn: StepFn | None = None) -> dict:
-    """Run teams [E, S] (population rows, -1 empty) in layouts[layout_ids]; metrics [E] each."""
-    return rollout(layouts.index(layout_ids), team_robots(genome, teams), tables, params, ticks,
-                   step_fn)
+                   step_fn: StepFn | None = None, catalog: Catalog | None = None) -> dict:
+    """Run teams [E, S] (population rows, -1 empty) in layouts[layout_ids], robots built from
+    `catalog` (`team_robots`); metrics [E] each."""
+    return rollout(layouts.index(layout_ids), team_robots(genome, teams, catalog), tables, params,
+                   ticks, step_fn)
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,12 +179,12 @@ def sim_batch(plan: EvalPlan, genome: Population, lo: int = 0, hi: int | None = 
 
 
 def simulate_batch(batch: SimBatch, params: WorldParams, ticks: int,
-                   step_fn: StepFn | None = None,
-                   tables: Tensor | None = None) -> tuple[dict, float]:
+                   step_fn: StepFn | None = None, tables: Tensor | None = None,
+                   catalog: Catalog | None = None) -> tuple[dict, float]:
     """Run a batch's focal and baseline teams over their trials in one rollout: per-environment
     metrics [2 * B * trials] (every focal trial, then every baseline trial, evaluation-major)
     and the rollout's wall time (device synchronised). `tables`: the behavior-tree tables of
-    the batch's genome (default: built here)."""
+    the batch's genome (default: built here); `catalog`: the scenario's hardware catalog."""
     T, B = batch.trials, batch.focal_team.shape[0]
     dev = batch.genome.bt.device
     teams = torch.cat([batch.focal_team, batch.baseline_team]).repeat_interleave(T, 0)
@@ -190,7 +193,7 @@ def simulate_batch(batch: SimBatch, params: WorldParams, ticks: int,
         tables = bt.build_tables(batch.genome.bt)
     t0 = _now(dev)
     m = simulate_teams(teams, batch.genome, tables, layout_ids, batch.layouts, params, ticks,
-                       step_fn)
+                       step_fn, catalog)
     return m, _now(dev) - t0
 
 
@@ -211,7 +214,7 @@ def score_plan(plan: EvalPlan, genome: Population, m: dict, scenario: Scenario, 
     P, T = plan.size, plan.trials
     swarms = plan.swarms
     teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
-    robot_cost = genome_phenotype(genome).cost[teams.clamp_min(0)]
+    robot_cost = genome_phenotype(genome, scenario.hardware).cost[teams.clamp_min(0)]
     counts = torch.cat([swarms.focal_species_count, swarms.baseline_species_count]).repeat_interleave(T)
     cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
     scores = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1)
@@ -238,7 +241,7 @@ def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index
                            scenario, cfg, generator)
     if evaluator is None:
         m, sim_seconds = simulate_batch(sim_batch(plan, genome), params, cfg.ticks, step_fn,
-                                        tables)
+                                        tables, scenario.hardware)
     else:
         m, sim_seconds = evaluator.simulate(plan, genome)
     return score_plan(plan, genome, m, scenario, cfg, sim_seconds, score_fn)

@@ -90,10 +90,12 @@ class Context:
         return tick_mode(self.step_fn, self.compiled)
 
 
-def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None) -> Context:
+def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None,
+                 scenario: Scenario | None = None) -> Context:
     """Validate the config, load the scenario and pick the device and tick function.
     `score_fn`: a user function that scores team-episodes instead of the built-in fitness (the
-    config records its name as `fitness_function`); a config that names one needs it (ValueError)."""
+    config records its name as `fitness_function`); a config that names one needs it (ValueError).
+    `scenario`: the Scenario to run, instead of loading `cfg.scenario` (which then only names it)."""
     if score_fn is not None:
         if not callable(score_fn):
             raise TypeError(f"the fitness function must be callable, got {type(score_fn).__name__}")
@@ -102,7 +104,8 @@ def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None) -> Conte
         raise ValueError(f"the run is scored by a custom fitness function "
                          f"({cfg.fitness_function}): give the function again")
     cfg.validate()
-    scenario = load_scenario(cfg.scenario)
+    if scenario is None:
+        scenario = load_scenario(cfg.scenario)
     device = resolve_device(cfg.device)
     eval_cfg = cfg.evaluation(scenario.num_robots, scenario.episode_ticks)
     step_fn, use_compile = tick_function(device, cfg.compile, cfg.cuda_graphs, cfg.generations)
@@ -187,7 +190,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     team = res.swarms.focal_team[b]
     rows, counts = torch.unique(team[team >= 0], return_counts=True)
     ids, sizes = torch.unique(sp.species, return_counts=True)
-    cost = genome_phenotype(genome).cost
+    cost = genome_phenotype(genome, ctx.scenario.hardware).cost
     # every value the records need, to the host in one transfer (each transfer is a device sync)
     sel = genome.index(rows)
     names = [f.name for f in fields(Population)]
@@ -199,7 +202,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     host, h = Population(**dict(zip(names, h))), h[len(names):]
     (team_species, team_cost, team_counts, team_m, focal_b, team_cost_b, ids, sizes, fit_max,
      fit_mean, focal_max, radius, dominance, selectivity) = h
-    can = capabilities(genome_phenotype(host), ctx.scenario, ctx.params).tolist()  # [R][C]
+    can = capabilities(genome_phenotype(host, ctx.scenario.hardware), ctx.scenario, ctx.params).tolist()  # [R][C]
     designs = [dict(design_record(host, i, s, c), count=n,
                     capability=[j for j, ok in enumerate(can[i]) if ok])
                for i, (s, c, n) in enumerate(zip(team_species.tolist(), team_cost.tolist(),
@@ -302,19 +305,20 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
 
 class Evolution:
     """A run: config, context and current state; `step()` runs one generation. `fitness`: a
-    user `evaluation.ScoreFn` that scores team-episodes instead of the built-in fitness."""
+    user `evaluation.ScoreFn` that scores team-episodes instead of the built-in fitness;
+    `scenario`: a Scenario object to run instead of loading `cfg.scenario` (`make_context`)."""
 
     def __init__(self, cfg: SwarmCoDeConfig, state: EvolutionState | None = None,
-                 fitness: ScoreFn | None = None):
-        self.ctx = make_context(cfg, fitness)
+                 fitness: ScoreFn | None = None, scenario: Scenario | None = None):
+        self.ctx = make_context(cfg, fitness, scenario)
         self.cfg = self.ctx.cfg
         self.state = state if state is not None else init_state(self.ctx)
 
     @classmethod
-    def from_checkpoint(cls, d: dict, cfg: SwarmCoDeConfig,
-                        fitness: ScoreFn | None = None) -> "Evolution":
+    def from_checkpoint(cls, d: dict, cfg: SwarmCoDeConfig, fitness: ScoreFn | None = None,
+                        scenario: Scenario | None = None) -> "Evolution":
         ev = cls.__new__(cls)
-        ev.ctx = make_context(cfg, fitness)
+        ev.ctx = make_context(cfg, fitness, scenario)
         ev.cfg = ev.ctx.cfg
         ev.state = load_state_dict(d, ev.ctx)
         return ev

@@ -1,7 +1,7 @@
 """Robot phenotype from hardware genes: mass, drive force, payload, battery and cost.
 
-The catalog of tiers is data (``data/hardware.toml``); this module turns genes into the
-physical quantities the world needs. Every function is elementwise over any batch shape.
+The catalog of tiers is data (``data/hardware.toml``, or a scenario's own file); this module
+reads and checks it and turns genes into the physical quantities the world needs. Every function is elementwise over any batch shape.
 """
 
 from __future__ import annotations
@@ -50,24 +50,121 @@ class Catalog:
     battery_cost_per_kj: tuple[float, ...]
 
 
+class CatalogError(ValueError):
+    """A hardware catalog that cannot be used; the message names the bad field."""
+
+
+#: The catalog's fields: TOML section, key, Catalog field, per tier (3 values) or one value,
+#: and the range each value must lie in (low, high, whether low itself is allowed).
+_POSITIVE = (0.0, 1e15, False)
+_NONNEGATIVE = (0.0, 1e15, True)
+_FRACTION = (0.0, 1.0, True)
+_CATALOG_FIELDS = (
+    ("base", "mass", "base_mass", False, _POSITIVE),
+    ("base", "cost", "base_cost", False, _NONNEGATIVE),
+    ("base", "effector_mass", "effector_mass", False, _NONNEGATIVE),
+    ("base", "effector_cost", "effector_cost", False, _NONNEGATIVE),
+    ("chassis", "areal_density", "chassis_density", True, _NONNEGATIVE),
+    ("chassis", "strength", "chassis_strength", True, _NONNEGATIVE),
+    ("chassis", "cost_per_area", "chassis_cost_per_area", True, _NONNEGATIVE),
+    ("motor", "force", "motor_force", True, _NONNEGATIVE),
+    ("motor", "force_floor", "motor_force_floor", False, _FRACTION),
+    ("motor", "efficiency", "motor_efficiency", True, (0.0, 1.0, False)),
+    ("motor", "mass", "motor_mass", True, _NONNEGATIVE),
+    ("motor", "cost", "motor_cost", True, _NONNEGATIVE),
+    ("battery", "capacity", "battery_capacity", True, _POSITIVE),
+    ("battery", "capacity_floor", "battery_capacity_floor", False, _FRACTION),
+    ("battery", "energy_density", "battery_density", True, _POSITIVE),
+    ("battery", "cost_per_kj", "battery_cost_per_kj", True, _NONNEGATIVE),
+)
+CATALOG_SECTIONS = ("base", "chassis", "motor", "battery")
+
+
+def _catalog_value(v, where: str, per_tier: bool, bounds: tuple[float, float, bool]):
+    lo, hi, lo_ok = bounds
+    want = (f"a list of {NUM_TIERS} numbers (tiers 1, 2, 3)" if per_tier else "a number")
+    items = v if per_tier and isinstance(v, list) else [v]
+    if per_tier and (not isinstance(v, list) or len(v) != NUM_TIERS) or not all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) for x in items):
+        raise CatalogError(f"{where}: expected {want}, got {v!r}")
+    for x in items:
+        if not (math.isfinite(x) and (lo < x or lo_ok and x == lo) and x <= hi):
+            raise CatalogError(f"{where}: expected {'' if per_tier else 'a value '}in "
+                               f"{'[' if lo_ok else '('}{lo:g}, {hi:g}], got {v!r}")
+    return tuple(float(x) for x in items) if per_tier else float(v)
+
+
+def catalog_from_dict(d, source: str = "hardware catalog") -> Catalog:
+    """A Catalog from the tables of a hardware TOML file ([base], [chassis], [motor],
+    [battery], as in data/hardware.toml); CatalogError naming `source` and the field for a
+    missing, unknown or out-of-range one."""
+    if not isinstance(d, dict):
+        raise CatalogError(f"{source}: expected a table")
+    for section in d:
+        if section not in CATALOG_SECTIONS:
+            raise CatalogError(f"{source}: {section}: unknown section (known: "
+                               f"{', '.join(CATALOG_SECTIONS)})")
+    values = {}
+    for section in CATALOG_SECTIONS:
+        table = d.get(section)
+        if not isinstance(table, dict):
+            raise CatalogError(f"{source}: [{section}]: "
+                               f"{'missing' if table is None else 'expected a table'}")
+        keys = [k for s, k, *_ in _CATALOG_FIELDS if s == section]
+        for k in table:
+            if k not in keys:
+                raise CatalogError(f"{source}: {section}.{k}: unknown field (known: "
+                                   f"{', '.join(keys)})")
+    for section, key, name, per_tier, bounds in _CATALOG_FIELDS:
+        if key not in d[section]:
+            raise CatalogError(f"{source}: {section}.{key}: missing")
+        values[name] = _catalog_value(d[section][key], f"{source}: {section}.{key}", per_tier,
+                                      bounds)
+    return Catalog(**values)
+
+
+def parse_catalog(data: bytes, source: str) -> Catalog:
+    """A Catalog from the bytes of a hardware TOML file (CatalogError naming `source`)."""
+    try:
+        d = tomllib.loads(data.decode("utf-8-sig"))
+    except UnicodeDecodeError as e:
+        raise CatalogError(f"{source}: not UTF-8 text (byte 0x{data[e.start]:02x} at offset "
+                           f"{e.start})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise CatalogError(f"{source}: not valid TOML ({e})") from None
+    return catalog_from_dict(d, source)
+
+
+def catalog_tables(cat: Catalog) -> dict[str, dict]:
+    """The TOML tables of a catalog ({"base": {...}, ...}): `catalog_from_dict` of them gives
+    `cat` back."""
+    out: dict[str, dict] = {s: {} for s in CATALOG_SECTIONS}
+    for section, key, name, per_tier, _ in _CATALOG_FIELDS:
+        v = getattr(cat, name)
+        out[section][key] = list(v) if per_tier else v
+    return out
+
+
+def catalog_toml_lines(cat: Catalog, prefix: str = "") -> list[str]:
+    """The TOML lines of a catalog's tables ([base], ... or, with `prefix` "hardware.",
+    [hardware.base], ... for a scenario's inline catalog); they parse back to `cat`."""
+    lines: list[str] = []
+    for section, table in catalog_tables(cat).items():
+        lines += ["", f"[{prefix}{section}]"]
+        lines += [f"{k} = {[float(x) for x in v] if isinstance(v, list) else float(v)!r}"
+                  for k, v in table.items()]
+    return lines
+
+
+def default_catalog_bytes() -> bytes:
+    """The installed catalog file, ``data/hardware.toml``, as read."""
+    return resources.files("swarmcode_torch").joinpath("data/hardware.toml").read_bytes()
+
+
 @lru_cache(maxsize=1)
 def default_catalog() -> Catalog:
     """The built-in catalog, read from ``data/hardware.toml``."""
-    text = resources.files("swarmcode_torch").joinpath("data/hardware.toml").read_text()
-    d = tomllib.loads(text)
-    b, c, m, bat = d["base"], d["chassis"], d["motor"], d["battery"]
-    return Catalog(
-        base_mass=b["mass"], base_cost=b["cost"], effector_mass=b["effector_mass"],
-        effector_cost=b["effector_cost"],
-        chassis_density=tuple(c["areal_density"]), chassis_strength=tuple(c["strength"]),
-        chassis_cost_per_area=tuple(c["cost_per_area"]),
-        motor_force=tuple(m["force"]), motor_force_floor=m["force_floor"],
-        motor_efficiency=tuple(m["efficiency"]), motor_mass=tuple(m["mass"]),
-        motor_cost=tuple(m["cost"]),
-        battery_capacity=tuple(bat["capacity"]), battery_capacity_floor=bat["capacity_floor"],
-        battery_density=tuple(bat["energy_density"]),
-        battery_cost_per_kj=tuple(bat["cost_per_kj"]),
-    )
+    return parse_catalog(default_catalog_bytes(), "swarmcode_torch/data/hardware.toml")
 
 
 class Phenotype(NamedTuple):

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from .hardware import R_MAX, R_MIN
+from .hardware import (R_MAX, R_MIN, Catalog, CatalogError, catalog_from_dict,
+                       default_catalog, parse_catalog)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -69,6 +70,9 @@ class Scenario:
     obstacle_count: int
     obstacle_radius: tuple[float, float]
     packages: tuple[PackageClass, ...]
+    #: the hardware catalog its robots are built from: the scenario's own (its `hardware` key)
+    #: or the built-in one (data/hardware.toml)
+    hardware: Catalog = field(default_factory=default_catalog)
 
     @property
     def num_packages(self) -> int:
@@ -121,21 +125,54 @@ def _effector(name, where: str) -> int:
     return EFFECTORS[name]
 
 
-def scenario_from_dict(d: dict, source: str = "scenario") -> Scenario:
+def scenario_from_dict(d: dict, source: str = "scenario", folder: Path | None = None,
+                       hardware: Catalog | None = None) -> Scenario:
     """Build and validate a :class:`Scenario` from a parsed TOML table: every field's type and
     range (finite numbers only), and whether its packages can be placed (`check_placement`).
-    ScenarioError names the source and the field."""
+    ScenarioError names the source and the field. `folder`: where a `hardware` file name is
+    looked up (the scenario file's folder); `hardware`: a catalog to use instead of the one the
+    scenario names (a run directory's own copy)."""
     try:
-        return _scenario_from_dict(d, source)
+        return _scenario_from_dict(d, source, folder, hardware)
     except ScenarioError as e:
         raise ScenarioError(f"{source}: {e}") from None
 
 
-def _scenario_from_dict(d: dict, source: str) -> Scenario:
+def _hardware(v, folder: Path | None) -> Catalog:
+    """The catalog a scenario's `hardware` key names: a TOML file (a path relative to the
+    scenario file's folder) or an inline table with the sections of data/hardware.toml."""
+    if isinstance(v, dict):
+        where = "hardware"
+    elif isinstance(v, str) and v:
+        if folder is None:
+            raise ScenarioError(f"hardware: {v!r} is a file name, but this scenario has no "
+                                "folder to find it in (give the catalog inline as a table)")
+        path = folder / v
+        if not path.is_file():
+            raise ScenarioError(f"hardware: catalog file not found: {path}")
+        try:
+            data = path.read_bytes()
+        except OSError as e:
+            raise ScenarioError(f"hardware: {path} cannot be read "
+                                f"({e.strerror or type(e).__name__})") from None
+        try:
+            return parse_catalog(data, f"hardware ({path})")
+        except CatalogError as e:
+            raise ScenarioError(str(e)) from None
+    else:
+        raise ScenarioError(f"hardware: expected a file name or a table, got {v!r}")
+    try:
+        return catalog_from_dict(v, where)
+    except CatalogError as e:
+        raise ScenarioError(str(e)) from None
+
+
+def _scenario_from_dict(d: dict, source: str, folder: Path | None = None,
+                        hardware: Catalog | None = None) -> Scenario:
     if not isinstance(d, dict):
         raise ScenarioError(f"{source}: expected a table")
     known = {"name", "description", "arena", "base_radius", "num_robots", "episode_ticks",
-             "species_overhead", "obstacles", "packages"}
+             "species_overhead", "obstacles", "packages", "hardware"}
     for k in d:
         if k not in known:
             raise ScenarioError(f"{k}: unknown field (known: {', '.join(sorted(known))})")
@@ -207,8 +244,12 @@ def _scenario_from_dict(d: dict, source: str) -> Scenario:
     description = d.get("description", "")
     if not isinstance(description, str):
         raise ScenarioError(f"description: expected str, got {description!r}")
+    if hardware is None:
+        hardware = _hardware(d["hardware"], folder) if "hardware" in d else default_catalog()
+    elif "hardware" in d and not isinstance(d["hardware"], (str, dict)):
+        raise ScenarioError(f"hardware: expected a file name or a table, got {d['hardware']!r}")
     scenario = Scenario(name, description, arena, base_radius, num_robots, ticks,
-                        overhead, obs_count, obs_radius, tuple(classes))
+                        overhead, obs_count, obs_radius, tuple(classes), hardware)
     check_placement(scenario)
     return scenario
 
@@ -285,23 +326,25 @@ def decode_text(data: bytes, source: str) -> str:
                             f"{e.start})") from None
 
 
-def parse_scenario(data: bytes, source: str) -> Scenario:
-    """A scenario from the bytes of its TOML file."""
+def parse_scenario(data: bytes, source: str, folder: Path | None = None,
+                   hardware: Catalog | None = None) -> Scenario:
+    """A scenario from the bytes of its TOML file (`folder`, `hardware`: `scenario_from_dict`)."""
     try:
         d = tomllib.loads(decode_text(data, source))
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{source}: not valid TOML ({e})") from None
-    return scenario_from_dict(d, source)
+    return scenario_from_dict(d, source, folder, hardware)
 
 
-def read_scenario(name_or_path: str) -> tuple[Scenario, bytes]:
+def read_scenario(name_or_path: str, hardware: Catalog | None = None) -> tuple[Scenario, bytes]:
     """A built-in scenario by name, or a scenario TOML file by path, and the bytes it was read
-    from (a run keeps them as its scenario.toml)."""
+    from (a run keeps them as its scenario.toml). A file's `hardware` file name is looked up
+    beside it; `hardware`: a catalog to use instead (`scenario_from_dict`)."""
     if not isinstance(name_or_path, str) or not name_or_path:
         raise ScenarioError(f"scenario: expected a name or a path, got {name_or_path!r}")
     if name_or_path in builtin_names():
         data = resources.files("swarmcode_torch").joinpath(f"scenarios/{name_or_path}.toml").read_bytes()
-        return parse_scenario(data, name_or_path), data
+        return parse_scenario(data, name_or_path, None, hardware), data
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
@@ -310,11 +353,11 @@ def read_scenario(name_or_path: str) -> tuple[Scenario, bytes]:
             data = path.read_bytes()
         except OSError as e:
             raise ScenarioError(f"{path}: cannot be read ({e.strerror or type(e).__name__})") from None
-        return parse_scenario(data, str(path)), data
+        return parse_scenario(data, str(path), path.parent, hardware), data
     raise ScenarioError(f"unknown scenario {name_or_path!r} (known: {', '.join(builtin_names())}; "
                         "or give a path to a .toml file)")
 
 
-def load_scenario(name_or_path: str) -> Scenario:
-    """A built-in scenario by name, or a scenario TOML file by path."""
-    return read_scenario(name_or_path)[0]
+def load_scenario(name_or_path: str, hardware: Catalog | None = None) -> Scenario:
+    """A built-in scenario by name, or a scenario TOML file by path (`read_scenario`)."""
+    return read_scenario(name_or_path, hardware)[0]
