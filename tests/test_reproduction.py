@@ -230,6 +230,22 @@ def test_mutate_bounds_and_flip_rate():
     assert abs(step.std().item() - 0.1) < 0.02
 
 
+def test_p_effector_sets_the_effector_rate_alone_and_unset_changes_nothing():
+    gen = torch.Generator().manual_seed(0)
+    g = random_genomes(20000, gen, l_tag=16)
+    base = ReproductionParams(p_categorical=0.3)
+    state = gen.get_state()
+    m = mutate(g, replace(base, p_effector=0.05), gen)
+    flipped = (m.effector != g.effector).float().mean().item()
+    assert abs(flipped - 0.05 / 2) < 0.005                   # resampled w.p. 0.05, new value 1/2
+    assert abs((m.chassis != g.chassis).float().mean().item() - 0.3 * 2 / 3) < 0.02
+    gen.set_state(state)
+    same = mutate(g, replace(base, p_effector=0.3), gen)      # the categorical rate, set twice
+    gen.set_state(state)
+    unset = mutate(g, base, gen)
+    assert genome_equal(same, unset)
+
+
 def test_default_mutation_seldom_founds_a_species():
     # docs/MODEL.md: one mutation alone crosses delta for well under 1 % of offspring
     from swarmcode_torch.coevo.speciation import distance

@@ -73,6 +73,10 @@ class SwarmCoDeConfig:
     """Mutation: Gaussian step of selectivity and dominance."""
     p_categorical: float = 0.02
     """Mutation: probability of resampling each tier and the effector."""
+    p_effector: float | None = None
+    """Mutation: probability of resampling the effector (None: p_categorical, as the tiers). An
+    experiment beyond the paper: after generation 100 every species founded is an effector flip
+    (docs/MODEL.md)."""
     p_tag_flip: float = 0.01
     """Mutation: probability of flipping each tag bit."""
     d_hw_tiers: bool = False
@@ -188,6 +192,9 @@ class SwarmCoDeConfig:
                 raise ValueError(f"{name(key)} must be a finite number in [0, 1], got {v}")
             if v > 1:
                 raise ValueError(f"{name(key)} must be <= 1 (a number in [0, 1]), got {v}")
+        if self.p_effector is not None and not 0 <= self.p_effector <= 1:   # also refuses nan
+            raise ValueError(f"{name('p_effector')} must be a number in [0, 1] or unset, "
+                             f"got {self.p_effector}")
         if bounds:
             self.check_bounds(option_names)
 
@@ -380,6 +387,7 @@ class ReproductionParams:
     social_sigma: the same for selectivity and dominance (range [0, 1]).
     p_categorical: per-gene probability of resampling chassis, battery, motor tier and effector
         uniformly (the new value may equal the old one).
+    p_effector: the effector's resampling probability; None: p_categorical.
     p_tag_flip: per-bit tag flip probability; None means 1 / L_tag.
     p_gene_mutation: probability that each continuous gene (radius, operating points,
         selectivity, dominance) of a non-elite offspring gets its Gaussian step (1.0: every gene
@@ -404,5 +412,6 @@ class ReproductionParams:
     hw_sigma: float = _RUN.hw_sigma
     social_sigma: float = _RUN.social_sigma
     p_categorical: float = _RUN.p_categorical
+    p_effector: float | None = _RUN.p_effector
     p_tag_flip: float | None = _RUN.p_tag_flip
     p_gene_mutation: float = _RUN.p_gene_mutation

@@ -191,7 +191,8 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
 
     Genes are drawn in field order: tag bits flip w.p. p_tag_flip (None: 1 / L_tag), the BT by
     `mutate_bt`, continuous genes by `_gauss_clip` in their GENE_BOUNDS (social_sigma for
-    SOCIAL_GENES, else hw_sigma; each w.p. p_gene_mutation), categorical ones by `_resample`.
+    SOCIAL_GENES, else hw_sigma; each w.p. p_gene_mutation), categorical ones by `_resample`
+    (w.p. p_categorical; the effector w.p. p_effector where that is set).
     """
     l_tag = g.tag.shape[1]
     p_flip = params.p_tag_flip if params.p_tag_flip is not None else (1.0 / l_tag if l_tag else 0.0)
@@ -206,7 +207,9 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
             sigma = params.social_sigma if name in SOCIAL_GENES else params.hw_sigma
             out[name] = _gauss_clip(x, *GENE_BOUNDS[name], sigma, generator, params.p_gene_mutation)
         else:
-            out[name] = _resample(x, GENE_VALUES[name], params.p_categorical, generator)
+            p_cat = params.p_effector if name == "effector" and params.p_effector is not None \
+                else params.p_categorical
+            out[name] = _resample(x, GENE_VALUES[name], p_cat, generator)
     return Population(**out)
 
 
