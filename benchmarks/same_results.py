@@ -22,6 +22,7 @@ import math
 import os
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 RUNS = (
@@ -50,7 +51,8 @@ for name in ("homogeneous-ga", "ccea", "swarmcode"):
 json.dump(out, open(sys.argv[1], "w"), indent=1, sort_keys=True)
 """
 
-UNTIMED_SUMMARY = {"wall_seconds", "seconds_per_generation", "elapsed_seconds"}
+UNTIMED_SUMMARY = {"wall_seconds", "seconds_per_generation", "elapsed_seconds",
+                   "software"}   # versions, device name and commit (0.3.1): not a result
 
 
 def run(src: Path, out: Path) -> None:
@@ -113,7 +115,7 @@ def compare(a: Path, b: Path) -> int:
             "teams.jsonl": lambda d: (d / "teams.jsonl").read_text(),
             "metrics.csv": lambda d: _untimed(list(csv.DictReader(open(d / "metrics.csv")))),
             "tensorboard scalars": _scalars,
-            "config.toml": lambda d: (d / "config.toml").read_text(),
+            "config.toml": lambda d: tomllib.loads((d / "config.toml").read_text()),
             "checkpoint.pt": _checkpoint,
         }
         for what, read in checks.items():

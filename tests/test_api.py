@@ -18,6 +18,7 @@ from swarmcode_torch.app.api import scenario_to_toml
 from swarmcode_torch.app.cli import app
 from swarmcode_torch.app.reporting import (HPARAM_METRICS, METRICS_FILE, SCALAR_TAGS, CsvReporter,
                                            read_metrics_csv)
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.sim.scenario import builtin_names, load_scenario
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -59,7 +60,7 @@ def runs(tmp_path_factory):
 def test_api_run_directory_is_the_clis(runs):
     cli_dir, result = runs
     api_dir = result.run_dir
-    assert api_dir.parent.name == "api" and api_dir.name.startswith("one-niche__3__")
+    assert api_dir.parent.name == "api" and api_dir.name.startswith("one-niche__b900__3__")
     for f in ("config.toml", "summary.json", "teams.jsonl", "checkpoint.pt", METRICS_FILE):
         assert (api_dir / f).is_file(), f
     assert list(api_dir.glob("events.out.tfevents.*"))
@@ -238,7 +239,7 @@ def test_custom_scenario_from_a_file_and_as_an_object(tmp_path):
     # a Scenario object, changed in code: the run directory keeps it as a TOML file
     s = replace(load_scenario(str(example)), name="three-niche-wide", arena=24.0)
     result = sc.evolve(scenario=s, generations=1, logdir=tmp_path, render_every=0, **tiny)
-    assert result.run_dir.name.startswith("three-niche-wide__3__")
+    assert result.run_dir.name.startswith("three-niche-wide__b900__3__")
     assert result.config.scenario == "three-niche-wide"
     assert load_scenario(str(result.run_dir / "scenario.toml")) == s     # the run's own copy
     resumed = sc.resume(result.run_dir, generations=2, render_every=0)
@@ -287,3 +288,36 @@ def test_python_dash_m_runs_the_cli():
                        text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     assert "evolve" in r.stdout and "Usage" in r.stdout
+
+
+def test_run_names_say_what_differs():
+    from swarmcode_torch.app.runs import run_dir_name
+
+    when = 1767225600.0                     # a fixed time: only the fields before it matter
+    stamp = run_dir_name(SwarmCoDeConfig(), when).rsplit("__", 1)[1]
+    assert run_dir_name(SwarmCoDeConfig(scenario="four-niche", seed=3), when) == \
+        f"four-niche__3__{stamp}"
+    assert run_dir_name(SwarmCoDeConfig(scenario="budget", budget=4000.0, seed=1), when) == \
+        f"budget__b4000__1__{stamp}"
+    assert run_dir_name(SwarmCoDeConfig(scenario="examples/x.toml", budget=2500.5,
+                                        objective="roi"), when) == f"x__b2500.5__roi__0__{stamp}"
+
+
+def test_a_run_records_its_software_device_and_commit(tmp_path):
+    import platform
+
+    import torch
+
+    result = sc.evolve(generations=1, logdir=tmp_path, **{**SETTINGS, "budget": 3000.0})
+    assert result.run_dir.name.startswith("one-niche__b3000__3__")
+    sw = json.loads((result.run_dir / "summary.json").read_text())["software"]
+    assert sw["swarmcode-torch"] == sc.__version__ and sw["torch"] == torch.__version__
+    assert sw["device"] == f"cpu ({platform.machine()})"
+    if (ROOT / ".git").exists():             # run from this checkout: its commit
+        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short=12", "HEAD"],
+                              capture_output=True, text=True, check=True).stdout.strip()
+        assert sw["commit"].removesuffix("+dirty") == head
+    config = (result.run_dir / "config.toml").read_text().splitlines()
+    assert config[1] == f"# written by swarmcode-torch {sc.__version__}, torch {torch.__version__}, " \
+        f"device cpu ({platform.machine()})" + (f", commit {sw['commit']}" if sw["commit"] else "")
+    assert sc.load(result.run_dir).config.budget == 3000.0   # the comment is no setting

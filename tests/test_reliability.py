@@ -394,7 +394,7 @@ def test_a_stale_lock_of_a_dead_pid_is_taken_over(finished_run, tmp_path):
 def test_run_directories_made_at_the_same_second_never_collide(tmp_path, monkeypatch):
     from swarmcode_torch.coevo.config import SwarmCoDeConfig
 
-    monkeypatch.setattr(runs_module.time, "strftime", lambda fmt: "20250101-000000")
+    monkeypatch.setattr(runs_module.time, "strftime", lambda fmt, *when: "20250101-000000")
     n = 12
     barrier, made, errors = threading.Barrier(n), [], []
 

@@ -78,5 +78,10 @@ def test_wheel_console_script_evolves(installed):
     for f in ("config.toml", "summary.json", "teams.jsonl", "checkpoint.pt"):
         assert (runs[0] / f).is_file(), f
     assert list(runs[0].glob("events.out.tfevents.*"))
-    assert json.loads((runs[0] / "summary.json").read_text())["generation"] == 0
+    summary = json.loads((runs[0] / "summary.json").read_text())
+    assert summary["generation"] == 0
+    # an installed package is no checkout: no commit, but its version and torch's
+    assert summary["software"]["commit"] is None
+    from swarmcode_torch import __version__
+    assert summary["software"]["swarmcode-torch"] == __version__
     sh(script.with_name("python"), "-m", "swarmcode_torch", "--help", cwd=work)

@@ -35,9 +35,10 @@ FIELDS = ["generation", "fitness", "cost", "species", "deliveries", "deliveries_
 
 
 def run_label(run_dir: Path) -> str:
-    """'four-niche__1__20261122-195904' -> 'four-niche-seed1'; sweep names are kept."""
+    """'four-niche__1__20261122-195904' -> 'four-niche-seed1' (and since 0.3.1
+    'budget__b4000__1__...' -> 'budget-b4000-seed1'); sweep names are kept."""
     parts = run_dir.name.split("__")
-    return f"{parts[0]}-seed{parts[1]}" if len(parts) == 3 else run_dir.name
+    return "-".join(parts[:-2]) + f"-seed{parts[-2]}" if len(parts) >= 3 else run_dir.name
 
 
 def compact(run_dir: Path, out_dir: Path, figure: bool = True) -> dict:

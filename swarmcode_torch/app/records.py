@@ -5,7 +5,13 @@ teams.jsonl line. The only place that names the tags."""
 from __future__ import annotations
 
 import math
+import platform
+import subprocess
+from functools import lru_cache
+from pathlib import Path
 from typing import Any
+
+import torch
 
 from ..coevo.evolve import Evolution, GenerationResult
 
@@ -56,6 +62,48 @@ def json_clean(x: Any) -> Any:
     return x
 
 
+@lru_cache(maxsize=1)
+def git_commit() -> str | None:
+    """The commit of the checkout the package runs from ('<sha>', '<sha>+dirty' with
+    uncommitted changes to tracked files), or None for an installed package or without git."""
+    root = Path(__file__).resolve().parents[2]
+    if not (root / ".git").exists():
+        return None
+    try:
+        sha = subprocess.run(["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"],
+                             capture_output=True, text=True, timeout=10)
+        if sha.returncode or not sha.stdout.strip():
+            return None
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain",
+                                "--untracked-files=no"], capture_output=True, text=True,
+                               timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return sha.stdout.strip() + ("+dirty" if dirty.returncode == 0 and dirty.stdout.strip() else "")
+
+
+def device_name(device: torch.device | str) -> str:
+    """'NVIDIA H200 (cuda:0)' for a GPU, 'cpu (x86_64)' for the CPU."""
+    dev = torch.device(device)
+    if dev.type == "cuda":
+        return f"{torch.cuda.get_device_name(dev)} ({dev})"
+    return f"{dev.type} ({platform.machine() or 'unknown'})"
+
+
+def software(device: torch.device | str) -> dict:
+    """What made a run's files: package and torch versions, the device and the git commit (None
+    outside a checkout); summary.json's "software", config.toml's "written by" comment."""
+    from .. import __version__
+    from ..sim.runtime import resolve_device
+
+    try:
+        name = device_name(resolve_device(device) if isinstance(device, str) else device)
+    except (RuntimeError, ValueError, AssertionError):
+        name = str(device)
+    return {"swarmcode-torch": __version__, "torch": torch.__version__, "device": name,
+            "commit": git_commit()}
+
+
 def summary(ev: Evolution, r: GenerationResult) -> dict:
     """The contents of summary.json after a generation."""
     best = r.best
@@ -70,6 +118,7 @@ def summary(ev: Evolution, r: GenerationResult) -> dict:
         "deliveries_collab": best["deliveries_collab"], "energy_used": best["energy_used"],
         "species_in_population": r.num_species,
         "device": str(ev.ctx.device), "tick": ev.ctx.tick_mode,
+        "software": software(ev.ctx.device),
         "designs": best["designs"],
         "last_generation": {k: v for k, v in scalars(r).items() if k != "generation"},
         # only a run scored by a user function says so (the built-in is the paper's fitness)

@@ -310,8 +310,13 @@ def _toml_value(v: Any) -> str:
     return json.dumps(str(v))
 
 
-def config_to_toml(cfg: SwarmCoDeConfig) -> str:
+def config_to_toml(cfg: SwarmCoDeConfig, software: dict | None = None) -> str:
+    """config.toml: every set key of `cfg`; `software` (`records.software`), what wrote it, goes
+    into a comment line (a config file holds settings only)."""
     lines = ["# swarmcode-torch run configuration (re-run with: swarmcode-torch evolve --resume DIR)"]
+    if software:
+        lines.append("# written by " + ", ".join(f"{k} {v}" for k, v in software.items()
+                                                  if v is not None))
     for k, v in cfg.to_dict().items():
         if v is not None:
             lines.append(f"{k} = {_toml_value(v)}")
@@ -319,7 +324,8 @@ def config_to_toml(cfg: SwarmCoDeConfig) -> str:
 
 
 def write_config(run_dir: Path, cfg: SwarmCoDeConfig) -> None:
-    atomic_write_bytes(Path(run_dir) / CONFIG_FILE, config_to_toml(cfg).encode())
+    atomic_write_bytes(Path(run_dir) / CONFIG_FILE,
+                       config_to_toml(cfg, records.software(cfg.device)).encode())
 
 
 #: The names of config keys in messages about a config file: the keys themselves.
@@ -637,13 +643,26 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
         raise RunError(f"checkpoint in {run_dir} is incompatible ({type(e).__name__}: {e})") from None
 
 
+def run_dir_name(cfg: SwarmCoDeConfig, when: float | None = None) -> str:
+    """SCENARIO[__bBUDGET][__OBJECTIVE]__SEED__TIME: what tells runs apart, e.g.
+    'four-niche__0__20261201-223000', 'budget__b4000__roi__2__20261201-223000' (the budget
+    when one is set, the objective when it is not the default)."""
+    parts = [Path(cfg.scenario).stem]
+    if cfg.budget is not None:
+        parts.append(f"b{cfg.budget:g}")
+    if cfg.objective != SwarmCoDeConfig.objective:
+        parts.append(cfg.objective)
+    parts += [str(cfg.seed), time.strftime("%Y%m%d-%H%M%S", time.localtime(when))]
+    return "__".join(parts)
+
+
 def new_run_dir(logdir: Path, cfg: SwarmCoDeConfig) -> Path:
-    """A new, empty run directory under `logdir`: SCENARIO__SEED__TIME, with -1, -2, ... added
+    """A new, empty run directory under `logdir`, named `run_dir_name`, with -1, -2, ... added
     when that exists. Each candidate is made with one mkdir that fails if it exists, so runs
     started at the same second (threads or processes) never share a directory."""
     logdir = Path(logdir)
     logdir.mkdir(parents=True, exist_ok=True)
-    base = f"{Path(cfg.scenario).stem}__{cfg.seed}__{time.strftime('%Y%m%d-%H%M%S')}"
+    base = run_dir_name(cfg)
     i = 0
     while True:
         d = logdir / (base if i == 0 else f"{base}-{i}")
