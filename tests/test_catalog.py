@@ -23,25 +23,14 @@ from swarmcode_torch.sim.hardware import (CatalogError, catalog_from_dict, catal
                                           default_catalog, default_catalog_bytes, parse_catalog)
 from swarmcode_torch.sim.scenario import ScenarioError, load_scenario, parse_scenario
 
-from test_reliability import invoke, one_line_error
+from test_reliability import MINE, invoke, one_line_error
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 
-SCENARIO = """name = "dear"
-arena = 14.0
-base_radius = 1.2
-num_robots = 4
-episode_ticks = 20
-hardware = "catalog.toml"
-
-[[packages]]
-kind = "individual"
-effector = "pincher"
-count = 3
-distance = [2.5, 5.0]
-mass = [1.0, 3.0]
-"""
+#: test_reliability's custom world, its robots built from catalog.toml beside it
+SCENARIO = MINE.replace('name = "mine"', 'name = "dear"').replace(
+    "episode_ticks = 10\n", 'episode_ticks = 20\nhardware = "catalog.toml"\n')
 
 
 def _catalog_text(base_cost: float = 1045.0, force=None) -> str:
