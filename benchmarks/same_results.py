@@ -58,14 +58,21 @@ UNTIMED_SUMMARY = {"wall_seconds", "seconds_per_generation", "elapsed_seconds",
 def run(src: Path, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "PYTHONPATH": str(src.resolve())}
+    out = out.resolve()
+    where = subprocess.run([sys.executable, "-c", "import swarmcode_torch; print(swarmcode_torch.__file__)"],
+                           env=env, capture_output=True, text=True, cwd=out, check=True).stdout
+    if not Path(where.strip()).resolve().is_relative_to(src.resolve()):
+        sys.exit(f"the package imports from {where.strip()}, not from --src {src}")
     for args in RUNS:
         cmd = [sys.executable, "-m", "swarmcode_torch", "evolve", *args, "--device", "cpu",
                "--no-compile", "--logdir", str(out)]
-        r = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        # cwd=out: `python -m` and `-c` put the working directory first on sys.path, so run
+        # from a checkout's root they would import its package instead of `src`'s
+        r = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=out)
         if r.returncode:
             sys.exit(f"{' '.join(cmd)} failed:\n{r.stdout[-2000:]}\n{r.stderr[-2000:]}")
     subprocess.run([sys.executable, "-c", BASELINES, str(out / "baselines.json")], env=env,
-                   check=True)
+                   check=True, cwd=out)
     print(f"wrote {out}")
 
 
