@@ -72,6 +72,10 @@ def test_founding_extinction_ages_and_lifetimes_on_a_scripted_sequence():
     assert sorted(lifetimes(t, 0, 5)) == [1, 2, 3]      # 4 lived 1, 1 lived 2, 2 lived 3
     st = window_stats(rows, t, 2, 5, team_niches={2: 3, 3: 4, 4: 4})
     assert st["founded_per_generation"] == pytest.approx(3 / 3)
+    # founded in 2..4: 4 (lived 1), 5 (alive 2..4: lasting), 6 (founded in the last generation:
+    # not known yet) -> 1 lasting in 3 generations; over 0..4 every one but 4 and 6 lasted
+    assert st["founded_lasting_per_generation"] == pytest.approx(1 / 3)
+    assert window_stats(rows, t, 0, 5)["founded_lasting_per_generation"] == pytest.approx(5 / 5)
     assert st["extinct_per_generation"] == pytest.approx(3 / 3)
     assert (st["niches"], st["population_species"], st["median_lifetime"]) == (4, 4, 2)
     # a resumed run repeats generations: the last record of each counts once

@@ -6,7 +6,8 @@
 Each group is one setting of one scenario (e.g. `four-niche before=a,b,c`), its runs one seed
 each. For every run, `swarmcode_torch.app.analysis.run_dynamics` gives the medians over the last
 `--last` generations (species in the best team and in the population, niches, best-team score,
-median species age) and the founding rate and median lifetime from generation
+median species age) and the founding rate (all foundings, and those of species alive in two
+generations or more: `founded_lasting_per_generation`) and median lifetime from generation
 `--founding-from` to the end; the table shows each run's values and their mean ± std (sample
 std over seeds) per group. Used in docs/RESULTS.md ("Speciation that settles").
 """
@@ -26,6 +27,7 @@ from swarmcode_torch.app.runs import load_checkpoint
 COLUMNS = (("team_species", "team sp", "{:.1f}"), ("population_species", "pop sp", "{:.1f}"),
            ("niches", "niches", "{:.1f}"), ("team_score", "score", "{:.0f}"),
            ("founded_per_generation", "founded/gen", "{:.2f}"),
+           ("founded_lasting_per_generation", "lasting/gen", "{:.2f}"),
            ("median_lifetime", "lifetime", "{:.1f}"), ("median_age", "age", "{:.0f}"))
 
 
@@ -35,6 +37,7 @@ def run_row(run: Path, last: int, founding_from: int) -> dict:
     return {**{k: tail[k] for k in ("team_species", "population_species", "niches",
                                     "team_score", "median_age")},
             "founded_per_generation": long["founded_per_generation"],
+            "founded_lasting_per_generation": long["founded_lasting_per_generation"],
             "median_lifetime": long["median_lifetime"], "generations": end, "run": str(run)}
 
 

@@ -823,11 +823,13 @@ def dynamics(
         console.print_json(json.dumps(stats).replace("NaN", "null"))
         return
     t = Table(title=f"Species dynamics of {run_dir} (medians over each window)",
-              box=box.SIMPLE_HEAD, caption="founded, extinct: species a generation; age, "
+              box=box.SIMPLE_HEAD, caption="founded, extinct: species a generation (lasting: "
+              "founded and alive in 2 generations or more); age, "
               "lifetime: generations; lifetime of the species that died in the window")
     cols = (("from", "from", "{}"), ("to", "to", "{}"), ("team sp", "team_species", "{:g}"),
             ("pop sp", "population_species", "{:g}"), ("niches", "niches", "{:g}"),
             ("founded", "founded_per_generation", "{:.2f}"),
+            ("lasting", "founded_lasting_per_generation", "{:.2f}"),
             ("extinct", "extinct_per_generation", "{:.2f}"), ("age", "median_age", "{:g}"),
             ("team age", "team_median_age", "{:g}"), ("lifetime", "median_lifetime", "{:g}"),
             ("team score", "team_score", "{:.1f}"))

@@ -90,9 +90,15 @@ def window_stats(rows: Sequence[dict], t: Turnover, start: int, end: int,
     """Medians over generations [start, end) of `replay` rows: species in the best team and in
     the population, niches (from `team_niches`: generation -> niches of its best team), founding
     and extinction per generation, median species age, and the median lifetime of the species
-    that died in the window."""
+    that died in the window. `founded_lasting_per_generation` counts only the species founded
+    in the window that were alive in two generations or more (one founded in the last
+    generation of `rows` cannot be told yet and does not count): the founding that is not a
+    singleton dying at once."""
     win = [r for r in rows if start <= r["generation"] < end]
     n = len(win)
+    last = rows[-1]["generation"] if rows else start
+    lasting = sum(1 for sp, b in t.born.items()
+                  if start <= b < end and t.died.get(sp, last + 1) - b >= 2)
     niches = [team_niches[r["generation"]] for r in win if r["generation"] in (team_niches or {})]
     return {
         "generations": n, "from": start, "to": end,
@@ -100,6 +106,7 @@ def window_stats(rows: Sequence[dict], t: Turnover, start: int, end: int,
         "population_species": median([r["species"] for r in win]),
         "niches": median(niches),
         "founded_per_generation": sum(r["founded"] for r in win) / n if n else float("nan"),
+        "founded_lasting_per_generation": lasting / n if n else float("nan"),
         "extinct_per_generation": sum(r["extinct"] for r in win) / n if n else float("nan"),
         "median_age": median([r["median_age"] for r in win]),
         "team_median_age": median([r["team_median_age"] for r in win]),
