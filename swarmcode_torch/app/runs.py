@@ -398,7 +398,8 @@ def hardware_bytes(hardware: Catalog | None = None) -> bytes:
     catalog written out as TOML (it parses back to the same catalog)."""
     if hardware is None or hardware == default_catalog():
         return default_catalog_bytes()
-    head = ["# The hardware catalog of this run's scenario (its `hardware` key), as the run read it.",
+    head = ["# The hardware catalog of this run's scenario (its `hardware` key), as the run "
+            "read it.",
             "# Tiers are listed 1, 2, 3. Units and the meaning of each field: data/hardware.toml."]
     return ("\n".join(head + catalog_toml_lines(hardware)) + "\n").encode("utf-8")
 

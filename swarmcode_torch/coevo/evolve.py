@@ -202,7 +202,8 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     host, h = Population(**dict(zip(names, h))), h[len(names):]
     (team_species, team_cost, team_counts, team_m, focal_b, team_cost_b, ids, sizes, fit_max,
      fit_mean, focal_max, radius, dominance, selectivity) = h
-    can = capabilities(genome_phenotype(host, ctx.scenario.hardware), ctx.scenario, ctx.params).tolist()  # [R][C]
+    can = capabilities(genome_phenotype(host, ctx.scenario.hardware), ctx.scenario,
+                       ctx.params).tolist()                                  # [R][C]
     designs = [dict(design_record(host, i, s, c), count=n,
                     capability=[j for j, ok in enumerate(can[i]) if ok])
                for i, (s, c, n) in enumerate(zip(team_species.tolist(), team_cost.tolist(),

@@ -1,7 +1,8 @@
 """Robot phenotype from hardware genes: mass, drive force, payload, battery and cost.
 
 The catalog of tiers is data (``data/hardware.toml``, or a scenario's own file); this module
-reads and checks it and turns genes into the physical quantities the world needs. Every function is elementwise over any batch shape.
+reads and checks it and turns genes into the physical quantities the world needs. Every
+function is elementwise over any batch shape.
 """
 
 from __future__ import annotations
