@@ -140,10 +140,9 @@ def scenario_from_dict(d: dict, source: str = "scenario", folder: Path | None = 
 
 def _hardware(v, folder: Path | None) -> Catalog:
     """The catalog a scenario's `hardware` key names: a TOML file (a path relative to the
-    scenario file's folder) or an inline table with the sections of data/hardware.toml."""
-    if isinstance(v, dict):
-        where = "hardware"
-    elif isinstance(v, str) and v:
+    scenario file's folder) or an inline table with the sections of data/hardware.toml (the
+    caller has checked that it is one of the two)."""
+    if isinstance(v, str):
         if folder is None:
             raise ScenarioError(f"hardware: {v!r} is a file name, but this scenario has no "
                                 "folder to find it in (give the catalog inline as a table)")
@@ -159,10 +158,8 @@ def _hardware(v, folder: Path | None) -> Catalog:
             return parse_catalog(data, f"hardware ({path})")
         except CatalogError as e:
             raise ScenarioError(str(e)) from None
-    else:
-        raise ScenarioError(f"hardware: expected a file name or a table, got {v!r}")
     try:
-        return catalog_from_dict(v, where)
+        return catalog_from_dict(v, "hardware")
     except CatalogError as e:
         raise ScenarioError(str(e)) from None
 
@@ -244,10 +241,11 @@ def _scenario_from_dict(d: dict, source: str, folder: Path | None = None,
     description = d.get("description", "")
     if not isinstance(description, str):
         raise ScenarioError(f"description: expected str, got {description!r}")
-    if hardware is None:
-        hardware = _hardware(d["hardware"], folder) if "hardware" in d else default_catalog()
-    elif "hardware" in d and not isinstance(d["hardware"], (str, dict)):
-        raise ScenarioError(f"hardware: expected a file name or a table, got {d['hardware']!r}")
+    named = d.get("hardware")
+    if named is not None and not (isinstance(named, dict) or isinstance(named, str) and named):
+        raise ScenarioError(f"hardware: expected a file name or a table, got {named!r}")
+    if hardware is None:       # else the given catalog stands in for the one the key names
+        hardware = default_catalog() if named is None else _hardware(named, folder)
     scenario = Scenario(name, description, arena, base_radius, num_robots, ticks,
                         overhead, obs_count, obs_radius, tuple(classes), hardware)
     check_placement(scenario)
