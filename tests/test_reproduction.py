@@ -355,3 +355,48 @@ def test_reproduce_rejects_unknown_species():
     with pytest.raises(ValueError):
         reproduce(g, fit, torch.full((10,), 999), r.proto_index, r.proto_ids,
                   ReproductionParams(), torch.Generator().manual_seed(0))
+
+
+def test_prototype_flips_copy_the_prototype_with_the_other_effector():
+    # effector_flip = "prototype": a flip is its own event on a copy of the species' prototype,
+    # exactly w_tool from it (< delta), as often as resampling flips; other children unchanged
+    from swarmcode_torch.coevo.config import DistanceWeights
+    from swarmcode_torch.coevo.reproduction import prototype_flips
+    from swarmcode_torch.coevo.speciation import distance
+    gen = torch.Generator().manual_seed(3)
+    child = random_genomes(20000, gen, l_tag=16)
+    proto = random_genomes(20000, gen, l_tag=16)
+    out = prototype_flips(child, proto, ReproductionParams(p_categorical=0.3), gen)
+    flip = out.effector != child.effector
+    flip |= (out.radius != child.radius) | (out.bt != child.bt).any(1)
+    assert abs(flip.float().mean().item() - 0.3 / 2) < 0.01
+    assert bool((out.effector[flip] != proto.effector[flip]).all())
+    kept, copied = out.index(~flip), out.index(flip)
+    assert genome_equal(kept, child.index(~flip))
+    d = distance(copied, proto.index(flip)).diagonal()
+    assert torch.allclose(d, torch.full_like(d, DistanceWeights().w_tool))
+    assert DistanceWeights().w_tool < ReproductionParams().delta
+    same_but_effector = proto.index(flip)
+    for name in ("tag", "bt", "radius", "chassis", "battery", "motor", "torque_point"):
+        assert torch.equal(getattr(copied, name), getattr(same_but_effector, name))
+
+
+def test_reproduce_with_prototype_flips_changes_the_effector_only_by_them():
+    gen = torch.Generator().manual_seed(4)
+    g = random_genomes(400, gen, l_tag=16)
+    g.effector.zero_()                                        # one species of suction robots
+    species = torch.zeros(400, dtype=torch.long)
+    fit = torch.rand(400, generator=gen)
+    params = replace(ReproductionParams(), effector_flip="prototype", p_categorical=0.2)
+    children, hint, is_elite, parent = reproduce(
+        g, fit, species, torch.tensor([7]), torch.tensor([0]), params, gen)
+    pinchers = children.index(children.effector == 1)
+    assert 10 <= pinchers.size <= 80                          # ~0.1 of 400 offspring
+    proto = g.index(torch.full((pinchers.size,), 7))
+    for name in ("tag", "bt", "radius", "chassis", "battery", "motor", "torque_point",
+                 "battery_point", "selectivity", "dominance"):
+        assert torch.equal(getattr(pinchers, name), getattr(proto, name))
+    gene = reproduce(g, fit, species, torch.tensor([7]), torch.tensor([0]),
+                     replace(params, effector_flip="gene"), gen)[0]
+    assert not genome_equal(gene.index(gene.effector == 1), g.index(
+        torch.full((int((gene.effector == 1).sum()),), 7)))

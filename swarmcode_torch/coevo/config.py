@@ -77,6 +77,11 @@ class SwarmCoDeConfig:
     """Mutation: probability of resampling the effector (None: p_categorical, as the tiers). An
     experiment beyond the paper: after generation 100 nearly every species founded is an effector
     flip (docs/RESULTS.md)."""
+    effector_flip: str = "gene"
+    """How an offspring's effector changes: 'gene', resampled like any categorical gene of the
+    child; 'prototype' (an experiment beyond the paper), a flip is its own event that replaces
+    the child by a copy of its species' prototype with the other effector, so that it lies
+    exactly w_tool < delta from that prototype and joins the species instead of founding one."""
     p_tag_flip: float = 0.01
     """Mutation: probability of flipping each tag bit."""
     d_hw_tiers: bool = False
@@ -154,6 +159,9 @@ class SwarmCoDeConfig:
             raise ValueError(f"{name('scenario')} must name a scenario")
         if self.fitness_function is not None and not self.fitness_function.strip():
             raise ValueError(f"{name('fitness_function')} must name a function or be unset")
+        if self.effector_flip not in ("gene", "prototype"):
+            raise ValueError(f"{name('effector_flip')} must be 'gene' or 'prototype', "
+                             f"got {self.effector_flip!r}")
         if self.quota_basis not in ("sum", "mean"):
             raise ValueError(f"{name('quota_basis')} must be 'sum' or 'mean', "
                              f"got {self.quota_basis!r}")
@@ -387,6 +395,9 @@ class ReproductionParams:
     p_categorical: per-gene probability of resampling chassis, battery, motor tier and effector
         uniformly (the new value may equal the old one).
     p_effector: the effector's resampling probability; None: p_categorical.
+    effector_flip: "gene": the effector is resampled in `mutate` like the tiers; "prototype":
+        `reproduce` resamples it as its own event on a copy of the species' prototype (a
+        resampled value equal to the prototype's leaves the child as it was).
     p_tag_flip: per-bit tag flip probability; None means 1 / L_tag.
     p_gene_mutation: probability that each continuous gene (radius, operating points,
         selectivity, dominance) of a non-elite offspring gets its Gaussian step (1.0: every gene
@@ -412,5 +423,6 @@ class ReproductionParams:
     social_sigma: float = _RUN.social_sigma
     p_categorical: float = _RUN.p_categorical
     p_effector: float | None = _RUN.p_effector
+    effector_flip: str = _RUN.effector_flip
     p_tag_flip: float | None = _RUN.p_tag_flip
     p_gene_mutation: float = _RUN.p_gene_mutation

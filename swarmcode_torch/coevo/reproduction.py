@@ -3,7 +3,7 @@ crossover and mutation of whole populations as batched tensor operations."""
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, replace
 from typing import Callable
 
 import torch
@@ -213,6 +213,25 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
     return Population(**out)
 
 
+def prototype_flips(child: Population, proto: Population, params: ReproductionParams,
+                    generator: torch.Generator) -> Population:
+    """Children [N], their species' prototypes [N] -> children [N], the effector flip as its own
+    event (`effector_flip = "prototype"`): each child's effector is resampled w.p. p_effector (None:
+    p_categorical) against its prototype's; where the new value differs, the child is replaced by
+    a copy of the prototype with that effector, which lies exactly w_tool from the prototype.
+    The flips are as frequent as `mutate`'s resampling makes them."""
+    n = child.size
+    dev = child.bt.device
+    p_eff = params.p_effector if params.p_effector is not None else params.p_categorical
+    hit = torch.rand(n, generator=generator, device=dev) < p_eff
+    new = torch.randint(0, GENE_VALUES["effector"], (n,), generator=generator, device=dev,
+                        dtype=proto.effector.dtype)
+    flip = hit & (new != proto.effector)
+    flipped = Population(**{f.name: getattr(proto, f.name) for f in fields(Population)
+                            if f.name != "effector"}, effector=new)
+    return flipped.where(flip, child)
+
+
 def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index: Tensor,
               proto_ids: Tensor, params: ReproductionParams, generator: torch.Generator,
               distance_fn: DistanceFn = distance) -> tuple[Population, Tensor, Tensor, Tensor]:
@@ -224,9 +243,10 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     proto order, best first); the remaining quota is filled by offspring: p1 by in-species
     tournament, p2 by in-species tournament within `delta` of p1 (and != p1), up to mate_tries
     tries, else a global tournament (!= p1); crossover w.p. crossover_same / crossover_cross (same /
-    different species) else clone p1; then every offspring is mutated. Hints: the elite's own
+    different species) else clone p1; then every offspring is mutated (with `effector_flip =
+    "prototype"`, its effector flip is `prototype_flips` on its species' prototype). Hints: the elite's own
     species / p1's species; parent_index: the elite row / p1. `distance_fn(genome, genome)` is
-    called once ([P, P]); `proto_index` is unused (kept for the API). Fitness must be finite for
+    called once ([P, P]); `proto_index` (the prototypes' rows) is used by the prototype flips. Fitness must be finite for
     every individual.
     """
     p = genome.size
@@ -291,7 +311,11 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
     g1, g2 = genome.index(p1), genome.index(p2)
     child = crossover(g1, g2, generator).where(do_cross, g1)
-    child = mutate(child, params, generator)
+    if params.effector_flip == "prototype":
+        child = mutate(child, replace(params, p_effector=0.0), generator)
+        child = prototype_flips(child, genome.index(proto_index[pos[p1]]), params, generator)
+    else:
+        child = mutate(child, params, generator)
 
     children = Population.cat([genome.index(elite), child])
     hint = torch.cat([species[elite], species[p1]])
