@@ -102,6 +102,11 @@ class SwarmCoDeConfig:
     dominance) of an offspring gets its Gaussian step (1.0: every gene, the behaviour before
     0.2). With every gene stepped in every child, a species' members spread so far from its
     prototype that any categorical change founds a species (docs/RESULTS.md)."""
+    prototype: str = "closest"
+    """How a surviving species' prototype is chosen each generation: 'closest', the member
+    closest to the previous prototype (the paper); 'medoid' (an experiment), the member whose
+    distances to the species' other members sum least, so that the prototype follows the
+    species instead of lagging behind at one edge of it."""
     merge_species: bool = False
     """Dissolve a species whose prototype comes within delta of an older one's (not in the paper;
     an experiment)."""
@@ -163,6 +168,9 @@ class SwarmCoDeConfig:
             raise ValueError(f"{name('scenario')} must name a scenario")
         if self.fitness_function is not None and not self.fitness_function.strip():
             raise ValueError(f"{name('fitness_function')} must name a function or be unset")
+        if self.prototype not in ("closest", "medoid"):
+            raise ValueError(f"{name('prototype')} must be 'closest' or 'medoid', "
+                             f"got {self.prototype!r}")
         if self.effector_flip not in ("gene", "prototype"):
             raise ValueError(f"{name('effector_flip')} must be 'gene' or 'prototype', "
                              f"got {self.effector_flip!r}")
@@ -251,7 +259,7 @@ class SwarmCoDeConfig:
     @property
     def speciation(self) -> "SpeciationParams":
         return SpeciationParams(delta=self.delta, weights=DistanceWeights(hw_tiers=self.d_hw_tiers),
-                                merge_species=self.merge_species)
+                                merge_species=self.merge_species, prototype=self.prototype)
 
     @property
     def reproduction(self) -> "ReproductionParams":
@@ -366,6 +374,7 @@ class SpeciationParams:
     delta: float = _RUN.delta
     weights: DistanceWeights = DistanceWeights()
     merge_species: bool = _RUN.merge_species
+    prototype: str = _RUN.prototype
 
 
 @dataclass(frozen=True)
