@@ -400,34 +400,3 @@ def test_reproduce_with_prototype_flips_changes_the_effector_only_by_them():
                      replace(params, effector_flip="gene"), gen)[0]
     assert not genome_equal(gene.index(gene.effector == 1), g.index(
         torch.full((int((gene.effector == 1).sum()),), 7)))
-
-
-def test_spared_species_keep_a_slot_and_the_others_share_the_rest():
-    f = torch.tensor([100.0, 1e-6, 1e-6, 50.0])
-    assert offspring_quotas(f, 10, min_share=1).tolist() == [7, 0, 0, 3]
-    spare = torch.tensor([False, True, False, False])
-    assert offspring_quotas(f, 10, min_share=1, spare=spare).tolist() == [6, 1, 0, 3]
-    both = torch.tensor([False, True, True, False])
-    q = offspring_quotas(f, 10, min_share=1, spare=both)
-    assert q.tolist() == [5, 1, 1, 3] and int(q.sum()) == 10
-    none = torch.zeros(4, dtype=torch.bool)                  # sparing nothing changes nothing
-    assert offspring_quotas(f, 10, min_share=1, spare=none).tolist() == [7, 0, 0, 3]
-
-
-def test_spare_fit_species_keeps_a_small_species_whose_best_member_is_fit():
-    # 40 members of species 0 at fitness 1.0; species 1: one member at 1.0 (the mean) and one
-    # at 0.01. Its total share, 50 * 1.01 / 41.01 = 1.23 slots, passes min_share = 1; with
-    # min_share = 2 it has no slot unless spare_fit_species keeps it.
-    gen = torch.Generator().manual_seed(5)
-    g = random_genomes(42, gen, l_tag=16)
-    species = torch.tensor([0] * 40 + [1, 1])
-    fit = torch.tensor([1.0] * 40 + [1.0, 0.01])
-    args = (g, fit, species, torch.tensor([0, 40]), torch.tensor([0, 1]))
-    base = replace(ReproductionParams(), min_share=2.0)
-    hint = reproduce(*args, base, gen)[1]
-    assert int((hint == 1).sum()) == 0
-    hint = reproduce(*args, replace(base, spare_fit_species=True), gen)[1]
-    assert int((hint == 1).sum()) >= 1
-    weak = torch.tensor([1.0] * 40 + [0.5, 0.01])             # its best is below the mean
-    hint = reproduce(g, weak, *args[2:], replace(base, spare_fit_species=True), gen)[1]
-    assert int((hint == 1).sum()) == 0

@@ -67,10 +67,6 @@ class SwarmCoDeConfig:
     """Offspring quotas proportional to each species' total ('sum') or mean ('mean') fitness."""
     min_share: float = 1.0
     """A species whose quota share is below this many individuals gets no slot (0: none)."""
-    spare_fit_species: bool = False
-    """A species whose best member is at least as fit as the population's mean keeps >= 1 slot
-    whatever its share (an experiment: the paper's "the floor of 1 guarantees at least the best
-    member of a species survives", for species whose best member is fit)."""
     hw_sigma: float = 0.05
     """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
     social_sigma: float = 0.05
@@ -392,8 +388,6 @@ class ReproductionParams:
         members' (gated, penalised, smoothed) fitness (the paper's "total adjusted fitness"), or
         "mean", NEAT's explicit fitness sharing (total / species size). See docs/MODEL.md.
     min_share: a species whose quota share is below this many individuals gets no slot.
-    spare_fit_species: a species whose best member's fitness is at least the population's mean
-        keeps a quota >= 1 whatever its share.
     bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
     bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
     bt_point_count: slots re-drawn by one point mutation (each a uniform slot, may repeat).
@@ -427,7 +421,6 @@ class ReproductionParams:
     max_elite: int = _RUN.max_elite
     quota_basis: str = _RUN.quota_basis
     min_share: float = _RUN.min_share
-    spare_fit_species: bool = _RUN.spare_fit_species
     bt_mutation_rate: float = _RUN.bt_mutation_rate
     bt_subtree_prob: float = 0.05
     bt_point_count: int = 1

@@ -19,8 +19,7 @@ DistanceFn = Callable[[Population, Population], Tensor]
 
 
 def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
-                     protect: int | None = None, min_share: float = 0.0,
-                     spare: Tensor | None = None) -> Tensor:
+                     protect: int | None = None, min_share: float = 0.0) -> Tensor:
     """[K] total adjusted fitness per species -> [K] long quotas summing to population_size.
 
     Proportional shares rounded by largest remainder (ties: lowest index); all-zero (or negative)
@@ -30,8 +29,6 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
     from the species with the largest quota (ties: lowest index). In `reproduce`, elites are
     counted inside the quota: a species whose quota is below its elite count keeps only its top
     `quota` elites; a quota of 0 means the species gets no child (it goes extinct) unless protected.
-    `spare` ([K] bool): species kept like `protect`, each guaranteed a quota >= 1 (the slots
-    they need are taken from the proportional shares of the others, which are recomputed).
     """
     dev = adjusted_fitness_sum.device
     k = adjusted_fitness_sum.numel()
@@ -47,36 +44,17 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
         any_kept = (f * keep).sum() > 0           # else no species qualifies: no threshold
         if protect is not None:
             keep[protect] = True
-        if spare is not None:
-            keep = keep | spare.to(dev)
         f = torch.where(any_kept & ~keep, torch.zeros_like(f), f)
-    q = _largest_remainder(f, population_size)
-    if spare is not None:
-        # the spared species left without a slot get one each; the others share the rest
-        need = spare.to(dev) & (q == 0)
-        n_need = need.sum().clamp(max=population_size)
-        rest = _largest_remainder(torch.where(need, torch.zeros_like(f), f),
-                                  population_size - n_need)
-        first = need & (need.long().cumsum(0) <= n_need)
-        q = torch.where(first, torch.ones_like(q), torch.where(need, torch.zeros_like(q), rest))
+    share = f / f.sum() * population_size
+    base = share.floor()
+    q = base.long()
+    rem = (population_size - q.sum()).clamp(0, k)  # +1 to the rem largest remainders
+    order = torch.sort(share - base, descending=True, stable=True).indices
+    q[order] += (torch.arange(k, device=dev) < rem).long()
     if protect is not None and population_size > 0:
         need = q[protect] == 0                    # take 1 from the largest quota
         q[q.argmax()] -= need.long()
         q[protect] = torch.where(need, 1, q[protect])
-    return q
-
-
-def _largest_remainder(f: Tensor, total: Tensor | int) -> Tensor:
-    """[K] float64 weights >= 0 (all 0: equal shares), total slots -> [K] long quotas summing to
-    total: proportional shares rounded by largest remainder (ties: lowest index)."""
-    k = f.numel()
-    f = torch.where(f.sum() > 0, f, torch.ones_like(f))
-    share = f / f.sum() * total
-    base = share.floor()
-    q = base.long()
-    rem = (total - q.sum()).clamp(0, k)           # +1 to the rem largest remainders
-    order = torch.sort(share - base, descending=True, stable=True).indices
-    q[order] += (torch.arange(k, device=f.device) < rem).long()
     return q
 
 
@@ -293,14 +271,8 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     if p:
         best_pos = pos[fit.argmax()]
         protect = (nonempty == best_pos).to(torch.int32).argmax()
-        spare = None
-        if params.spare_fit_species:
-            # a species whose best member is at least as fit as the population's mean
-            best = torch.full((k,), -torch.inf, device=dev).scatter_reduce(
-                0, pos, fit, reduce="amax")
-            spare = (best >= fit.mean())[nonempty]
         quota[nonempty] = offspring_quotas(adjusted[nonempty], p, protect=protect,
-                                           min_share=params.min_share, spare=spare)
+                                           min_share=params.min_share)
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
 
     order, rank = rank_within_groups(pos, fit, sizes)       # by (species, fitness desc, row)
