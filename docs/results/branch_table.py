@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 from swarmcode_torch.app.analysis import run_dynamics
@@ -47,6 +48,9 @@ def main() -> None:
         start = int(start or 100)
         full = max(int(r["niches"]) for r in read_teams(control).values())
         for name, run in (("control", control), ("branch", branch)):
+            if not (run / "checkpoint.pt").is_file():
+                print(f"{label}: {run} has no checkpoint; left out", file=sys.stderr)
+                continue
             r = row(run, start, args.to, full)
             out.append({"label": label, "run": name, "path": str(run), "from": start, **r})
             t = r["tail_niches"]

@@ -3,10 +3,11 @@
 prototype), the share of its members whose focal team did not beat its baseline (gated: their
 fitness is multiplied by p_marginal), their mean fitness and their offspring quota.
 
-    python docs/results/sisters.py CHECKPOINT GENERATIONS [--set KEY=VALUE ...] [--json OUT]
+    python docs/results/sisters.py CHECKPOINT GENERATIONS [--set KEY=VALUE ...] [--trials N]
+        [--json OUT]
 
 The run continues with its saved config (compiled as it was, so that a continuation of an
-unchanged run repeats it) and the settings given. Used in docs/RESULTS.md ("How a niche is
+unchanged run repeats it) and the settings given (`--trials`: trials per evaluation). Used in docs/RESULTS.md ("How a niche is
 lost") to show what happens to two species of one niche.
 """
 
@@ -77,10 +78,14 @@ def main() -> None:
     ap.add_argument("checkpoint")
     ap.add_argument("generations", type=int)
     ap.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--trials", type=int, help="trials per evaluation (default: the run's)")
     ap.add_argument("--json", help="write the records here")
     args = ap.parse_args()
     torch.set_num_threads(1)
-    rows = continue_and_record(args.checkpoint, args.generations, parse_settings(args.settings))
+    settings = parse_settings(args.settings)
+    if args.trials is not None:
+        settings["trials"] = args.trials
+    rows = continue_and_record(args.checkpoint, args.generations, settings)
     print("gen  species  niche  size  gated  mean fitness  quota")
     for r in rows:
         print(f"{r['generation']:4d}  {r['species']:6d}  {str(r['niche']):6s} {r['size']:4d}  "

@@ -164,18 +164,10 @@ class SwarmCoDeConfig:
             raise ValueError(f"{name('scenario')} must name a scenario")
         if self.fitness_function is not None and not self.fitness_function.strip():
             raise ValueError(f"{name('fitness_function')} must name a function or be unset")
-        if self.prototype not in ("closest", "medoid"):
-            raise ValueError(f"{name('prototype')} must be 'closest' or 'medoid', "
-                             f"got {self.prototype!r}")
-        if self.effector_flip not in ("gene", "prototype"):
-            raise ValueError(f"{name('effector_flip')} must be 'gene' or 'prototype', "
-                             f"got {self.effector_flip!r}")
-        if self.quota_basis not in ("sum", "mean"):
-            raise ValueError(f"{name('quota_basis')} must be 'sum' or 'mean', "
-                             f"got {self.quota_basis!r}")
-        if self.objective not in ("fitness", "roi"):
-            raise ValueError(f"{name('objective')} must be 'fitness' or 'roi', "
-                             f"got {self.objective!r}")
+        for key, (a, b) in CHOICES.items():
+            v = getattr(self, key)
+            if v not in (a, b):
+                raise ValueError(f"{name(key)} must be {a!r} or {b!r}, got {v!r}")
         dev = self.device
         if dev not in ("auto", "cpu", "cuda") and not (
                 dev.startswith("cuda:") and dev[5:].isdigit() and dev[5:].isascii()):
@@ -261,6 +253,10 @@ class SwarmCoDeConfig:
     def reproduction(self) -> "ReproductionParams":
         return _part(ReproductionParams, self)
 
+
+#: The settings that name one of two choices (validated in `SwarmCoDeConfig.validate`).
+CHOICES = {"prototype": ("closest", "medoid"), "effector_flip": ("gene", "prototype"),
+           "quota_basis": ("sum", "mean"), "objective": ("fitness", "roi")}
 
 #: The largest seed a run's generator takes (torch.Generator.manual_seed accepts 64 bits; a seed
 #: is kept non-negative and below 2**63 so that it reads back the same everywhere).
