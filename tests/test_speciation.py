@@ -251,22 +251,3 @@ def test_speciate_empty_population():
     g = make(0)
     r = speciate(g, torch.zeros(0, dtype=torch.long), None, torch.zeros(0, dtype=torch.long), 3)
     assert r.species.numel() == 0 and r.proto_ids.numel() == 0 and r.next_species_id == 3
-
-
-def test_medoid_prototype_is_the_member_nearest_the_rest_of_its_species():
-    # species 0: members at radius 0.15 (the old prototype), 0.30, 0.32, 0.33, 0.34; the medoid
-    # is 0.32 (its distances sum least), where "closest" keeps the edge member at 0.15
-    from dataclasses import fields
-    gen = torch.Generator().manual_seed(0)
-    g = _random_genomes(5, gen, l_tag=8)
-    same = {f.name: getattr(g, f.name)[:1].expand_as(getattr(g, f.name)).clone()
-            for f in fields(Population)}
-    same["radius"] = torch.tensor([0.15, 0.30, 0.32, 0.33, 0.34])
-    g = Population(**same)
-    hint = torch.zeros(5, dtype=torch.long)
-    old = g.index(torch.tensor([0]))
-    closest = speciate(g, hint, old, torch.tensor([0]), 1, delta=10.0)
-    medoid = speciate(g, hint, old, torch.tensor([0]), 1, delta=10.0, prototype="medoid")
-    assert closest.proto_index.tolist() == [0]
-    assert medoid.proto_index.tolist() == [2]
-    assert medoid.species.tolist() == closest.species.tolist() == [0] * 5

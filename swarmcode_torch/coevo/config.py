@@ -98,11 +98,6 @@ class SwarmCoDeConfig:
     dominance) of an offspring gets its Gaussian step (1.0: every gene, the behaviour before
     0.2). With every gene stepped in every child, a species' members spread so far from its
     prototype that any categorical change founds a species (docs/RESULTS.md)."""
-    prototype: str = "closest"
-    """How a surviving species' prototype is chosen each generation: 'closest', the member
-    closest to the previous prototype (the paper); 'medoid' (an experiment), the member whose
-    distances to the species' other members sum least, so that the prototype follows the
-    species instead of lagging behind at one edge of it."""
     merge_species: bool = False
     """Dissolve a species whose prototype comes within delta of an older one's (not in the paper;
     an experiment)."""
@@ -247,7 +242,7 @@ class SwarmCoDeConfig:
     @property
     def speciation(self) -> "SpeciationParams":
         return SpeciationParams(delta=self.delta, weights=DistanceWeights(hw_tiers=self.d_hw_tiers),
-                                merge_species=self.merge_species, prototype=self.prototype)
+                                merge_species=self.merge_species)
 
     @property
     def reproduction(self) -> "ReproductionParams":
@@ -255,8 +250,8 @@ class SwarmCoDeConfig:
 
 
 #: The settings that name one of two choices (validated in `SwarmCoDeConfig.validate`).
-CHOICES = {"prototype": ("closest", "medoid"), "effector_flip": ("gene", "prototype"),
-           "quota_basis": ("sum", "mean"), "objective": ("fitness", "roi")}
+CHOICES = {"effector_flip": ("gene", "prototype"), "quota_basis": ("sum", "mean"),
+           "objective": ("fitness", "roi")}
 
 #: The largest seed a run's generator takes (torch.Generator.manual_seed accepts 64 bits; a seed
 #: is kept non-negative and below 2**63 so that it reads back the same everywhere).
@@ -366,7 +361,6 @@ class SpeciationParams:
     delta: float = _RUN.delta
     weights: DistanceWeights = DistanceWeights()
     merge_species: bool = _RUN.merge_species
-    prototype: str = _RUN.prototype
 
 
 @dataclass(frozen=True)

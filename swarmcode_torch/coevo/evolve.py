@@ -173,7 +173,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     # 1. dynamic speciation
     sp = speciate(genome, state.species_hint, state.proto, state.proto_ids,
                   state.next_species_id, ctx.speciation.delta, w=ctx.speciation.weights,
-                  merge=ctx.speciation.merge_species, prototype=ctx.speciation.prototype)
+                  merge=ctx.speciation.merge_species)
 
     # 2. evaluation of every individual, all teams and trials in one batch
     t_eval = time.perf_counter()

@@ -244,10 +244,10 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     tournament, p2 by in-species tournament within `delta` of p1 (and != p1), up to mate_tries
     tries, else a global tournament (!= p1); crossover w.p. crossover_same / crossover_cross (same /
     different species) else clone p1; then every offspring is mutated (with `effector_flip =
-    "prototype"`, its effector flip is `prototype_flips` on its species' prototype). Hints: the elite's own
-    species / p1's species; parent_index: the elite row / p1. `distance_fn(genome, genome)` is
-    called once ([P, P]); `proto_index` (the prototypes' rows) is used by the prototype flips. Fitness must be finite for
-    every individual.
+    "prototype"`, its effector flip is `prototype_flips` on its species' prototype). Hints: the
+    elite's own species / p1's species; parent_index: the elite row / p1. `distance_fn(genome,
+    genome)` is called once ([P, P]); `proto_index` (the prototypes' rows) is used by the
+    prototype flips. Fitness must be finite for every individual.
     """
     p = genome.size
     dev = genome.bt.device

@@ -79,14 +79,11 @@ def distance(a: Population, b: Population, w: DistanceWeights = DistanceWeights(
 
 def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | None,
              prev_proto_ids: Tensor, next_species_id: int, delta: float = SwarmCoDeConfig.delta,
-             w: DistanceWeights = DistanceWeights(), merge: bool = False,
-             prototype: str = "closest") -> SpeciationResult:
+             w: DistanceWeights = DistanceWeights(), merge: bool = False) -> SpeciationResult:
     """Population [P], hint [P] long (-1 none), previous prototypes [Kp] + ids [Kp] -> SpeciationResult.
 
     (1) Each previous species with >= 1 member by `species_hint` keeps its id; its new prototype is
-    the member closest to the old prototype (ties: lowest row; `prototype="medoid"`, an
-    experiment: the member whose distances to its species' members sum least); memberless
-    species go extinct.
+    the member closest to the old prototype (ties: lowest row); memberless species go extinct.
     merge (not in the paper; an experiment): after (1), a surviving species whose new prototype
     lies within delta of the prototype of an older surviving one (earlier in `prev_proto_ids`)
     is dissolved, and its members are assigned in (2) like any other individual.
@@ -107,11 +104,7 @@ def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | 
         d_prev = distance(genome, prev_proto.to(dev), w)                  # [P, Kp]
         member = species_hint.to(dev)[:, None] == prev_ids[None, :]      # [P, Kp]
         alive = member.any(0)
-        if prototype == "medoid":
-            spread = distance(genome, genome, w) @ member.float()         # [P, Kp] sums
-            closest = spread.masked_fill(~member, math.inf).argmin(0)
-        else:
-            closest = d_prev.masked_fill(~member, math.inf).argmin(0)    # first min = lowest row
+        closest = d_prev.masked_fill(~member, math.inf).argmin(0)        # first min = lowest row
         carried_rows, carried_ids = closest[alive], prev_ids[alive]
     else:
         carried_rows, carried_ids = long_empty, long_empty
