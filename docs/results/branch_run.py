@@ -10,7 +10,8 @@ its checkpoint.pt, or a copy of it kept at an earlier generation, such as the sn
 of the runs in docs/results/cpu/v02/runs.tar.gz) as its checkpoint.pt, and the teams.jsonl
 records of the generations before it; the settings are changed in config.toml
 and in the checkpoint's saved config alike, so that `--resume` accepts the branch and the
-branch records what it ran with. Used in docs/RESULTS.md ("A lower effector rate").
+branch records what it ran with. Used in docs/RESULTS.md ("A lower effector rate", "How a niche
+is lost").
 """
 
 from __future__ import annotations
