@@ -305,6 +305,7 @@ def test_run_names_say_what_differs():
 
 def test_a_run_records_its_software_device_and_commit(tmp_path):
     import platform
+    import shutil
 
     import torch
 
@@ -313,8 +314,6 @@ def test_a_run_records_its_software_device_and_commit(tmp_path):
     sw = json.loads((result.run_dir / "summary.json").read_text())["software"]
     assert sw["swarmcode-torch"] == sc.__version__ and sw["torch"] == torch.__version__
     assert sw["device"] == f"cpu ({platform.machine()})"
-    import shutil
-
     if (ROOT / ".git").exists() and shutil.which("git"):   # run from this checkout: its commit
         head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short=12", "HEAD"],
                               capture_output=True, text=True, check=True).stdout.strip()

@@ -400,3 +400,6 @@ def test_reproduce_with_prototype_flips_changes_the_effector_only_by_them():
                      replace(params, effector_flip="gene"), gen)[0]
     assert not genome_equal(gene.index(gene.effector == 1), g.index(
         torch.full((int((gene.effector == 1).sum()),), 7)))
+    with pytest.raises(ValueError, match="effector_flip"):
+        reproduce(g, fit, species, torch.tensor([7]), torch.tensor([0]),
+                  replace(params, effector_flip="flip"), gen)

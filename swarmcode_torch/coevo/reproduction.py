@@ -314,8 +314,11 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     if params.effector_flip == "prototype":
         child = mutate(child, replace(params, p_effector=0.0), generator)
         child = prototype_flips(child, genome.index(proto_index[pos[p1]]), params, generator)
-    else:
+    elif params.effector_flip == "gene":
         child = mutate(child, params, generator)
+    else:
+        raise ValueError(f"effector_flip must be 'gene' or 'prototype', "
+                         f"not {params.effector_flip!r}")
 
     children = Population.cat([genome.index(elite), child])
     hint = torch.cat([species[elite], species[p1]])
