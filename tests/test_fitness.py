@@ -70,6 +70,13 @@ def test_gate():
     b = torch.tensor([5.0, 10.0, 20.0])
     assert torch.allclose(gate(f, b), torch.tensor([10.0, 2.5, 2.5]))
     assert torch.allclose(gate(f, b, p_marginal=0.5), torch.tensor([10.0, 5.0, 5.0]))
+    # a margin: penalised only below -margin * |baseline| (a tie and a small loss pass; -10 of
+    # a baseline of 20 is -50 %, below a 10 % margin); margin 0 is the gate above, bit for bit
+    f = torch.tensor([10.0, 10.0, 9.5, 10.0, -1.0])
+    b = torch.tensor([5.0, 10.0, 10.0, 20.0, -1.05])
+    assert torch.equal(gate(f, b, margin=0.1), torch.tensor([10.0, 10.0, 9.5, 2.5, -1.0]))
+    assert torch.equal(gate(f, b, margin=0.0), gate(f, b))
+    assert torch.equal(gate(f, b, margin=0.04), torch.tensor([10.0, 10.0, 9.5 * 0.25, 2.5, -1.0]))
 
 
 def test_ema():

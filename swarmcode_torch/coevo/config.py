@@ -55,6 +55,11 @@ class SwarmCoDeConfig:
     """Speciation threshold."""
     p_marginal: float = 0.25
     """Fitness factor when the marginal contribution is not positive."""
+    gate_margin: float = 0.0
+    """The gate penalises a focal whose marginal contribution is at most -gate_margin times its
+    baseline's score (0: every contribution that is not positive, the paper's gate). An
+    experiment beyond the paper: a focal that is about as good as the robots that replace it is
+    not penalised, so two species of one niche need not gate each other (docs/RESULTS.md)."""
     alpha: float = 0.6
     """EMA decay of fitness (weight of the previous value)."""
     lam: float = 0.001
@@ -188,7 +193,7 @@ class SwarmCoDeConfig:
             v = getattr(self, key)
             if not (v >= 0 and math.isfinite(v)):
                 raise ValueError(f"{name(key)} must be a finite number >= 0, got {v}")
-        for key in ("p_marginal", "alpha", "p_categorical", "p_effector", "p_tag_flip",
+        for key in ("p_marginal", "gate_margin", "alpha", "p_categorical", "p_effector", "p_tag_flip",
                     "bt_mutation_rate", "p_gene_mutation", "inactive_factor"):
             v = getattr(self, key)
             if v is None:                  # an optional one left unset (`p_effector`)
@@ -333,6 +338,7 @@ class EvalConfig:
     objective: str = _RUN.objective  # "fitness" or "roi" (fitness divided by team cost)
     lam: float = _RUN.lam            # budget penalty decay
     p_marginal: float = _RUN.p_marginal  # factor on fitness when the marginal contribution is <= 0
+    gate_margin: float = _RUN.gate_margin  # ... is <= -gate_margin * |baseline score|
     max_elite: int = _RUN.max_elite  # the elite cap (partner elites are drawn from the elites)
     dominance: bool = _RUN.dominance  # False: uniform team composition (an ablation)
     evaluated_partners: bool = _RUN.evaluated_partners  # partners are elites with a fitness

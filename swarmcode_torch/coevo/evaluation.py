@@ -220,9 +220,9 @@ def score_plan(plan: EvalPlan, genome: Population, m: dict, scenario: Scenario, 
     scores = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1)
     focal, base = scores[0], scores[1]
     team_m = {k: v.view(2, P, T)[0].mean(-1) for k, v in m.items()}
-    return EvalResult(fitness=gate(focal, base, cfg.p_marginal), focal=focal, baseline=base,
-                      team_cost=cost.view(2, P, T)[0, :, 0], swarms=swarms, team_metrics=team_m,
-                      sim_seconds=sim_seconds)
+    return EvalResult(fitness=gate(focal, base, cfg.p_marginal, cfg.gate_margin), focal=focal,
+                      baseline=base, team_cost=cost.view(2, P, T)[0, :, 0], swarms=swarms,
+                      team_metrics=team_m, sim_seconds=sim_seconds)
 
 
 def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
