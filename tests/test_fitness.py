@@ -120,8 +120,11 @@ def test_fitness_weights_are_run_settings_with_one_default():
     ("w_delivery", -1.0, ">= 0"), ("w_energy", math.nan, ">= 0"), ("w_pickup", math.inf, ">= 0"),
     ("fitness_floor", -0.1, ">= 0"), ("inactive_factor", 1.5, "<= 1"),
     ("inactive_factor", -0.5, "in \\[0, 1\\]"), ("w_closeness", 1e20, "<= 1e\\+12"),
-    ("w_collab_bonus", "50", "a number")])
-def test_fitness_weights_are_validated(key, value, needle):
+    ("w_collab_bonus", "50", "a number"), ("gate_margin", -0.1, "in \\[0, 1\\]"),
+    ("gate_margin", 2.0, "<= 1"), ("quota_inertia", math.nan, "in \\[0, 1\\]"),
+    ("quota_basis", "median", "'sum', 'mean' or 'sqrt', got 'median'"),
+    ("objective", "cost", "'fitness' or 'roi', got 'cost'")])
+def test_fitness_and_quota_settings_are_validated(key, value, needle):
     from swarmcode_torch.coevo.config import SwarmCoDeConfig
 
     with pytest.raises(ValueError, match=f"{key} must .*{needle}"):

@@ -295,11 +295,16 @@ def test_reproduce_invariants_and_elites():
     assert differs.all()
 
 
-@pytest.mark.parametrize("basis,min_share,quotas", [
-    ("mean", 0.0, [6, 6, 5]), ("sum", 0.0, [12, 4, 1]),
-    ("sum", 1.0, [13, 4, 0]),        # species 9's share .98 < 1: its slot goes to species 7
+@pytest.mark.parametrize("basis,min_share,inertia,quotas", [
+    ("mean", 0.0, 0.0, [6, 6, 5]), ("sum", 0.0, 0.0, [12, 4, 1]),
+    ("sum", 1.0, 0.0, [13, 4, 0]),   # species 9's share .98 < 1: its slot goes to species 7
+    # quota_inertia: half-way from the fitness share to the sizes 12, 4, 1: the mean's
+    # 5.79, 5.6, 5.6 become 8.9, 4.8, 3.3; all the way, the quotas are the sizes
+    ("mean", 0.0, 0.5, [9, 5, 3]), ("mean", 1.0, 1.0, [12, 4, 1]),
+    # between the sum and the mean: 12.4 / sqrt 12, 4 / 2, 1 -> shares 9.25, 5.17, 2.58
+    ("sqrt", 0.0, 0.0, [9, 5, 3]),
 ])
-def test_reproduce_elite_counts_and_quotas(basis, min_share, quotas):
+def test_reproduce_elite_counts_and_quotas(basis, min_share, inertia, quotas):
     gen = torch.Generator().manual_seed(0)
     g = random_genomes(17, gen)
     species = torch.tensor([7] * 12 + [3] * 4 + [9])
@@ -310,7 +315,8 @@ def test_reproduce_elite_counts_and_quotas(basis, min_share, quotas):
     ch, hint, is_elite, parent = reproduce(g, fit, species, torch.tensor([0, 12, 16]),
                                            torch.tensor([7, 3, 9]),
                                            ReproductionParams(quota_basis=basis,
-                                                              min_share=min_share), gen)
+                                                              min_share=min_share,
+                                                              quota_inertia=inertia), gen)
     elites = [2, 5, 8, 12, 16] if quotas[2] else [2, 5, 8, 12]     # 3 + 1 (+ 1), best first
     assert parent[is_elite].tolist() == elites
     assert torch.bincount(hint, minlength=10)[[7, 3, 9]].tolist() == quotas

@@ -69,7 +69,14 @@ class SwarmCoDeConfig:
     dominance: bool = True
     """Sample team slots by the dominance genes; False: uniformly (an ablation)."""
     quota_basis: str = "sum"
-    """Offspring quotas proportional to each species' total ('sum') or mean ('mean') fitness."""
+    """Offspring quotas proportional to each species' total ('sum') or mean ('mean') fitness, or
+    to the mean times the square root of the species' size ('sqrt', an experiment between the
+    two: a species' size then settles where it is proportional to its mean fitness squared)."""
+    quota_inertia: float = 0.0
+    """A species' quota share moves this fraction of the way from its share of the fitness
+    back toward its present size (0: the share of the fitness, the paper's quota; 0.5:
+    neat-python's spawn step, half-way from the previous size to the target). An experiment
+    beyond the paper (docs/RESULTS.md)."""
     min_share: float = 1.0
     """A species whose quota share is below this many individuals gets no slot (0: none)."""
     hw_sigma: float = 0.05
@@ -164,10 +171,11 @@ class SwarmCoDeConfig:
             raise ValueError(f"{name('scenario')} must name a scenario")
         if self.fitness_function is not None and not self.fitness_function.strip():
             raise ValueError(f"{name('fitness_function')} must name a function or be unset")
-        for key, (a, b) in CHOICES.items():
+        for key, opts in CHOICES.items():
             v = getattr(self, key)
-            if v not in (a, b):
-                raise ValueError(f"{name(key)} must be {a!r} or {b!r}, got {v!r}")
+            if v not in opts:
+                one_of = ", ".join(map(repr, opts[:-1])) + f" or {opts[-1]!r}"
+                raise ValueError(f"{name(key)} must be {one_of}, got {v!r}")
         dev = self.device
         if dev not in ("auto", "cpu", "cuda") and not (
                 dev.startswith("cuda:") and dev[5:].isdigit() and dev[5:].isascii()):
@@ -193,7 +201,7 @@ class SwarmCoDeConfig:
             v = getattr(self, key)
             if not (v >= 0 and math.isfinite(v)):
                 raise ValueError(f"{name(key)} must be a finite number >= 0, got {v}")
-        for key in ("p_marginal", "gate_margin", "alpha", "p_categorical", "p_effector", "p_tag_flip",
+        for key in ("p_marginal", "gate_margin", "quota_inertia", "alpha", "p_categorical", "p_effector", "p_tag_flip",
                     "bt_mutation_rate", "p_gene_mutation", "inactive_factor"):
             v = getattr(self, key)
             if v is None:                  # an optional one left unset (`p_effector`)
@@ -254,8 +262,8 @@ class SwarmCoDeConfig:
         return _part(ReproductionParams, self)
 
 
-#: The settings that name one of two choices (validated in `SwarmCoDeConfig.validate`).
-CHOICES = {"effector_flip": ("gene", "prototype"), "quota_basis": ("sum", "mean"),
+#: The settings that name one of a few choices (validated in `SwarmCoDeConfig.validate`).
+CHOICES = {"effector_flip": ("gene", "prototype"), "quota_basis": ("sum", "mean", "sqrt"),
            "objective": ("fitness", "roi")}
 
 #: The largest seed a run's generator takes (torch.Generator.manual_seed accepts 64 bits; a seed
@@ -382,7 +390,12 @@ class ReproductionParams:
     max_elite: the elite cap (the paper's E): a species keeps max(1, min(max_elite, size // 5 + 1)).
     quota_basis: what a species' offspring quota is proportional to: "sum", the total of its
         members' (gated, penalised, smoothed) fitness (the paper's "total adjusted fitness"), or
-        "mean", NEAT's explicit fitness sharing (total / species size). See docs/MODEL.md.
+        "mean", NEAT's explicit fitness sharing (total / species size), or "sqrt", total /
+        sqrt(species size), between the two. See docs/MODEL.md.
+    quota_inertia: a species' quota share is (1 - quota_inertia) x its share of the
+        (sum or mean) fitness + quota_inertia x its share of the population now (0: the fitness
+        share alone; 0.5: neat-python's half step from the previous size); `min_share` applies
+        to that blend.
     min_share: a species whose quota share is below this many individuals gets no slot.
     bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
     bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
@@ -416,6 +429,7 @@ class ReproductionParams:
     delta: float = _RUN.delta
     max_elite: int = _RUN.max_elite
     quota_basis: str = _RUN.quota_basis
+    quota_inertia: float = _RUN.quota_inertia
     min_share: float = _RUN.min_share
     bt_mutation_rate: float = _RUN.bt_mutation_rate
     bt_subtree_prob: float = 0.05

@@ -264,14 +264,23 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
         adjusted = fsum
     elif params.quota_basis == "mean":
         adjusted = fsum / sizes.clamp(min=1)
+    elif params.quota_basis == "sqrt":                  # between the two: mean x sqrt(size)
+        adjusted = fsum / sizes.clamp(min=1).double().sqrt()
     else:
-        raise ValueError(f"quota_basis must be 'sum' or 'mean', not {params.quota_basis!r}")
+        raise ValueError(f"quota_basis must be 'sum', 'mean' or 'sqrt', "
+                         f"not {params.quota_basis!r}")
     quota = torch.zeros(k, dtype=torch.long, device=dev)
     nonempty = (sizes > 0).nonzero().squeeze(1)                           # empty species get 0
     if p:
         best_pos = pos[fit.argmax()]
         protect = (nonempty == best_pos).to(torch.int32).argmax()
-        quota[nonempty] = offspring_quotas(adjusted[nonempty], p, protect=protect,
+        basis = adjusted[nonempty]
+        if params.quota_inertia > 0:            # blend the fitness share with the sizes now
+            f = torch.nan_to_num(basis, nan=0.0).clamp(min=0.0)
+            n = sizes[nonempty].double()
+            f = torch.where(f.sum() > 0, f / f.sum(), n / n.sum())
+            basis = (1 - params.quota_inertia) * f + params.quota_inertia * n / n.sum()
+        quota[nonempty] = offspring_quotas(basis, p, protect=protect,
                                            min_share=params.min_share)
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
 
