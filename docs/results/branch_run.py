@@ -2,7 +2,7 @@
 the same population: generations before the branch are the original run's, after it only the
 changed settings (and the random streams they move) differ.
 
-    python docs/results/branch_run.py SRC_RUN SNAPSHOT DST --set KEY=VALUE [--set ...]
+    python docs/results/branch_run.py SRC_RUN SNAPSHOT DST [--set KEY=VALUE ...] [--reseed S]
     swarmcode-torch evolve --resume DST --generations N
 
 DST gets SRC_RUN's scenario.toml and hardware.toml, SNAPSHOT (a checkpoint file in SRC_RUN:
@@ -10,8 +10,10 @@ its checkpoint.pt, or a copy of it kept at an earlier generation, such as the sn
 of the runs in docs/results/cpu/v02/runs.tar.gz) as its checkpoint.pt, and the teams.jsonl
 records of the generations before it; the settings are changed in config.toml
 and in the checkpoint's saved config alike, so that `--resume` accepts the branch and the
-branch records what it ran with. Used in docs/RESULTS.md ("A lower effector rate", "How a niche
-is lost").
+branch records what it ran with. `--reseed S` replaces the run's random stream by a fresh one
+seeded S: with no setting changed, a null branch, the same population continued by the same
+algorithm with other random draws, which measures how far two continuations differ by chance.
+Used in docs/RESULTS.md ("A lower effector rate", "How a niche is lost").
 """
 
 from __future__ import annotations
@@ -27,9 +29,12 @@ from swarmcode_torch.app.runs import config_from_dict, read_checkpoint, write_co
 from swarmcode_torch.app.settings import parse_settings
 
 
-def branch(src: Path, snapshot: str, dst: Path, settings: dict) -> int:
+def branch(src: Path, snapshot: str, dst: Path, settings: dict,
+           reseed: int | None = None) -> int:
     """Make the branch directory; returns the generation it starts from."""
     d = read_checkpoint(src / snapshot)
+    if reseed is not None:
+        d["rng_state"] = torch.Generator().manual_seed(reseed).get_state()
     cfg = config_from_dict({**d["config"], **settings}, f"{src / snapshot} (its config)")
     cfg.validate()
     dst.mkdir(parents=True)
@@ -56,8 +61,10 @@ def main() -> None:
     ap.add_argument("snapshot")
     ap.add_argument("dst", type=Path)
     ap.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--reseed", type=int, metavar="S",
+                    help="continue with a fresh random stream seeded S (a null branch)")
     args = ap.parse_args()
-    g = branch(args.src, args.snapshot, args.dst, parse_settings(args.settings))
+    g = branch(args.src, args.snapshot, args.dst, parse_settings(args.settings), args.reseed)
     print(f"{args.dst}: branched from {args.src / args.snapshot} at generation {g}; continue "
           f"with: swarmcode-torch evolve --resume {args.dst} --generations N")
 
