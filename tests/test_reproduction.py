@@ -322,6 +322,28 @@ def test_reproduce_elite_counts_and_quotas(basis, min_share, inertia, quotas):
     assert torch.bincount(hint, minlength=10)[[7, 3, 9]].tolist() == quotas
 
 
+@pytest.mark.parametrize("exponent,same_as,quotas", [
+    (1.0, "sum", [12, 4, 1]), (0.0, "mean", [6, 6, 5]), (0.5, "sqrt", [9, 5, 3]),
+    (0.75, None, [11, 4, 2]),   # 12.4 / 12 ** .25, 4 / 4 ** .25, 1 -> shares 10.6, 4.55, 1.6
+])
+def test_quota_size_exponent_spans_the_mean_and_the_total(exponent, same_as, quotas):
+    species = torch.tensor([7] * 12 + [3] * 4 + [9])
+    fit = torch.ones(17)
+    fit[[2, 5, 8]] = torch.tensor([1.5, 1.4, 1.3])
+    fit[[0, 1, 3]] = torch.tensor([0.8, 0.7, 0.7])
+
+    def hint(**kw):
+        gen = torch.Generator().manual_seed(0)
+        g = random_genomes(17, gen)
+        return reproduce(g, fit, species, torch.tensor([0, 12, 16]), torch.tensor([7, 3, 9]),
+                         ReproductionParams(min_share=0.0, **kw), gen)[1]
+
+    h = hint(quota_size_exponent=exponent, quota_basis="mean")     # the exponent wins
+    assert torch.bincount(h, minlength=10)[[7, 3, 9]].tolist() == quotas
+    if same_as:
+        assert torch.equal(h, hint(quota_basis=same_as))
+
+
 def test_reproduce_zero_quota_species_goes_extinct():
     gen = torch.Generator().manual_seed(0)
     g = random_genomes(16, gen)

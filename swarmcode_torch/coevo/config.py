@@ -72,6 +72,11 @@ class SwarmCoDeConfig:
     """Offspring quotas proportional to each species' total ('sum') or mean ('mean') fitness, or
     to the mean times the square root of the species' size ('sqrt', an experiment between the
     two: a species' size then settles where it is proportional to its mean fitness squared)."""
+    quota_size_exponent: float | None = None
+    """Unset: quotas as `quota_basis` says. Else each species' quota is proportional to its
+    mean fitness times its size to this power (1: 'sum', 0: 'mean', 0.5: 'sqrt'); a species'
+    size then settles where it is proportional to its mean fitness to the power
+    1 / (1 - exponent). An experiment beyond the paper (docs/RESULTS.md)."""
     quota_inertia: float = 0.0
     """A species' quota share moves this fraction of the way from its share of the fitness
     back toward its present size (0: the share of the fitness, the paper's quota; 0.5:
@@ -201,7 +206,8 @@ class SwarmCoDeConfig:
             v = getattr(self, key)
             if not (v >= 0 and math.isfinite(v)):
                 raise ValueError(f"{name(key)} must be a finite number >= 0, got {v}")
-        for key in ("p_marginal", "gate_margin", "quota_inertia", "alpha", "p_categorical", "p_effector", "p_tag_flip",
+        for key in ("p_marginal", "gate_margin", "quota_inertia", "quota_size_exponent",
+                    "alpha", "p_categorical", "p_effector", "p_tag_flip",
                     "bt_mutation_rate", "p_gene_mutation", "inactive_factor"):
             v = getattr(self, key)
             if v is None:                  # an optional one left unset (`p_effector`)
@@ -392,6 +398,8 @@ class ReproductionParams:
         members' (gated, penalised, smoothed) fitness (the paper's "total adjusted fitness"), or
         "mean", NEAT's explicit fitness sharing (total / species size), or "sqrt", total /
         sqrt(species size), between the two. See docs/MODEL.md.
+    quota_size_exponent: None, or quotas proportional to mean fitness x size ** exponent in
+        place of `quota_basis` (1 is "sum", 0 "mean", 0.5 "sqrt").
     quota_inertia: a species' quota share is (1 - quota_inertia) x its share of the
         (sum or mean) fitness + quota_inertia x its share of the population now (0: the fitness
         share alone; 0.5: neat-python's half step from the previous size); `min_share` applies
@@ -429,6 +437,7 @@ class ReproductionParams:
     delta: float = _RUN.delta
     max_elite: int = _RUN.max_elite
     quota_basis: str = _RUN.quota_basis
+    quota_size_exponent: float | None = _RUN.quota_size_exponent
     quota_inertia: float = _RUN.quota_inertia
     min_share: float = _RUN.min_share
     bt_mutation_rate: float = _RUN.bt_mutation_rate

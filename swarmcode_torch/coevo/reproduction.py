@@ -260,7 +260,10 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     sizes = group_sizes(pos, k)
     fit = fitness.float()
     fsum = torch.zeros(k, dtype=torch.float64, device=dev).index_add_(0, pos, fit.double())
-    if params.quota_basis == "sum":
+    if params.quota_size_exponent is not None:          # mean x size ** exponent
+        n = sizes.clamp(min=1).double()
+        adjusted = fsum / n * n.pow(params.quota_size_exponent)
+    elif params.quota_basis == "sum":
         adjusted = fsum
     elif params.quota_basis == "mean":
         adjusted = fsum / sizes.clamp(min=1)
