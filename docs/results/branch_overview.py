@@ -20,7 +20,9 @@ TABLES = {"effector_flip = prototype": "prototype_flip/table.json",
           "quota_basis = mean": "quota_mean_table.json",
           "gate_margin = 0.1": "gate_margin_table.json",
           "quota_inertia = 0.5": "quota_inertia_table.json",
-          "quota_basis = sqrt": "quota_sqrt_table.json"}
+          "quota_basis = sqrt": "quota_sqrt_table.json",
+          "quota_size_exponent = 0.75": "quota_exponent_075_table.json",
+          "none (null branch, --reseed 1)": "null_branch_table.json"}
 
 
 def overview(rows: list[dict]) -> list[dict]:
@@ -52,6 +54,9 @@ def main() -> None:
           "a niche short: branch / control | best-team score vs control |")
     print("|---|---|---|---|---|---|")
     for name, path in tables.items():
+        if not path.is_file():
+            print(f"| {name} | (no table: {path.name}) | | | | |")
+            continue
         for o in overview(json.loads(path.read_text())):
             print(f"| {name} | {o['scenario']} | {o['seeds']} | {o['team_species']:.1f} / "
                   f"{o['control_team_species']:.1f} | {o['short']} / {o['control_short']} | "
