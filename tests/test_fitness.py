@@ -76,7 +76,8 @@ def test_gate():
     b = torch.tensor([5.0, 10.0, 10.0, 20.0, -1.05])
     assert torch.equal(gate(f, b, margin=0.1), torch.tensor([10.0, 10.0, 9.5, 2.5, -1.0]))
     assert torch.equal(gate(f, b, margin=0.0), gate(f, b))
-    assert torch.equal(gate(f, b, margin=0.04), torch.tensor([10.0, 10.0, 9.5 * 0.25, 2.5, -1.0]))
+    assert torch.equal(gate(f, b, margin=0.04),
+                       torch.tensor([10.0, 10.0, 9.5 * 0.25, 2.5, -1.0]))
 
 
 def test_ema():

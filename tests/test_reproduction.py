@@ -324,7 +324,7 @@ def test_reproduce_elite_counts_and_quotas(basis, min_share, inertia, quotas):
 
 @pytest.mark.parametrize("exponent,same_as,quotas", [
     (1.0, "sum", [12, 4, 1]), (0.0, "mean", [6, 6, 5]), (0.5, "sqrt", [9, 5, 3]),
-    (0.75, None, [11, 4, 2]),   # 12.4 / 12 ** .25, 4 / 4 ** .25, 1 -> shares 10.6, 4.55, 1.6
+    (0.75, None, [11, 4, 2]),   # 12.4 / 12 ** .25, 4 / 4 ** .25, 1 -> shares 10.8, 4.6, 1.6
 ])
 def test_quota_size_exponent_spans_the_mean_and_the_total(exponent, same_as, quotas):
     species = torch.tensor([7] * 12 + [3] * 4 + [9])

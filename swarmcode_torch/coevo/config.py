@@ -75,8 +75,8 @@ class SwarmCoDeConfig:
     quota_size_exponent: float | None = None
     """Unset: quotas as `quota_basis` says. Else each species' quota is proportional to its
     mean fitness times its size to this power (1: 'sum', 0: 'mean', 0.5: 'sqrt'); a species'
-    size then settles where it is proportional to its mean fitness to the power
-    1 / (1 - exponent). An experiment beyond the paper (docs/RESULTS.md)."""
+    size then settles, for an exponent below 1, where it is proportional to its mean fitness
+    to the power 1 / (1 - exponent). An experiment beyond the paper (docs/RESULTS.md)."""
     quota_inertia: float = 0.0
     """A species' quota share moves this fraction of the way from its share of the fitness
     back toward its present size (0: the share of the fitness, the paper's quota; 0.5:
