@@ -111,14 +111,22 @@ def test_resume_equals_straight_through(tmp_path):
     _same_state(straight.state, resumed.state)
 
 
-def test_ctrl_c_checkpoints_the_last_finished_generation(tmp_path):
+@pytest.mark.parametrize("wrapped", [False, True])
+def test_ctrl_c_checkpoints_the_last_finished_generation(tmp_path, wrapped):
+    # wrapped: the interrupt lands in an extension module's initialisation, which Python
+    # reports as an ImportError raised from it (seen with SIGTERM during matplotlib's import)
     class Interrupt:
         def on_start(self, ev): pass
         def on_end(self, ev): pass
 
         def on_generation(self, ev, metrics):
             if ev.state.generation == 2:
-                raise KeyboardInterrupt
+                if not wrapped:
+                    raise KeyboardInterrupt
+                try:
+                    raise KeyboardInterrupt
+                except KeyboardInterrupt as e:
+                    raise ImportError("initialization failed") from e
 
     ev = Evolution(TINY)
     write_config(tmp_path, TINY)
@@ -126,6 +134,22 @@ def test_ctrl_c_checkpoints_the_last_finished_generation(tmp_path):
         run(ev, tmp_path, [Interrupt()])
     assert load_checkpoint(tmp_path)["generation"] == 2
     assert resume(tmp_path).state.generation == 2
+
+
+def test_interrupt_of_finds_an_interrupt_in_the_chain_only():
+    from swarmcode_torch.app.runs import interrupt_of
+
+    k = KeyboardInterrupt()
+    assert interrupt_of(k) is k
+    try:
+        try:
+            raise k
+        except KeyboardInterrupt as e:
+            raise ImportError("initialization failed") from e
+    except ImportError as e:
+        assert interrupt_of(e) is k
+    assert interrupt_of(ImportError("no module")) is None
+    assert interrupt_of(RuntimeError("x")) is None
 
 
 def test_tensorboard_tags_read_back(tmp_path):

@@ -827,6 +827,18 @@ def generation_team(run_dir: Path, generation: int) -> dict:
     return found
 
 
+def interrupt_of(e: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (Ctrl-C, or SIGTERM turned into one) that `e` is or was raised
+    from, else None: an interrupt that lands while a compiled extension module initialises
+    (matplotlib's, imported for the first figure) reaches Python as an ImportError caused by it."""
+    seen = 0
+    while e is not None and seen < 16:
+        if isinstance(e, KeyboardInterrupt):
+            return e
+        e, seen = e.__cause__ or e.__context__, seen + 1
+    return None
+
+
 def run(ev: Evolution, run_dir: Path, reporters: Iterable[Reporter],
         on_interrupt: Callable[[Path], None] | None = None) -> Evolution:
     """Run generations until the configured total; Ctrl-C checkpoints the last finished one."""
@@ -838,11 +850,14 @@ def run(ev: Evolution, run_dir: Path, reporters: Iterable[Reporter],
             result = ev.step()
             for r in reporters:
                 r.on_generation(ev, result)
-    except KeyboardInterrupt:
+    except BaseException as e:
+        interrupt = interrupt_of(e)
+        if interrupt is None:
+            raise
         path = save_checkpoint(run_dir, ev)
         if on_interrupt:
             on_interrupt(path)
-        raise
+        raise interrupt from None
     for r in reporters:
         r.on_end(ev)
     return ev
