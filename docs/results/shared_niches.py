@@ -19,20 +19,23 @@ import json
 import statistics
 from pathlib import Path
 
-from swarmcode_torch.app.runs import load_checkpoint, read_teams
+from swarmcode_torch.app.analysis import design_capabilities
+from swarmcode_torch.app.runs import load_checkpoint, read_config, read_teams, run_scenario
 
 
 def shared_niches(run: Path, start: int, end: int) -> dict:
     sizes = {h["generation"]: {int(k): v for k, v in h["population"].items()}
              for h in load_checkpoint(run)["history"]}
     teams = read_teams(run)
+    scenario = run_scenario(run, read_config(run))
     lone, largest, others, shared = [], [], [], 0
     for g in range(start, end):
         if g not in teams or g not in sizes:
             continue
         caps: dict[int, set] = {}
-        for d in teams[g]["designs"]:
-            caps.setdefault(d["species"], set()).add(tuple(d["capability"]))
+        designs = teams[g]["designs"]
+        for d, cap in zip(designs, design_capabilities(designs, scenario)):
+            caps.setdefault(d["species"], set()).add(tuple(cap))
         niche: dict[tuple, list[int]] = {}
         for sid, cs in caps.items():
             if len(cs) == 1 and next(iter(cs)):

@@ -19,11 +19,14 @@ DistanceFn = Callable[[Population, Population], Tensor]
 
 
 def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
-                     protect: int | None = None, min_share: float = 0.0) -> Tensor:
+                     protect: int | None = None, min_share: float = 0.0,
+                     sizes: Tensor | None = None, inertia: float = 0.0) -> Tensor:
     """[K] total adjusted fitness per species -> [K] long quotas summing to population_size.
 
     Proportional shares rounded by largest remainder (ties: lowest index); all-zero (or negative)
-    fitness gives equal shares. A species whose share (population_size * its fraction of the
+    fitness gives equal shares. With `inertia` > 0 and the species' present `sizes` [K], each
+    share is (1 - inertia) x its fitness share + inertia x its share of the sizes (all-zero
+    fitness: the sizes' shares). A species whose share (population_size * its fraction of the
     total) is below `min_share` gets 0 and the others share its slots (0, or no species reaching
     it: no threshold). `protect` (a species position) is guaranteed a quota >= 1, taken
     from the species with the largest quota (ties: lowest index). In `reproduce`, elites are
@@ -37,6 +40,10 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
     # no value is read on the host here (each would be a device sync): the branches are
     # torch.where over tensors, `protect` may be a 0-d tensor
     f = torch.nan_to_num(adjusted_fitness_sum.double(), nan=0.0).clamp(min=0.0)
+    if inertia > 0 and sizes is not None:       # blend the fitness share with the sizes now
+        n = sizes.double()
+        f = torch.where(f.sum() > 0, f / f.sum(), n / n.sum())
+        f = (1 - inertia) * f + inertia * n / n.sum()
     f = torch.where(f.sum() > 0, f, torch.ones_like(f))
     if min_share > 0:
         # a relative tolerance, so that an exact share of min_share is not lost to rounding
@@ -277,14 +284,9 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     if p:
         best_pos = pos[fit.argmax()]
         protect = (nonempty == best_pos).to(torch.int32).argmax()
-        basis = adjusted[nonempty]
-        if params.quota_inertia > 0:            # blend the fitness share with the sizes now
-            f = torch.nan_to_num(basis, nan=0.0).clamp(min=0.0)
-            n = sizes[nonempty].double()
-            f = torch.where(f.sum() > 0, f / f.sum(), n / n.sum())
-            basis = (1 - params.quota_inertia) * f + params.quota_inertia * n / n.sum()
-        quota[nonempty] = offspring_quotas(basis, p, protect=protect,
-                                           min_share=params.min_share)
+        quota[nonempty] = offspring_quotas(adjusted[nonempty], p, protect=protect,
+                                           min_share=params.min_share, sizes=sizes[nonempty],
+                                           inertia=params.quota_inertia)
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
 
     order, rank = rank_within_groups(pos, fit, sizes)       # by (species, fitness desc, row)
