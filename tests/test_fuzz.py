@@ -104,10 +104,11 @@ SET_KEYS = ["delta", "p_marginal", "alpha", "lam", "max_elite", "tag_length", "b
             "p_tag_flip", "bt_mutation_rate", "p_gene_mutation", "dominance", "merge_species",
             "evaluated_partners", "cuda_graphs", "d_hw_tiers", "bt_point_on_nodes", "seed",
             "w_delivery", "inactive_factor", "fitness_floor", "p_effector", "effector_flip",
-            "gate_margin", "quota_inertia", "quota_size_exponent", "unknown_key"]
+            "gate_margin", "quota_inertia", "quota_size_exponent", "partners_per_niche",
+            "unknown_key"]
 SET_VALUES = ["nan", "inf", "-inf", "-1", "0", "0.5", "1", "1.5", "4", "1e300", "1e400",
               "100000000000", "true", "false", "none", "x", "sum", "mean", "sqrt", "gene",
-              "prototype", ""]
+              "prototype", "all", "one", ""]
 set_cases = st.lists(st.tuples(st.sampled_from(SET_KEYS), st.sampled_from(SET_VALUES)),
                      min_size=1, max_size=3)
 

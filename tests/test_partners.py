@@ -172,3 +172,67 @@ def test_assemble_no_partners_zero_dominance_and_determinism():
     assert torch.equal(sw.baseline_team, sw2.baseline_team)
     one = assemble_swarms(focal, partners, dominance, 1, torch.Generator().manual_seed(0))
     assert one.focal_team.tolist() == [[3], [4]] and one.baseline_team.tolist() == [[-1], [-1]]
+
+
+def test_niche_representatives_largest_then_fittest_then_oldest():
+    from swarmcode_torch.coevo.partners import niche_representatives
+    cap = torch.tensor([[1, 0], [1, 0], [1, 0], [0, 1], [0, 0], [0, 0], [0, 1], [0, 1]],
+                       dtype=torch.bool)
+    sizes = torch.tensor([5, 7, 7, 3, 2, 2, 3, 9])
+    best = torch.tensor([9.0, 1.0, 2.0, 1.0, 1.0, 1.0, 1.0, 5.0])
+    has = torch.tensor([True] * 7 + [False])
+    rep = niche_representatives(cap, sizes, best, has).tolist()
+    # niche {0}: species 1 and 2 are the largest, 2 has the fitter elite (0's 9 does not count);
+    # niche {1}: 3 and 6 tie in size and fitness, the first (oldest) represents it, and 7, the
+    # largest, has no elite, so it neither represents nor displaces; 4 and 5 lift nothing: each
+    # represents itself
+    assert rep == [False, False, True, True, True, True, False, False]
+
+
+def test_choose_partners_allowed_mask_removes_species_and_keeps_the_draws():
+    args = (torch.zeros(40, 16, dtype=torch.bool), torch.ones(40), torch.zeros(40, dtype=torch.long),
+            torch.tensor([0, 1, 2, 3]), tags_at_distance([1, 2, 3, 4]),
+            torch.tensor([[0, 1, 2], [3, 4, -1], [5, -1, -1], [6, 7, 8]]))
+    free = choose_partners(*args, torch.Generator().manual_seed(2))
+    allowed = torch.tensor([True, False, True, False])
+    masked = choose_partners(*args, torch.Generator().manual_seed(2), allowed)
+    assert (masked[:, ~allowed] == -1).all() and (masked[:, 1:2] == -1).all()
+    assert torch.equal(masked[:, allowed], free[:, allowed])
+    assert (free[:, 1:] >= 0).all()                     # without the mask every species is one
+
+
+def test_one_partner_per_niche_puts_a_duplicate_beside_its_resident():
+    from dataclasses import replace
+
+    from swarmcode_torch.app.render import team_genome
+    from swarmcode_torch.coevo.config import EvalConfig
+    from swarmcode_torch.coevo.evaluation import plan_evaluation
+    from swarmcode_torch.sim.scenario import load_scenario
+
+    def design(effector, radius):
+        return {"effector": effector, "radius": radius, "chassis_tier": 3, "battery_tier": 3,
+                "motor_tier": 3, "torque_point": 1.0, "battery_point": 1.0, "dominance": 0.5,
+                "selectivity": 1.0, "count": 1, "bt": [13] * 4}
+    # species 10: 3 heavy pinchers (the resident), 11: 2 heavy pinchers of another design (a
+    # duplicate of its niche), 12: a heavy suction robot, 13: a robot that lifts nothing
+    genome, _ = team_genome([design("pincher", 0.4)] * 3 + [design("pincher", 0.45)] * 2
+                            + [design("suction", 0.4), design("pincher", 0.31)])
+    species = torch.tensor([10, 10, 10, 11, 11, 12, 13])
+    ids = torch.tensor([10, 11, 12, 13])
+    proto_index = torch.tensor([0, 3, 5, 6])
+    fitness, has = torch.ones(7), torch.ones(7, dtype=torch.bool)
+    four = load_scenario("four-niche")
+    cfg = EvalConfig(swarm_size=6, ticks=10, trials=1)
+
+    def partner_species(c):
+        plan = plan_evaluation(genome, species, ids, proto_index, fitness, has, four, c,
+                               torch.Generator().manual_seed(0))
+        team = plan.swarms.focal_team
+        return [sorted({int(species[r]) for r in row if r >= 0} - {int(species[i])})
+                for i, row in enumerate(team)]
+    everyone = partner_species(cfg)
+    one = partner_species(replace(cfg, partners_per_niche="one"))
+    assert everyone[0] == [11, 12, 13] and everyone[3] == [10, 12, 13]
+    assert one[0] == [12, 13]                   # the resident's team leaves the duplicate out
+    assert one[3] == [10, 12, 13]               # the duplicate's team holds the resident
+    assert one[5] == [10, 13] and one[6] == [10, 12]   # one species of each other niche

@@ -121,6 +121,13 @@ class SwarmCoDeConfig:
     evaluated_partners: bool = False
     """Partners are species elites that have a fitness: a species founded this generation is no
     one's partner (an experiment, off by default: it did not reduce the species in best teams)."""
+    partners_per_niche: str = "all"
+    """Which species may be partners: "all" (the paper: any species whose tag the focal's
+    selectivity accepts) or "one": of the species whose elites have the same capability (the
+    scenario's package classes a design can lift), only the largest (then the one with the
+    fittest elite, then the oldest) may be a partner, so that a second species of a niche is
+    evaluated beside its niche's resident, not in place of it. An experiment beyond the paper
+    (docs/RESULTS.md, "One partner per niche")."""
     cuda_graphs: bool | None = None
     """Replay the compiled tick as CUDA graphs of 10 ticks (`sim.runtime.CudaGraphTicks`). Unset: on
     wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
@@ -270,7 +277,7 @@ class SwarmCoDeConfig:
 
 #: The settings that name one of a few choices (validated in `SwarmCoDeConfig.validate`).
 CHOICES = {"effector_flip": ("gene", "prototype"), "quota_basis": ("sum", "mean", "sqrt"),
-           "objective": ("fitness", "roi")}
+           "objective": ("fitness", "roi"), "partners_per_niche": ("all", "one")}
 
 #: The largest seed a run's generator takes (torch.Generator.manual_seed accepts 64 bits; a seed
 #: is kept non-negative and below 2**63 so that it reads back the same everywhere).
@@ -356,6 +363,7 @@ class EvalConfig:
     max_elite: int = _RUN.max_elite  # the elite cap (partner elites are drawn from the elites)
     dominance: bool = _RUN.dominance  # False: uniform team composition (an ablation)
     evaluated_partners: bool = _RUN.evaluated_partners  # partners are elites with a fitness
+    partners_per_niche: str = _RUN.partners_per_niche  # "one": one partner species per capability
     weights: FitnessWeights = FitnessWeights()
 
 

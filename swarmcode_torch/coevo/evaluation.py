@@ -29,11 +29,11 @@ from .population import Population
 from .population import genome_phenotype
 from ..sim.hardware import Catalog
 from ..sim.layout import Layout, make_layouts
-from .partners import Swarms, assemble_swarms, choose_partners, elite_rows
+from .partners import Swarms, assemble_swarms, choose_partners, elite_rows, niche_representatives
 from .selection import elite_count
 from ..sim.scenario import Scenario
 from ..sim.rollout import rollout
-from ..sim.state import Robots, WorldParams
+from ..sim.state import Robots, WorldParams, capabilities
 
 StepFn = Callable
 
@@ -154,12 +154,32 @@ def plan_evaluation(genome: Population, species: Tensor, proto_ids: Tensor, prot
     S, T = cfg.swarm_size, cfg.trials
     elites = elite_rows(fitness, has_fitness, species, proto_ids,
                         lambda n: elite_count(n, cfg.max_elite), cfg.evaluated_partners)
+    allowed = (niche_partners(genome, species, proto_ids, elites, fitness, has_fitness, scenario)
+               if cfg.partners_per_niche == "one" else None)
     partners = choose_partners(genome.tag, genome.selectivity, species, proto_ids,
-                               genome.tag[proto_index], elites, generator)
+                               genome.tag[proto_index], elites, generator, allowed)
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
     swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator)
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)
     return EvalPlan(swarms, layouts, T)
+
+
+def niche_partners(genome: Population, species: Tensor, proto_ids: Tensor, elites: Tensor,
+                   fitness: Tensor, has_fitness: Tensor, scenario: Scenario) -> Tensor:
+    """[K] bool: the species that may be partners under `partners_per_niche = "one"`
+    (`partners.niche_representatives`), a species' capability being its fittest elite's."""
+    k = proto_ids.numel()
+    first = elites[:, 0].clamp_min(0) if elites.numel() else torch.zeros(k, dtype=torch.long,
+                                                                           device=species.device)
+    can = capabilities(genome_phenotype(genome.index(first), scenario.hardware), scenario,
+                       WorldParams.for_scenario(scenario))
+    sizes = (species[:, None] == proto_ids[None, :]).sum(0)
+    has_elite = (elites[:, 0] >= 0) if elites.numel() else torch.zeros(k, dtype=torch.bool,
+                                                                        device=species.device)
+    f = torch.where(has_fitness, torch.nan_to_num(fitness.float(), nan=-torch.inf),
+                    torch.full_like(fitness, -torch.inf, dtype=torch.float))
+    best = torch.where(has_elite, f[first], torch.full_like(f[first], -torch.inf))
+    return niche_representatives(can, sizes, best, has_elite)
 
 
 def sim_batch(plan: EvalPlan, genome: Population, lo: int = 0, hi: int | None = None) -> SimBatch:

@@ -30,11 +30,14 @@ class Swarms:
 
 
 def choose_partners(tag: Tensor, selectivity: Tensor, species: Tensor, proto_ids: Tensor,
-                    proto_tag: Tensor, elite_index: Tensor, generator: torch.Generator) -> Tensor:
+                    proto_tag: Tensor, elite_index: Tensor, generator: torch.Generator,
+                    allowed: Tensor | None = None) -> Tensor:
     """tag [P, L] bool, selectivity [P], species [P], proto_ids [K], proto_tag [K, L], elite_index [K, M] -> partner_rows [P, K] long.
 
     Species k is a partner of i iff it is not i's species, has >= 1 elite, and H(tag_i, proto_tag_k)/L
-    < selectivity_i (strict); partner_rows[i, k] is one of k's elites drawn uniformly, else -1.
+    < selectivity_i (strict), and `allowed[k]` where that [K] bool mask is given
+    (`niche_representatives`); partner_rows[i, k] is one of k's elites drawn uniformly, else -1.
+    The random draws do not depend on `allowed`.
     """
     p, l = tag.shape
     k = proto_ids.numel()
@@ -46,12 +49,35 @@ def choose_partners(tag: Tensor, selectivity: Tensor, species: Tensor, proto_ids
     count = valid.sum(1)                                                  # [K]
     eligible = (dist < selectivity[:, None]) & (species[:, None] != proto_ids[None, :])
     eligible &= (count > 0)[None, :]
+    if allowed is not None:
+        eligible &= allowed.to(dev)[None, :]
     # left-pack each species' elites so that entries 0..count-1 are valid
     packed = elite_index.gather(1, torch.sort((~valid).to(torch.uint8), dim=1, stable=True).indices)
     u = torch.rand(p, k, generator=generator, device=dev)
     j = torch.minimum((u * count[None, :]).long(), (count - 1).clamp(min=0)[None, :])
     rows = packed[torch.arange(k, device=dev)[None, :].expand(p, k), j]
     return torch.where(eligible, rows, torch.full_like(rows, -1))
+
+
+def niche_representatives(capability: Tensor, sizes: Tensor, best: Tensor,
+                          has_elite: Tensor) -> Tensor:
+    """capability [K, U] bool (the package classes each species' design can lift), sizes [K],
+    best [K] (its fittest elite's fitness, -inf for none), has_elite [K] bool -> [K] bool: the
+    species that may be partners when each niche gives one.
+
+    Species that lift the same non-empty set of classes share a niche; of those with an elite,
+    the representative is the largest, then the one with the fittest elite, then the first
+    (the oldest: species are in order of founding). A species that lifts nothing, and one
+    alone in its niche, represents itself; a species without an elite represents nothing."""
+    k = sizes.numel()
+    same = (capability[:, None, :] == capability[None, :, :]).all(-1)   # [K, K]
+    same &= capability.any(-1)[:, None]
+    idx = torch.arange(k, device=sizes.device)
+    size, fit = sizes[:, None], best[:, None]
+    beats = (size.T > size) | ((size.T == size) & ((fit.T > fit) | ((fit.T == fit)
+                                                                    & (idx[None, :] < idx[:, None]))))
+    beaten = (same & beats & has_elite[None, :]).any(1)                 # [k, j]: j beats k
+    return has_elite & ~beaten
 
 
 def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids: Tensor,
