@@ -22,6 +22,8 @@ TABLES = {"effector_flip = prototype": "prototype_flip/table.json",
           "quota_inertia = 0.5": "quota_inertia_table.json",
           "quota_basis = sqrt": "quota_sqrt_table.json",
           "quota_size_exponent = 0.75": "quota_exponent_075_table.json",
+          "partners_per_niche = one": "partners_one_table.json",
+          "partners_per_niche = one, quota_size_exponent = 0.75": "partners_one_exp075_table.json",
           "none (null branch, --reseed 1)": "null_branch_table.json",
           "none (null branch, --reseed 2)": "null_branch_2_table.json"}
 
