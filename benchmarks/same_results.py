@@ -7,7 +7,9 @@ baselines with the code of one source tree, then compare two such outputs.
     python benchmarks/same_results.py compare /tmp/same/before /tmp/same/after
 
 `run` works on any commit since the CLI existed (it tries the module paths of the 0.3 layout,
-then those before it). `compare` prints one line per file and exits 1 if any differs:
+then those before it). `run --set KEY=VALUE` (repeatable) gives every run and baseline that
+setting, e.g. to run a tree whose defaults have changed with the settings of an older one:
+`--set partners_per_niche=all --set quota_size_exponent=none` are the defaults before 0.4. `compare` prints one line per file and exits 1 if any differs:
 summary.json (less its timings), teams.jsonl, metrics.csv and TensorBoard scalars (less
 perf/*), config.toml, checkpoint.pt (every tensor and value), and the baselines' per-generation
 metrics (less seconds). CPU only; about a minute on 2 cores.
@@ -44,7 +46,7 @@ from swarmcode_torch.baselines import make_algorithm
 out = {}
 for name in ("homogeneous-ga", "ccea", "swarmcode"):
     cfg = C(scenario="four-niche", population=12, swarm_size=6, trials=1, ticks=30, seed=5,
-            generations=3, device="cpu", compile=False)
+            generations=3, device="cpu", compile=False, **json.loads(sys.argv[2]))
     algo = make_algorithm(name, cfg)
     out[name] = [{k: v for k, v in algo.step().items()
                   if isinstance(v, (int, float)) and "seconds" not in k} for _ in range(3)]
@@ -55,7 +57,18 @@ UNTIMED_SUMMARY = {"wall_seconds", "seconds_per_generation", "elapsed_seconds",
                    "software"}   # versions, device name and commit (0.3.1): not a result
 
 
-def run(src: Path, out: Path) -> None:
+def setting_value(text: str):
+    """A --set value as the baselines' config takes it: none, a TOML-style number or boolean,
+    else the string."""
+    if text == "none":
+        return None
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def run(src: Path, out: Path, settings: list[str] = ()) -> None:
     out.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "PYTHONPATH": str(src.resolve())}
     out = out.resolve()
@@ -66,13 +79,21 @@ def run(src: Path, out: Path) -> None:
     for args in RUNS:
         cmd = [sys.executable, "-m", "swarmcode_torch", "evolve", *args, "--device", "cpu",
                "--no-compile", "--logdir", str(out)]
+        for kv in settings:
+            cmd += ["--set", kv]
         # cwd=out: `python -m` and `-c` put the working directory first on sys.path, so run
         # from a checkout's root they would import its package instead of `src`'s
         r = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=out)
         if r.returncode:
             sys.exit(f"{' '.join(cmd)} failed:\n{r.stdout[-2000:]}\n{r.stderr[-2000:]}")
-    subprocess.run([sys.executable, "-c", BASELINES, str(out / "baselines.json")], env=env,
-                   check=True, cwd=out)
+    given = {}
+    for kv in settings:
+        key, sep, value = kv.partition("=")
+        if not sep:
+            sys.exit(f"--set {kv}: expected KEY=VALUE")
+        given[key] = setting_value(value)
+    subprocess.run([sys.executable, "-c", BASELINES, str(out / "baselines.json"),
+                    json.dumps(given)], env=env, check=True, cwd=out)
     print(f"wrote {out}")
 
 
@@ -142,12 +163,14 @@ def main() -> None:
     r = sub.add_parser("run")
     r.add_argument("--src", type=Path, required=True, help="source tree (a checkout or worktree)")
     r.add_argument("--out", type=Path, required=True)
+    r.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE",
+                   help="a setting for every run and baseline (repeatable)")
     c = sub.add_parser("compare")
     c.add_argument("a", type=Path)
     c.add_argument("b", type=Path)
     args = ap.parse_args()
     if args.cmd == "run":
-        run(args.src, args.out)
+        run(args.src, args.out, args.settings)
     else:
         sys.exit(compare(args.a, args.b))
 

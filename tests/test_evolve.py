@@ -184,10 +184,12 @@ def test_config_saved_before_quota_basis_keeps_its_algorithm():
 
     new = SwarmCoDeConfig(scenario="one-niche", population=8)
     legacy = {k: v for k, v in new.to_dict().items()
-              if k not in ("quota_basis", "hw_sigma", "social_sigma", "p_categorical")}
+              if k not in ("quota_basis", "hw_sigma", "social_sigma", "p_categorical",
+                           "quota_size_exponent", "partners_per_niche")}
     old = SwarmCoDeConfig.from_dict(migrate_config(legacy))
     assert (old.quota_basis, old.hw_sigma, old.social_sigma, old.p_categorical) == \
         ("mean", 0.1, 0.1, 0.1)
+    assert (old.quota_size_exponent, old.partners_per_niche) == (None, "all")
     pinned = make_context(new).cfg                               # what a run saves
     assert SwarmCoDeConfig.from_dict(pinned.to_dict()) == pinned    # a current config round-trips
     repro = make_context(old).repro
@@ -250,12 +252,32 @@ def test_config_saved_before_the_paper_text_fixes_keeps_the_old_operators():
     assert (ctx.repro.bt_mutation_rate, ctx.repro.p_gene_mutation) == (1.0, 1.0)
 
 
+def test_config_saved_before_0_4_keeps_every_partner_and_its_quota_rule():
+    from swarmcode_torch.coevo.evolve import make_context
+
+    new = SwarmCoDeConfig(scenario="one-niche", population=8)
+    ctx = make_context(new)
+    assert (ctx.eval_cfg.partners_per_niche, ctx.repro.quota_size_exponent) == ("one", 0.75)
+    saved = {k: v for k, v in new.to_dict().items()
+             if k not in ("partners_per_niche", "quota_size_exponent")}      # before 0.3.3
+    ctx = make_context(SwarmCoDeConfig.from_dict(migrate_config(saved)))
+    assert (ctx.eval_cfg.partners_per_niche, ctx.repro.quota_size_exponent) == ("all", None)
+    # 0.3.3 wrote the exponent ("none" unset; a branch set 0.75): it is kept as written
+    for written, kept in (("none", None), (0.75, 0.75)):
+        cfg = SwarmCoDeConfig.from_dict(migrate_config({**saved, "quota_size_exponent": written}))
+        assert (cfg.partners_per_niche, cfg.quota_size_exponent) == ("all", kept)
+
+
 def test_parse_settings_types_and_refusals():
     from swarmcode_torch.app.settings import parse_settings
 
     assert parse_settings(["delta=0.5", "max-elite=2", "dominance=False", "quota_basis=mean"]) == \
         {"delta": 0.5, "max_elite": 2, "dominance": False, "quota_basis": "mean"}
+    # a key that may be unset takes none; one that may not refuses it
+    assert parse_settings(["quota_size_exponent=none", "p_effector=None"]) == \
+        {"quota_size_exponent": None, "p_effector": None}
     for bad, needle in (("max_elite=2.5", "type int"), ("dominance=yes", "type bool"),
+                        ("delta=none", "type float"),
                         ("=3", "KEY=VALUE"), ("budget=9", "--budget option"),
                         ("gamma=2", "unknown key")):
         with pytest.raises(ValueError, match=needle):
@@ -279,7 +301,8 @@ def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
     ev = Evolution(SwarmCoDeConfig(scenario="two-niche", population=12, swarm_size=6, trials=1,
                                 ticks=40, generations=6, seed=1, device="cpu", compile=False,
                                 d_hw_tiers=True, bt_point_on_nodes=False,
-                                bt_mutation_rate=1.0, p_gene_mutation=1.0))
+                                bt_mutation_rate=1.0, p_gene_mutation=1.0,
+                                partners_per_niche="all", quota_size_exponent=None))
     differed = 0
     while not ev.done:
         m = ev.step()

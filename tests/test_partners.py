@@ -222,7 +222,7 @@ def test_one_partner_per_niche_puts_a_duplicate_beside_its_resident():
     proto_index = torch.tensor([0, 3, 5, 6])
     fitness, has = torch.ones(7), torch.ones(7, dtype=torch.bool)
     four = load_scenario("four-niche")
-    cfg = EvalConfig(swarm_size=6, ticks=10, trials=1)
+    cfg = EvalConfig(swarm_size=6, ticks=10, trials=1, partners_per_niche="all")
 
     def partner_species(c):
         plan = plan_evaluation(genome, species, ids, proto_index, fitness, has, four, c,

@@ -315,6 +315,7 @@ def test_reproduce_elite_counts_and_quotas(basis, min_share, inertia, quotas):
     ch, hint, is_elite, parent = reproduce(g, fit, species, torch.tensor([0, 12, 16]),
                                            torch.tensor([7, 3, 9]),
                                            ReproductionParams(quota_basis=basis,
+                                                              quota_size_exponent=None,
                                                               min_share=min_share,
                                                               quota_inertia=inertia), gen)
     elites = [2, 5, 8, 12, 16] if quotas[2] else [2, 5, 8, 12]     # 3 + 1 (+ 1), best first
@@ -341,7 +342,7 @@ def test_quota_size_exponent_spans_the_mean_and_the_total(exponent, same_as, quo
     h = hint(quota_size_exponent=exponent, quota_basis="mean")     # the exponent wins
     assert torch.bincount(h, minlength=10)[[7, 3, 9]].tolist() == quotas
     if same_as:
-        assert torch.equal(h, hint(quota_basis=same_as))
+        assert torch.equal(h, hint(quota_basis=same_as, quota_size_exponent=None))
 
 
 def test_reproduce_zero_quota_species_goes_extinct():

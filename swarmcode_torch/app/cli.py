@@ -8,6 +8,7 @@ import signal
 import sys
 import threading
 from contextlib import ExitStack, contextmanager
+from dataclasses import replace
 from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
@@ -330,8 +331,9 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
             console.print(f"Resuming [bold]{escape(str(run_dir))}[/] at generation "
                           f"{ev.state.generation} of {ev.cfg.generations}")
             return ev, run_dir, ev.state.generation
-        cfg = with_overrides(SwarmCoDeConfig(), generations=generations, device=device, **given,
-                             **parse_settings(settings or []))
+        # --set values are applied as given, none included (with_overrides skips None)
+        cfg = replace(with_overrides(SwarmCoDeConfig(), generations=generations, device=device,
+                                     **given), **parse_settings(settings or []))
         cfg.validate(option_names(), bounds=False)
         scen, data = read_scenario(cfg.scenario)  # a clear error before anything is created
         check_config(cfg, scen, option_names())
@@ -531,10 +533,11 @@ def sweep(
     out = out or (logdir or Path("runs")) / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     names = option_names({"seed": "--seeds", "budget": "--budgets"})
     try:
-        base = with_overrides(SwarmCoDeConfig(), objective=_objective(objective),
-                              scenario=scenario, generations=generations, population=population,
-                              swarm_size=swarm_size, trials=trials, ticks=ticks, device=device,
-                              compile=compile, **parse_settings(settings or [], names))
+        base = replace(with_overrides(SwarmCoDeConfig(), objective=_objective(objective),
+                                      scenario=scenario, generations=generations,
+                                      population=population, swarm_size=swarm_size,
+                                      trials=trials, ticks=ticks, device=device,
+                                      compile=compile), **parse_settings(settings or [], names))
         for b in budget_list:
             for sd in seed_list:
                 with_overrides(base, budget=b, seed=sd).validate(option_names=names, bounds=False)

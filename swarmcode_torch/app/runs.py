@@ -317,9 +317,14 @@ def config_to_toml(cfg: SwarmCoDeConfig, software: dict | None = None) -> str:
     if software:
         lines.append("# written by " + ", ".join(f"{k} {v}" for k, v in software.items()
                                                   if v is not None))
+    defaults = SwarmCoDeConfig().to_dict()
     for k, v in cfg.to_dict().items():
         if v is not None:
             lines.append(f"{k} = {_toml_value(v)}")
+        elif defaults.get(k) is not None:
+            # TOML has no null: a key unset where its default is set (quota_size_exponent)
+            # is written "none", which reading a config turns back into None
+            lines.append(f'{k} = "none"')
     return "\n".join(lines) + "\n"
 
 
@@ -360,6 +365,11 @@ def migrate_config(d: Any) -> Any:
     d.setdefault("bt_point_on_nodes", False)
     d.setdefault("bt_mutation_rate", 1.0)
     d.setdefault("p_gene_mutation", 1.0)
+    if "partners_per_niche" not in d:
+        # written before 0.4: every species was a partner, and quotas were as quota_basis says
+        # unless a quota_size_exponent was set (0.3.3)
+        d["partners_per_niche"] = "all"
+        d.setdefault("quota_size_exponent", None)
     if d.get("ticks") is None and d.get("scenario") in LEGACY_EPISODE_TICKS:
         # written before runs pinned their episode length: the scenario's length of that time
         d["ticks"] = LEGACY_EPISODE_TICKS[d["scenario"]]

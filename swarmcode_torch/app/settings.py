@@ -29,7 +29,8 @@ def option_names(overrides: dict[str, str] | None = None) -> dict[str, str]:
 
 def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None) -> dict[str, Any]:
     """["key=value", ...] -> {key: typed value} for the algorithm's config keys (e.g. delta=0.5,
-    p_tag_flip=0.0625, quota_basis=mean); ValueError with a one-line message for a malformed
+    p_tag_flip=0.0625, quota_basis=mean; `none` unsets a key that may be unset, such as
+    quota_size_exponent=none); ValueError with a one-line message for a malformed
     pair, an unknown key, a key that has its own option (named `option_names[key]`, default
     --key), or a value of the wrong type."""
     out: dict[str, Any] = {}
@@ -48,9 +49,11 @@ def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None)
         if key not in SETTING_TYPES:
             settable = ", ".join(sorted(set(SETTING_TYPES) - OPTION_KEYS - set(API_KEYS)))
             raise ValueError(f"--set: unknown key {key!r} (settable: {settable})")
-        kind, _ = SETTING_TYPES[key]
+        kind, nullable = SETTING_TYPES[key]
         try:
-            if kind is bool:
+            if nullable and text.lower() == "none":
+                out[key] = None              # unset (e.g. quota_size_exponent=none)
+            elif kind is bool:
                 if text.lower() not in ("true", "false"):
                     raise ValueError
                 out[key] = text.lower() == "true"

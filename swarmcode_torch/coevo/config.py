@@ -69,14 +69,16 @@ class SwarmCoDeConfig:
     dominance: bool = True
     """Sample team slots by the dominance genes; False: uniformly (an ablation)."""
     quota_basis: str = "sum"
-    """Offspring quotas proportional to each species' total ('sum') or mean ('mean') fitness, or
-    to the mean times the square root of the species' size ('sqrt', an experiment between the
-    two: a species' size then settles where it is proportional to its mean fitness squared)."""
-    quota_size_exponent: float | None = None
-    """Unset: quotas as `quota_basis` says. Else each species' quota is proportional to its
-    mean fitness times its size to this power (1: 'sum', 0: 'mean', 0.5: 'sqrt'); a species'
-    size then settles, for an exponent below 1, where it is proportional to its mean fitness
-    to the power 1 / (1 - exponent). An experiment beyond the paper (docs/RESULTS.md)."""
+    """Where `quota_size_exponent` is unset: offspring quotas proportional to each species'
+    total ('sum', the paper's) or mean ('mean') fitness, or to the mean times the square root
+    of the species' size ('sqrt', an experiment between the two: a species' size then settles
+    where it is proportional to its mean fitness squared)."""
+    quota_size_exponent: float | None = 0.75
+    """Each species' quota is proportional to its mean fitness times its size to this power (1:
+    the paper's total, 'sum'; 0: 'mean'; 0.5: 'sqrt'); a species' size then settles, for an
+    exponent below 1, where it is proportional to its mean fitness to the power
+    1 / (1 - exponent). Unset (none): quotas as `quota_basis` says. 0.75 since 0.4, with
+    `partners_per_niche = "one"`; beyond the paper (docs/MODEL.md, docs/RESULTS.md)."""
     quota_inertia: float = 0.0
     """A species' quota share moves this fraction of the way from its share of the fitness
     back toward its present size (0: the share of the fitness, the paper's quota; 0.5:
@@ -121,13 +123,14 @@ class SwarmCoDeConfig:
     evaluated_partners: bool = False
     """Partners are species elites that have a fitness: a species founded this generation is no
     one's partner (an experiment, off by default: it did not reduce the species in best teams)."""
-    partners_per_niche: str = "all"
+    partners_per_niche: str = "one"
     """Which species may be partners: "all" (the paper: any species whose tag the focal's
     selectivity accepts) or "one": of the species whose elites have the same capability (the
     scenario's package classes a design can lift), only the largest (then the one with the
     fittest elite, then the oldest) may be a partner, so that a second species of a niche is
-    evaluated beside its niche's resident, not in place of it. An experiment beyond the paper
-    (docs/RESULTS.md, "One partner per niche")."""
+    evaluated beside its niche's resident, not in place of it. "one" since 0.4, with
+    `quota_size_exponent = 0.75`; beyond the paper (docs/MODEL.md, docs/RESULTS.md, "One
+    partner per niche")."""
     cuda_graphs: bool | None = None
     """Replay the compiled tick as CUDA graphs of 10 ticks (`sim.runtime.CudaGraphTicks`). Unset: on
     wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
@@ -188,6 +191,10 @@ class SwarmCoDeConfig:
             if v not in opts:
                 one_of = ", ".join(map(repr, opts[:-1])) + f" or {opts[-1]!r}"
                 raise ValueError(f"{name(key)} must be {one_of}, got {v!r}")
+        if self.quota_basis != "sum" and self.quota_size_exponent is not None:
+            raise ValueError(f"{name('quota_basis')}={self.quota_basis} takes effect only with "
+                             f"quota_size_exponent unset (it is {self.quota_size_exponent:g}, "
+                             f"which sets the quotas): give quota_size_exponent=none as well")
         dev = self.device
         if dev not in ("auto", "cpu", "cuda") and not (
                 dev.startswith("cuda:") and dev[5:].isdigit() and dev[5:].isascii()):
