@@ -7,8 +7,10 @@ package classes a design can lift, as teams.jsonl records it) leaves the best te
 come back within 5 generations, prints the species that held that niche in the best team in the
 `--before` generations before, each with its size in the population generation by generation
 (the checkpoint's history) and the generation it died. The best team holds every species of the
-population in these runs (docs/RESULTS.md), so its designs name each species' niche. Used in
-docs/RESULTS.md ("How a niche is lost").
+population in runs with every species a partner (`partners_per_niche = "all"`, the default
+before 0.4; docs/RESULTS.md), so its designs name each species' niche; with one partner per
+niche a duplicate is in no team and is not listed. Used in docs/RESULTS.md ("How a niche is
+lost", "One partner per niche").
 """
 
 from __future__ import annotations

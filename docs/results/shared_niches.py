@@ -1,7 +1,9 @@
 """How often a niche is shared by two species or more, and how large its species are: for
 each generation of a window, the capability of each species in the best team (the best team
-holds every species of the population: its designs name each species' niche) and each
-species' size in the population (the run's history).
+holds every species of the population where every species is a partner, `partners_per_niche
+= "all"`, the default before 0.4: its designs name each species' niche; with one partner per
+niche it does not, so the count is not valid there) and each species' size in the population
+(the run's history).
 
     python docs/results/shared_niches.py RUN_DIR FROM TO [--json OUT]
 
