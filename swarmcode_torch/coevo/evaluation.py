@@ -29,7 +29,8 @@ from .population import Population
 from .population import genome_phenotype
 from ..sim.hardware import Catalog
 from ..sim.layout import Layout, make_layouts
-from .partners import Swarms, assemble_swarms, choose_partners, elite_rows, niche_representatives
+from .partners import (Swarms, assemble_swarms, choose_partners, elite_rows,
+                       niche_representatives, ranking_fitness)
 from .selection import elite_count
 from ..sim.scenario import Scenario
 from ..sim.rollout import rollout
@@ -169,16 +170,13 @@ def niche_partners(genome: Population, species: Tensor, proto_ids: Tensor, elite
     """[K] bool: the species that may be partners under `partners_per_niche = "one"`
     (`partners.niche_representatives`), a species' capability being its fittest elite's."""
     k = proto_ids.numel()
-    first = elites[:, 0].clamp_min(0) if elites.numel() else torch.zeros(k, dtype=torch.long,
-                                                                           device=species.device)
+    top = elites[:, 0] if elites.shape[1] else torch.full((k,), -1, dtype=torch.long,
+                                                           device=species.device)
+    has_elite, first = top >= 0, top.clamp_min(0)
     can = capabilities(genome_phenotype(genome.index(first), scenario.hardware), scenario,
                        WorldParams.for_scenario(scenario))
     sizes = (species[:, None] == proto_ids[None, :]).sum(0)
-    has_elite = (elites[:, 0] >= 0) if elites.numel() else torch.zeros(k, dtype=torch.bool,
-                                                                        device=species.device)
-    f = torch.where(has_fitness, torch.nan_to_num(fitness.float(), nan=-torch.inf),
-                    torch.full_like(fitness, -torch.inf, dtype=torch.float))
-    best = torch.where(has_elite, f[first], torch.full_like(f[first], -torch.inf))
+    best = ranking_fitness(fitness, has_fitness)[first].masked_fill(~has_elite, -torch.inf)
     return niche_representatives(can, sizes, best, has_elite)
 
 

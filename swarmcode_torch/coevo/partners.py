@@ -59,6 +59,12 @@ def choose_partners(tag: Tensor, selectivity: Tensor, species: Tensor, proto_ids
     return torch.where(eligible, rows, torch.full_like(rows, -1))
 
 
+def ranking_fitness(fitness: Tensor, has_fitness: Tensor) -> Tensor:
+    """[P] float fitness by which elites rank: -inf where there is none (or it is NaN)."""
+    return torch.where(has_fitness, torch.nan_to_num(fitness.float(), nan=-torch.inf),
+                       torch.full_like(fitness, -torch.inf, dtype=torch.float))
+
+
 def niche_representatives(capability: Tensor, sizes: Tensor, best: Tensor,
                           has_elite: Tensor) -> Tensor:
     """capability [K, U] bool (the package classes each species' design can lift), sizes [K],
@@ -102,8 +108,7 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
     n_wanted = torch.as_tensor(n_elite_fn(group_sizes(pos, k + 1)[:k]), device=dev)
     if evaluated_only and bool(has_fitness.any()):
         pos = torch.where(has_fitness, pos, torch.full_like(pos, k))
-    f = torch.where(has_fitness, torch.nan_to_num(fitness.float(), nan=-torch.inf),
-                    torch.full_like(fitness, -torch.inf, dtype=torch.float))
+    f = ranking_fitness(fitness, has_fitness)
     sizes = group_sizes(pos, k + 1)
     order, rank = rank_within_groups(pos, f, sizes, first=has_fitness)
     return top_table(order, rank, pos, torch.minimum(n_wanted.long(), sizes[:k]))
