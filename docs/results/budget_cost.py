@@ -1,0 +1,84 @@
+"""Team cost against the budget, window by window, for budget runs.
+
+    python docs/results/budget_cost.py RUN_DIR [RUN_DIR ...] [--window 50] [--json OUT]
+
+For each run (its teams.jsonl: the best team of every generation) and each window of
+`--window` generations: the median team cost, the share of generations whose team is over the
+budget, the median score and collaborative deliveries, and, for the teams over and within the
+budget separately, the median score and the median score before the budget penalty (score /
+P_budget, with P_budget = max(0.05, exp(-lam (cost - budget))) as in the fitness; lam from the
+run's config.toml). Used in docs/RESULTS.md ("The budget sweep's two ends with the 0.4
+defaults").
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import tomllib
+from pathlib import Path
+
+
+def penalty(cost: float, budget: float, lam: float) -> float:
+    over = cost - budget
+    return max(0.05, math.exp(-lam * over)) if over > 0 else 1.0
+
+
+def median(values: list[float]) -> float | None:
+    return round(statistics.median(values), 1) if values else None
+
+
+def windows(run: Path, width: int) -> dict:
+    cfg = tomllib.loads((run / "config.toml").read_text())
+    budget, lam = cfg.get("budget"), cfg.get("lam", 0.001)
+    if budget is None or budget == "none":
+        raise SystemExit(f"error: {run} has no budget")
+    rows = [json.loads(line) for line in (run / "teams.jsonl").read_text().splitlines() if line]
+    out = []
+    end = max(r["generation"] for r in rows) + 1
+    for lo in range(0, end, width):
+        w = [r for r in rows if lo <= r["generation"] < lo + width]
+        over = [r for r in w if r["cost"] > budget]
+        within = [r for r in w if r["cost"] <= budget]
+
+        def part(rs: list[dict]) -> dict:
+            return {"n": len(rs), "score": median([r["fitness"] for r in rs]),
+                    "score_before_penalty": median([r["fitness"] / penalty(r["cost"], budget, lam)
+                                                    for r in rs]),
+                    "cost": median([r["cost"] for r in rs]),
+                    "collab": median([r["deliveries_collab"] for r in rs])}
+
+        out.append({"generations": [lo, lo + len(w) - 1], "cost": median([r["cost"] for r in w]),
+                    "over_share": round(len(over) / len(w), 2),
+                    "score": median([r["fitness"] for r in w]),
+                    "collab": median([r["deliveries_collab"] for r in w]),
+                    "over": part(over), "within": part(within)})
+    return {"run": str(run), "budget": budget, "lam": lam, "windows": out}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="+", type=Path)
+    ap.add_argument("--window", type=int, default=50)
+    ap.add_argument("--json", type=Path)
+    a = ap.parse_args()
+    result = [windows(r, a.window) for r in a.runs]
+    for res in result:
+        print(f"{res['run']} (budget {res['budget']:.0f}, lam {res['lam']})")
+        print("| generations | median cost | over budget | score | collab | over: n, score, "
+              "before penalty | within: n, score, before penalty |")
+        print("|---|---|---|---|---|---|---|")
+        for w in res["windows"]:
+            o, i = w["over"], w["within"]
+            print(f"| {w['generations'][0]}–{w['generations'][1]} | {w['cost']} | "
+                  f"{w['over_share']:.0%} | {w['score']} | {w['collab']} | {o['n']}, {o['score']}, "
+                  f"{o['score_before_penalty']} | {i['n']}, {i['score']}, "
+                  f"{i['score_before_penalty']} |")
+    if a.json:
+        a.json.write_text(json.dumps(result, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
