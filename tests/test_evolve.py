@@ -1,6 +1,7 @@
 """SwarmCoDe end to end: evaluation batching, generations, checkpoints, resume, TensorBoard."""
 
 from dataclasses import replace
+import tomllib
 
 import pytest
 import torch
@@ -266,6 +267,25 @@ def test_config_saved_before_0_4_keeps_every_partner_and_its_quota_rule():
     for written, kept in (("none", None), (0.75, 0.75)):
         cfg = SwarmCoDeConfig.from_dict(migrate_config({**saved, "quota_size_exponent": written}))
         assert (cfg.partners_per_niche, cfg.quota_size_exponent) == ("all", kept)
+
+
+def test_config_saved_before_0_5_keeps_the_effector_rate():
+    """Before 0.5 an unset p_effector was not written (the effector at p_categorical); 0.5
+    writes it always, "none" where it is unset, and a config read back keeps it."""
+    from swarmcode_torch.app.runs import config_to_toml
+    from swarmcode_torch.coevo.evolve import make_context
+
+    new = SwarmCoDeConfig(scenario="one-niche", population=8)
+    assert make_context(new).repro.p_effector == 0.005
+    saved = {k: v for k, v in new.to_dict().items() if k != "p_effector"}
+    ctx = make_context(SwarmCoDeConfig.from_dict(migrate_config(saved)))
+    assert (ctx.repro.p_effector, ctx.repro.p_categorical) == (None, 0.02)
+    assert SwarmCoDeConfig.from_dict(migrate_config({**saved, "p_effector": 0.01})).p_effector \
+        == 0.01
+    for value in (None, 0.005, 0.0):
+        text = config_to_toml(replace(new, p_effector=value))
+        back = SwarmCoDeConfig.from_dict(migrate_config(tomllib.loads(text)))
+        assert back.p_effector == value
 
 
 def test_parse_settings_types_and_refusals():

@@ -233,7 +233,7 @@ def test_mutate_bounds_and_flip_rate():
 def test_p_effector_sets_the_effector_rate_alone_and_unset_changes_nothing():
     gen = torch.Generator().manual_seed(0)
     g = random_genomes(20000, gen, l_tag=16)
-    base = ReproductionParams(p_categorical=0.3)
+    base = ReproductionParams(p_categorical=0.3, p_effector=None)   # unset: p_categorical
     state = gen.get_state()
     m = mutate(g, replace(base, p_effector=0.05), gen)
     flipped = (m.effector != g.effector).float().mean().item()
@@ -395,7 +395,8 @@ def test_prototype_flips_copy_the_prototype_with_the_other_effector():
     gen = torch.Generator().manual_seed(3)
     child = random_genomes(20000, gen, l_tag=16)
     proto = random_genomes(20000, gen, l_tag=16)
-    out = prototype_flips(child, proto, ReproductionParams(p_categorical=0.3), gen)
+    out = prototype_flips(child, proto, ReproductionParams(p_categorical=0.3, p_effector=None),
+                          gen)                               # unset: p_categorical
     flip = out.effector != child.effector
     flip |= (out.radius != child.radius) | (out.bt != child.bt).any(1)
     assert abs(flip.float().mean().item() - 0.3 / 2) < 0.01
@@ -416,7 +417,8 @@ def test_reproduce_with_prototype_flips_changes_the_effector_only_by_them():
     g.effector.zero_()                                        # one species of suction robots
     species = torch.zeros(400, dtype=torch.long)
     fit = torch.rand(400, generator=gen)
-    params = replace(ReproductionParams(), effector_flip="prototype", p_categorical=0.2)
+    params = replace(ReproductionParams(), effector_flip="prototype", p_categorical=0.2,
+                     p_effector=None)
     children, hint, is_elite, parent = reproduce(
         g, fit, species, torch.tensor([7]), torch.tensor([0]), params, gen)
     pinchers = children.index(children.effector == 1)

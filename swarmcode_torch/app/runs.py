@@ -370,6 +370,9 @@ def migrate_config(d: Any) -> Any:
         # unless a quota_size_exponent was set (0.3.3)
         d["partners_per_niche"] = "all"
         d.setdefault("quota_size_exponent", None)
+    # written before 0.5, which writes p_effector always ("none" unset): it was unset unless
+    # the config names it
+    d.setdefault("p_effector", None)
     if d.get("ticks") is None and d.get("scenario") in LEGACY_EPISODE_TICKS:
         # written before runs pinned their episode length: the scenario's length of that time
         d["ticks"] = LEGACY_EPISODE_TICKS[d["scenario"]]

@@ -92,10 +92,11 @@ class SwarmCoDeConfig:
     """Mutation: Gaussian step of selectivity and dominance."""
     p_categorical: float = 0.02
     """Mutation: probability of resampling each tier and the effector."""
-    p_effector: float | None = None
-    """Mutation: probability of resampling the effector (None: p_categorical, as the tiers). An
-    experiment beyond the paper: after generation 100 nearly every species founded is an effector
-    flip (docs/RESULTS.md)."""
+    p_effector: float | None = 0.005
+    """Mutation: probability of resampling the effector (None: p_categorical, as the tiers; the
+    behaviour before 0.5). 0.005 since 0.5, beyond the paper: after generation 100 nearly every
+    species founded is an effector flip that dies at once, and with one partner per niche a
+    niche no longer needs flips to be founded again (docs/RESULTS.md)."""
     effector_flip: str = "gene"
     """How an offspring's effector changes: 'gene', resampled like any categorical gene of the
     child; 'prototype' (an experiment beyond the paper), a flip is its own event that replaces
