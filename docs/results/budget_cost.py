@@ -7,8 +7,11 @@ For each run (its teams.jsonl: the best team of every generation) and each windo
 budget, the median score and collaborative deliveries, and, for the teams over and within the
 budget separately, the median score and the median score before the budget penalty (score /
 P_budget, with P_budget = max(0.05, exp(-lam (cost - budget))) as in the fitness; lam from the
-run's config.toml). Used in docs/RESULTS.md ("The budget sweep's two ends with the 0.4
-defaults").
+run's config.toml). Then one row per run, the paper's Table III columns: the run's best team
+(summary.json: fitness, cost, deliveries, species) and the medians of its last `--window`
+generations (`app.analysis.run_dynamics`: species in the best team and the population, niches,
+best-team score). Used in docs/RESULTS.md ("The budget sweep's two ends with the 0.4
+defaults", "The budget sweep, ROI and swarm200 with the 0.5 defaults").
 """
 
 from __future__ import annotations
@@ -19,6 +22,8 @@ import math
 import statistics
 import tomllib
 from pathlib import Path
+
+from swarmcode_torch.app.analysis import run_dynamics
 
 
 def penalty(cost: float, budget: float, lam: float) -> float:
@@ -55,7 +60,14 @@ def windows(run: Path, width: int) -> dict:
                     "score": median([r["fitness"] for r in w]),
                     "collab": median([r["deliveries_collab"] for r in w]),
                     "over": part(over), "within": part(within)})
-    return {"run": str(run), "budget": budget, "lam": lam, "windows": out}
+    summary = json.loads((run / "summary.json").read_text())
+    tail = run_dynamics(run, [(end - width, end)])[0]
+    best = {k: summary[k] for k in ("best_fitness", "team_cost", "deliveries",
+                                    "deliveries_individual", "deliveries_collab", "num_species",
+                                    "niches")}
+    last = {k: tail[k] for k in ("team_species", "population_species", "niches", "team_score")}
+    return {"run": str(run), "budget": budget, "lam": lam, "windows": out, "best": best,
+            "last": last}
 
 
 def main() -> None:
@@ -76,6 +88,15 @@ def main() -> None:
                   f"{w['over_share']:.0%} | {w['score']} | {w['collab']} | {o['n']}, {o['score']}, "
                   f"{o['score_before_penalty']} | {i['n']}, {i['score']}, "
                   f"{i['score_before_penalty']} |")
+    print("| budget | best fitness | team cost | deliveries (individual + collaborative) | "
+          "species | last: team species / population species / niches | last: score |")
+    print("|---|---|---|---|---|---|---|")
+    for res in sorted(result, key=lambda r: r["budget"]):
+        b, t = res["best"], res["last"]
+        print(f"| {res['budget']:,.0f} | {b['best_fitness']:,.0f} | {b['team_cost']:,.0f} | "
+              f"{b['deliveries']:.1f} ({b['deliveries_individual']:.1f} + "
+              f"{b['deliveries_collab']:.1f}) | {b['num_species']} | {t['team_species']:g} / "
+              f"{t['population_species']:g} / {t['niches']:g} | {t['team_score']:,.0f} |")
     if a.json:
         a.json.write_text(json.dumps(result, indent=1) + "\n")
 
