@@ -11,24 +11,26 @@ run's config.toml). Then one row per run, the paper's Table III columns: the run
 (summary.json: fitness, cost, deliveries, species) and the medians of its last `--window`
 generations (`app.analysis.run_dynamics`: species in the best team and the population, niches,
 best-team score). Used in docs/RESULTS.md ("The budget sweep's two ends with the 0.4
-defaults", "The budget sweep, ROI and swarm200 with the 0.5 defaults").
+defaults", "The budget sweep and ROI with the 0.5 defaults").
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import math
 import statistics
-import tomllib
 from pathlib import Path
 
+import torch
+
 from swarmcode_torch.app.analysis import run_dynamics
+from swarmcode_torch.app.runs import read_config, read_teams
+from swarmcode_torch.coevo.fitness import budget_penalty
 
 
 def penalty(cost: float, budget: float, lam: float) -> float:
-    over = cost - budget
-    return max(0.05, math.exp(-lam * over)) if over > 0 else 1.0
+    """P_budget of one team, as the fitness computes it (`fitness.budget_penalty`)."""
+    return float(budget_penalty(torch.tensor(cost), budget, lam))
 
 
 def median(values: list[float]) -> float | None:
@@ -36,11 +38,11 @@ def median(values: list[float]) -> float | None:
 
 
 def windows(run: Path, width: int) -> dict:
-    cfg = tomllib.loads((run / "config.toml").read_text())
-    budget, lam = cfg.get("budget"), cfg.get("lam", 0.001)
-    if budget is None or budget == "none":
+    cfg = read_config(run)
+    budget, lam = cfg.budget, cfg.lam
+    if budget is None:
         raise SystemExit(f"error: {run} has no budget")
-    rows = [json.loads(line) for line in (run / "teams.jsonl").read_text().splitlines() if line]
+    rows = list(read_teams(run).values())
     out = []
     end = max(r["generation"] for r in rows) + 1
     for lo in range(0, end, width):
