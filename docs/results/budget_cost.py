@@ -68,8 +68,36 @@ def windows(run: Path, width: int) -> dict:
                                     "deliveries_individual", "deliveries_collab", "num_species",
                                     "niches")}
     last = {k: tail[k] for k in ("team_species", "population_species", "niches", "team_score")}
-    return {"run": str(run), "budget": budget, "lam": lam, "windows": out, "best": best,
-            "last": last}
+    return {"run": str(run), "budget": budget, "seed": cfg.seed, "lam": lam, "windows": out,
+            "best": best, "last": last,
+            "last_cost": out[-1]["cost"], "last_over_share": out[-1]["over_share"]}
+
+
+def mean_std(values: list[float]) -> str:
+    """"mean ± std" (sample std; a single value alone)."""
+    if len(values) == 1:
+        return f"{values[0]:,.0f}"
+    return f"{statistics.mean(values):,.0f} ± {statistics.stdev(values):,.0f}"
+
+
+def by_budget(result: list[dict]) -> list[str]:
+    """Markdown rows of the sweep over seeds: per budget, the seeds' runs side by side."""
+    rows = ["| budget | seeds | best fitness | last: score | last: team species (per seed) | "
+            "last: niches | last: population species | last: team cost | last: over budget |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for budget in sorted({r["budget"] for r in result}):
+        rs = sorted((r for r in result if r["budget"] == budget), key=lambda r: r["seed"])
+        each = lambda f: ", ".join(f"{f(r):g}" for r in rs)  # noqa: E731
+        rows.append(
+            f"| {budget:,.0f} | {', '.join(str(r['seed']) for r in rs)} "
+            f"| {mean_std([r['best']['best_fitness'] for r in rs])} "
+            f"| {mean_std([r['last']['team_score'] for r in rs])} "
+            f"| {each(lambda r: r['last']['team_species'])} "
+            f"| {each(lambda r: r['last']['niches'])} "
+            f"| {each(lambda r: r['last']['population_species'])} "
+            f"| {', '.join(format(r['last_cost'], ',.0f') for r in rs)} "
+            f"| {', '.join(format(r['last_over_share'], '.0%') for r in rs)} |")
+    return rows
 
 
 def main() -> None:
@@ -99,6 +127,9 @@ def main() -> None:
               f"{b['deliveries']:.1f} ({b['deliveries_individual']:.1f} + "
               f"{b['deliveries_collab']:.1f}) | {b['num_species']} | {t['team_species']:g} / "
               f"{t['population_species']:g} / {t['niches']:g} | {t['team_score']:,.0f} |")
+    if len({r["budget"] for r in result}) < len(result):       # several seeds of a budget
+        print("\n".join(["", "Over seeds (last: the last --window generations):"]
+                        + by_budget(result)))
     if a.json:
         a.json.write_text(json.dumps(result, indent=1) + "\n")
 
