@@ -44,7 +44,7 @@ import torch
 from swarmcode_torch.app.render import team_genome
 from swarmcode_torch.app.runs import read_config, read_teams, run_scenario
 from swarmcode_torch.coevo.evaluation import simulate_teams
-from swarmcode_torch.coevo.fitness import budget_penalty, raw_fitness
+from swarmcode_torch.coevo.fitness import budget_penalty, raw_fitness, team_cost
 from swarmcode_torch.coevo.population import Population
 from swarmcode_torch.sim import bt
 from swarmcode_torch.sim.layout import make_layouts
@@ -79,9 +79,12 @@ def variants(designs: list[dict]) -> dict[str, list[dict]]:
     return out
 
 
-def team_cost(designs: list[dict], overhead: float) -> float:
-    return (sum(float(d["cost"]) * int(d["count"]) for d in designs)
-            + overhead * len({d["species"] for d in designs if int(d["count"]) > 0}))
+def design_team_cost(designs: list[dict], overhead: float) -> float:
+    """The team's cost as the run computes it (`fitness.team_cost`), from each design's
+    recorded cost (the run's catalog) and its distinct species."""
+    robot = torch.tensor([float(d["cost"]) for d in designs for _ in range(int(d["count"]))])
+    species = torch.tensor(len({d["species"] for d in designs if int(d["count"]) > 0}))
+    return float(team_cost(robot, torch.ones_like(robot, dtype=torch.bool), species, overhead))
 
 
 def cat(genomes: list[Population]) -> Population:
@@ -104,7 +107,7 @@ def evaluate(run: Path, window: int, every: int, envs: int, seed: int) -> dict:
     for g in gens:
         for name, ds in variants(teams[g]["designs"]).items():
             genome, team = team_genome(ds, cfg.tag_length)
-            items.append((g, name, team_cost(ds, scenario.species_overhead)))
+            items.append((g, name, design_team_cost(ds, scenario.species_overhead)))
             genomes.append(genome)
             slots.append(team + offset)
             offset += genome.size
@@ -143,12 +146,12 @@ def summarise(run: Path, cfg, rows: list[dict]) -> dict:
         ones = [v[e] for e in ("suction", "pincher") if e in v]
         if not ones:
             continue                                   # a one-effector team already
-        best = max(ones, key=lambda r: r["raw"])
+        best = max(ones, key=lambda r: r["raw"])      # R is against the better copy's F_raw
         t = v["team"]
         paired.append({"generation": g, "team": t, "one": best,
                        "ratio": round(t["raw"] / best["raw"], 3),
                        "break_even": round(best["penalty"] / t["penalty"], 3),
-                       "team_wins": t["score"] > best["score"]})
+                       "team_wins": t["score"] > max(r["score"] for r in ones)})
     med = lambda xs: round(statistics.median(xs), 3) if xs else None  # noqa: E731
     return {"run": str(run), "budget": cfg.budget, "lam": cfg.lam, "rows": rows,
             "paired": paired,
