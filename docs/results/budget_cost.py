@@ -25,6 +25,7 @@ import torch
 
 from swarmcode_torch.app.analysis import run_dynamics
 from swarmcode_torch.app.runs import read_config, read_teams
+from swarmcode_torch.coevo.dynamics import mean_std
 from swarmcode_torch.coevo.fitness import budget_penalty
 
 
@@ -73,11 +74,10 @@ def windows(run: Path, width: int) -> dict:
             "last_cost": out[-1]["cost"], "last_over_share": out[-1]["over_share"]}
 
 
-def mean_std(values: list[float]) -> str:
-    """"mean ± std" (sample std; a single value alone)."""
-    if len(values) == 1:
-        return f"{values[0]:,.0f}"
-    return f"{statistics.mean(values):,.0f} ± {statistics.stdev(values):,.0f}"
+def mean_std_text(values: list[float]) -> str:
+    """"mean ± std" over seeds (`dynamics.mean_std`; a single value alone)."""
+    mean, std = mean_std(values)
+    return f"{mean:,.0f}" if len(values) == 1 else f"{mean:,.0f} ± {std:,.0f}"
 
 
 def by_budget(result: list[dict]) -> list[str]:
@@ -87,16 +87,16 @@ def by_budget(result: list[dict]) -> list[str]:
             "|---|---|---|---|---|---|---|---|---|"]
     for budget in sorted({r["budget"] for r in result}):
         rs = sorted((r for r in result if r["budget"] == budget), key=lambda r: r["seed"])
-        each = lambda f: ", ".join(f"{f(r):g}" for r in rs)  # noqa: E731
+        each = lambda f, fmt="g": ", ".join(format(f(r), fmt) for r in rs)  # noqa: E731
         rows.append(
             f"| {budget:,.0f} | {', '.join(str(r['seed']) for r in rs)} "
-            f"| {mean_std([r['best']['best_fitness'] for r in rs])} "
-            f"| {mean_std([r['last']['team_score'] for r in rs])} "
+            f"| {mean_std_text([r['best']['best_fitness'] for r in rs])} "
+            f"| {mean_std_text([r['last']['team_score'] for r in rs])} "
             f"| {each(lambda r: r['last']['team_species'])} "
             f"| {each(lambda r: r['last']['niches'])} "
             f"| {each(lambda r: r['last']['population_species'])} "
-            f"| {', '.join(format(r['last_cost'], ',.0f') for r in rs)} "
-            f"| {', '.join(format(r['last_over_share'], '.0%') for r in rs)} |")
+            f"| {each(lambda r: r['last_cost'], ',.0f')} "
+            f"| {each(lambda r: r['last_over_share'], '.0%')} |")
     return rows
 
 

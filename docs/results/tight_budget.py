@@ -42,7 +42,7 @@ from pathlib import Path
 import torch
 
 from swarmcode_torch.app.render import team_genome
-from swarmcode_torch.app.runs import read_config, read_teams, run_scenario
+from swarmcode_torch.app.runs import RunError, read_config, read_teams, run_scenario
 from swarmcode_torch.coevo.evaluation import simulate_teams
 from swarmcode_torch.coevo.fitness import budget_penalty, raw_fitness, team_cost
 from swarmcode_torch.coevo.population import Population
@@ -73,9 +73,8 @@ def variants(designs: list[dict]) -> dict[str, list[dict]]:
         return out                                    # a one-effector team already
     for eff in ("suction", "pincher"):
         own = [d for d in designs if d["effector"] == eff]
-        if own:
-            counts = scaled_counts([int(d["count"]) for d in own], size)
-            out[eff] = [dict(d, count=c) for d, c in zip(own, counts)]
+        counts = scaled_counts([int(d["count"]) for d in own], size)
+        out[eff] = [dict(d, count=c) for d, c in zip(own, counts)]
     return out
 
 
@@ -88,11 +87,11 @@ def design_team_cost(designs: list[dict], overhead: float) -> float:
 
 
 def cat(genomes: list[Population]) -> Population:
+    """`Population.cat` of genomes whose trees may differ in length (NOP-padded to the longest)."""
     length = max(g.bt.shape[1] for g in genomes)
-    padded = [dataclasses.replace(g, bt=torch.nn.functional.pad(g.bt, (0, length - g.bt.shape[1]),
-                                                                 value=bt.NOP)) for g in genomes]
-    return Population(*(torch.cat([getattr(g, f.name) for g in padded])
-                        for f in dataclasses.fields(Population)))
+    return Population.cat([dataclasses.replace(
+        g, bt=torch.nn.functional.pad(g.bt, (0, length - g.bt.shape[1]), value=bt.NOP))
+        for g in genomes])
 
 
 def evaluate(run: Path, window: int, every: int, envs: int, seed: int) -> dict:
@@ -101,6 +100,8 @@ def evaluate(run: Path, window: int, every: int, envs: int, seed: int) -> dict:
         raise SystemExit(f"error: {run} has no budget")
     scenario = run_scenario(run, cfg)
     teams = read_teams(run)
+    if not teams:
+        raise SystemExit(f"error: {run} has no best team in teams.jsonl")
     last = max(teams)
     gens = [g for g in range(last - window + 1, last + 1, every) if g in teams]
     items, genomes, slots, offset = [], [], [], 0
@@ -234,7 +235,13 @@ def main() -> None:
         return
     if not a.runs:
         ap.error("give run directories, or --paper")
-    out = [evaluate(r, a.window, a.every, a.envs, a.seed) for r in a.runs]
+    for name in ("window", "every", "envs"):
+        if getattr(a, name) < 1:
+            ap.error(f"--{name} must be at least 1, got {getattr(a, name)}")
+    try:
+        out = [evaluate(r, a.window, a.every, a.envs, a.seed) for r in a.runs]
+    except RunError as e:
+        raise SystemExit(f"error: {e}") from None
     print("| run | budget | team: F_raw, cost, P_budget, deliveries "
           "| one effector: F_raw, cost, P_budget, deliveries | R = F_raw ratio "
           "| R below which one effector wins | team wins |")
