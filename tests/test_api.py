@@ -322,3 +322,18 @@ def test_a_run_records_its_software_device_and_commit(tmp_path):
     assert config[1] == f"# written by swarmcode-torch {sc.__version__}, torch {torch.__version__}, " \
         f"device cpu ({platform.machine()})" + (f", commit {sw['commit']}" if sw["commit"] else "")
     assert sc.load(result.run_dir).config.budget == 3000.0   # the comment is no setting
+
+
+def test_api_preset_sets_the_papers_rules_under_explicit_settings(tmp_path):
+    r = sc.evolve(preset="paper", scenario="one-niche", generations=1, population=6, swarm_size=4,
+                  trials=1, ticks=10, seed=1, logdir=None, baseline_refill="senior")
+    cfg = r.config
+    assert (cfg.preset, cfg.partners_per_niche, cfg.quota_size_exponent) == ("paper", "all", None)
+    assert cfg.baseline_refill == "senior"       # an explicit setting goes on top of the preset
+    given = sc.evolve(SwarmCoDeConfig(quota_size_exponent=0.5), preset="paper",
+                      scenario="one-niche", generations=1, population=6, swarm_size=4, trials=1,
+                      ticks=10, logdir=None).config
+    assert given.quota_size_exponent is None     # the preset's settings replace the config's
+    with pytest.raises(ValueError, match="unknown preset"):
+        sc.evolve(preset="fast", logdir=tmp_path)
+    assert not any(tmp_path.iterdir())

@@ -115,6 +115,28 @@ def test_set_writes_algorithm_keys_into_the_run_config(tmp_path):
                               "--set", "quota_basis=mean"), "quota_size_exponent=none")
 
 
+def test_preset_paper_runs_the_papers_rules_and_is_recorded(tmp_path):
+    import json
+
+    from swarmcode_torch.app.runs import read_config
+    r = invoke("evolve", *TINY, "--generations", 1, "--logdir", tmp_path, "--preset", "paper",
+               "--set", "p_tag_flip=0.25")
+    assert r.exit_code == 0, r.output
+    run = only_run(tmp_path)
+    cfg = read_config(run)
+    assert (cfg.preset, cfg.partners_per_niche, cfg.baseline_refill) == ("paper", "all", "any")
+    assert (cfg.quota_size_exponent, cfg.p_effector, cfg.p_tag_flip) == (None, None, 0.25)
+    assert json.loads((run / "summary.json").read_text())["preset"] == "paper"
+    assert_clean_error(invoke("evolve", *TINY, "--generations", 1, "--logdir", tmp_path / "b",
+                              "--preset", "fast"), "unknown preset 'fast'", "default, paper")
+    assert_clean_error(invoke("evolve", "--resume", run, "--preset", "default"), "--preset")
+    assert_clean_error(invoke("evolve", *TINY, "--logdir", tmp_path / "c",
+                              "--set", "preset=paper"), "use the --preset option")
+    r = invoke("evolve", *TINY, "--generations", 1, "--logdir", tmp_path / "d")
+    assert r.exit_code == 0, r.output
+    assert read_config(only_run(tmp_path / "d")).preset == "default"
+
+
 def test_resume_extends_a_finished_run(tmp_path):
     assert invoke("evolve", *TINY, "--generations", 2, "--logdir", tmp_path).exit_code == 0
     run = only_run(tmp_path)

@@ -47,16 +47,32 @@ def test_all_focal_and_baseline_trials_run_as_one_batch():
 
 
 def test_identical_partner_gives_zero_marginal_and_gated_fitness():
-    # the baseline replaces the focal by an identical design in identical environments,
-    # so both teams score exactly the same and the gate applies
+    # the paper's refill: the baseline replaces the focal by an identical design in identical
+    # environments, so both teams score exactly the same and the gate applies to both
     pop = _two_identical()
-    cfg = EvalConfig(swarm_size=6, trials=2, ticks=60)
+    cfg = EvalConfig(swarm_size=6, trials=2, ticks=60, baseline_refill="any")
     res = evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
                    torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"),
                    cfg, torch.Generator().manual_seed(4))
     assert (res.swarms.baseline_team[0] == 1).all() and (res.swarms.baseline_team[1] == 0).all()
     assert torch.equal(res.focal, res.baseline)
     assert torch.allclose(res.fitness, res.focal * cfg.p_marginal)
+
+
+def test_senior_refill_gates_only_the_junior_of_two_identical_species():
+    # two identical one-member species: species 0 is the older, so it is senior to species 1.
+    # The junior's slots are re-filled by the senior's robot (same score: gated); the senior's
+    # slots stay empty (its baseline is the team without it: not gated)
+    pop = _two_identical()
+    cfg = EvalConfig(swarm_size=6, trials=2, ticks=60, baseline_refill="senior")
+    res = evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
+                   torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"),
+                   cfg, torch.Generator().manual_seed(4))
+    sw = res.swarms
+    assert (sw.baseline_team[1] == 0).all()
+    assert torch.equal(sw.baseline_team[0], torch.where(sw.focal_slot[0], -1, sw.focal_team[0]))
+    assert res.focal[1] == res.baseline[1] and res.fitness[1] == res.focal[1] * cfg.p_marginal
+    assert res.focal[0] > res.baseline[0] and res.fitness[0] == res.focal[0]
 
 
 def test_alone_an_individual_beats_an_empty_baseline():
@@ -98,9 +114,11 @@ def _same_state(a, b):
 
 
 def test_resume_equals_straight_through(tmp_path):
+    from swarmcode_torch.app.records import step
+
     straight = Evolution(TINY)
     while not straight.done:
-        straight.step()
+        step(straight)          # as the application runs it: team records with their niches
 
     cfg = replace(TINY, generations=2)
     first = Evolution(cfg)
@@ -256,7 +274,7 @@ def test_config_saved_before_the_paper_text_fixes_keeps_the_old_operators():
 def test_config_saved_before_0_4_keeps_every_partner_and_its_quota_rule():
     from swarmcode_torch.coevo.evolve import make_context
 
-    new = SwarmCoDeConfig(scenario="one-niche", population=8)
+    new = SwarmCoDeConfig(scenario="one-niche", population=8, partners_per_niche="one")
     ctx = make_context(new)
     assert (ctx.eval_cfg.partners_per_niche, ctx.repro.quota_size_exponent) == ("one", 0.75)
     saved = {k: v for k, v in new.to_dict().items()
@@ -360,3 +378,73 @@ def test_cuda_graphs_need_cuda_and_the_compiled_tick():
     # unset is not written, so a resumed run decides again on its device; a choice is kept
     assert "cuda_graphs" not in config_to_toml(SwarmCoDeConfig())
     assert "cuda_graphs = false" in config_to_toml(SwarmCoDeConfig(cuda_graphs=False))
+
+
+def _patch_niche_knowledge(monkeypatch):
+    """Make every name through which the algorithm could learn the scenario's niches raise:
+    `sim.state.capabilities` wherever a module of the package has bound it, and the oracle's
+    `niche_representatives`."""
+    import sys
+
+    def refuse(*a, **k):
+        raise AssertionError("the algorithm read the scenario's capabilities")
+
+    patched = 0
+    for name, mod in list(sys.modules.items()):
+        if name.startswith("swarmcode_torch."):
+            for attr in ("capabilities", "niche_representatives", "niche_partners"):
+                if callable(getattr(mod, attr, None)):
+                    monkeypatch.setattr(mod, attr, refuse)
+                    patched += 1
+    return patched
+
+
+@pytest.mark.parametrize("preset", ["default", "paper"])
+def test_the_presets_algorithm_reads_no_capabilities_or_niches(monkeypatch, preset):
+    from swarmcode_torch.coevo.config import preset_config
+
+    cfg = preset_config(preset, scenario="two-niche", population=12, swarm_size=6, trials=1,
+                        ticks=20, generations=4, seed=3)
+    assert _patch_niche_knowledge(monkeypatch) >= 3
+    ev = Evolution(cfg)
+    while not ev.done:
+        r = ev.step()
+    assert "niches" not in r.team and all("capability" not in d for d in r.team["designs"])
+    # the diagnostic oracle does read them, so the patch is where the algorithm would look
+    oracle = Evolution(replace(cfg, partners_per_niche="one"))
+    with pytest.raises(AssertionError, match="capabilities"):
+        for _ in range(3):
+            oracle.step()
+
+
+def test_the_application_adds_capabilities_and_niches_to_the_records():
+    from swarmcode_torch.app.records import design_capabilities, step
+    from swarmcode_torch.coevo.dynamics import niche_count
+
+    ev = Evolution(replace(TINY, scenario="two-niche"))
+    r = step(ev)
+    designs = r.team["designs"]
+    caps = design_capabilities([{k: v for k, v in d.items() if k != "capability"}
+                                for d in designs], ev.ctx.scenario)
+    assert [d["capability"] for d in designs] == caps
+    assert r.team["niches"] == niche_count(caps) and "niches" in r.best
+
+
+def test_presets_set_the_papers_rules_and_record_their_name():
+    from swarmcode_torch.coevo.config import PRESETS, preset_config
+
+    paper = preset_config("paper")
+    assert paper.preset == "paper" and paper.partners_per_niche == "all"
+    assert (paper.baseline_refill, paper.quota_size_exponent, paper.p_effector) == ("any", None, None)
+    default = preset_config()
+    assert default == SwarmCoDeConfig() and default.baseline_refill == "senior"
+    assert default.partners_per_niche == "all"          # no niche oracle by default
+    assert preset_config("paper", seed=4).seed == 4 and set(PRESETS) == {"default", "paper"}
+    with pytest.raises(ValueError, match="unknown preset 'nope'"):
+        preset_config("nope")
+    with pytest.raises(ValueError, match="preset must be"):
+        replace(default, preset="nope").validate()
+    # a config written before 0.6 re-fills from any partner and names no preset
+    old = {k: v for k, v in default.to_dict().items() if k not in ("baseline_refill", "preset")}
+    cfg = SwarmCoDeConfig.from_dict(migrate_config(old))
+    assert (cfg.baseline_refill, cfg.preset) == ("any", None)

@@ -236,3 +236,29 @@ def test_one_partner_per_niche_puts_a_duplicate_beside_its_resident():
     assert one[0] == [12, 13]                   # the resident's team leaves the duplicate out
     assert one[3] == [10, 12, 13]               # the duplicate's team holds the resident
     assert one[5] == [10, 13] and one[6] == [10, 12]   # one species of each other niche
+
+
+def test_senior_partners_rank_by_size_then_age():
+    from swarmcode_torch.coevo.partners import senior_partners
+
+    # species 2 (3 members), 5 (2 members), 7 (2 members), 9 (1 member)
+    species = torch.tensor([2, 2, 2, 5, 5, 7, 7, 9])
+    proto_ids = torch.tensor([2, 5, 7, 9])
+    sen = senior_partners(species, proto_ids)
+    expected = {2: [], 5: [2], 7: [2, 5], 9: [2, 5, 7]}
+    for i, s in enumerate(species.tolist()):
+        assert proto_ids[sen[i]].tolist() == expected[s], s
+    assert not sen[torch.arange(8), torch.searchsorted(proto_ids, species)].any()
+
+
+def test_senior_refill_leaves_a_slot_empty_without_a_senior_partner():
+    from swarmcode_torch.coevo.partners import assemble_swarms
+
+    partner_rows = torch.tensor([[-1, 4], [3, -1]])       # focal 0's partner: 4; focal 1's: 3
+    refill = torch.tensor([[True, False], [True, True]])   # 4 is not senior to focal 0
+    g = torch.Generator().manual_seed(0)
+    sw = assemble_swarms(torch.tensor([0, 1]), partner_rows, torch.ones(5), 4, g, refill)
+    assert (sw.baseline_team[0][sw.focal_slot[0]] == -1).all()
+    assert (sw.baseline_team[1][sw.focal_slot[1]] == 3).all()
+    assert torch.equal(sw.baseline_team[0][~sw.focal_slot[0]], sw.focal_team[0][~sw.focal_slot[0]])
+    assert sw.baseline_species_count.tolist() == [1, 1]

@@ -8,23 +8,11 @@ from pathlib import Path
 from typing import Sequence
 
 from ..coevo.dynamics import median, niche_count, replay, window_stats
-from ..coevo.population import genome_phenotype
+from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
 from .runs import (REPLAY_FILE, RunError, generation_team, load_checkpoint,
                    read_config, read_summary, read_teams, run_scenario)
 from ..sim.scenario import Scenario
-from ..sim.state import WorldParams, capabilities
-
-
-def design_capabilities(designs: Sequence[dict], scenario: Scenario) -> list[list[int]]:
-    """For each summary / teams.jsonl design, the indices of the scenario's package classes it
-    can lift (the `capability` the run recorded, or computed from its genes for older runs)."""
-    if all("capability" in d for d in designs):
-        return [list(d["capability"]) for d in designs]
-    genome, _ = team_genome(designs)
-    can = capabilities(genome_phenotype(genome, scenario.hardware), scenario,
-                       WorldParams.for_scenario(scenario))
-    return [[j for j, ok in enumerate(row) if ok] for row in can.tolist()]
 
 
 def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:

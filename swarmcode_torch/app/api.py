@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from . import records, runs
-from ..coevo.config import SwarmCoDeConfig
+from ..coevo.config import PRESETS, SwarmCoDeConfig
 from ..coevo.evaluation import ScoreFn
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.hardware import catalog_toml_lines, default_catalog
@@ -196,7 +196,7 @@ def _execute(ev: Evolution, run_dir: Path | None, reporters: list) -> None:
     for r in reporters:                     # in memory: runs.run less the interrupt checkpoint
         r.on_start(ev)
     while not ev.done:
-        result = ev.step()
+        result = records.step(ev)
         for r in reporters:
             r.on_generation(ev, result)
     for r in reporters:
@@ -206,7 +206,8 @@ def _execute(ev: Evolution, run_dir: Path | None, reporters: list) -> None:
 # ------------------------------------------------------------------ evolve, resume, load
 def make_config(config: SwarmCoDeConfig | None = None, **settings) -> SwarmCoDeConfig:
     """`config` (default `SwarmCoDeConfig()`) with `settings` (config keys) replaced; TypeError for
-    an unknown key. A path scenario becomes a string."""
+    an unknown key. A path scenario becomes a string. `preset="paper"` (`coevo.config.PRESETS`)
+    sets the preset's algorithm settings first; the other settings go on top."""
     if config is not None and not isinstance(config, SwarmCoDeConfig):
         raise TypeError(f"config must be an SwarmCoDeConfig, got {type(config).__name__}")
     unknown = sorted(set(settings) - set(_CONFIG_KEYS))
@@ -215,6 +216,12 @@ def make_config(config: SwarmCoDeConfig | None = None, **settings) -> SwarmCoDeC
                         f"{', '.join(_CONFIG_KEYS)})")
     if isinstance(settings.get("scenario"), os.PathLike):
         settings["scenario"] = os.fspath(settings["scenario"])
+    if "preset" in settings:        # the preset's settings first, then the others on top
+        name = settings.pop("preset")
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset {name!r} (presets: {', '.join(PRESETS)})")
+        config = replace(config if config is not None else SwarmCoDeConfig(), **PRESETS[name],
+                         preset=name)
     return replace(config if config is not None else SwarmCoDeConfig(), **settings)
 
 
@@ -226,7 +233,8 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     """Run an evolution and return its `RunResult`.
 
     config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
-        experiment); `settings` replace its keys: `generations=20, population=30, seed=0,
+        experiment with the default preset; `preset="paper"` for the paper's algorithm with
+        nothing beyond it); `settings` replace its keys: `generations=20, population=30, seed=0,
         budget=4000.0, delta=0.5, ...` (any key of SwarmCoDeConfig / a run's config.toml).
     scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
     logdir: where the run directory is created (named `<scenario>__<seed>__<time>`, as by the

@@ -202,6 +202,7 @@ def evolve(
     render_every: Annotated[int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")] = 50,
     figure_every: Annotated[int, typer.Option(help="Generations between species-composition figures in TensorBoard (one is also drawn at the end of every run).")] = 50,
     resume: Annotated[Optional[Path], typer.Option(help="Continue the run in this directory.")] = None,
+    preset: Annotated[Optional[str], typer.Option(help="Algorithm settings to start from: default, or paper (the paper's text and nothing beyond it); --set goes on top [default: default].")] = None,
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key, e.g. --set p_tag_flip=0.0625 (repeatable; keys as in the run's config.toml).")] = None,
     eval_workers: Annotated[int, typer.Option(help="Evaluate each generation in this many shards on Ray actors, one GPU each on CUDA, else CPUs (needs Ray; same results as 1).")] = 1,
     cpus_per_eval_worker: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1].")] = None,
@@ -216,7 +217,7 @@ def evolve(
             generations=generations, population=population, swarm_size=swarm_size,
             trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
             logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
-            render_every=render_every, resume=resume, settings=settings, attach=attach,
+            render_every=render_every, resume=resume, settings=settings, attach=attach, preset=preset,
             figure_every=figure_every)
         if ev is None:
             return
@@ -283,12 +284,13 @@ def _print_shard_traffic(evaluator) -> None:
 
 def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
                   swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
-                  log_every, render_every, resume, settings, attach=None, figure_every=50):
+                  log_every, render_every, resume, settings, attach=None, figure_every=50,
+                  preset=None):
     """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
     The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
     once the Evolution exists and before any file is written (evaluation shards)."""
-    from ..coevo.config import SwarmCoDeConfig, with_overrides
+    from ..coevo.config import preset_config, with_overrides
     from ..coevo.evolve import Evolution
     from .settings import option_names, parse_settings
     from .runs import (RunError, RunLock, check_config, load_run, new_run_dir, write_config,
@@ -305,6 +307,7 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
         if resume is not None:
             extra = [k.replace("_", "-") for k, v in given.items() if v is not None]
             extra += ["set"] if settings else []
+            extra += ["preset"] if preset is not None else []
             if extra:
                 fail(f"--resume uses the run's saved config; only --generations and --device may "
                      f"change (got --{', --'.join(extra)})")
@@ -332,8 +335,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
                           f"{ev.state.generation} of {ev.cfg.generations}")
             return ev, run_dir, ev.state.generation
         # --set values are applied as given, none included (with_overrides skips None)
-        cfg = replace(with_overrides(SwarmCoDeConfig(), generations=generations, device=device,
-                                     **given), **parse_settings(settings or []))
+        cfg = replace(with_overrides(preset_config(preset or "default"), generations=generations,
+                                     device=device, **given), **parse_settings(settings or []))
         cfg.validate(option_names(), bounds=False)
         scen, data = read_scenario(cfg.scenario)  # a clear error before anything is created
         check_config(cfg, scen, option_names())
@@ -505,6 +508,7 @@ def sweep(
     out: Annotated[Optional[Path], typer.Option(help="The sweep directory itself [default: LOGDIR/sweep-<time>]; run again with the same --out to resume.")] = None,
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines off a terminal.")] = 50,
+    preset: Annotated[Optional[str], typer.Option(help="Algorithm settings to start from, as in evolve [default: default].")] = None,
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key of every run (repeatable), as in evolve.")] = None,
     workers: Annotated[int, typer.Option(help="Runs at once; > 1 runs them as Ray tasks (needs Ray).")] = 1,
     cpus_per_run: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) each run reserves [default: 1].")] = None,
@@ -514,7 +518,7 @@ def sweep(
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
     import time
 
-    from ..coevo.config import SwarmCoDeConfig, with_overrides
+    from ..coevo.config import preset_config, with_overrides
     from .settings import option_names, parse_settings
     from .runs import SWEEP_LOCK_FILE, TABLE_MD, RunError, RunLock, check_config, read_summary
     from ..sim.scenario import read_scenario
@@ -533,7 +537,8 @@ def sweep(
     out = out or (logdir or Path("runs")) / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     names = option_names({"seed": "--seeds", "budget": "--budgets"})
     try:
-        base = replace(with_overrides(SwarmCoDeConfig(), objective=_objective(objective),
+        base = replace(with_overrides(preset_config(preset or "default"),
+                                      objective=_objective(objective),
                                       scenario=scenario, generations=generations,
                                       population=population, swarm_size=swarm_size,
                                       trials=trials, ticks=ticks, device=device,

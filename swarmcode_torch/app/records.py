@@ -13,7 +13,10 @@ from typing import Any
 
 import torch
 
+from ..coevo.dynamics import niche_count
 from ..coevo.evolve import Evolution, GenerationResult
+from ..coevo.population import from_designs, genome_phenotype
+from ..sim.state import WorldParams, capabilities
 
 #: The scalar tags of a generation, in the order of metrics.csv's columns.
 SCALAR_TAGS = (
@@ -27,6 +30,42 @@ SCALAR_TAGS = (
 #: The gene histograms of a generation: tag -> GenerationResult field.
 HISTOGRAMS = {"hist/radius": "radius", "hist/dominance": "dominance",
               "hist/selectivity": "selectivity"}
+
+
+def design_capabilities(designs, scenario) -> list[list[int]]:
+    """For each summary / teams.jsonl design, the indices of the scenario's package classes it
+    can lift (the `capability` the run recorded, or computed from its genes)."""
+    if all("capability" in d for d in designs):
+        return [list(d["capability"]) for d in designs]
+    if not designs:
+        return []
+    genome, _ = from_designs(designs)
+    can = capabilities(genome_phenotype(genome, scenario.hardware), scenario,
+                       WorldParams.for_scenario(scenario))
+    return [[j for j, ok in enumerate(row) if ok] for row in can.tolist()]
+
+
+def describe_team(record: dict | None, scenario) -> dict | None:
+    """Add to a team record (`GenerationResult.team`, `.best`) what the algorithm does not know:
+    each design's capability, the scenario's package classes it can lift, and the team's
+    niches, its distinct capabilities (`dynamics.niche_count`). In place; a record that has
+    them is left as it is."""
+    if record is None or "niches" in record:
+        return record
+    designs = record.get("designs", [])
+    for d, c in zip(designs, design_capabilities(designs, scenario)):
+        d["capability"] = c
+    record["niches"] = niche_count(d["capability"] for d in designs)
+    return record
+
+
+def step(ev: Evolution) -> GenerationResult:
+    """One generation of `ev`, its team records described (`describe_team`): what the
+    application's reporters and callbacks receive."""
+    result = ev.step()
+    describe_team(result.team, ev.ctx.scenario)
+    describe_team(result.best, ev.ctx.scenario)
+    return result
 
 
 def scalars(r: GenerationResult) -> dict[str, Any]:
@@ -109,7 +148,7 @@ def summary(ev: Evolution, r: GenerationResult) -> dict:
     best = r.best
     return json_clean({
         "generation": r.generation, "generations": ev.cfg.generations,
-        "scenario": ev.cfg.scenario, "objective": ev.cfg.objective,
+        "scenario": ev.cfg.scenario, "objective": ev.cfg.objective, "preset": ev.cfg.preset,
         "best_fitness": best["fitness"], "best_generation": best["generation"],
         "team_cost": best["cost"], "budget": ev.cfg.budget, "num_species": best["species"],
         "niches": best.get("niches"),

@@ -373,6 +373,10 @@ def migrate_config(d: Any) -> Any:
     # written before 0.5, which writes p_effector always ("none" unset): it was unset unless
     # the config names it
     d.setdefault("p_effector", None)
+    # written before 0.6: every partner re-filled a focal's slots, and there were no presets
+    d.setdefault("baseline_refill", "any")
+    d.setdefault("partner_admission", "open")
+    d.setdefault("preset", None)
     if d.get("ticks") is None and d.get("scenario") in LEGACY_EPISODE_TICKS:
         # written before runs pinned their episode length: the scenario's length of that time
         d["ticks"] = LEGACY_EPISODE_TICKS[d["scenario"]]
@@ -860,7 +864,7 @@ def run(ev: Evolution, run_dir: Path, reporters: Iterable[Reporter],
         r.on_start(ev)
     try:
         while not ev.done:
-            result = ev.step()
+            result = records.step(ev)
             for r in reporters:
                 r.on_generation(ev, result)
     except BaseException as e:

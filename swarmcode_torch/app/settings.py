@@ -9,7 +9,7 @@ from ..coevo.config import SETTING_TYPES
 
 #: Config keys that `parse_settings` refuses because the command line has an option for them.
 OPTION_KEYS = frozenset({"scenario", "budget", "objective", "generations", "population",
-                         "swarm_size", "trials", "ticks", "seed", "device", "compile"})
+                         "swarm_size", "trials", "ticks", "seed", "device", "compile", "preset"})
 
 
 #: Config keys that only the Python API sets (`parse_settings` refuses them), and how.

@@ -25,6 +25,10 @@ class SwarmCoDeConfig:
     and its default, once. The algorithm reads it through its parts: `evaluation`,
     `speciation` and `reproduction`, built from these fields by name."""
 
+    preset: str | None = "default"
+    """The preset the run's algorithm settings started from (`PRESETS`): "default" or "paper";
+    none: written before presets existed (0.6). Settings given on top of it are recorded
+    beside it."""
     scenario: str = "budget"
     """Built-in scenario name or path to a scenario TOML file."""
     budget: float | None = None
@@ -124,14 +128,26 @@ class SwarmCoDeConfig:
     evaluated_partners: bool = False
     """Partners are species elites that have a fitness: a species founded this generation is no
     one's partner (an experiment, off by default: it did not reduce the species in best teams)."""
-    partners_per_niche: str = "one"
+    partners_per_niche: str = "all"
     """Which species may be partners: "all" (the paper: any species whose tag the focal's
-    selectivity accepts) or "one": of the species whose elites have the same capability (the
-    scenario's package classes a design can lift), only the largest (then the one with the
-    fittest elite, then the oldest) may be a partner, so that a second species of a niche is
-    evaluated beside its niche's resident, not in place of it. "one" since 0.4, with
-    `quota_size_exponent = 0.75`; beyond the paper (docs/MODEL.md, docs/RESULTS.md, "One
-    partner per niche")."""
+    selectivity accepts) or "one", a diagnostic reference that is no part of SwarmCoDe: of the
+    species whose elites have the same capability (the scenario's package classes a design can
+    lift), only the largest may be a partner. "one" tells the algorithm the task's niches; it
+    was the default of 0.4 and 0.5 and is kept so that their runs can be compared and resumed."""
+    baseline_refill: str = "senior"
+    """Where a focal's slots in its baseline team are re-filled from: "any" partner in its team
+    (the paper), or only "senior" ones, species larger than the focal's own (as large: older),
+    the slots staying empty where there is none. Beyond the paper, and scenario-agnostic (it
+    reads species sizes and ages): of two species that can stand in for each other, the junior
+    one is compared against the senior, the senior one against a team without the junior, so
+    the gate no longer credits both alike (docs/RESULTS.md)."""
+    partner_admission: str = "gate"
+    """When a species becomes a partner: "open", when it is founded (the paper), or "gate",
+    after probation: a species founded after generation 0 is no one's partner until few of its
+    members are gated (their focal team does not beat their baseline), and of two or more
+    partner species that stay mostly gated the lowest-ranked (smallest, then youngest) stops
+    being one (`coevo.admission`). Beyond the paper, and scenario-agnostic: it reads only
+    species sizes, ages and the gate's results (docs/RESULTS.md)."""
     cuda_graphs: bool | None = None
     """Replay the compiled tick as CUDA graphs of 10 ticks (`sim.runtime.CudaGraphTicks`). Unset: on
     wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
@@ -196,6 +212,11 @@ class SwarmCoDeConfig:
             raise ValueError(f"{name('quota_basis')}={self.quota_basis} takes effect only with "
                              f"quota_size_exponent unset (it is {self.quota_size_exponent:g}, "
                              f"which sets the quotas): give quota_size_exponent=none as well")
+        for key, opts in OPTIONAL_CHOICES.items():
+            v = getattr(self, key)
+            if v is not None and v not in opts:
+                raise ValueError(f"{name(key)} must be {' or '.join(map(repr, opts))} or unset, "
+                                 f"got {v!r}")
         dev = self.device
         if dev not in ("auto", "cpu", "cuda") and not (
                 dev.startswith("cuda:") and dev[5:].isdigit() and dev[5:].isascii()):
@@ -285,7 +306,31 @@ class SwarmCoDeConfig:
 
 #: The settings that name one of a few choices (validated in `SwarmCoDeConfig.validate`).
 CHOICES = {"effector_flip": ("gene", "prototype"), "quota_basis": ("sum", "mean", "sqrt"),
-           "objective": ("fitness", "roi"), "partners_per_niche": ("all", "one")}
+           "objective": ("fitness", "roi"), "partners_per_niche": ("all", "one"),
+           "baseline_refill": ("any", "senior"), "partner_admission": ("open", "gate")}
+#: Choices of settings that may also be unset.
+OPTIONAL_CHOICES = {"preset": ("default", "paper")}
+
+#: Algorithm settings of each preset, over the defaults of `SwarmCoDeConfig` ("default" is
+#: those defaults). "paper": our reading of the paper's text with nothing beyond it: every
+#: species the tags accept is a partner, a focal's slots are re-filled from any partner,
+#: offspring quotas proportional to each species' total fitness, the effector resampled as the
+#: tiers are (docs/MODEL.md, "Presets").
+PRESETS: dict[str, dict[str, Any]] = {
+    "default": {},
+    "paper": {"partners_per_niche": "all", "baseline_refill": "any", "partner_admission": "open",
+              "quota_basis": "sum",
+              "quota_size_exponent": None, "p_effector": None},
+}
+
+
+def preset_config(name: str = "default", **settings: Any) -> "SwarmCoDeConfig":
+    """The config of preset `name` (`PRESETS`) with `settings` (config keys) on top; ValueError
+    naming the presets for an unknown name."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r} (presets: {', '.join(PRESETS)})")
+    return replace(SwarmCoDeConfig(), **{**PRESETS[name], **settings, "preset": name})
+
 
 #: The largest seed a run's generator takes (torch.Generator.manual_seed accepts 64 bits; a seed
 #: is kept non-negative and below 2**63 so that it reads back the same everywhere).
@@ -372,6 +417,7 @@ class EvalConfig:
     dominance: bool = _RUN.dominance  # False: uniform team composition (an ablation)
     evaluated_partners: bool = _RUN.evaluated_partners  # partners are elites with a fitness
     partners_per_niche: str = _RUN.partners_per_niche  # "one": one partner species per capability
+    baseline_refill: str = _RUN.baseline_refill  # "senior": re-fill a focal's slots from larger species
     weights: FitnessWeights = FitnessWeights()
 
 

@@ -30,7 +30,7 @@ from .population import genome_phenotype
 from ..sim.hardware import Catalog
 from ..sim.layout import Layout, make_layouts
 from .partners import (Swarms, assemble_swarms, choose_partners, elite_rows,
-                       niche_representatives, ranking_fitness)
+                       niche_representatives, ranking_fitness, senior_partners)
 from .selection import elite_count
 from ..sim.scenario import Scenario
 from ..sim.rollout import rollout
@@ -147,20 +147,26 @@ class SimBatch:
 
 def plan_evaluation(genome: Population, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
                     fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
-                    generator: torch.Generator) -> EvalPlan:
+                    generator: torch.Generator, allowed: Tensor | None = None) -> EvalPlan:
     """The driver's part of an evaluation, every random draw of it from the run's generator:
-    partners by tag and selectivity, team slots by dominance, and the environments."""
+    partners by tag and selectivity, team slots by dominance, and the environments. Only the
+    diagnostic `partners_per_niche = "one"` reads the scenario's package classes (`niche_partners`);
+    the default reads genomes, species and fitness alone. `allowed` [K] bool: the species that
+    may be partners at all (`admission.Admission.allowed`); None: every species."""
     P = genome.size
     dev = genome.bt.device
     S, T = cfg.swarm_size, cfg.trials
     elites = elite_rows(fitness, has_fitness, species, proto_ids,
                         lambda n: elite_count(n, cfg.max_elite), cfg.evaluated_partners)
-    allowed = (niche_partners(genome, species, proto_ids, elites, fitness, has_fitness, scenario)
-               if cfg.partners_per_niche == "one" else None)
+    if cfg.partners_per_niche == "one":
+        oracle = niche_partners(genome, species, proto_ids, elites, fitness, has_fitness, scenario)
+        allowed = oracle if allowed is None else allowed & oracle
     partners = choose_partners(genome.tag, genome.selectivity, species, proto_ids,
                                genome.tag[proto_index], elites, generator, allowed)
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
-    swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator)
+    refill = senior_partners(species, proto_ids) if cfg.baseline_refill == "senior" else None
+    swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator,
+                             refill)
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)
     return EvalPlan(swarms, layouts, T)
 
@@ -247,16 +253,18 @@ def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index
              fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
              generator: torch.Generator, params: WorldParams | None = None,
              step_fn: StepFn | None = None, tables: Tensor | None = None,
-             evaluator=None, score_fn: ScoreFn = team_scores) -> EvalResult:
+             evaluator=None, score_fn: ScoreFn = team_scores,
+             allowed: Tensor | None = None) -> EvalResult:
     """Score every individual of the population by its marginal contribution to a team:
     `plan_evaluation` (teams and environments, drawn here), the simulation, `score`. The
     simulation runs here (`simulate_batch` of the whole plan), or, given an `evaluator`, where
     its `simulate(plan, genome)` runs it (`distributed.ShardedEvaluator`: shards of whole
     evaluations on Ray actors), which returns the same per-environment metrics. `score_plan`
-    then scores them here, each team-episode by `score_fn`."""
+    then scores them here, each team-episode by `score_fn`. `allowed` [K] bool: the species
+    that may be partners (`plan_evaluation`)."""
     params = params or WorldParams.for_scenario(scenario)
     plan = plan_evaluation(genome, species, proto_ids, proto_index, fitness, has_fitness,
-                           scenario, cfg, generator)
+                           scenario, cfg, generator, allowed)
     if evaluator is None:
         m, sim_seconds = simulate_batch(sim_batch(plan, genome), params, cfg.ticks, step_fn,
                                         tables, scenario.hardware)

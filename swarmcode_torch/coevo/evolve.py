@@ -18,15 +18,17 @@ from torch import Tensor
 
 from ..sim import bt
 from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
-from .dynamics import Turnover, median, niche_count, replay
+from . import admission
+from .admission import Admission
+from .dynamics import Turnover, median, replay
 from .evaluation import ScoreFn, evaluate, score_fn_name, team_scores
-from .fitness import ema
+from .fitness import beats_baseline, ema
 from .population import Population, design_record, genome_phenotype
 from .reproduction import mutate_bt, reproduce
 from ..sim.scenario import Scenario, load_scenario
 from .speciation import distance, speciate
 from ..sim.runtime import resolve_device, tick_function, tick_mode
-from ..sim.state import WorldParams, capabilities
+from ..sim.state import WorldParams
 
 CHECKPOINT_VERSION = 1
 
@@ -60,6 +62,8 @@ class EvolutionState:
     history: list = field(default_factory=list)  # per-generation composition records
     turnover: Turnover = field(default_factory=Turnover)  # species births and deaths (derived
     #                                                       from history; not saved)
+    admission: Admission | None = None  # partner admission by species id (`partner_admission =
+    #                                     "gate"`); None: not used yet
 
 
 @dataclass
@@ -147,7 +151,8 @@ class GenerationResult:
     founded: int                   # species founded this generation
     extinct: int                   # species gone since the previous generation
     species_median_age: float      # generations since founding, median over the population's species
-    team: dict                     # this generation's best team: its teams.jsonl record
+    team: dict                     # this generation's best team: its teams.jsonl record (the
+    #                                application adds each design's capability and the niches)
     team_rows: Tensor              # [S] population rows of that team's robots (-1: empty slot)
     team_median_age: float         # median age of the team's species
     focal_max: float               # highest focal team score (ungated)
@@ -175,11 +180,22 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
                   state.next_species_id, ctx.speciation.delta, w=ctx.speciation.weights,
                   merge=ctx.speciation.merge_species)
 
+    # which species may be partners (`admission`): the species of generation 0 and, on a run
+    # resumed from a checkpoint without the state, the species it had, are partners
+    adm = None
+    if cfg.partner_admission == "gate":
+        adm = state.admission or Admission.empty(ctx.device).grow(state.next_species_id, True)
+        adm = adm.grow(sp.next_species_id, partner=state.generation == 0)
+
     # 2. evaluation of every individual, all teams and trials in one batch
     t_eval = time.perf_counter()
     res = evaluate(genome, sp.species, sp.proto_ids, sp.proto_index, state.fitness,
                    state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn,
-                   evaluator=ctx.evaluator, score_fn=ctx.score_fn)
+                   evaluator=ctx.evaluator, score_fn=ctx.score_fn,
+                   allowed=None if adm is None else adm.allowed(sp.proto_ids))
+    if adm is not None:
+        gated = ~beats_baseline(res.focal, res.baseline, ctx.eval_cfg.gate_margin)
+        adm = admission.update(adm, sp.species, sp.proto_ids, gated)
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
 
@@ -202,10 +218,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     host, h = Population(**dict(zip(names, h))), h[len(names):]
     (team_species, team_cost, team_counts, team_m, focal_b, team_cost_b, ids, sizes, fit_max,
      fit_mean, focal_max, radius, dominance, selectivity) = h
-    can = capabilities(genome_phenotype(host, ctx.scenario.hardware), ctx.scenario,
-                       ctx.params).tolist()                                  # [R][C]
-    designs = [dict(design_record(host, i, s, c), count=n,
-                    capability=[j for j, ok in enumerate(can[i]) if ok])
+    designs = [dict(design_record(host, i, s, c), count=n)
                for i, (s, c, n) in enumerate(zip(team_species.tolist(), team_cost.tolist(),
                                                  team_counts.tolist()))]
     designs.sort(key=lambda d: -d["count"])
@@ -213,7 +226,6 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     team_record = {
         "generation": state.generation, "fitness": float(focal_b),
         "cost": float(team_cost_b), "species": len(designs),
-        "niches": niche_count(d["capability"] for d in designs),
         "deliveries_individual": tm["delivered_individual"],
         "deliveries_collab": tm["delivered_collab"],
         "deliveries": tm["delivered_individual"] + tm["delivered_collab"],
@@ -241,7 +253,7 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
         next_species_id=sp.next_species_id,
         fitness=torch.where(is_elite, fit[parent], 0.0), has_fitness=is_elite,
         rng_state=g.get_state(), best=best, history=state.history + [composition],
-        turnover=turnover)
+        turnover=turnover, admission=adm)
 
     result = GenerationResult(
         generation=state.generation, best_fitness=float(fit_max),
@@ -280,6 +292,7 @@ def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
         "proto_ids": state.proto_ids.cpu(), "next_species_id": state.next_species_id,
         "fitness": state.fitness.cpu(), "has_fitness": state.has_fitness.cpu(),
         "rng_state": state.rng_state.cpu(), "best": state.best, "history": state.history,
+        "admission": state.admission.state_dict() if state.admission is not None else None,
     }
 
 
@@ -301,7 +314,9 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
         proto=Population.from_state_dict(d["proto"]).to(dev) if d["proto"] is not None else None,
         proto_ids=d["proto_ids"].to(dev), next_species_id=int(d["next_species_id"]),
         fitness=d["fitness"].to(dev), has_fitness=d["has_fitness"].to(dev), rng_state=rng,
-        best=d["best"], history=list(d["history"]), turnover=replay(d["history"])[0])
+        best=d["best"], history=list(d["history"]), turnover=replay(d["history"])[0],
+        admission=(Admission.from_state_dict(d["admission"], dev)
+                   if d.get("admission") is not None else None))
 
 
 class Evolution:

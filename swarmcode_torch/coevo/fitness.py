@@ -53,8 +53,14 @@ def gate(f_focal: Tensor, f_baseline: Tensor, p_marginal: float = 0.25,
     """[...] focal / baseline team fitness -> [...]: f_focal if its marginal contribution
     f_focal - f_baseline is above -margin * |f_baseline| (margin 0: if it beats the baseline),
     else f_focal * p_marginal."""
-    keep = f_focal - f_baseline > -margin * f_baseline.abs()
+    keep = beats_baseline(f_focal, f_baseline, margin)
     return torch.where(keep, f_focal, f_focal * p_marginal)
+
+
+def beats_baseline(f_focal: Tensor, f_baseline: Tensor, margin: float = 0.0) -> Tensor:
+    """[...] bool: the marginal contribution f_focal - f_baseline is above -margin * |f_baseline|
+    (the focal is not gated, `gate`)."""
+    return f_focal - f_baseline > -margin * f_baseline.abs()
 
 
 def ema(prev: Tensor, new: Tensor, has_prev: Tensor, alpha: float = 0.6) -> Tensor:

@@ -86,6 +86,23 @@ def niche_representatives(capability: Tensor, sizes: Tensor, best: Tensor,
     return has_elite & ~beaten
 
 
+def senior_partners(species: Tensor, proto_ids: Tensor) -> Tensor:
+    """species [P] (each individual's species id), proto_ids [K] (ids in order of founding) ->
+    [P, K] bool: species k is senior to individual i's species: it has more members, or as many
+    and was founded earlier (a lower id). No species is senior to itself.
+
+    The baseline refill rule `baseline_refill = "senior"`: a focal's slots are re-filled only
+    from senior partners, so of two species that can stand in for each other the junior one is
+    compared against the senior and the senior one against a team without it. It reads only
+    the species' sizes and ages."""
+    member = species[:, None] == proto_ids[None, :]                      # [P, K]
+    size = member.sum(0)                                                 # [K]
+    own = torch.where(member.any(1), (member.long() * size[None, :]).sum(1),
+                      torch.zeros_like(species))                         # [P] own species' size
+    older = proto_ids[None, :] < species[:, None]
+    return (size[None, :] > own[:, None]) | ((size[None, :] == own[:, None]) & older)
+
+
 def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids: Tensor,
                n_elite_fn: Callable[[Tensor], Tensor] = elite_count,
                evaluated_only: bool = False) -> Tensor:
@@ -115,14 +132,15 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
 
 
 def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swarm_size: int,
-                    generator: torch.Generator) -> Swarms:
+                    generator: torch.Generator, refill_from: Tensor | None = None) -> Swarms:
     """focal [B] rows, partner_rows [B, K] (-1 none), dominance [P] -> Swarms of swarm_size S slots.
 
     Slot 0: the focal design; slots 1..: one per partner in the team (in species order; a uniform
     random subset of S - 1 if there are more partners); remaining slots: clones drawn from {focal,
     partners in the team} with probability proportional to dominance (uniform if all are 0).
     The baseline team re-fills every focal slot by dominance among the partners in the team
-    (-1 if there are none).
+    (-1 if there are none); where `refill_from` [B, K] bool is given, only among the partners in
+    the team that it allows (`senior_partners`), and the slots stay empty if it allows none.
     """
     b, k = partner_rows.shape
     s = int(swarm_size)
@@ -156,10 +174,11 @@ def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swar
     focal_slot = empty & (draw == 0)
     focal_slot[:, 0] = True
 
-    has_p = n_team > 0
+    refill = in_team if refill_from is None else in_team & refill_from.to(dev)
+    has_p = refill.any(1)
     if k > 0:
-        pw = torch.where(in_team, dom[partner_rows.clamp(min=0)], torch.zeros(b, k, device=dev))
-        pw = torch.where(pw.sum(1, keepdim=True) > 0, pw, in_team.float())
+        pw = torch.where(refill, dom[partner_rows.clamp(min=0)], torch.zeros(b, k, device=dev))
+        pw = torch.where(pw.sum(1, keepdim=True) > 0, pw, refill.float())
         pw = torch.where(has_p[:, None], pw, torch.ones_like(pw))        # dummy rows, masked below
         bdraw = torch.multinomial(pw, s, replacement=True, generator=generator)
         brows = torch.where(has_p[:, None], partner_rows.gather(1, bdraw),

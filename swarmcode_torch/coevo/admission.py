@@ -1,0 +1,130 @@
+"""Partner admission from the gate's own statistics (`partner_admission = "gate"`).
+
+The paper's partner rule makes every species that the tags accept a partner of everyone, the
+moment it is founded. Two species that can stand in for each other (a niche's resident R and a
+new duplicate D) are then in each other's teams and refill each other's slots in each other's
+baselines, so the marginal gate credits both alike and neither is selected against. This rule
+breaks that tie with what evaluation measures, nothing else (no scenario, no capability):
+
+- **Probation.** A species founded after generation 0 is no one's partner until the moving
+  average of its gated share (the fraction of its members whose focal team did not beat its
+  baseline) has stayed below `admit_below` for `admit_generations` generations in a row. On
+  probation its own team still holds every partner, so a duplicate, whose robots the resident
+  replaces at no loss, stays gated and is never admitted; a species that does what no partner
+  does beats its baseline and is admitted.
+- **Demotion.** When two or more partner species have had a gated share above `clash_above`
+  for `clash_generations` generations in a row (two substitutes gating each other), the
+  lowest-ranked of them (the smallest, then the youngest) stops being a partner and is on
+  probation again; at most one a generation.
+
+The state is kept by species id (`Admission`), saved in checkpoints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+
+@dataclass(frozen=True)
+class AdmissionParams:
+    """Thresholds of the rule (the values of the candidate in the project's research notes)."""
+
+    admit_below: float = 0.4
+    admit_generations: int = 3
+    clash_above: float = 0.6
+    clash_generations: int = 2
+    decay: float = 0.5             # weight of the previous value in the moving average
+
+
+@dataclass(frozen=True, eq=False)
+class Admission:
+    """Per species id (0 .. N-1): partner [N] bool, gated [N] float (moving average of the gated
+    share; NaN before its first evaluation), calm [N] long (generations in a row below
+    `admit_below` while on probation), clash [N] long (generations in a row above
+    `clash_above` while a partner)."""
+
+    partner: Tensor
+    gated: Tensor
+    calm: Tensor
+    clash: Tensor
+
+    @classmethod
+    def empty(cls, device: torch.device | str = "cpu") -> "Admission":
+        return cls(torch.zeros(0, dtype=torch.bool, device=device),
+                   torch.zeros(0, device=device),
+                   torch.zeros(0, dtype=torch.long, device=device),
+                   torch.zeros(0, dtype=torch.long, device=device))
+
+    def grow(self, n: int, partner: bool) -> "Admission":
+        """Room for species ids below n; ids new to it start as partners if `partner` (the
+        species of generation 0), else on probation."""
+        m = self.partner.numel()
+        if n <= m:
+            return self
+        dev, extra = self.partner.device, n - m
+        return Admission(torch.cat([self.partner,
+                                    torch.full((extra,), partner, dtype=torch.bool, device=dev)]),
+                         torch.cat([self.gated, torch.full((extra,), torch.nan, device=dev)]),
+                         torch.cat([self.calm, torch.zeros(extra, dtype=torch.long, device=dev)]),
+                         torch.cat([self.clash, torch.zeros(extra, dtype=torch.long, device=dev)]))
+
+    def allowed(self, proto_ids: Tensor) -> Tensor:
+        """[K] bool: which of the species proto_ids may be partners."""
+        return self.partner[proto_ids]
+
+    def state_dict(self) -> dict:
+        return {"partner": self.partner.cpu(), "gated": self.gated.cpu(),
+                "calm": self.calm.cpu(), "clash": self.clash.cpu()}
+
+    @classmethod
+    def from_state_dict(cls, d: dict, device: torch.device | str = "cpu") -> "Admission":
+        """ValueError unless d holds four 1-D tensors of one length and the right dtypes."""
+        want = {"partner": torch.bool, "gated": torch.float32, "calm": torch.long,
+                "clash": torch.long}
+        if not isinstance(d, dict) or set(d) != set(want):
+            raise ValueError("checkpoint's partner admission state is malformed")
+        n = None
+        for k, dt in want.items():
+            t = d[k]
+            if not isinstance(t, Tensor) or t.dtype != dt or t.dim() != 1 or \
+                    (n is not None and t.numel() != n):
+                raise ValueError("checkpoint's partner admission state is malformed")
+            n = t.numel()
+        return cls(*(d[k].to(device) for k in want))
+
+
+def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor,
+           params: AdmissionParams = AdmissionParams()) -> Admission:
+    """The admission after one evaluation: species [P] ids, proto_ids [K] (the species, in
+    order of founding), gated [P] bool (whose focal team did not beat its baseline)."""
+    k = proto_ids.numel()
+    if k == 0:
+        return adm
+    member = species[:, None] == proto_ids[None, :]                       # [P, K]
+    size = member.sum(0)
+    share = (member & gated[:, None]).sum(0).float() / size.clamp_min(1).float()
+    prev = adm.gated[proto_ids]
+    avg = torch.where(torch.isnan(prev), share, params.decay * prev + (1 - params.decay) * share)
+    partner = adm.partner[proto_ids]
+    calm = torch.where(~partner & (avg < params.admit_below), adm.calm[proto_ids] + 1, 0)
+    clash = torch.where(partner & (avg > params.clash_above), adm.clash[proto_ids] + 1, 0)
+    admit = ~partner & (calm >= params.admit_generations)
+    clashing = clash >= params.clash_generations
+    demote = torch.zeros(k, dtype=torch.bool, device=species.device)
+    if int(clashing.sum()) >= 2:
+        # the lowest-ranked clashing species: the smallest, of those the youngest (highest id)
+        big = int(size.max()) + 1
+        key = torch.where(clashing, size * (proto_ids.max() + 1) - proto_ids,
+                          torch.full_like(size, big * (int(proto_ids.max()) + 2)))
+        demote[key.argmin()] = True
+    new_partner = (partner | admit) & ~demote
+    reset = admit | demote
+    out = Admission(adm.partner.clone(), adm.gated.clone(), adm.calm.clone(), adm.clash.clone())
+    out.partner[proto_ids] = new_partner
+    out.gated[proto_ids] = avg
+    out.calm[proto_ids] = torch.where(reset, 0, calm)
+    out.clash[proto_ids] = torch.where(reset, 0, clash)
+    return out
