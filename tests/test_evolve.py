@@ -437,8 +437,9 @@ def test_presets_set_the_papers_rules_and_record_their_name():
     assert paper.preset == "paper" and paper.partners_per_niche == "all"
     assert (paper.baseline_refill, paper.quota_size_exponent, paper.p_effector) == ("any", None, None)
     default = preset_config()
-    assert default == SwarmCoDeConfig() and default.baseline_refill == "senior"
+    assert default == SwarmCoDeConfig() and default.partner_admission == "gate"
     assert default.partners_per_niche == "all"          # no niche oracle by default
+    assert paper.partner_admission == "open"
     assert preset_config("paper", seed=4).seed == 4 and set(PRESETS) == {"default", "paper"}
     with pytest.raises(ValueError, match="unknown preset 'nope'"):
         preset_config("nope")

@@ -58,17 +58,28 @@ def cell(values: list[float], fmt: str) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("groups", nargs="+", help="LABEL=RUN_DIR[,RUN_DIR...]")
+    ap.add_argument("groups", nargs="*", help="LABEL=RUN_DIR[,RUN_DIR...]")
     ap.add_argument("--last", type=int, default=50)
     ap.add_argument("--founding-from", type=int, default=100)
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--stored", action="append", default=[], metavar="FILE:LABEL[=SHOWN]",
+                    help="a group's rows from an earlier --json output (runs whose checkpoints "
+                         "are not kept), shown as SHOWN")
     a = ap.parse_args()
     out = {}
     print("| group | runs | " + " | ".join(c[1] for c in COLUMNS) + " |")
     print("|---|---|" + "---|" * len(COLUMNS))
-    for g in a.groups:
-        label, _, dirs = g.partition("=")
-        rows = [run_row(Path(d), a.last, a.founding_from) for d in dirs.split(",") if d]
+    groups = [(g, None) for g in a.groups]
+    for spec in a.stored:
+        path, _, labels = spec.partition(":")
+        label, _, shown = labels.partition("=")
+        groups.append((shown or label, json.loads(Path(path).read_text())[label]))
+    for g, stored in groups:
+        if stored is not None:
+            label, rows = g, stored
+        else:
+            label, _, dirs = g.partition("=")
+            rows = [run_row(Path(d), a.last, a.founding_from) for d in dirs.split(",") if d]
         out[label] = rows
         cells = [cell([r[k] for r in rows], fmt) for k, _, fmt in COLUMNS]
         print(f"| {label} | {len(rows)} | " + " | ".join(cells) + " |")

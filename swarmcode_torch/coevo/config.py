@@ -134,13 +134,11 @@ class SwarmCoDeConfig:
     species whose elites have the same capability (the scenario's package classes a design can
     lift), only the largest may be a partner. "one" tells the algorithm the task's niches; it
     was the default of 0.4 and 0.5 and is kept so that their runs can be compared and resumed."""
-    baseline_refill: str = "senior"
+    baseline_refill: str = "any"
     """Where a focal's slots in its baseline team are re-filled from: "any" partner in its team
     (the paper), or only "senior" ones, species larger than the focal's own (as large: older),
-    the slots staying empty where there is none. Beyond the paper, and scenario-agnostic (it
-    reads species sizes and ages): of two species that can stand in for each other, the junior
-    one is compared against the senior, the senior one against a team without the junior, so
-    the gate no longer credits both alike (docs/RESULTS.md)."""
+    the slots staying empty where there is none. "senior" is a candidate of 0.6 that was not
+    adopted: alone it kept same-niche duplicates in two-niche (docs/RESULTS.md)."""
     partner_admission: str = "gate"
     """When a species becomes a partner: "open", when it is founded (the paper), or "gate",
     after probation: a species founded after generation 0 is no one's partner until few of its
