@@ -2,7 +2,7 @@
 // The replay page of swarmcode-torch (app/replay_page.py writes the data; no network, no libraries).
 (function () {
   const PINCHER = 1, DELIVERED = 2;
-  const MIN_R = 4;   // css px: the smallest robot disc drawn (a 0.15 m robot of a 60 m arena is ~1 px)
+  const MIN_R = 4.5;   // css px: the smallest robot disc drawn (a 0.15 m robot of a 60 m arena is ~1 px)
   const STATUS = ["SUCCESS", "FAILURE", "RUNNING"];
   const PANELS = ["focal", "baseline"];
   const $ = (id) => document.getElementById(id);
@@ -150,7 +150,7 @@
       ctx.globalAlpha = p.energyA[t * N + i] > 0.0001 ? 1 : 0.3;
       ctx.beginPath(); ctx.arc(x, y, r, 0, 2 * Math.PI);
       ctx.fillStyle = D.designs[d].color; ctx.fill();
-      ctx.strokeStyle = carrying ? "#000" : "#444"; ctx.lineWidth = (carrying ? Math.min(2, Math.max(1.2, r / v.dpr / 4)) : 0.6) * lw; ctx.stroke();
+      ctx.strokeStyle = carrying ? "#000" : "#444"; ctx.lineWidth = (carrying ? Math.min(2, Math.max(1, r / v.dpr / 5)) : 0.6) * lw; ctx.stroke();
       ctx.beginPath();
       if (R.effector[i] === PINCHER) { const h = 0.42 * r; ctx.rect(x - h, y - h, 2 * h, 2 * h); }
       else ctx.arc(x, y, 0.48 * r, 0, 2 * Math.PI);
@@ -159,6 +159,7 @@
     }
     for (const [q, x, y, r, held] of carried) {   // small, on its carrier, so its colour shows
       const rr = Math.max(MIN_R * v.dpr, R.radius[held] * s);
+      if (rr < 7 * v.dpr) continue;   // too small to show both: the black outline says it
       shape(ctx, pk.g_eff[q * G], x, y, Math.min(0.45 * rr, Math.max(1.5 * v.dpr, r * s)));
       ctx.fillStyle = pk.color[q]; ctx.fill(); ctx.strokeStyle = "#000"; ctx.lineWidth = 0.6 * lw; ctx.stroke();
     }

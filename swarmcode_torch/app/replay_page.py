@@ -145,7 +145,7 @@ def _panel(ep: Episode, team: Tensor, designs, programs: Tensor, traces: list[di
         },
         "pos": _q(stack["pos"], 100.0),                   # cm, delta over ticks [T+1, N, 2]
         "energy": _q(pct, 10.0),                          # 0.1 %, delta [T+1, N]
-        "team_energy": [_round(x, 4) for x in team_energy.tolist()],
+        "team_energy": team_energy.tolist(),
         "holding": stack["holding"].reshape(-1).tolist(),  # [T+1, N]
         "grip": stack["grip"].reshape(-1).tolist(),
         "p_pos": _q(stack["p_pos"], 100.0),              # [T+1, Q, 2]
