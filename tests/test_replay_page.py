@@ -46,7 +46,8 @@ def two_niche():
 
 # ------------------------------------------------------------------ teams
 def test_focal_is_the_largest_design_and_its_slots_are_refilled_by_partners():
-    focal, team, base = focal_and_baseline(DESIGNS, seed=4)
+    focal, team, base, recorded = focal_and_baseline(DESIGNS, seed=4)
+    assert not recorded
     assert focal == 0 and team.tolist() == [0] * 12 + [1] * 6 + [2] * 2
     assert torch.equal(base[12:], team[12:])                   # partner slots stay
     assert set(base[:12].tolist()) <= {1, 2} and len(set(base[:12].tolist())) == 2
@@ -60,12 +61,40 @@ def test_focal_is_the_largest_design_and_its_slots_are_refilled_by_partners():
 def test_a_record_that_names_its_focal_and_a_team_without_partners():
     marked = [dict(d) for d in DESIGNS]
     marked[2]["focal"] = True
-    focal, team, base = focal_and_baseline(marked, seed=0)
+    focal, team, base, _ = focal_and_baseline(marked, seed=0)
     assert focal == 2 and set(base[18:].tolist()) <= {0, 1} and torch.equal(base[:18], team[:18])
-    focal, team, base = focal_and_baseline(DESIGNS[:1], seed=0)
+    focal, team, base, _ = focal_and_baseline(DESIGNS[:1], seed=0)
     assert focal == 0 and (base == -1).all()                   # no partner: no robot
     # equal counts: the first design
     assert focal_and_baseline([design(count=2), design(count=2, species=5)])[0] == 0
+
+
+def test_a_record_with_its_baseline_counts_gives_that_baseline():
+    rec = [dict(d, focal=i == 1, baseline_count=b) for i, (d, b) in
+           enumerate(zip(DESIGNS, (15, 0, 5)))]
+    focal, team, base, recorded = focal_and_baseline(rec, seed=0)
+    assert recorded and focal == 1
+    assert torch.equal(base[:12], team[:12]) and torch.equal(base[18:], team[18:])
+    assert sorted(base[12:18].tolist()) == [0, 0, 0, 2, 2, 2]
+    # counts that do not fit the team: reconstructed instead
+    bad = [dict(d, focal=i == 1, baseline_count=b) for i, (d, b) in
+           enumerate(zip(DESIGNS, (15, 0, 1)))]
+    assert focal_and_baseline(bad, seed=0)[3] is False
+    alone = [dict(DESIGNS[0], focal=True, baseline_count=0)]
+    f, team, base, recorded = focal_and_baseline(alone)
+    assert recorded and (base == -1).all()
+
+
+def test_evolution_records_the_focal_design_and_its_baseline_team():
+    from swarmcode_torch.app.api import evolve
+
+    res = evolve(scenario="two-niche", generations=2, population=8, swarm_size=6, trials=1,
+                 ticks=10, seed=0, logdir=None, device="cpu", compile=False)
+    for d in res.best_team["designs"]:
+        assert isinstance(d["focal"], bool) and isinstance(d["baseline_count"], int)
+    assert sum(d["focal"] for d in res.best_team["designs"]) == 1
+    f, team, base, recorded = focal_and_baseline(res.best_team["designs"])
+    assert recorded and base.numel() == 6
 
 
 # ------------------------------------------------------------------ data
@@ -73,7 +102,7 @@ def test_page_counts_equal_episode_metrics_of_the_evaluation_rollout(two_niche):
     data, cfg = two_niche
     s = load_scenario("two-niche")
     genome, _ = team_genome(DESIGNS, cfg.tag_length)
-    _, team, base = focal_and_baseline(DESIGNS, seed=1)
+    _, team, base, _ = focal_and_baseline(DESIGNS, seed=1)
     # the evaluation's own rollout of both teams in the page's environment
     layouts = make_layouts(s.__class__(**{**s.__dict__, "num_robots": 20}), 1,
                            torch.Generator().manual_seed(1))

@@ -216,7 +216,9 @@
     return `<b>Focal individual:</b> ${swatch(D, D.focal, 14)} ${esc(designLabel(D, D.focal))} ` +
       `(${g.count} of ${D.robots} robots). Focal team score <b data-testid="focal-score">${fmt(f.score, 1)}</b>, ` +
       `baseline team score <b data-testid="baseline-score">${fmt(b.score, 1)}</b> ` +
-      `(the focal's ${g.count} slots refilled by its partners), marginal contribution ` +
+      `(the focal's ${g.count} slots refilled by its partners` +
+      (D.baseline_recorded ? ", as the run recorded them" : ", drawn by dominance: the run did not record its baseline") +
+      `), marginal contribution ` +
       `<b class="${cls}" data-testid="marginal">${m >= 0 ? "+" : ""}${fmt(m, 1)}</b>; ` +
       `gated fitness ${fmt(D.gated, 1)} (${kept}).${recTxt}` +
       (D.custom_fitness ? ` <br><b>Note:</b> the run was scored by ${esc(D.custom_fitness)}; the scores here are the built-in fitness.` : "");
@@ -438,8 +440,9 @@
     $("legend").innerHTML = legendHtml(D);
     $("terms").innerHTML = termsHtml(D);
     $("footer").textContent = "Written by swarmcode-torch replay --html. The baseline team: the focal design's slots " +
-      "refilled by the team's other designs in proportion to their dominance (app/replay_page.py). Both teams ran " +
-      "through the same environment with the evaluation's rollout.";
+      (D.baseline_recorded ? "refilled by its partners as the run recorded them. "
+                           : "refilled by the team's other designs in proportion to their dominance (app/replay_page.py). ") +
+      "Both teams ran through the same environment with the evaluation's rollout.";
     $("scrub").max = String(D.ticks);
     resize(D);
     wire();

@@ -5,15 +5,16 @@ environment, every tick recorded by `render.record_episode` (the rollout code of
 evaluation). The page draws both on canvases driven by one scrubber, and shows, for a clicked
 robot, its design, energy, load and behavior tree with the node that acted that tick.
 
-The focal individual and the baseline. teams.jsonl and summary.json record the designs of the
-best team and their robot counts, not which design is the focal individual nor the baseline
-team it was scored against, so the page reconstructs them (`focal_and_baseline`): the focal is
-the design a record marks ``"focal": true`` where one does, else the design with the most robots
-(the focal takes slot 0 and its share of the dominance draws; the first of equals), and the
-baseline is the team with every slot of the focal design refilled by the team's other designs
-(its partners), drawn in proportion to their dominance (uniformly if all are 0) with a
-generator seeded by the page's seed, as `coevo.partners.assemble_swarms` refills them. With
-no partner the baseline has no robot. The scores are those of this one episode (the record's
+The focal individual and the baseline. A run made since the replay page records, with each design of a best
+team, whether it is the focal individual's (``"focal"``) and its robots in the baseline team the
+focal was scored against (``"baseline_count"``); the page takes the baseline from those counts
+(the partner slots as they are, the focal's slots refilled to the counts). Older records have
+the designs and their robot counts only, so the page reconstructs them (`focal_and_baseline`):
+the focal is the design with the most robots (the focal takes slot 0 and its share of the
+dominance draws; the first of equals), and the baseline is the team with every slot of the
+focal design refilled by the team's other designs (its partners), drawn in proportion to their
+dominance (uniformly if all are 0) with a generator seeded by the page's seed, as
+`coevo.partners.assemble_swarms` refills them. With no partner the baseline has no robot. The scores are those of this one episode (the record's
 fitness is a mean over the run's trials), by the run's fitness weights, budget and objective.
 
 The data (layout, per-tick positions in cm delta-coded over ticks, energies, loads, package
@@ -53,9 +54,13 @@ _TERMS = (("delivery", "deliveries"), ("collab", "collaborative deliveries and b
 
 
 # ------------------------------------------------------------------ teams
-def focal_and_baseline(designs: Sequence[dict], seed: int = 0) -> tuple[int, Tensor, Tensor]:
-    """(focal design index, focal team ``[S]``, baseline team ``[S]``) as rows of
-    ``team_genome(designs)`` (-1: an empty slot); see the module docstring."""
+def focal_and_baseline(designs: Sequence[dict], seed: int = 0
+                       ) -> tuple[int, Tensor, Tensor, bool]:
+    """(focal design index, focal team ``[S]``, baseline team ``[S]``, whether the baseline is
+    the recorded one) as rows of ``team_genome(designs)`` (-1: an empty slot); see the module
+    docstring. A record that gives
+    every design's ``baseline_count`` (runs made since the replay page) gives the baseline it was scored
+    against: the partner slots as they are, the focal's slots refilled to those counts."""
     _, team = team_genome(designs)
     counts = [int(d.get("count", 1)) for d in designs]
     marked = [i for i, d in enumerate(designs) if d.get("focal") is True and counts[i] > 0]
@@ -65,17 +70,41 @@ def focal_and_baseline(designs: Sequence[dict], seed: int = 0) -> tuple[int, Ten
         focal = max(range(len(designs)), key=lambda i: (counts[i], -i))
     partners = [i for i in range(len(designs)) if i != focal and counts[i] > 0]
     slots = team == focal
+    n_slots = int(slots.sum())
     baseline = team.clone()
-    if partners:
+    recorded = _recorded_refill(designs, counts, focal, n_slots)
+    if recorded is not None:
+        baseline[slots] = recorded
+    elif partners:
         w = torch.tensor([max(float(designs[i].get("dominance", 0.5)), 0.0) for i in partners])
         if float(w.sum()) <= 0:
             w = torch.ones(len(partners))
         g = torch.Generator().manual_seed(int(seed))
-        draw = torch.multinomial(w, int(slots.sum()), replacement=True, generator=g)
+        draw = torch.multinomial(w, n_slots, replacement=True, generator=g)
         baseline[slots] = torch.tensor(partners)[draw]
     else:
         baseline[slots] = -1
-    return focal, team, baseline
+    return focal, team, baseline, recorded is not None
+
+
+def _recorded_refill(designs: Sequence[dict], counts: list[int], focal: int,
+                     n_slots: int) -> Tensor | None:
+    """The focal's slots as the record's baseline counts fill them ([n_slots] design rows, -1
+    empty), or None where the record has none or they do not fit the team."""
+    base = [d.get("baseline_count") for d in designs]
+    if not all(isinstance(b, int) and not isinstance(b, bool) for b in base):
+        return None
+    if base[focal] != 0:
+        return None
+    extra = [b - c if i != focal else 0 for i, (b, c) in enumerate(zip(base, counts))]
+    if any(e < 0 for e in extra):
+        return None
+    fill = [i for i, e in enumerate(extra) for _ in range(e)]
+    if not fill and sum(base) == 0:
+        return torch.full((n_slots,), -1, dtype=torch.long)   # no partner: an empty team
+    if len(fill) != n_slots:
+        return None
+    return torch.tensor(fill, dtype=torch.long)
 
 
 def _species_count(designs: Sequence[dict], team: Tensor) -> int:
@@ -167,7 +196,7 @@ def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
     """Everything the page shows, as JSON-friendly data: both teams' episodes in the environment
     of `seed`, the designs, the layout, the scores. `cfg`: the run's SwarmCoDeConfig."""
     genome, _ = team_genome(designs, cfg.tag_length)
-    focal, team, base = focal_and_baseline(designs, seed)
+    focal, team, base, recorded = focal_and_baseline(designs, seed)
     ticks = scenario.episode_ticks if ticks is None else int(ticks)
     ph = genome_phenotype(genome, scenario.hardware)
     row_cost = ph.cost
@@ -237,7 +266,7 @@ def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
         },
         "obstacles": [[_round(x, 3), _round(y, 3), _round(r, 3)] for (x, y), r in
                       zip(lay.o_pos[0][o].tolist(), lay.o_radius[0][o].tolist())],
-        "designs": dd, "focal": focal,
+        "designs": dd, "focal": focal, "baseline_recorded": recorded,
         "panels": panels, "gated": _round(gated), "marginal": _round(f - b),
         "p_marginal": cfg.p_marginal,
     }
