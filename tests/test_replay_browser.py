@@ -104,6 +104,8 @@ def test_clicking_a_robot_shows_its_design_and_tree(browser, page):
     size = canvas.size
     ActionChains(browser).move_to_element_with_offset(
         canvas, pos["cx"] - size["width"] / 2, pos["cy"] - size["height"] / 2).click().perform()
+    tip = browser.find_element("id", "tooltip")            # the pointer rests on it: hover
+    assert tip.is_displayed() and tip.text.startswith(f"robot {robot}: ")
     title = _text(browser, "robot-title")
     d = data["designs"][data["panels"]["baseline"]["robots"]["design"][robot]]
     assert f"Robot {robot} of the baseline team" in title and f"sp {d['species']}" in title

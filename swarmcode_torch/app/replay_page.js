@@ -234,7 +234,7 @@
     h += `</table><p class="muted">Robots: discs of their true radius in their design's colour; an inner square: pincher, ` +
          `an inner ring: suction (at least 4 px across); black outline: carrying, with its package drawn small on top; faded: battery flat. Packages: squares need a pincher, ` +
          `circles suction, darker is heavier; hexagons are collaborative, with a marker per grip point ` +
-         `(white: free, black: held). The number in the base: packages delivered.</p>`;
+         `(white: free, black: held). The number in the base: packages delivered. Hover over a robot or a package for what it is.</p>`;
     h += `<h3>Package classes</h3><ul class="muted">` + D.classes.map((c, i) => `<li>${i}: ${esc(c)}</li>`).join("") + `</ul>`;
     return h;
   }
@@ -375,11 +375,47 @@
     return best;
   }
 
+  function packageAt(name, clientX, clientY) {
+    const v = view[name], rect = v.canvas.getBoundingClientRect();
+    const k = v.canvas.width / rect.width;
+    const x = (clientX - rect.left) * k, y = (clientY - rect.top) * k;
+    const p = D.panels[name], Q = D.Q, t = state.t, pk = D.packages;
+    for (let q = 0; q < Q; q++) {
+      if (!pk.present[q] || p.p_status[t * Q + q] === DELIVERED) continue;
+      const [px, py] = toPx(v, p.pposA[(t * Q + q) * 2], p.pposA[(t * Q + q) * 2 + 1], D);
+      if (Math.hypot(px - x, py - y) <= Math.max(pk.size[q] * 1.1 * v.s, 4 * v.dpr)) return q;
+    }
+    return -1;
+  }
+
+  function packageText(name, q) {
+    const p = D.panels[name], Q = D.Q, G = D.G, t = state.t, pk = D.packages;
+    let grips = 0, held = 0;
+    for (let g = 0; g < G; g++) {
+      if (pk.g_eff[q * G + g] < 0) continue;
+      grips++;
+      if (p.holder[(t * Q + q) * G + g] >= 0) held++;
+    }
+    const where = p.p_status[t * Q + q] === DELIVERED ? "delivered"
+      : held === 0 ? "on the ground" : held === grips ? "carried" : `${held} of ${grips} grips held, waiting`;
+    return `package #${q} · class ${pk.cls[q]}: ${D.classes[pk.cls[q]] || "?"} · ${fmt(pk.mass[q], 1)} kg · ${where}` +
+           (p.p_picked[t * Q + q] ? " · picked" : "");
+  }
+
   function screenPos(name, i) {   // where robot i of a panel is on the screen now (tests, tools)
     const v = view[name], rect = v.canvas.getBoundingClientRect(), k = rect.width / v.canvas.width;
     const p = D.panels[name], N = D.robots, t = state.t;
     const [x, y] = toPx(v, p.posA[(t * N + i) * 2], p.posA[(t * N + i) * 2 + 1], D);
     return {x: rect.left + x * k, y: rect.top + y * k, cx: x * k, cy: y * k};
+  }
+
+  function showTip(tip, text, e) {   // beside the pointer, inside the window
+    tip.textContent = text;
+    tip.hidden = false;
+    const w = tip.offsetWidth, h = tip.offsetHeight;
+    const x = e.clientX + 12 + w > window.innerWidth ? Math.max(0, e.clientX - 12 - w) : e.clientX + 12;
+    const y = e.clientY + 12 + h > window.innerHeight ? Math.max(0, e.clientY - 12 - h) : e.clientY + 12;
+    tip.style.left = x + "px"; tip.style.top = y + "px";
   }
 
   function wire() {
@@ -405,13 +441,16 @@
       cv.addEventListener("mousemove", (e) => {
         const i = robotAt(name, e.clientX, e.clientY);
         cv.style.cursor = i >= 0 ? "pointer" : "crosshair";
-        if (i < 0) { tip.hidden = true; return; }
+        if (i < 0) {
+          const q = packageAt(name, e.clientX, e.clientY);
+          if (q < 0) { tip.hidden = true; return; }
+          showTip(tip, packageText(name, q), e);
+          return;
+        }
         const p = D.panels[name], N = D.robots, t = state.t;
         const hold = p.holding[t * N + i];
-        tip.textContent = `robot ${i}: ${designLabel(D, p.robots.design[i])} · ${fmt(p.energyA[t * N + i], 0)}% energy` +
-                          (hold >= 0 ? ` · holds package #${hold}` : "");
-        tip.style.left = (e.clientX + 12) + "px"; tip.style.top = (e.clientY + 12) + "px";
-        tip.hidden = false;
+        showTip(tip, `robot ${i}: ${designLabel(D, p.robots.design[i])} · ${fmt(p.energyA[t * N + i], 0)}% energy` +
+                     (hold >= 0 ? ` · holds package #${hold}` : "") + " · click for its tree", e);
       });
       cv.addEventListener("mouseleave", () => { tip.hidden = true; });
     }
