@@ -209,3 +209,13 @@ def test_replay_run_html_and_the_command(tmp_path):
     # the GIF stays the default
     res = CliRunner().invoke(app, ["replay", str(run), "--ticks", "4"])
     assert res.exit_code == 0 and (run / "team.gif").is_file()
+
+
+def test_html_into_a_missing_folder_or_a_directory_is_one_line(tmp_path):
+    run = _run(tmp_path)
+    for out, msg in ((tmp_path / "nope" / "t.html", "does not exist"),
+                     (tmp_path, "is a directory")):
+        res = CliRunner().invoke(app, ["replay", str(run), "--html", "--out", str(out)])
+        assert res.exit_code != 0 and msg in res.output and "Traceback" not in res.output
+    assert "team.html" in CliRunner().invoke(app, ["replay", str(run), "--html", "--out",
+                                                   str(tmp_path)]).output
