@@ -124,12 +124,11 @@ def _round(x: float, nd: int = 6) -> float | None:
     return round(float(x), nd) if math.isfinite(float(x)) else None
 
 
-def _panel(ep: Episode, team: Tensor, designs, programs: Tensor, traces: list[dict],
+def _panel(ep: Episode, team: Tensor, programs: Tensor, traces: list[dict],
            cost: float, species: int, cfg, scenario: Scenario) -> dict:
     """One team's episode as page data; fills `traces` (per design: combination -> trace)."""
     snaps = ep.snapshots
     rob = ep.robots
-    N = rob.radius.shape[1]
     stack = {k: torch.stack([getattr(s, k) for s in snaps]) for k in
              ("pos", "energy", "holding", "grip", "p_pos", "p_status", "holder", "p_picked")}
     cap = rob.capacity[0].clamp_min(1e-9)
@@ -140,20 +139,15 @@ def _panel(ep: Episode, team: Tensor, designs, programs: Tensor, traces: list[di
     team_energy = (pct * present.float()).sum(-1) / n
     combos = []
     prog = rob.program[0].tolist()
+    ops = programs.tolist()
     for t, leaf in enumerate(ep.leaves):
-        alive = present & (snaps[t].energy > 0)
-        c = bt.combo_index(leaf)
-        row = []
-        for i in range(N):
-            if not bool(alive[i]):
-                row.append(-1)
-                continue
-            ci = int(c[i])
-            row.append(ci)
-            table = traces[prog[i]]
-            if ci not in table:
-                acting, visited = bt.trace(programs[prog[i]].tolist(), leaf[i].tolist())
-                table[ci] = [acting, [list(v) for v in visited]]
+        # the trees that ran at tick t + 1: those of live robots (step's `alive`)
+        alive = (present & (snaps[t].energy > 0)).tolist()
+        row = torch.where(torch.tensor(alive), bt.combo_index(leaf), -1).tolist()
+        for i, ci in enumerate(row):
+            if ci >= 0 and ci not in traces[prog[i]]:
+                acting, visited = bt.trace(ops[prog[i]], leaf[i].tolist())
+                traces[prog[i]][ci] = [acting, [list(v) for v in visited]]
         combos.extend(row)
     m = ep.metrics
     mt = {k: torch.tensor([v]) for k, v in m.items()}
@@ -209,7 +203,7 @@ def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
         counts = torch.tensor([_species_count(designs, t)])
         cost = float(team_cost(row_cost[t.clamp_min(0)], present, counts,
                                scenario.species_overhead)[0])
-        panels[name] = _panel(ep, t, designs, genome.bt, traces, cost, int(counts[0]), cfg,
+        panels[name] = _panel(ep, t, genome.bt, traces, cost, int(counts[0]), cfg,
                               scenario)
         eps[name] = ep
     f, b = panels["focal"]["score"], panels["baseline"]["score"]
