@@ -219,3 +219,12 @@ def test_html_into_a_missing_folder_or_a_directory_is_one_line(tmp_path):
         assert res.exit_code != 0 and msg in res.output and "Traceback" not in res.output
     assert "team.html" in CliRunner().invoke(app, ["replay", str(run), "--html", "--out",
                                                    str(tmp_path)]).output
+
+
+def test_a_team_of_one_design_has_an_empty_baseline():
+    data = page_data(DESIGNS[:1], load_scenario("one-niche"), SwarmCoDeConfig(scenario="one-niche"),
+                     seed=0, ticks=20)
+    base = data["panels"]["baseline"]
+    assert set(base["robots"]["design"]) == {-1} and base["species"] == 0
+    assert set(base["combo"]) == {-1} and final_counts(data, "baseline")["picked_individual"] == 0
+    assert data["marginal"] == pytest.approx(data["panels"]["focal"]["score"] - base["score"])

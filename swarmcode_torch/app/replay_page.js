@@ -8,6 +8,8 @@
   const $ = (id) => document.getElementById(id);
   const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"}[c]));
   const fmt = (x, d) => (x === null || x === undefined || Number.isNaN(x)) ? "–" : Number(x).toFixed(d);
+  // scores: one decimal, more for the small scores of the roi objective
+  const fmtS = (x) => fmt(x, x !== null && x !== undefined && Math.abs(x) < 10 ? 3 : 1);
 
   function fail(msg) {
     const e = $("error");
@@ -196,6 +198,7 @@
 
   function liveText(D, name, t) {
     const p = D.panels[name], c = p.counts[t], nd = c.di + c.dc;
+    if (!p.robots.design.some((d) => d >= 0)) return `no robot: the team has no partner (delivered <b data-testid="delivered-${name}">0</b>/${D.total})`;
     const collab = D.nCollab ? ` (${c.di} indiv, ${c.dc} collab)` : "";
     const energy = 100 - p.team_energy[t];
     return `delivered <b data-testid="delivered-${name}">${nd}</b>/${D.total}${collab} · picked ` +
@@ -210,17 +213,19 @@
       : `the focal's score &times; ${D.p_marginal}: it does not beat its baseline`;
     const rec = D.record || {};
     const recTxt = rec.fitness !== undefined && rec.fitness !== null
-      ? ` The run recorded a fitness of ${fmt(rec.fitness, 1)} for this team` +
+      ? ` The run recorded a fitness of ${fmtS(rec.fitness)} for this team` +
         (rec.generation !== undefined ? ` in generation ${rec.generation}` : "") +
         " (a mean over the run's trials; this page is one episode)." : "";
     return `<b>Focal individual:</b> ${swatch(D, D.focal, 14)} ${esc(designLabel(D, D.focal))} ` +
-      `(${g.count} of ${D.robots} robots). Focal team score <b data-testid="focal-score">${fmt(f.score, 1)}</b>, ` +
-      `baseline team score <b data-testid="baseline-score">${fmt(b.score, 1)}</b> ` +
-      `(the focal's ${g.count} slots refilled by its partners` +
-      (D.baseline_recorded ? ", as the run recorded them" : ", drawn by dominance: the run did not record its baseline") +
-      `), marginal contribution ` +
-      `<b class="${cls}" data-testid="marginal">${m >= 0 ? "+" : ""}${fmt(m, 1)}</b>; ` +
-      `gated fitness ${fmt(D.gated, 1)} (${kept}).${recTxt}` +
+      `(${g.count} of ${D.robots} robots). Focal team score <b data-testid="focal-score">${fmtS(f.score)}</b>, ` +
+      `baseline team score <b data-testid="baseline-score">${fmtS(b.score)}</b> ` +
+      (b.robots.design.some((d) => d >= 0)
+        ? `(the focal's ${g.count} slots refilled by its partners` +
+          (D.baseline_recorded ? ", as the run recorded them" : ", drawn by dominance: the run did not record its baseline") + ")"
+        : "(the team has no partner to refill the focal's slots: the baseline team has no robot)") +
+      `, marginal contribution ` +
+      `<b class="${cls}" data-testid="marginal">${m >= 0 ? "+" : ""}${fmtS(m)}</b>; ` +
+      `gated fitness ${fmtS(D.gated)} (${kept}).${recTxt}` +
       (D.custom_fitness ? ` <br><b>Note:</b> the run was scored by ${esc(D.custom_fitness)}; the scores here are the built-in fitness.` : "");
   }
 
@@ -429,6 +434,8 @@
       if (e.key === " ") { e.preventDefault(); setPlaying(!state.playing); }
       else if (e.key === "ArrowRight" && e.target.id !== "scrub") { setPlaying(false); setTick(state.t + 1); }
       else if (e.key === "ArrowLeft" && e.target.id !== "scrub") { setPlaying(false); setTick(state.t - 1); }
+      else if (e.key === "Home" && e.target.id !== "scrub") { setPlaying(false); setTick(0); }
+      else if (e.key === "End" && e.target.id !== "scrub") { setPlaying(false); setTick(D.ticks); }
     });
     const tip = $("tooltip");
     for (const name of PANELS) {
@@ -473,14 +480,15 @@
     const rec = D.record || {};
     $("subtitle").textContent = `${D.scenario} · ${D.robots} robots · ${D.ticks} ticks (${fmt(D.ticks * D.dt, 0)} s) · ` +
       `environment seed ${D.seed}` + (rec.generation !== undefined ? ` · best team of generation ${rec.generation}` : " · the run's best team");
-    $("score-focal").textContent = `score ${fmt(D.panels.focal.score, 1)}`;
-    $("score-baseline").textContent = `score ${fmt(D.panels.baseline.score, 1)}`;
+    $("score-focal").textContent = `score ${fmtS(D.panels.focal.score)}`;
+    $("score-baseline").textContent = `score ${fmtS(D.panels.baseline.score)}`;
     $("summary").innerHTML = summaryHtml(D);
     $("legend").innerHTML = legendHtml(D);
     $("terms").innerHTML = termsHtml(D);
     $("footer").textContent = "Written by swarmcode-torch replay --html. The baseline team: the focal design's slots " +
-      (D.baseline_recorded ? "refilled by its partners as the run recorded them. "
-                           : "refilled by the team's other designs in proportion to their dominance (app/replay_page.py). ") +
+      (!D.panels.baseline.robots.design.some((d) => d >= 0) ? "left empty: the team has no partner. "
+       : D.baseline_recorded ? "refilled by its partners as the run recorded them. "
+       : "refilled by the team's other designs in proportion to their dominance (app/replay_page.py). ") +
       "Both teams ran through the same environment with the evaluation's rollout.";
     $("scrub").max = String(D.ticks);
     resize(D);

@@ -43,7 +43,7 @@ from ..coevo.fitness import budget_penalty, gate, raw_fitness_terms, team_cost
 from ..coevo.population import PINCHER, genome_phenotype
 from ..sim import bt
 from ..sim.scenario import Scenario
-from ..sim.state import DELIVERED
+from ..sim.state import DELIVERED, capabilities
 from .render import Episode, design_colors, record_episode, team_genome
 
 HTML_FILE = "team.html"   # the default output of `replay --html`
@@ -220,6 +220,11 @@ def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
     pcol = [to_hex(ylor(0.35 + 0.6 * min(max((float(x) - lo) / max(hi - lo, 1e-6), 0), 1)))
             for x in mass.tolist()]
     o = lay.o_present[0]
+    if all("capability" in d for d in designs):
+        can = [list(d["capability"]) for d in designs]
+    else:   # an older record: from the genes, as analysis.design_capabilities does
+        rows = capabilities(ph, scenario, eps["focal"].params).tolist()
+        can = [[j for j, ok in enumerate(r) if ok] for r in rows]
     dd = []
     for i, d in enumerate(designs):
         dd.append({
@@ -230,7 +235,7 @@ def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
             "torque_point": d["torque_point"], "battery_point": d["battery_point"],
             "dominance": d.get("dominance"), "selectivity": d.get("selectivity"),
             "cost": _round(float(row_cost[i]), 2),
-            "capability": d.get("capability"),
+            "capability": can[i],
             "count": int(d.get("count", 1)),
             "baseline_count": int((base == i).sum()),
             "color": to_hex(colors[i]), "focal": i == focal,
