@@ -402,3 +402,51 @@ def test_no_graph_breaks() -> None:
     lk = torch.compile(lookup, backend="eager", fullgraph=True)
     for w, x in zip(lookup(tables, idx, ls), lk(tables, idx, ls)):
         assert torch.equal(w, x)
+
+
+# ------------------------------------------------------------------ tracing one tick (replays)
+def test_tree_lines_are_format_tree_with_slots() -> None:
+    g = torch.Generator().manual_seed(5)
+    progs = [bt.TEMPLATES[k] for k in bt.TEMPLATES] + random_programs(300, 24, g).tolist()
+    for prog in progs:
+        lines = bt.tree_lines(prog)
+        assert "\n".join(text for text, _ in lines) == bt.format_tree(prog, root=True)
+        assert lines[0][1] == -1
+        for text, slot in lines[1:]:
+            assert text.strip() == bt.OPCODE_NAMES[prog[slot]]
+
+
+def test_trace_agrees_with_the_interpreter_and_the_tables() -> None:
+    g = torch.Generator().manual_seed(9)
+    ops = torch.cat([random_programs(1500, 24, g, p_nop=0.2),
+                     torch.stack([bt.template_tensor(k, 24) for k in bt.TEMPLATES])])
+    ls = bt.combo_statuses()[torch.randint(0, bt.NUM_COMBOS, (ops.shape[0],), generator=g)]
+    tables = bt.build_tables(ops)
+    action, fired, status = bt.lookup(tables, torch.arange(ops.shape[0]), ls)
+    for i, (prog, st_row) in enumerate(zip(ops.tolist(), ls.tolist())):
+        acting, visited = bt.trace(prog, st_row)
+        ref_action, ref_fired, ref_status = interpret_reference(prog, st_row)
+        assert visited[-1] == (-1, ref_status) == (-1, int(status[i]))
+        leaves = [(s, st) for s, st in visited if s >= 0 and prog[s] in bt.LEAF_OPS]
+        assert {prog[s] for s, st in leaves if st == S and prog[s] in bt.ACTION_OPS} == ref_fired
+        assert ref_fired == {k for k in range(NUM_OPCODES) if fired[i, k]}
+        assert len({s for s, _ in visited}) == len(visited)   # each node ticks at most once
+        if ref_status == R:
+            assert prog[acting] == ref_action == int(action[i])
+            assert leaves[-1] == (acting, R)
+        elif ref_fired:
+            assert prog[acting] in ref_fired
+            assert acting == max(s for s, st in leaves if st == S and prog[s] in bt.ACTION_OPS)
+        else:
+            assert acting == -1
+
+
+def test_trace_hand_made() -> None:
+    prog = bt.TEMPLATES["forage"]   # SEL(SEQ(HAS, TO_BASE, DROP), SEQ(TO_PACK, PICK), WALK)
+    acting, visited = bt.trace(prog, statuses(COND_HAS_PACKAGE=F, ACT_MOVE_TO_PACK=R))
+    assert prog[acting] == ACT_MOVE_TO_PACK
+    assert [prog[s] if s >= 0 else "root" for s, _ in visited] == [
+        COND_HAS_PACKAGE, bt.SEQ, ACT_MOVE_TO_PACK, bt.SEQ, bt.SEL, "root"]
+    assert [st for _, st in visited] == [F, F, R, R, R, R]
+    acting, visited = bt.trace(prog, statuses())            # holding, at the base: drop fires
+    assert prog[acting] == ACT_DROP and visited[-1] == (-1, S)

@@ -85,3 +85,7 @@ def test_wheel_console_script_evolves(installed):
     from swarmcode_torch import __version__
     assert summary["software"]["swarmcode-torch"] == __version__
     sh(script.with_name("python"), "-m", "swarmcode_torch", "--help", cwd=work)
+    # the replay page's template, script and styles are package data of the wheel
+    sh(script, "replay", runs[0], "--html", "--ticks", 5, cwd=work)
+    page = (runs[0] / "team.html").read_text()
+    assert 'id="episode-data"' in page and "DecompressionStream" in page and "/*SCRIPT*/" not in page

@@ -257,3 +257,23 @@ def test_waypoints_are_the_counter_hash_of_seed_robot_axis_and_tick():
         tt = torch.tensor(t)
         ref = torch.stack([hash_uniform(seed[:, None], 2 * i + a, tt) for a in (0, 1)], -1)
         assert torch.equal(_waypoints(keys, tt, params), 0.5 + (params.arena - 1.0) * ref)
+
+
+def test_observe_leaf_changes_nothing_and_sees_what_the_trees_read():
+    s, layout, rob, tables, p = random_world("two-niche", E=2, seed=3)
+    m0, s0 = rollout(layout, rob, tables, p, 40, return_state=True)
+    seen = []
+    m1, s1 = rollout(layout, rob, tables, p, 40, return_state=True,
+                     observe_leaf=lambda t, leaf: seen.append((t, leaf.clone())))
+    for a, b in zip(s0, s1):
+        assert torch.equal(a, b)
+    for k in m0:
+        assert torch.equal(m0[k], m1[k])
+    assert [t for t, _ in seen] == list(range(1, 41))
+    assert all(leaf.shape == (2, s.num_robots, bt.NUM_OPCODES) for _, leaf in seen)
+    # both observers at once: the state seen before tick t is the one the leaves came from
+    states = {}
+    rollout(layout, rob, tables, p, 3, observe=lambda t, st: states.setdefault(t, st),
+            observe_leaf=lambda t, leaf: states.setdefault(-t, leaf))
+    assert sorted(states) == [-3, -2, -1, 0, 1, 2, 3]
+    assert torch.equal(states[-1], seen[0][1])

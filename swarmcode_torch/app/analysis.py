@@ -10,6 +10,7 @@ from typing import Sequence
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
+from .replay_page import HTML_FILE, page_data, write_page
 from .runs import (REPLAY_FILE, RunError, generation_team, load_checkpoint,
                    read_config, read_summary, read_teams, run_scenario)
 from ..sim.scenario import Scenario
@@ -63,9 +64,9 @@ def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None
 
 def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0,
                ticks: int | None = None, every: int = 2, generation: int | None = None,
-               fps: float = 10, dpi: int = 80) -> tuple[Path, dict]:
+               fps: float = 10, dpi: int = 80, html: bool = False) -> tuple[Path, dict]:
     """Render the best team of a run (summary.json "designs"), or the best team of one
-    `generation` (teams.jsonl), as a GIF.
+    `generation` (teams.jsonl), as a GIF, or (`html`) as an interactive page.
 
     The run's config gives the episode length (``ticks`` overrides it) and its scenario.toml
     copy the scenario (the config's scenario in a run made before runs kept one); the
@@ -73,22 +74,39 @@ def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0
     file that cannot be read or is malformed (its robots are built from the run's hardware.toml
     copy). Returns the GIF path (default ``run_dir/team.gif``) and
     the episode metrics as floats.
+
+    `html`: one self-contained HTML file (default ``run_dir/team.html``; `replay_page`): the
+    team and its baseline team (the focal design's slots refilled by its partners) side by side
+    in the same environment, every tick, with each robot's design, energy, load and behavior
+    tree; `every`, `fps` and `dpi` do not apply. The metrics returned are the focal team's.
     """
     run_dir = Path(run_dir)
-    out = Path(out) if out is not None else run_dir / REPLAY_FILE
+    default = run_dir / (HTML_FILE if html else REPLAY_FILE)
+    out = Path(out) if out is not None else default
     if out.is_dir():
-        raise RunError(f"--out {out} is a directory; give a file name such as {out / REPLAY_FILE}")
+        raise RunError(f"--out {out} is a directory; give a file name such as {out / default.name}")
     if not out.parent.is_dir():
         raise RunError(f"--out {out}: the folder {out.parent} does not exist")
     cfg = read_config(run_dir)
     if generation is not None:
-        designs = generation_team(run_dir, generation)["designs"]
+        record = generation_team(run_dir, generation)
     else:
-        designs = read_summary(run_dir, figures=False)["designs"]
+        record = read_summary(run_dir, figures=False)
+    designs = record["designs"]
     scenario = run_scenario(run_dir, cfg)        # the run's own copies, when it has them
-    genome, team = team_genome(designs, cfg.tag_length)
     if ticks is None:
         ticks = cfg.ticks or scenario.episode_ticks
+    if html:
+        fitness = record.get("fitness") if generation is not None else record.get("best_fitness")
+        rec = {"run": run_dir.name, "fitness": fitness if isinstance(fitness, (int, float)) else None,
+               "generation": generation if generation is not None else record.get("best_generation")}
+        what = f"generation {generation}" if generation is not None else "best team"
+        data = page_data(designs, scenario, cfg, seed=seed, ticks=ticks,
+                         title=f"SwarmCoDe replay: {run_dir.name}, {what}",
+                         record={k: v for k, v in rec.items() if v is not None})
+        write_page(data, out)
+        return out, dict(data["panels"]["focal"]["metrics"])
+    genome, team = team_genome(designs, cfg.tag_length)
     ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every)
     ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
     save_gif(ep, out, fps=fps, dpi=dpi)

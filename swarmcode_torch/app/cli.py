@@ -851,13 +851,15 @@ def dynamics(
 @app.command()
 def replay(
     run_dir: Annotated[Path, typer.Argument(help="A run directory.")],
-    out: Annotated[Optional[Path], typer.Option(help="Output GIF [default: RUN_DIR/team.gif].")] = None,
+    out: Annotated[Optional[Path], typer.Option(help="Output file [default: RUN_DIR/team.gif, with --html RUN_DIR/team.html].")] = None,
     generation: Annotated[Optional[int], typer.Option(help="Replay this generation's best team instead of the run's.")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the random environment.")] = 0,
     ticks: Annotated[Optional[int], typer.Option(help="Episode length [default: the run's].")] = None,
-    every: Annotated[int, typer.Option(help="Draw every k-th tick.")] = 2,
+    every: Annotated[int, typer.Option(help="Draw every k-th tick (GIF).")] = 2,
+    html: Annotated[bool, typer.Option("--html", help="Write an interactive page instead: one self-contained HTML file with the team and its baseline team side by side, every tick, each robot's design and behavior tree.")] = False,
 ) -> None:
-    """Render a rollout of the best team headless, as an animated GIF."""
+    """Render a rollout of the best team headless, as an animated GIF (or, --html, an
+    interactive page)."""
     from .analysis import replay_run
     from .runs import RunError
 
@@ -875,12 +877,13 @@ def replay(
         fail(f"{run_dir} is not a directory")
     try:
         path, m = replay_run(run_dir, out=out, seed=seed, ticks=ticks, every=every,
-                             generation=generation)
+                             generation=generation, html=html)
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
     except OSError as e:
         _os_fail(e, "replay failed")
-    console.print(f"Wrote {path}: {m['delivered_individual']:.0f} individual and "
+    console.print(f"Wrote {path}: {'the focal team: ' if html else ''}"
+                  f"{m['delivered_individual']:.0f} individual and "
                   f"{m['delivered_collab']:.0f} collaborative deliveries, "
                   f"{m['energy_used']:.1f}% energy used", markup=False, highlight=False)
 

@@ -62,6 +62,9 @@ class Episode:
     metrics: dict[str, float]
     name: str = ""                                   # shown in frame titles (scenario name)
     labels: list[str] = field(default_factory=list)  # legend text per design row
+    #: with record_episode(leaves=True): the leaf statuses ``[N, 14]`` the trees read at ticks
+    #: 1 .. T (`rollout`'s observe_leaf), for `bt.trace`
+    leaves: list[Tensor] = field(default_factory=list)
 
     @property
     def num_designs(self) -> int:
@@ -74,11 +77,12 @@ def _env0(state: State) -> State:
 
 def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: int,
                    ticks: int | None = None, every: int = 1,
-                   params: WorldParams | None = None) -> Episode:
+                   params: WorldParams | None = None, leaves: bool = False) -> Episode:
     """Run the team (``[S]`` genome rows, -1 = empty slot) in one random environment on the CPU.
 
     The environment is ``make_layouts(replace(scenario, num_robots=S), 1, Generator(seed))``;
-    a snapshot is kept at tick 0, every `every` ticks, and at the last tick.
+    a snapshot is kept at tick 0, every `every` ticks, and at the last tick. `leaves`: keep
+    the leaf statuses of every tick too (`Episode.leaves`).
     """
     if every < 1:
         raise ValueError(f"every must be >= 1, got {every}")
@@ -105,8 +109,14 @@ def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: i
         if t % every == 0 or t == ticks:
             snaps.append(_env0(state))
 
+    seen: list[Tensor] = []
+
+    def keep_leaf(t: int, leaf: Tensor) -> None:
+        seen.append(leaf[0].clone())
+
     with torch.no_grad():
-        m = rollout(layout, robots, tables, params, ticks, observe=keep)
+        m = rollout(layout, robots, tables, params, ticks, observe=keep,
+                    observe_leaf=keep_leaf if leaves else None)
     metrics = {k: float(v[0]) for k, v in m.items()}
 
     labels = []
@@ -114,7 +124,7 @@ def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: i
         n = int((teams == r).sum())
         labels.append(f"{_EFFECTOR_NAMES.get(int(genome.effector[r]), '?')} "
                       f"r={float(genome.radius[r]):.2f} x{n}")
-    return Episode(layout, robots, params, snaps, metrics, scenario.name, labels)
+    return Episode(layout, robots, params, snaps, metrics, scenario.name, labels, seen)
 
 
 # ------------------------------------------------------------------ drawing

@@ -205,22 +205,27 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     b = res.fitness.argmax()
     team = res.swarms.focal_team[b]
     rows, counts = torch.unique(team[team >= 0], return_counts=True)
+    # the baseline team it was scored against: robots of each of the team's rows
+    base_counts = (res.swarms.baseline_team[b][None, :] == rows[:, None]).sum(1)
     ids, sizes = torch.unique(sp.species, return_counts=True)
     cost = genome_phenotype(genome, ctx.scenario.hardware).cost
     # every value the records need, to the host in one transfer (each transfer is a device sync)
     sel = genome.index(rows)
     names = [f.name for f in fields(Population)]
     h = _to_host([getattr(sel, n) for n in names] + [
-        sp.species[rows], cost[rows], counts,
+        sp.species[rows], cost[rows], counts, base_counts, rows == b,
         torch.stack([v[b].float() for v in res.team_metrics.values()]), res.focal[b],
         res.team_cost[b], ids, sizes, fit.max(), fit.mean(), res.focal.max(),
         genome.radius.detach(), genome.dominance.detach(), genome.selectivity.detach()])
     host, h = Population(**dict(zip(names, h))), h[len(names):]
-    (team_species, team_cost, team_counts, team_m, focal_b, team_cost_b, ids, sizes, fit_max,
+    (team_species, team_cost, team_counts, team_base, team_focal, team_m, focal_b, team_cost_b, ids, sizes, fit_max,
      fit_mean, focal_max, radius, dominance, selectivity) = h
-    designs = [dict(design_record(host, i, s, c), count=n)
-               for i, (s, c, n) in enumerate(zip(team_species.tolist(), team_cost.tolist(),
-                                                 team_counts.tolist()))]
+    # focal: the design of the focal individual; baseline_count: its robots in the baseline
+    # team (the focal's slots refilled by its partners), which the replay page shows
+    designs = [dict(design_record(host, i, s, c), count=n, focal=bool(f), baseline_count=nb)
+               for i, (s, c, n, nb, f) in enumerate(zip(
+                   team_species.tolist(), team_cost.tolist(), team_counts.tolist(),
+                   team_base.tolist(), team_focal.tolist()))]
     designs.sort(key=lambda d: -d["count"])
     tm = dict(zip(res.team_metrics, team_m.tolist()))
     team_record = {

@@ -17,22 +17,32 @@ METRIC_KEYS = (
 )
 
 
-def raw_fitness(m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()) -> Tensor:
-    """dict of [...] metric tensors (see METRIC_KEYS) -> [...] float F_raw (>= w.floor)."""
+def raw_fitness_terms(m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()) -> dict[str, Tensor]:
+    """The terms of F_raw, each [...]: "delivery", "collab", "pickup", "energy", "proximity",
+    "closeness" (weighted), "activity" (the inactive factor: 1, or w.inactive_factor for a team
+    that picked nothing up); `raw_fitness` = max(w.floor, sum of the terms * activity)."""
     missing = [k for k in METRIC_KEYS if k not in m]
     if missing:
         raise KeyError(f"raw_fitness is missing metrics: {', '.join(missing)}")
     f = {k: torch.as_tensor(m[k]).float() for k in METRIC_KEYS}
-    s_delivery = f["delivered_individual"] * w.W_delivery
-    s_collab = f["grips_delivered"] * w.W_delivery + f["delivered_collab"] * w.W_collab_bonus
     picked = f["picked_individual"] + f["picked_collab"]
-    s_pickup = picked * w.W_pickup
-    s_energy = f["mean_final_energy"] * w.W_energy
-    s_proximity = f["proximity"] * w.W_proximity
-    s_closeness = f["closeness"] * w.W_closeness
-    p_activity = torch.where(picked <= 0, torch.full_like(picked, w.inactive_factor),
-                             torch.ones_like(picked))
-    total = (s_delivery + s_collab + s_pickup + s_energy + s_proximity + s_closeness) * p_activity
+    return {
+        "delivery": f["delivered_individual"] * w.W_delivery,
+        "collab": f["grips_delivered"] * w.W_delivery + f["delivered_collab"] * w.W_collab_bonus,
+        "pickup": picked * w.W_pickup,
+        "energy": f["mean_final_energy"] * w.W_energy,
+        "proximity": f["proximity"] * w.W_proximity,
+        "closeness": f["closeness"] * w.W_closeness,
+        "activity": torch.where(picked <= 0, torch.full_like(picked, w.inactive_factor),
+                                torch.ones_like(picked)),
+    }
+
+
+def raw_fitness(m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()) -> Tensor:
+    """dict of [...] metric tensors (see METRIC_KEYS) -> [...] float F_raw (>= w.floor)."""
+    t = raw_fitness_terms(m, w)
+    total = (t["delivery"] + t["collab"] + t["pickup"] + t["energy"] + t["proximity"]
+             + t["closeness"]) * t["activity"]
     return total.clamp(min=w.floor)
 
 

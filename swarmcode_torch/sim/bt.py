@@ -496,3 +496,81 @@ def random_programs(n: int, length: int, generator: torch.Generator | None = Non
     ops = torch.randint(0, NOP, (n, length), generator=generator)
     nop = torch.rand(n, length, generator=generator) < p_nop
     return torch.where(nop, NOP, ops)
+
+
+# ---------------------------------------------------------------------------------------------
+# Tracing one tick (replays): which slots a tick visits, and the node that acted
+# ---------------------------------------------------------------------------------------------
+
+SlotNode = tuple[int, int, list]  # (slot of the node in the program array, opcode, children)
+
+
+def parse_slots(program: Sequence[int]) -> list[SlotNode]:
+    """Like :func:`parse`, keeping each node's slot: the implicit root's children as
+    ``(slot, opcode, children)`` (a leaf has no children)."""
+    root: list[SlotNode] = []
+    stack = [root]
+    for slot, op in enumerate(int(o) for o in program):
+        if op == NOP:
+            continue
+        if op == END:
+            if len(stack) > 1:
+                stack.pop()
+        elif op in CONTROL_OPS:
+            children: list[SlotNode] = []
+            stack[-1].append((slot, op, children))
+            stack.append(children)
+        else:
+            stack[-1].append((slot, op, []))
+    return root
+
+
+def tree_lines(program: Sequence[int]) -> list[tuple[str, int]]:
+    """``format_tree(program, root=True)``'s lines, each with the slot of its node (-1: the
+    implicit root)."""
+    lines = [("SEQ (root)", -1)]
+
+    def emit(nodes: list[SlotNode], level: int) -> None:
+        for slot, op, children in nodes:
+            lines.append(("  " * level + _node_name(op), slot))
+            if op in CONTROL_OPS:
+                emit(children, level + 1)
+
+    emit(parse_slots(program), 1)
+    return lines
+
+
+def trace(program: Sequence[int], leaf_status: Sequence[int]) -> tuple[int, list[tuple[int, int]]]:
+    """One tick of one program, node by node (plain Python, for replays; the simulator itself
+    runs :func:`lookup`, which it agrees with: tests/test_bt.py).
+
+    Returns ``(acting, visited)``: `visited` lists ``(slot, status)`` of every node the tick
+    ticked, in the order they returned (a control node after its children; slot -1 is the
+    implicit root), and `acting` is the slot of the node that acted: the leaf that returned
+    RUNNING (the action the robot carries out), else the last action that succeeded (fired,
+    e.g. a pick-up or a drop), else -1.
+    """
+    visited: list[tuple[int, int]] = []
+    acting = [-1, -1]  # running leaf, last fired action
+
+    def tick(node: SlotNode) -> int:
+        slot, op, children = node
+        if op not in CONTROL_OPS:
+            st = int(leaf_status[op])
+            visited.append((slot, st))
+            if st == RUNNING:
+                acting[0] = slot
+            elif st == SUCCESS and op in ACTION_OPS:
+                acting[1] = slot
+            return st
+        st = SUCCESS if op == SEQ else FAILURE
+        for child in children:
+            c = tick(child)
+            if c == RUNNING or (op == SEQ and c == FAILURE) or (op == SEL and c == SUCCESS):
+                st = c
+                break
+        visited.append((slot, st))
+        return st
+
+    tick((-1, SEQ, parse_slots(program)))
+    return (acting[0] if acting[0] >= 0 else acting[1]), visited

@@ -8,6 +8,7 @@ import torch
 
 from .layout import Layout
 from .runtime import CudaGraphTicks
+from .sense import sense
 from .state import DELIVERED, Robots, State, TickInputs, WorldParams, compatible, random_keys, \
     reset
 from .step import step
@@ -46,22 +47,31 @@ def episode_metrics(state: State, layout: Layout, robots: Robots, params: WorldP
 
 def rollout(layout: Layout, robots: Robots, tables: torch.Tensor, params: WorldParams,
             ticks: int, step_fn: Callable | None = None, return_state: bool = False,
-            observe: Callable[[int, State], None] | None = None):
+            observe: Callable[[int, State], None] | None = None,
+            observe_leaf: Callable[[int, torch.Tensor], None] | None = None):
     """Run `ticks` ticks of every environment; the per-environment metrics (and final state).
 
     `observe(t, state)`, if given, sees the state after reset (t = 0) and after every tick
     t = 1 .. ticks; a `CudaGraphTicks` step_fn then runs its ticks one by one.
+    `observe_leaf(t, leaf)`, if given, sees the leaf statuses ``[E, N, 14]`` that the behavior
+    trees read at tick t = 1 .. ticks (`sense` of the state before the tick, computed again
+    outside the tick: the rollout's results do not change, and nothing is computed without it);
+    `bt.trace` of a robot's program on them says which node acted.
     """
     compat = compatible(layout, robots, params)
     keys = random_keys(layout, robots.radius.shape[1])
     inputs = TickInputs(layout, robots, compat, keys, tables)
     state = reset(layout, robots, params)
     fn = step_fn or step
-    if observe is not None:
-        observe(0, state)
+    if observe is not None or observe_leaf is not None:
+        if observe is not None:
+            observe(0, state)
         for t in range(1, ticks + 1):
+            if observe_leaf is not None:
+                observe_leaf(t, sense(state, layout, robots, compat, keys, params).leaf)
             state = fn(state, *inputs, params)
-            observe(t, state)
+            if observe is not None:
+                observe(t, state)
     elif isinstance(fn, CudaGraphTicks):
         state = fn.run_ticks(state, inputs, params, ticks)
     else:

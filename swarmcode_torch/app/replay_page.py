@@ -1,0 +1,323 @@
+"""An interactive replay page: one self-contained HTML file (`swarmcode-torch replay RUN --html`).
+
+The best team of a run (or of one generation) and its baseline team run through the same
+environment, every tick recorded by `render.record_episode` (the rollout code of the
+evaluation). The page draws both on canvases driven by one scrubber, and shows, for a clicked
+robot, its design, energy, load and behavior tree with the node that acted that tick.
+
+The focal individual and the baseline. A run made since the replay page records, with each design of a best
+team, whether it is the focal individual's (``"focal"``) and its robots in the baseline team the
+focal was scored against (``"baseline_count"``); the page takes the baseline from those counts
+(the partner slots as they are, the focal's slots refilled to the counts). Older records have
+the designs and their robot counts only, so the page reconstructs them (`focal_and_baseline`):
+the focal is the design with the most robots (the focal takes slot 0 and its share of the
+dominance draws; the first of equals), and the baseline is the team with every slot of the
+focal design refilled by the team's other designs (its partners), drawn in proportion to their
+dominance (uniformly if all are 0) with a generator seeded by the page's seed, as
+`coevo.partners.assemble_swarms` refills them. With no partner the baseline has no robot. The scores are those of this one episode (the record's
+fitness is a mean over the run's trials), by the run's fitness weights, budget and objective.
+
+The data (layout, per-tick positions in cm delta-coded over ticks, energies, loads, package
+states, the leaf-status combination each robot's tree read) are JSON, gzip-compressed and
+base64-encoded inside the page; the browser inflates them with its DecompressionStream. The
+script and styles are package data (`replay_page.js`, `replay_page.css`) inlined into the file.
+"""
+
+from __future__ import annotations
+
+import base64
+import gzip
+import html
+import json
+import math
+import re
+from importlib import resources
+from pathlib import Path
+from typing import Sequence
+
+import torch
+from torch import Tensor
+
+from ..coevo.evaluation import team_scores
+from ..coevo.fitness import budget_penalty, gate, raw_fitness_terms, team_cost
+from ..coevo.population import PINCHER, genome_phenotype
+from ..sim import bt
+from ..sim.scenario import Scenario
+from ..sim.state import DELIVERED, capabilities
+from .render import Episode, design_colors, record_episode, team_genome
+
+HTML_FILE = "team.html"   # the default output of `replay --html`
+_EFFECTOR = {PINCHER: "pincher"}
+_TERMS = (("delivery", "deliveries"), ("collab", "collaborative deliveries and bonus"),
+          ("pickup", "pick-ups"), ("energy", "energy left"), ("proximity", "proximity"),
+          ("closeness", "closeness"))
+
+
+# ------------------------------------------------------------------ teams
+def focal_and_baseline(designs: Sequence[dict], seed: int = 0
+                       ) -> tuple[int, Tensor, Tensor, bool]:
+    """(focal design index, focal team ``[S]``, baseline team ``[S]``, whether the baseline is
+    the recorded one) as rows of ``team_genome(designs)`` (-1: an empty slot); see the module
+    docstring. A record that gives
+    every design's ``baseline_count`` (runs made since the replay page) gives the baseline it was scored
+    against: the partner slots as they are, the focal's slots refilled to those counts."""
+    _, team = team_genome(designs)
+    counts = [int(d.get("count", 1)) for d in designs]
+    marked = [i for i, d in enumerate(designs) if d.get("focal") is True and counts[i] > 0]
+    if marked:
+        focal = marked[0]
+    else:
+        focal = max(range(len(designs)), key=lambda i: (counts[i], -i))
+    partners = [i for i in range(len(designs)) if i != focal and counts[i] > 0]
+    slots = team == focal
+    n_slots = int(slots.sum())
+    baseline = team.clone()
+    recorded = _recorded_refill(designs, counts, focal, n_slots)
+    if recorded is not None:
+        baseline[slots] = recorded
+    elif partners:
+        w = torch.tensor([max(float(designs[i].get("dominance", 0.5)), 0.0) for i in partners])
+        if float(w.sum()) <= 0:
+            w = torch.ones(len(partners))
+        g = torch.Generator().manual_seed(int(seed))
+        draw = torch.multinomial(w, n_slots, replacement=True, generator=g)
+        baseline[slots] = torch.tensor(partners)[draw]
+    else:
+        baseline[slots] = -1
+    return focal, team, baseline, recorded is not None
+
+
+def _recorded_refill(designs: Sequence[dict], counts: list[int], focal: int,
+                     n_slots: int) -> Tensor | None:
+    """The focal's slots as the record's baseline counts fill them ([n_slots] design rows, -1
+    empty), or None where the record has none or they do not fit the team."""
+    base = [d.get("baseline_count") for d in designs]
+    if not all(isinstance(b, int) and not isinstance(b, bool) for b in base):
+        return None
+    if base[focal] != 0:
+        return None
+    extra = [b - c if i != focal else 0 for i, (b, c) in enumerate(zip(base, counts))]
+    if any(e < 0 for e in extra):
+        return None
+    fill = [i for i, e in enumerate(extra) for _ in range(e)]
+    if not fill and sum(base) == 0:
+        return torch.full((n_slots,), -1, dtype=torch.long)   # no partner: an empty team
+    if len(fill) != n_slots:
+        return None
+    return torch.tensor(fill, dtype=torch.long)
+
+
+def _species_count(designs: Sequence[dict], team: Tensor) -> int:
+    rows = sorted(set(team[team >= 0].tolist()))
+    return len({designs[r].get("species", r) for r in rows})
+
+
+# ------------------------------------------------------------------ episode -> page data
+def _q(x: Tensor, scale: float) -> list[int]:
+    """Quantize, then delta-code along the first (tick) axis; flattened."""
+    v = torch.round(x.double() * scale).long()
+    v = torch.cat([v[:1], v[1:] - v[:-1]]) if v.shape[0] > 1 else v
+    return v.reshape(-1).tolist()
+
+
+def _round(x: float, nd: int = 6) -> float | None:
+    return round(float(x), nd) if math.isfinite(float(x)) else None
+
+
+def _panel(ep: Episode, team: Tensor, programs: Tensor, traces: list[dict],
+           cost: float, species: int, cfg, scenario: Scenario) -> dict:
+    """One team's episode as page data; fills `traces` (per design: combination -> trace)."""
+    snaps = ep.snapshots
+    rob = ep.robots
+    stack = {k: torch.stack([getattr(s, k) for s in snaps]) for k in
+             ("pos", "energy", "holding", "grip", "p_pos", "p_status", "holder", "p_picked")}
+    cap = rob.capacity[0].clamp_min(1e-9)
+    present = rob.present[0]
+    # the team's mean energy left each tick, as episode_metrics computes it at the end
+    pct = 100.0 * stack["energy"] / cap
+    n = present.float().sum().clamp_min(1)
+    team_energy = (pct * present.float()).sum(-1) / n
+    combos = []
+    prog = rob.program[0].tolist()
+    ops = programs.tolist()
+    for t, leaf in enumerate(ep.leaves):
+        # the trees that ran at tick t + 1: those of live robots (step's `alive`)
+        alive = (present & (snaps[t].energy > 0)).tolist()
+        row = torch.where(torch.tensor(alive), bt.combo_index(leaf), -1).tolist()
+        for i, ci in enumerate(row):
+            if ci >= 0 and ci not in traces[prog[i]]:
+                acting, visited = bt.trace(ops[prog[i]], leaf[i].tolist())
+                traces[prog[i]][ci] = [acting, [list(v) for v in visited]]
+        combos.extend(row)
+    m = ep.metrics
+    mt = {k: torch.tensor([v]) for k, v in m.items()}
+    ecfg = cfg.evaluation(scenario.num_robots, scenario.episode_ticks)
+    terms = {k: float(v[0]) for k, v in raw_fitness_terms(mt, ecfg.weights).items()}
+    cost_t = torch.tensor([cost])
+    penalty = float(budget_penalty(cost_t, ecfg.budget, ecfg.lam)[0])
+    score = float(team_scores(mt, cost_t, ecfg)[0])
+    return {
+        "robots": {
+            "design": [r if bool(p) else -1 for r, p in zip(team.tolist(), present.tolist())],
+            "radius": [_round(x, 4) for x in rob.radius[0].tolist()],
+            "effector": rob.effector[0].tolist(),
+            "capacity": [_round(x, 1) for x in rob.capacity[0].tolist()],
+            "mass": [_round(x, 3) for x in rob.mass[0].tolist()],
+            "payload": [_round(x, 3) for x in rob.payload[0].tolist()],
+            "force": [_round(x, 3) for x in rob.force[0].tolist()],
+        },
+        "pos": _q(stack["pos"], 100.0),                   # cm, delta over ticks [T+1, N, 2]
+        "energy": _q(pct, 10.0),                          # 0.1 %, delta [T+1, N]
+        "team_energy": team_energy.tolist(),
+        "holding": stack["holding"].reshape(-1).tolist(),  # [T+1, N]
+        "grip": stack["grip"].reshape(-1).tolist(),
+        "p_pos": _q(stack["p_pos"], 100.0),              # [T+1, Q, 2]
+        "p_status": stack["p_status"].reshape(-1).tolist(),
+        "holder": stack["holder"].reshape(-1).tolist(),   # [T+1, Q, G]
+        "p_picked": stack["p_picked"].long().reshape(-1).tolist(),
+        "combo": combos,                                  # [T, N] ticks 1..T, -1: no tree ran
+        "metrics": {k: _round(v) for k, v in m.items()},
+        "terms": {k: _round(v) for k, v in terms.items()},
+        "raw": _round(float(sum(terms[k] for k, _ in _TERMS) * terms["activity"])),
+        "floor": ecfg.weights.floor,
+        "penalty": _round(penalty), "cost": _round(cost, 2), "species": species,
+        "score": _round(score),
+    }
+
+
+def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
+              ticks: int | None = None, title: str = "", record: dict | None = None) -> dict:
+    """Everything the page shows, as JSON-friendly data: both teams' episodes in the environment
+    of `seed`, the designs, the layout, the scores. `cfg`: the run's SwarmCoDeConfig."""
+    genome, _ = team_genome(designs, cfg.tag_length)
+    focal, team, base, recorded = focal_and_baseline(designs, seed)
+    ticks = scenario.episode_ticks if ticks is None else int(ticks)
+    ph = genome_phenotype(genome, scenario.hardware)
+    row_cost = ph.cost
+    colors = design_colors(len(designs))
+    traces: list[dict] = [{} for _ in designs]
+    panels, eps = {}, {}
+    for name, t in (("focal", team), ("baseline", base)):
+        ep = record_episode(genome, t, scenario, seed, ticks=ticks, every=1, leaves=True)
+        present = t >= 0
+        counts = torch.tensor([_species_count(designs, t)])
+        cost = float(team_cost(row_cost[t.clamp_min(0)], present, counts,
+                               scenario.species_overhead)[0])
+        panels[name] = _panel(ep, t, genome.bt, traces, cost, int(counts[0]), cfg,
+                              scenario)
+        eps[name] = ep
+    f, b = panels["focal"]["score"], panels["baseline"]["score"]
+    gated = float(gate(torch.tensor([f]), torch.tensor([b]), cfg.p_marginal, cfg.gate_margin)[0])
+    lay = eps["focal"].layout
+    present = lay.p_present[0]
+    cls = [i for i, c in enumerate(scenario.packages) for _ in range(c.count)]
+    from matplotlib import colormaps
+    from matplotlib.colors import to_hex
+    mass = lay.p_mass[0]
+    pm = mass[present]
+    lo, hi = (float(pm.min()), float(pm.max())) if pm.numel() else (0.0, 1.0)
+    ylor = colormaps["YlOrBr"]
+    pcol = [to_hex(ylor(0.35 + 0.6 * min(max((float(x) - lo) / max(hi - lo, 1e-6), 0), 1)))
+            for x in mass.tolist()]
+    o = lay.o_present[0]
+    if all("capability" in d for d in designs):
+        can = [list(d["capability"]) for d in designs]
+    else:   # an older record: from the genes, as analysis.design_capabilities does
+        rows = capabilities(ph, scenario, eps["focal"].params).tolist()
+        can = [[j for j, ok in enumerate(r) if ok] for r in rows]
+    dd = []
+    for i, d in enumerate(designs):
+        dd.append({
+            "species": d.get("species"), "effector": d["effector"] if isinstance(d["effector"], str)
+            else _EFFECTOR.get(int(d["effector"]), "suction"),
+            "radius": d["radius"], "chassis_tier": d["chassis_tier"],
+            "battery_tier": d["battery_tier"], "motor_tier": d["motor_tier"],
+            "torque_point": d["torque_point"], "battery_point": d["battery_point"],
+            "dominance": d.get("dominance"), "selectivity": d.get("selectivity"),
+            "cost": _round(float(row_cost[i]), 2),
+            "capability": can[i],
+            "count": int(d.get("count", 1)),
+            "baseline_count": int((base == i).sum()),
+            "color": to_hex(colors[i]), "focal": i == focal,
+            "tree": [[text, slot] for text, slot in bt.tree_lines(genome.bt[i].tolist())],
+            "ops": genome.bt[i].tolist(),
+            "traces": {str(k): v for k, v in sorted(traces[i].items())},
+        })
+    Q, G = lay.g_effector.shape[1:]
+    return {
+        "title": title, "scenario": scenario.name, "seed": int(seed), "ticks": ticks,
+        "dt": eps["focal"].params.dt, "arena": scenario.arena, "base_radius": scenario.base_radius,
+        "robots": int(team.numel()), "Q": int(Q), "G": int(G),
+        "record": record or {},
+        "objective": cfg.objective, "budget": cfg.budget,
+        "custom_fitness": getattr(cfg, "fitness_function", None),
+        "weights": {k: getattr(cfg.fitness_weights, k) for k in
+                    ("W_delivery", "W_collab_bonus", "W_pickup", "W_energy", "W_proximity",
+                     "W_closeness", "inactive_factor", "floor")},
+        "classes": [c.label for c in scenario.packages],
+        "packages": {
+            "present": present.long().tolist(), "cls": cls + [-1] * (int(Q) - len(cls)),
+            "collab": lay.p_collab[0].long().tolist(),
+            "size": [_round(x, 4) for x in lay.p_size[0].tolist()],
+            "mass": [_round(x, 3) for x in mass.tolist()], "color": pcol,
+            "g_eff": lay.g_effector[0].reshape(-1).tolist(),
+            "g_off": [_round(x, 4) for x in lay.g_offset[0].reshape(-1).tolist()],
+        },
+        "obstacles": [[_round(x, 3), _round(y, 3), _round(r, 3)] for (x, y), r in
+                      zip(lay.o_pos[0][o].tolist(), lay.o_radius[0][o].tolist())],
+        "designs": dd, "focal": focal, "baseline_recorded": recorded,
+        "panels": panels, "gated": _round(gated), "marginal": _round(f - b),
+        "p_marginal": cfg.p_marginal,
+    }
+
+
+def final_counts(data: dict, panel: str) -> dict:
+    """The counts the page shows at the last tick, computed from the page data as the page
+    computes them: deliveries (individual, collaborative), packages picked, energy used."""
+    p = data["panels"][panel]
+    Q, T = data["Q"], data["ticks"]
+    pk = data["packages"]
+    last = slice(T * Q, (T + 1) * Q)
+    st, picked = p["p_status"][last], p["p_picked"][last]
+    out = {"delivered_individual": 0, "delivered_collab": 0, "picked_individual": 0,
+           "picked_collab": 0}
+    for q in range(Q):
+        if not pk["present"][q]:
+            continue
+        kind = "collab" if pk["collab"][q] else "individual"
+        out["delivered_" + kind] += st[q] == DELIVERED
+        out["picked_" + kind] += picked[q]
+    out["energy_used"] = 100.0 - p["team_energy"][T]
+    return out
+
+
+# ------------------------------------------------------------------ the file
+def _asset(name: str) -> str:
+    return resources.files(__package__).joinpath(name).read_text(encoding="utf-8")
+
+
+def render_html(data: dict) -> str:
+    """The page: the template with its script, styles and the gzip + base64 data inlined."""
+    raw = json.dumps(data, separators=(",", ":"), allow_nan=False).encode()
+    blob = base64.b64encode(gzip.compress(raw, compresslevel=9, mtime=0)).decode("ascii")
+    # the script must not close its own tag; the data is base64, which has no '<'
+    parts = {"/*STYLE*/": _asset("replay_page.css"),
+             "/*SCRIPT*/": _asset("replay_page.js").replace("</script", "<\\/script"),
+             "@TITLE@": html.escape(data.get("title") or "SwarmCoDe replay"), "@DATA@": blob}
+    # one pass over the template: nothing inserted is searched for markers again
+    return re.sub("|".join(re.escape(k) for k in parts), lambda m: parts[m.group(0)],
+                  _asset("replay_page.html"))
+
+
+def decode_page(text: str) -> dict:
+    """The data inside a page written by `render_html` (for tests and tools)."""
+    start = text.index('id="episode-data"')
+    start = text.index(">", start) + 1
+    end = text.index("</script>", start)
+    return json.loads(gzip.decompress(base64.b64decode(text[start:end].strip())))
+
+
+def write_page(data: dict, path: str | Path) -> Path:
+    path = Path(path)
+    path.write_text(render_html(data), encoding="utf-8")
+    return path
