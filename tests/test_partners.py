@@ -262,3 +262,17 @@ def test_senior_refill_leaves_a_slot_empty_without_a_senior_partner():
     assert (sw.baseline_team[1][sw.focal_slot[1]] == 3).all()
     assert torch.equal(sw.baseline_team[0][~sw.focal_slot[0]], sw.focal_team[0][~sw.focal_slot[0]])
     assert sw.baseline_species_count.tolist() == [1, 1]
+
+
+def test_nearest_refill_gives_every_focal_slot_to_the_nearest_partner_in_the_team():
+    from swarmcode_torch.coevo.partners import assemble_swarms
+
+    partner_rows = torch.tensor([[5, 6, 7], [5, -1, 7]])
+    dist = torch.tensor([[0.9, 0.2, 0.5], [0.9, 0.1, 0.5]])    # focal 1 lacks partner 6
+    g = torch.Generator().manual_seed(0)
+    sw = assemble_swarms(torch.tensor([0, 1]), partner_rows, torch.ones(8), 8, g,
+                         refill_distance=dist)
+    assert (sw.baseline_team[0][sw.focal_slot[0]] == 6).all()
+    assert (sw.baseline_team[1][sw.focal_slot[1]] == 7).all()
+    keep = ~sw.focal_slot
+    assert torch.equal(sw.baseline_team[keep], sw.focal_team[keep])

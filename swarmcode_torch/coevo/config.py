@@ -136,9 +136,11 @@ class SwarmCoDeConfig:
     was the default of 0.4 and 0.5 and is kept so that their runs can be compared and resumed."""
     baseline_refill: str = "any"
     """Where a focal's slots in its baseline team are re-filled from: "any" partner in its team
-    (the paper), or only "senior" ones, species larger than the focal's own (as large: older),
-    the slots staying empty where there is none. "senior" is a candidate of 0.6 that was not
-    adopted: alone it kept same-niche duplicates in two-niche (docs/RESULTS.md)."""
+    by dominance (the paper); "nearest", all from the partner species in its team whose
+    prototype is nearest its own species' prototype by the genome distance D, so that the
+    baseline asks whether the most similar partner can do the focal's job; or "senior", only
+    species larger than the focal's own (as large: older), the slots staying empty where there
+    is none (a candidate of 0.6 that was not adopted; docs/RESULTS.md)."""
     partner_admission: str = "gate"
     """When a species becomes a partner: "open", when it is founded (the paper), or "gate",
     after probation: a species founded after generation 0 is no one's partner until few of its
@@ -305,7 +307,7 @@ class SwarmCoDeConfig:
 #: The settings that name one of a few choices (validated in `SwarmCoDeConfig.validate`).
 CHOICES = {"effector_flip": ("gene", "prototype"), "quota_basis": ("sum", "mean", "sqrt"),
            "objective": ("fitness", "roi"), "partners_per_niche": ("all", "one"),
-           "baseline_refill": ("any", "senior"), "partner_admission": ("open", "gate")}
+           "baseline_refill": ("any", "senior", "nearest"), "partner_admission": ("open", "gate")}
 #: Choices of settings that may also be unset.
 OPTIONAL_CHOICES = {"preset": ("default", "paper")}
 

@@ -147,12 +147,15 @@ class SimBatch:
 
 def plan_evaluation(genome: Population, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
                     fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
-                    generator: torch.Generator, allowed: Tensor | None = None) -> EvalPlan:
+                    generator: torch.Generator, allowed: Tensor | None = None,
+                    proto_distance: Tensor | None = None) -> EvalPlan:
     """The driver's part of an evaluation, every random draw of it from the run's generator:
     partners by tag and selectivity, team slots by dominance, and the environments. Only the
     diagnostic `partners_per_niche = "one"` reads the scenario's package classes (`niche_partners`);
     the default reads genomes, species and fitness alone. `allowed` [K] bool: the species that
-    may be partners at all (`admission.Admission.allowed`); None: every species."""
+    may be partners at all (`admission.Admission.allowed`); None: every species.
+    `proto_distance` [K, K]: the genome distance between the species' prototypes, which
+    `baseline_refill = "nearest"` needs."""
     P = genome.size
     dev = genome.bt.device
     S, T = cfg.swarm_size, cfg.trials
@@ -165,8 +168,14 @@ def plan_evaluation(genome: Population, species: Tensor, proto_ids: Tensor, prot
                                genome.tag[proto_index], elites, generator, allowed)
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
     refill = senior_partners(species, proto_ids) if cfg.baseline_refill == "senior" else None
+    near = None
+    if cfg.baseline_refill == "nearest":
+        if proto_distance is None:
+            raise ValueError('baseline_refill = "nearest" needs the prototypes\' distances')
+        pos = (species[:, None] == proto_ids[None, :]).long().argmax(1)      # [P] species index
+        near = proto_distance.to(dev)[pos]                                    # [P, K]
     swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator,
-                             refill)
+                             refill, near)
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)
     return EvalPlan(swarms, layouts, T)
 
@@ -254,17 +263,17 @@ def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index
              generator: torch.Generator, params: WorldParams | None = None,
              step_fn: StepFn | None = None, tables: Tensor | None = None,
              evaluator=None, score_fn: ScoreFn = team_scores,
-             allowed: Tensor | None = None) -> EvalResult:
+             allowed: Tensor | None = None, proto_distance: Tensor | None = None) -> EvalResult:
     """Score every individual of the population by its marginal contribution to a team:
     `plan_evaluation` (teams and environments, drawn here), the simulation, `score`. The
     simulation runs here (`simulate_batch` of the whole plan), or, given an `evaluator`, where
     its `simulate(plan, genome)` runs it (`distributed.ShardedEvaluator`: shards of whole
     evaluations on Ray actors), which returns the same per-environment metrics. `score_plan`
     then scores them here, each team-episode by `score_fn`. `allowed` [K] bool: the species
-    that may be partners (`plan_evaluation`)."""
+    that may be partners, `proto_distance` [K, K] the prototypes' distances (`plan_evaluation`)."""
     params = params or WorldParams.for_scenario(scenario)
     plan = plan_evaluation(genome, species, proto_ids, proto_index, fitness, has_fitness,
-                           scenario, cfg, generator, allowed)
+                           scenario, cfg, generator, allowed, proto_distance)
     if evaluator is None:
         m, sim_seconds = simulate_batch(sim_batch(plan, genome), params, cfg.ticks, step_fn,
                                         tables, scenario.hardware)

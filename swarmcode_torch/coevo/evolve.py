@@ -192,7 +192,11 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     res = evaluate(genome, sp.species, sp.proto_ids, sp.proto_index, state.fitness,
                    state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn,
                    evaluator=ctx.evaluator, score_fn=ctx.score_fn,
-                   allowed=None if adm is None else adm.allowed(sp.proto_ids))
+                   allowed=None if adm is None else adm.allowed(sp.proto_ids),
+                   proto_distance=(distance(genome.index(sp.proto_index),
+                                            genome.index(sp.proto_index),
+                                            w=ctx.speciation.weights)
+                                   if cfg.baseline_refill == "nearest" else None))
     if adm is not None:
         gated = ~beats_baseline(res.focal, res.baseline, ctx.eval_cfg.gate_margin)
         adm = admission.update(adm, sp.species, sp.proto_ids, gated)

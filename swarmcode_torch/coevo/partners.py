@@ -132,7 +132,8 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
 
 
 def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swarm_size: int,
-                    generator: torch.Generator, refill_from: Tensor | None = None) -> Swarms:
+                    generator: torch.Generator, refill_from: Tensor | None = None,
+                    refill_distance: Tensor | None = None) -> Swarms:
     """focal [B] rows, partner_rows [B, K] (-1 none), dominance [P] -> Swarms of swarm_size S slots.
 
     Slot 0: the focal design; slots 1..: one per partner in the team (in species order; a uniform
@@ -140,7 +141,10 @@ def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swar
     partners in the team} with probability proportional to dominance (uniform if all are 0).
     The baseline team re-fills every focal slot by dominance among the partners in the team
     (-1 if there are none); where `refill_from` [B, K] bool is given, only among the partners in
-    the team that it allows (`senior_partners`), and the slots stay empty if it allows none.
+    the team that it allows (`senior_partners`), and the slots stay empty if it allows none;
+    where `refill_distance` [B, K] float is given, only from the partner in the team at the
+    least distance (the first of equals): the focal's slots are all given to its nearest
+    partner species.
     """
     b, k = partner_rows.shape
     s = int(swarm_size)
@@ -175,6 +179,12 @@ def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swar
     focal_slot[:, 0] = True
 
     refill = in_team if refill_from is None else in_team & refill_from.to(dev)
+    if refill_distance is not None and k > 0:
+        d = torch.where(refill, refill_distance.to(dev).float(), torch.full((b, k), torch.inf,
+                                                                            device=dev))
+        nearest = torch.zeros_like(refill)
+        nearest[torch.arange(b, device=dev), d.argmin(1)] = True
+        refill = refill & nearest
     has_p = refill.any(1)
     if k > 0:
         pw = torch.where(refill, dom[partner_rows.clamp(min=0)], torch.zeros(b, k, device=dev))
