@@ -251,3 +251,17 @@ def test_speciate_empty_population():
     g = make(0)
     r = speciate(g, torch.zeros(0, dtype=torch.long), None, torch.zeros(0, dtype=torch.long), 3)
     assert r.species.numel() == 0 and r.proto_ids.numel() == 0 and r.next_species_id == 3
+
+
+def test_design_distance_is_d_without_the_tag_and_tree_terms():
+    from swarmcode_torch.coevo.speciation import design_distance, distance_terms
+
+    g = _random_genomes(6, torch.Generator().manual_seed(3))
+    t = distance_terms(g, g)
+    d = design_distance(g)
+    assert torch.allclose(d, t["hw"] + t["tool"] + t["size"])
+    flipped = g.index(torch.arange(6))
+    flipped.tag[:] = ~flipped.tag                    # another tag, another tree: same designs
+    flipped.bt[:] = flipped.bt.roll(1, 0)
+    assert torch.equal(design_distance(flipped), d)
+    assert (d.diagonal() == 0).all() and torch.equal(d, d.T)

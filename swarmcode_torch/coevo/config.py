@@ -137,8 +137,9 @@ class SwarmCoDeConfig:
     baseline_refill: str = "any"
     """Where a focal's slots in its baseline team are re-filled from: "any" partner in its team
     by dominance (the paper); "nearest", all from the partner species in its team whose
-    prototype is nearest its own species' prototype by the genome distance D, so that the
-    baseline asks whether the most similar partner can do the focal's job; or "senior", only
+    prototype's robot is the nearest design to its own species' prototype (the hardware terms
+    of D: operating points, effector, size), so that the baseline asks whether the most similar
+    robots among its partners can do the focal's job; or "senior", only
     species larger than the focal's own (as large: older), the slots staying empty where there
     is none (a candidate of 0.6 that was not adopted; docs/RESULTS.md)."""
     partner_admission: str = "gate"

@@ -26,7 +26,7 @@ from .fitness import beats_baseline, ema
 from .population import Population, design_record, genome_phenotype
 from .reproduction import mutate_bt, reproduce
 from ..sim.scenario import Scenario, load_scenario
-from .speciation import distance, speciate
+from .speciation import design_distance, distance, speciate
 from ..sim.runtime import resolve_device, tick_function, tick_mode
 from ..sim.state import WorldParams
 
@@ -193,9 +193,8 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
                    state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn,
                    evaluator=ctx.evaluator, score_fn=ctx.score_fn,
                    allowed=None if adm is None else adm.allowed(sp.proto_ids),
-                   proto_distance=(distance(genome.index(sp.proto_index),
-                                            genome.index(sp.proto_index),
-                                            w=ctx.speciation.weights)
+                   proto_distance=(design_distance(genome.index(sp.proto_index),
+                                                   ctx.speciation.weights)
                                    if cfg.baseline_refill == "nearest" else None))
     if adm is not None:
         gated = ~beats_baseline(res.focal, res.baseline, ctx.eval_cfg.gate_margin)

@@ -77,6 +77,15 @@ def distance(a: Population, b: Population, w: DistanceWeights = DistanceWeights(
     return t["tag"] + t["hw"] + t["bt"] + t["tool"] + t["size"]
 
 
+def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -> Tensor:
+    """Genomes [K] -> [K, K] float32: the hardware terms of D between them (w_hw d_hw + w_tool
+    d_tool + w_size d_size), how far apart their robots are as designs. The tag (a signal for
+    partner choice, not a property of the robot) and the tree are left out: which partner's
+    robots are most like a species' robots (`baseline_refill = "nearest"`)."""
+    t = distance_terms(proto, proto, w)
+    return t["hw"] + t["tool"] + t["size"]
+
+
 def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | None,
              prev_proto_ids: Tensor, next_species_id: int, delta: float = SwarmCoDeConfig.delta,
              w: DistanceWeights = DistanceWeights(), merge: bool = False) -> SpeciationResult:
