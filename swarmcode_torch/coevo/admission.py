@@ -96,10 +96,37 @@ class Admission:
         return cls(*(d[k].to(device) for k in want))
 
 
+#: The thresholds of `partner_admission = "substitute"`, where every baseline re-fills the
+#: focal's slots from its nearest partner species (`baseline_refill = "nearest"`): a species
+#: whose robots that partner can replace at no loss is gated about half the time (its marginal
+#: contribution is zero up to noise), one that does what no partner does far less often. A
+#: probationer is admitted only when clearly below one half (0.3); a partner that is gated
+#: half the time or more is a substitute of its nearest partner, and the lower-ranked of the two
+#: is demoted.
+SUBSTITUTE = AdmissionParams(admit_below=0.3, clash_above=0.5)
+
+
+def nearest_partner(design_distance: Tensor, allowed: Tensor) -> Tensor:
+    """design_distance [K, K], allowed [K] bool -> [K] long: for each species the index of the
+    allowed species (other than itself) whose design is nearest (the first of equals), -1 where
+    there is none."""
+    k = allowed.numel()
+    eye = torch.eye(k, dtype=torch.bool, device=allowed.device)
+    d = torch.where(allowed[None, :] & ~eye, design_distance.float(),
+                    torch.full((k, k), torch.inf, device=allowed.device))
+    best = d.argmin(1)
+    return torch.where(torch.isfinite(d.min(1).values), best, -1)
+
+
 def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor,
-           params: AdmissionParams = AdmissionParams()) -> Admission:
+           params: AdmissionParams = AdmissionParams(),
+           nearest: Tensor | None = None) -> Admission:
     """The admission after one evaluation: species [P] ids, proto_ids [K] (the species, in
-    order of founding), gated [P] bool (whose focal team did not beat its baseline)."""
+    order of founding), gated [P] bool (whose focal team did not beat its baseline).
+    `nearest` [K] long (`nearest_partner`, the partner each species' baseline was re-filled
+    from): a partner above `clash_above` for `clash_generations` is a substitute of its nearest
+    partner, and the lower-ranked of the two is demoted; without it, two or more partners above
+    it clash and the lowest-ranked of them is demoted."""
     k = proto_ids.numel()
     if k == 0:
         return adm
@@ -114,7 +141,15 @@ def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor,
     admit = ~partner & (calm >= params.admit_generations)
     clashing = clash >= params.clash_generations
     demote = torch.zeros(k, dtype=torch.bool, device=species.device)
-    if int(clashing.sum()) >= 2:
+    rank = size * (proto_ids.max() + 1) - proto_ids          # higher: larger, then older
+    if nearest is not None:
+        pair = clashing & (nearest >= 0)
+        if bool(pair.any()):
+            other = nearest.clamp_min(0)
+            loser = torch.where(rank[other] < rank, other, torch.arange(k, device=rank.device))
+            low = torch.where(pair, rank[loser], torch.full_like(rank, int(rank.max()) + 1))
+            demote[loser[low.argmin()]] = True
+    elif int(clashing.sum()) >= 2:
         # the lowest-ranked clashing species: the smallest, of those the youngest (highest id)
         big = int(size.max()) + 1
         key = torch.where(clashing, size * (proto_ids.max() + 1) - proto_ids,

@@ -308,7 +308,7 @@ class SwarmCoDeConfig:
 #: The settings that name one of a few choices (validated in `SwarmCoDeConfig.validate`).
 CHOICES = {"effector_flip": ("gene", "prototype"), "quota_basis": ("sum", "mean", "sqrt"),
            "objective": ("fitness", "roi"), "partners_per_niche": ("all", "one"),
-           "baseline_refill": ("any", "senior", "nearest"), "partner_admission": ("open", "gate")}
+           "baseline_refill": ("any", "senior", "nearest"), "partner_admission": ("open", "gate", "substitute")}
 #: Choices of settings that may also be unset.
 OPTIONAL_CHOICES = {"preset": ("default", "paper")}
 

@@ -169,7 +169,7 @@ def plan_evaluation(genome: Population, species: Tensor, proto_ids: Tensor, prot
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
     refill = senior_partners(species, proto_ids) if cfg.baseline_refill == "senior" else None
     near = None
-    if cfg.baseline_refill == "nearest":
+    if proto_distance is not None or cfg.baseline_refill == "nearest":
         if proto_distance is None:
             raise ValueError('baseline_refill = "nearest" needs the prototypes\' distances')
         pos = (species[:, None] == proto_ids[None, :]).long().argmax(1)      # [P] species index

@@ -183,22 +183,27 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     # which species may be partners (`admission`): the species of generation 0 and, on a run
     # resumed from a checkpoint without the state, the species it had, are partners
     adm = None
-    if cfg.partner_admission == "gate":
+    if cfg.partner_admission != "open":
         adm = state.admission or Admission.empty(ctx.device).grow(state.next_species_id, True)
         adm = adm.grow(sp.next_species_id, partner=state.generation == 0)
+    allowed = None if adm is None else adm.allowed(sp.proto_ids)
+    near_refill = cfg.baseline_refill == "nearest" or cfg.partner_admission == "substitute"
+    designs_d = (design_distance(genome.index(sp.proto_index), ctx.speciation.weights)
+                 if near_refill else None)
 
     # 2. evaluation of every individual, all teams and trials in one batch
     t_eval = time.perf_counter()
     res = evaluate(genome, sp.species, sp.proto_ids, sp.proto_index, state.fitness,
                    state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn,
-                   evaluator=ctx.evaluator, score_fn=ctx.score_fn,
-                   allowed=None if adm is None else adm.allowed(sp.proto_ids),
-                   proto_distance=(design_distance(genome.index(sp.proto_index),
-                                                   ctx.speciation.weights)
-                                   if cfg.baseline_refill == "nearest" else None))
+                   evaluator=ctx.evaluator, score_fn=ctx.score_fn, allowed=allowed,
+                   proto_distance=designs_d)
     if adm is not None:
         gated = ~beats_baseline(res.focal, res.baseline, ctx.eval_cfg.gate_margin)
-        adm = admission.update(adm, sp.species, sp.proto_ids, gated)
+        if cfg.partner_admission == "substitute":
+            adm = admission.update(adm, sp.species, sp.proto_ids, gated, admission.SUBSTITUTE,
+                                   admission.nearest_partner(designs_d, allowed))
+        else:
+            adm = admission.update(adm, sp.species, sp.proto_ids, gated)
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
 
