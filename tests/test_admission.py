@@ -64,3 +64,25 @@ def test_admission_state_round_trips_and_malformed_state_is_refused():
         Admission.from_state_dict(bad)
     with pytest.raises(ValueError, match="admission"):
         Admission.from_state_dict({**adm.state_dict(), "gated": adm.gated.double()})
+
+
+def test_substitute_rule_demotes_the_lower_ranked_of_a_species_and_its_nearest_partner():
+    from swarmcode_torch.coevo.admission import SUBSTITUTE, nearest_partner
+
+    # species 0 (4 members) and 2 (2 members) are near designs; 1 (3 members) is far from both
+    dd = torch.tensor([[0.0, 0.9, 0.1], [0.9, 0.0, 0.8], [0.1, 0.8, 0.0]])
+    allowed = torch.tensor([True, True, True])
+    near = nearest_partner(dd, allowed)
+    assert near.tolist() == [2, 2, 0]
+    assert nearest_partner(dd, torch.tensor([True, False, False])).tolist() == [-1, 0, 0]
+    adm = Admission.empty().grow(3, True)
+    ids = torch.tensor([0, 1, 2])
+    species = torch.tensor([0, 0, 0, 0, 1, 1, 1, 2, 2])
+    # the large species 0 is the one gated (its robots the small 2 replaces at no loss): the
+    # pair's lower-ranked member, 2, is demoted, not 0; 1, never gated, stays
+    gated = torch.tensor([True, True, False, True, False, False, False, False, False])
+    seen = []
+    for _ in range(3):
+        adm = update(adm, species, ids, gated, SUBSTITUTE, near)
+        seen.append(adm.partner.tolist())
+    assert seen == [[True] * 3, [True, True, False], [True, True, False]]
