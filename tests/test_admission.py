@@ -1,4 +1,4 @@
-"""Partner admission from the gate's statistics (`coevo.admission`, `partner_admission = "gate"`)."""
+"""Partner admission from the gate's statistics (`coevo.admission`, `partner_admission = "substitute"` and "gate")."""
 
 import pytest
 import torch

@@ -399,12 +399,13 @@ def _patch_niche_knowledge(monkeypatch):
     return patched
 
 
-@pytest.mark.parametrize("preset", ["default", "paper"])
-def test_the_presets_algorithm_reads_no_capabilities_or_niches(monkeypatch, preset):
+@pytest.mark.parametrize("preset,settings", [("default", {}), ("paper", {}),
+                                             ("default", {"partner_admission": "gate"})])
+def test_the_presets_algorithm_reads_no_capabilities_or_niches(monkeypatch, preset, settings):
     from swarmcode_torch.coevo.config import preset_config
 
     cfg = preset_config(preset, scenario="two-niche", population=12, swarm_size=6, trials=1,
-                        ticks=20, generations=4, seed=3)
+                        ticks=20, generations=4, seed=3, **settings)
     assert _patch_niche_knowledge(monkeypatch) >= 3
     ev = Evolution(cfg)
     while not ev.done:
@@ -437,7 +438,7 @@ def test_presets_set_the_papers_rules_and_record_their_name():
     assert paper.preset == "paper" and paper.partners_per_niche == "all"
     assert (paper.baseline_refill, paper.quota_size_exponent, paper.p_effector) == ("any", None, None)
     default = preset_config()
-    assert default == SwarmCoDeConfig() and default.partner_admission == "gate"
+    assert default == SwarmCoDeConfig() and default.partner_admission == "substitute"
     assert default.partners_per_niche == "all"          # no niche oracle by default
     assert paper.partner_admission == "open"
     assert preset_config("paper", seed=4).seed == 4 and set(PRESETS) == {"default", "paper"}

@@ -142,13 +142,16 @@ class SwarmCoDeConfig:
     robots among its partners can do the focal's job; or "senior", only
     species larger than the focal's own (as large: older), the slots staying empty where there
     is none (a candidate of 0.6 that was not adopted; docs/RESULTS.md)."""
-    partner_admission: str = "gate"
-    """When a species becomes a partner: "open", when it is founded (the paper), or "gate",
-    after probation: a species founded after generation 0 is no one's partner until few of its
-    members are gated (their focal team does not beat their baseline), and of two or more
-    partner species that stay mostly gated the lowest-ranked (smallest, then youngest) stops
-    being one (`coevo.admission`). Beyond the paper, and scenario-agnostic: it reads only
-    species sizes, ages and the gate's results (docs/RESULTS.md)."""
+    partner_admission: str = "substitute"
+    """When a species becomes and stays a partner (`coevo.admission`): "open", from its founding
+    (the paper); "substitute", every focal's baseline re-fills its slots from its nearest
+    partner design, a species founded after generation 0 is no one's partner until its members
+    are seldom gated (its robots do what that partner's cannot), and a partner gated half the
+    time or more is a substitute of its nearest partner, the lower-ranked of the two (smaller,
+    then younger) stopping being a partner; "gate", probation and demotion as "substitute" but
+    with the paper's baseline and two mostly gated partners demoting the lowest-ranked (a
+    candidate of 0.6, not adopted). Beyond the paper and scenario-agnostic: it reads genomes,
+    species sizes and ages, and the gate's results (docs/RESULTS.md)."""
     cuda_graphs: bool | None = None
     """Replay the compiled tick as CUDA graphs of 10 ticks (`sim.runtime.CudaGraphTicks`). Unset: on
     wherever the tick runs compiled on CUDA; true on the CPU or with the eager tick is an error."""
