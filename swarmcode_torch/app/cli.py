@@ -24,6 +24,7 @@ from rich.table import Table
 
 from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
+from .runs import deferred_signals
 
 class _OneLineErrors(TyperGroup):
     """The command group, with usage errors (an option value that is not a number, an unknown
@@ -209,25 +210,71 @@ def evolve(
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
     shards = _eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
-    with ExitStack() as stack:
-        attach = None if shards is None else (lambda ev: _attach_shards(stack, ev, *shards))
-        ev, run_dir, saved = _start_evolve(
-            stack, scenario=scenario, budget=budget, objective=_objective(objective),
-            generations=generations, population=population, swarm_size=swarm_size,
-            trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
-            logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
-            render_every=render_every, resume=resume, settings=settings, attach=attach,
-            figure_every=figure_every)
-        if ev is None:
-            return
-        _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
-                 figure_every=figure_every)
-        if shards is not None:
-            _print_shard_traffic(ev.ctx.evaluator)
-    console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
-    _print_team(run_dir)
-    console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir "
-                  f"{run_dir.parent}", markup=False, highlight=False)
+    where = _Where()
+    with _terminate_as_interrupt() as terminated:
+        try:
+            with ExitStack() as stack:
+                attach = None if shards is None else (lambda ev: _attach_shards(stack, ev, *shards))
+                ev, run_dir, saved = _start_evolve(
+                    stack, scenario=scenario, budget=budget, objective=_objective(objective),
+                    generations=generations, population=population, swarm_size=swarm_size,
+                    trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
+                    logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
+                    render_every=render_every, resume=resume, settings=settings, attach=attach,
+                    figure_every=figure_every, where=where)
+                if ev is None:
+                    return
+                _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
+                         figure_every=figure_every, where=where)
+                if shards is not None:
+                    _print_shard_traffic(ev.ctx.evaluator)
+            console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
+            _print_team(run_dir)
+            console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard "
+                          f"--logdir {run_dir.parent}", markup=False, highlight=False)
+        except KeyboardInterrupt:
+            _stopped(where, bool(terminated))
+
+
+class _Where:
+    """Where an evolve command stands, for the line an interrupt prints: its run directory (None
+    before one is made or locked), whether it resumes one, the generation its checkpoint file
+    holds (`saved`; the `CheckpointReporter`'s once the run loop has it) and how to continue."""
+
+    def __init__(self):
+        self.run_dir: Path | None = None
+        self.resuming = False
+        self.saved: int | None = None
+        self.checkpoints = None
+        self.again: str | None = None
+
+    def holds(self) -> int | None:
+        return self.checkpoints.saved if self.checkpoints is not None else self.saved
+
+
+def _stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | None,
+               resuming: bool = False) -> str:
+    """The line an interrupted run prints: the generation its checkpoint file really holds, or
+    that there is none."""
+    if run_dir is None:
+        return f"{how}: no run directory was made"
+    if saved is None:
+        if resuming:
+            return f"{how} before the run resumed; {run_dir} is unchanged"
+        return (f"{how}: no checkpoint was written yet, so {run_dir} holds no generation to "
+                "continue from; start the run again")
+    done = "no generation finished yet" if saved == 0 else \
+        f"generations 0-{saved - 1} recorded"
+    again = again or f"swarmcode-torch evolve --resume {run_dir}"
+    return (f"{how}: checkpoint of generation {saved} is in {run_dir} ({done}); continue "
+            f"with: {again}")
+
+
+def _stopped(where: _Where, terminated: bool) -> None:
+    how = "Terminated" if terminated else "Interrupted"
+    err.print(_stop_line(how, where.run_dir, where.holds(), where.again, where.resuming),
+              markup=False, highlight=False, soft_wrap=True)
+    raise typer.Exit(code=143 if terminated else 130)
 
 
 def _eval_shards_option(eval_workers: int, cpus: float | None, address: str | None):
@@ -283,7 +330,8 @@ def _print_shard_traffic(evaluator) -> None:
 
 def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
                   swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
-                  log_every, render_every, resume, settings, attach=None, figure_every=50):
+                  log_every, render_every, resume, settings, attach=None, figure_every=50,
+                  where: "_Where | None" = None):
     """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
     The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
@@ -315,8 +363,12 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
                 fail(f"--resume {resume} is not a run directory (no such directory)")
             run_dir = resume
             stack.enter_context(RunLock(run_dir))
+            if where is not None:
+                where.run_dir, where.resuming = run_dir, True
             loaded = load_run(run_dir)
             cfg, ck = loaded[0], loaded[1]
+            if where is not None:
+                where.saved = ck["generation"]
             target = cfg.generations if generations is None else generations
             if target <= ck["generation"]:
                 console.print(f"{run_dir} already has {ck['generation']} generations"
@@ -350,6 +402,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
         except OSError as e:
             _os_fail(e, f"--logdir {logdir}: cannot make a run directory")
         stack.enter_context(RunLock(run_dir))
+        if where is not None:
+            where.run_dir = run_dir
         write_run_files(run_dir, ev.cfg, data, ev.ctx.scenario.hardware)
         console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
                       f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
@@ -363,7 +417,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
 
 def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
              render_every: int = 0, saved: int | None = None,
-             again: str | None = None, figure_every: int = 50) -> None:
+             again: str | None = None, figure_every: int = 50,
+             where: _Where | None = None) -> None:
     """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints.
     Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
     failed write (a full disk: OSError from the checkpoint, summary.json, teams.jsonl or
@@ -372,15 +427,19 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     generation of the checkpoint the run resumed from; `again` is the command to continue with
     (default: swarmcode-torch evolve --resume RUN_DIR)."""
     from .distributed import ShardError
-    from .runs import CheckpointReporter, SummaryReporter, os_error_text, run
+    from .runs import CheckpointReporter, RunError, SummaryReporter, os_error_text, run
 
     again = again or f"swarmcode-torch evolve --resume {run_dir}"
-    progress = _Progress(ev.cfg.generations, ev.state.generation, log_every)
     checkpoints = CheckpointReporter(run_dir, checkpoint_every)
     checkpoints.saved = saved
-    reporters = [progress, SummaryReporter(run_dir)]
+    if where is not None:
+        where.run_dir, where.checkpoints, where.again = run_dir, checkpoints, again
+    reporters: list = []
     terminated: list[int] = []
+    progress = None
     try:
+        progress = _Progress(ev.cfg.generations, ev.state.generation, log_every)
+        reporters = [progress, SummaryReporter(run_dir)]
         with _quiet_thread_os_errors():
             from .reporting import CsvReporter, TensorBoardReporter
 
@@ -390,11 +449,19 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
             with _terminate_as_interrupt() as terminated:
                 run(ev, run_dir, reporters)
     except KeyboardInterrupt:
-        progress.stop()
+        with deferred_signals():
+            if progress is not None:
+                progress.stop()
+            _close_writers(reporters)
         how = "Terminated" if terminated else "Interrupted"
-        err.print(f"{how}: checkpoint of generation {ev.state.generation} written to "
-                  f"{run_dir}; continue with: {again}", markup=False, highlight=False)
+        err.print(_stop_line(how, run_dir, checkpoints.saved, again), markup=False,
+                  highlight=False, soft_wrap=True)
         raise typer.Exit(code=143 if terminated else 130)
+    except RunError as e:
+        if progress is not None:
+            progress.stop()
+        _close_writers(reporters)
+        fail(f"{e}; the last checkpoint is of generation {checkpoints.saved}")
     except OSError as e:
         progress.stop()
         _close_writers(reporters)
@@ -422,6 +489,7 @@ def _close_writers(reporters) -> None:
         if writer is not None:
             try:
                 writer.close()
+                r.writer = None
             except Exception:  # noqa: BLE001 - the run already failed; this is cleanup
                 pass
 

@@ -15,12 +15,15 @@ import math
 import os
 import pickle
 import re
+import signal
 import socket
 import sys
+import threading
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Iterable, Protocol
+from typing import Any, Callable, Iterable, Iterator, Protocol
 
 import torch
 
@@ -57,7 +60,16 @@ TABLE_MD, TABLE_CSV, BUDGET_PLOT = "table.md", "table.csv", "budget.png"
 #: Files of a run directory written with `atomic_write_bytes`; a temporary `.NAME.xxxxxxxx` of
 #: one of them (or of any file that exists) left by a killed write is removed on start.
 ATOMIC_FILES = (CONFIG_FILE, CHECKPOINT_FILE, SUMMARY_FILE, SCENARIO_COPY, HARDWARE_COPY,
-                METRICS_FILE, TABLE_MD, TABLE_CSV)
+                METRICS_FILE, TEAMS_FILE, REPLAY_FILE, TABLE_MD, TABLE_CSV)
+#: The most bytes read from a text file of a run or a scenario (config.toml, scenario.toml,
+#: hardware.toml, summary.json; a scenario file and the catalog it names): far above any real
+#: one, far below what would exhaust memory.
+MAX_TEXT_BYTES = 16 * 2 ** 20
+#: The most bytes read from teams.jsonl and metrics.csv (one record a generation).
+MAX_RECORD_BYTES = 2 * 2 ** 30
+#: The deepest nesting of tables and lists accepted in a TOML or JSON file of a run or scenario
+#: (real ones nest 4 deep); deeper input is refused before a parser could recurse too far.
+MAX_NESTING = 64
 #: The memory assumed when the machine's cannot be read.
 FALLBACK_MEMORY = 64 * 2 ** 30
 
@@ -86,6 +98,118 @@ def current_umask() -> int:
     return mask
 
 
+def interrupt_point(what: str) -> None:
+    """Called after each step of a run that writes (a file replaced or appended to) and after
+    each generation is computed; does nothing. Tests replace it to interrupt or kill a run at
+    every such point (tests/test_reliability.py, the interrupt sweep)."""
+
+
+@contextmanager
+def deferred_signals() -> Iterator[list[int]]:
+    """Within the block Ctrl-C (SIGINT) and SIGTERM are held, not acted on: a step that must
+    not be split (a generation's records and its checkpoint; the checkpoint written on an
+    interrupt) completes, then the first held signal is delivered to the handler that was in
+    place (Ctrl-C's KeyboardInterrupt, the CLI's SIGTERM handler, or the default action). Off
+    the main thread signals cannot be handled and the block runs as it is. Yields the list of
+    held signal numbers."""
+    held: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield held
+        return
+
+    def hold(signum, frame):
+        held.append(signum)
+
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, hold)
+    except (ValueError, OSError):          # pragma: no cover - no signals here
+        for sig, h in previous.items():
+            signal.signal(sig, h)
+        yield held
+        return
+    failed = True
+    try:
+        yield held
+        failed = False
+    finally:
+        for sig, h in previous.items():
+            signal.signal(sig, h if h is not None else signal.SIG_DFL)
+        if held and not failed:            # an error in the block is reported, not replaced
+            sig = held[0]
+            h = previous.get(sig)
+            if callable(h):
+                h(sig, None)
+            elif h != signal.SIG_IGN:
+                signal.raise_signal(sig)   # the default action, as if it arrived now
+
+
+def open_nofollow(path: Path, flags: int, mode: int = 0o666) -> int:
+    """os.open that never follows a symbolic link at `path` (O_NOFOLLOW): a run's files are its
+    own, and a link planted in a run directory must not make a run read or write elsewhere.
+    OSError (ELOOP) for a link, reported as "is a symbolic link"."""
+    try:
+        return os.open(path, flags | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0),
+                       mode)
+    except OSError as e:
+        if e.errno == errno.ELOOP or (e.errno == errno.EMLINK and os.path.islink(path)):
+            raise OSError(errno.ELOOP, "is a symbolic link (refused: a run's files must be "
+                          "its own)", str(path)) from None
+        raise
+
+
+def read_file_bytes(path: Path, limit: int = MAX_TEXT_BYTES) -> bytes:
+    """The bytes of a regular file, opened without following a link (`open_nofollow`), read up
+    to `limit` bytes: OSError for a link, a file that is not regular (a FIFO, a device) or one
+    larger than `limit` (EFBIG), before more than `limit` bytes are read."""
+    fd = open_nofollow(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    try:
+        st = os.fstat(fd)
+        import stat as _stat
+        if not _stat.S_ISREG(st.st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
+        if st.st_size > limit:
+            raise OSError(errno.EFBIG, f"file too large ({st.st_size} bytes, at most {limit})",
+                          str(path))
+        chunks, total = [], 0
+        while True:
+            b = os.read(fd, min(1 << 20, limit + 1 - total))
+            if not b:
+                break
+            chunks.append(b)
+            total += len(b)
+            if total > limit:
+                raise OSError(errno.EFBIG, f"file too large (more than {limit} bytes)",
+                              str(path))
+        return b"".join(chunks)
+    finally:
+        os.close(fd)
+
+
+def nesting_depth(text: str) -> int:
+    """An upper bound of how deep tables and lists nest in TOML or JSON text: the most brackets
+    and braces open at once, counted without parsing (brackets inside strings count too, so the
+    bound is never too low)."""
+    depth = most = 0
+    for m in re.finditer(r"[\[\]{}]", text):
+        if m.group() in "[{":
+            depth += 1
+            most = max(most, depth)
+        else:
+            depth = max(0, depth - 1)
+    return most
+
+
+def check_nesting(text: str, source: str, error=None) -> None:
+    """`error` (RunError by default) naming `source` when `text` nests deeper than MAX_NESTING."""
+    if text.count("[") + text.count("{") <= MAX_NESTING:
+        return
+    d = nesting_depth(text)
+    if d > MAX_NESTING:
+        raise (error or RunError)(f"{source}: nested {d} levels deep (at most {MAX_NESTING})")
+
+
 def _write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     while view:
@@ -108,11 +232,12 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
-        os.replace(tmp, path)
+        os.replace(tmp, path)              # replaces a link at `path`, never writes through it
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+    interrupt_point(path.name)
 
 
 _TEMP_NAME = re.compile(r"^\.(?P<target>.+)\.[A-Za-z0-9_]{8}$")
@@ -148,9 +273,9 @@ def repair_teams(run_dir: Path) -> int:
     file is truncated to its last complete line, so that the next record starts a line of its
     own. Returns the number of bytes set aside (0: the file was whole)."""
     path = Path(run_dir) / TEAMS_FILE
-    if not path.is_file():
+    if not path.exists() and not path.is_symlink():
         return 0
-    with open(path, "rb+") as f:
+    with os.fdopen(open_nofollow(path, os.O_RDWR), "rb+") as f:
         size = f.seek(0, os.SEEK_END)
         if size == 0:
             return 0
@@ -168,7 +293,7 @@ def repair_teams(run_dir: Path) -> int:
                 break
         f.seek(cut)
         tail = f.read()
-        fd = os.open(str(path) + PARTIAL_SUFFIX, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+        fd = open_nofollow(str(path) + PARTIAL_SUFFIX, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
         try:
             _write_all(fd, tail + b"\n")
             os.fsync(fd)
@@ -181,12 +306,39 @@ def repair_teams(run_dir: Path) -> int:
 
 
 def append_line(path: Path, line: str) -> None:
-    """Append one line to a file (one os.write per chunk; no buffering in Python)."""
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+    """Append one line to a file (one os.write per chunk; no buffering in Python); a link at
+    `path` is refused (`open_nofollow`)."""
+    fd = open_nofollow(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
     try:
         _write_all(fd, (line + "\n").encode("utf-8"))
     finally:
         os.close(fd)
+    interrupt_point(Path(path).name)
+
+
+def trim_teams(run_dir: Path, generation: int) -> int:
+    """Drop the records of teams.jsonl of generations >= `generation` (those a resume from a
+    checkpoint of `generation` computes again), so that the file keeps one record per
+    generation; the file is rewritten atomically, and only when something is dropped. Returns
+    the number of records dropped."""
+    path = Path(run_dir) / TEAMS_FILE
+    if not path.exists() and not path.is_symlink():
+        return 0
+    data = read_file_bytes(path, MAX_RECORD_BYTES)
+    keep, dropped = [], 0
+    for line in data.splitlines(keepends=True):
+        try:
+            rec = json.loads(line)
+            g = rec.get("generation") if isinstance(rec, dict) else None
+        except (ValueError, RecursionError):
+            g = None
+        if isinstance(g, int) and not isinstance(g, bool) and g >= generation:
+            dropped += 1
+            continue
+        keep.append(line)
+    if dropped:
+        atomic_write_bytes(path, b"".join(keep))
+    return dropped
 
 
 def prepare_run_dir(run_dir: Path) -> None:
@@ -197,12 +349,13 @@ def prepare_run_dir(run_dir: Path) -> None:
 
 
 # ------------------------------------------------------------------ reading run files
-def read_text(path: Path) -> str:
-    """The UTF-8 text of a run file (a byte-order mark is dropped); RunError naming the file
-    when it cannot be read or is not UTF-8."""
+def read_text(path: Path, limit: int = MAX_TEXT_BYTES) -> str:
+    """The UTF-8 text of a run file (a byte-order mark is dropped), read without following a
+    link and up to `limit` bytes (`read_file_bytes`); RunError naming the file when it cannot be
+    read, is a link or too large, or is not UTF-8."""
     path = Path(path)
     try:
-        data = path.read_bytes()
+        data = read_file_bytes(path, limit)
     except OSError as e:
         raise RunError(f"{path} cannot be read ({e.strerror or type(e).__name__})") from None
     try:
@@ -233,7 +386,7 @@ class RunLock:
 
     def _holder(self) -> str:
         try:
-            text = self.path.read_text(encoding="utf-8", errors="replace").strip()
+            text = read_file_bytes(self.path, 4096).decode("utf-8", "replace").strip()
         except OSError:
             text = ""
         return text or "an unknown process"
@@ -241,7 +394,13 @@ class RunLock:
     def acquire(self) -> "RunLock":
         info = f"pid={os.getpid()} host={socket.gethostname()} since={time.strftime('%Y-%m-%dT%H:%M:%S')}\n"
         while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+            try:                           # a link planted as the lock file is refused
+                fd = open_nofollow(self.path, os.O_RDWR | os.O_CREAT)
+            except OSError as e:
+                if e.errno == errno.ELOOP:
+                    raise RunError(f"{self.path} is a symbolic link; a run's lock must be its "
+                                   "own file (remove the link)") from None
+                raise
             try:
                 if fcntl is not None:
                     try:
@@ -690,7 +849,9 @@ def new_run_dir(logdir: Path, cfg: SwarmCoDeConfig) -> Path:
 # ------------------------------------------------------------------ summary.json
 class SummaryReporter:
     """Rewrites summary.json (atomically) after every generation and appends the generation's
-    best team to teams.jsonl (one JSON object per line)."""
+    best team to teams.jsonl (one JSON object per line). On a start or resume it prepares the
+    directory (`prepare_run_dir`) and drops the records of teams.jsonl past the checkpoint the
+    run continues from (`trim_teams`): those generations are computed again."""
 
     def __init__(self, run_dir: Path):
         self.run_dir = Path(run_dir)
@@ -699,10 +860,11 @@ class SummaryReporter:
 
     def on_start(self, ev: Evolution) -> None:
         prepare_run_dir(self.run_dir)       # no leftover temporary files, no cut-off line
+        trim_teams(self.run_dir, ev.state.generation)
 
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
-        atomic_write_bytes(self.path, json.dumps(records.summary(ev, result), indent=2).encode())
         append_line(self.teams, json.dumps(records.team_line(result)))
+        atomic_write_bytes(self.path, json.dumps(records.summary(ev, result), indent=2).encode())
 
     def on_end(self, ev: Evolution) -> None:
         pass
@@ -711,14 +873,17 @@ class SummaryReporter:
 class CheckpointReporter:
     """Writes checkpoint.pt at the start of a new run (generation 0, so that a run stopped
     before its first periodic checkpoint can still be resumed), every `every` generations and
-    at the end. `saved` is the generation of the checkpoint on disk (None: none yet)."""
+    after the last one (as part of that generation's step: `run` writes the records of a
+    generation, then its checkpoint, with signals held). `saved` is the generation of the
+    checkpoint on disk (None: none yet)."""
 
     def __init__(self, run_dir: Path, every: int):
         self.run_dir, self.every = Path(run_dir), max(1, every)
         self.saved: int | None = None
 
     def on_start(self, ev: Evolution) -> None:
-        if (self.run_dir / CHECKPOINT_FILE).is_file():
+        path = self.run_dir / CHECKPOINT_FILE
+        if path.exists() or path.is_symlink():
             self.saved = ev.state.generation        # resumed from it
         else:
             self._save(ev)
@@ -727,12 +892,17 @@ class CheckpointReporter:
         save_checkpoint(self.run_dir, ev)
         self.saved = ev.state.generation
 
+    def save_state(self, ev: Evolution) -> None:
+        """The checkpoint of `ev`'s state, unless the file holds that generation already."""
+        if self.saved != ev.state.generation:
+            self._save(ev)
+
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
-        if ev.state.generation % self.every == 0:
+        if ev.state.generation % self.every == 0 or ev.done:
             self._save(ev)
 
     def on_end(self, ev: Evolution) -> None:
-        self._save(ev)
+        self.save_state(ev)
 
 
 # ------------------------------------------------------------------ run files read back
@@ -854,23 +1024,50 @@ def interrupt_of(e: BaseException) -> KeyboardInterrupt | None:
 
 def run(ev: Evolution, run_dir: Path, reporters: Iterable[Reporter],
         on_interrupt: Callable[[Path], None] | None = None) -> Evolution:
-    """Run generations until the configured total; Ctrl-C checkpoints the last finished one."""
+    """Run generations until the configured total.
+
+    Each generation is one step that Ctrl-C or SIGTERM cannot split (`deferred_signals`): the
+    reporters up to the last `CheckpointReporter` in `reporters` (the run's records: summary,
+    teams.jsonl, metrics.csv, TensorBoard) write it, then its checkpoint is written when one is
+    due; the reporters after it (a progress callback, a user's) run outside that step. On an
+    interrupt (anywhere: while a generation computes, while the run starts, in the end-of-run
+    work) the state whose records are all written is kept (a generation computed but not yet
+    recorded is dropped: a resume computes it again, identically), its checkpoint written if the
+    file does not hold it yet, and KeyboardInterrupt re-raised; the `CheckpointReporter`'s
+    `saved` then names the generation the file holds."""
     reporters = list(reporters)
-    for r in reporters:
-        r.on_start(ev)
+    marks = [i for i, r in enumerate(reporters) if isinstance(r, CheckpointReporter)]
+    checkpoints = reporters[marks[-1]] if marks else None
+    cut = marks[-1] + 1 if marks else len(reporters)
+    step_reporters, after = reporters[:cut], reporters[cut:]
+    recorded = ev.state                    # the last state whose records are all written
     try:
+        with deferred_signals():
+            for r in reporters:
+                r.on_start(ev)
         while not ev.done:
             result = ev.step()
-            for r in reporters:
+            interrupt_point("generation")
+            with deferred_signals():
+                for r in step_reporters:
+                    r.on_generation(ev, result)
+                recorded = ev.state
+            for r in after:
                 r.on_generation(ev, result)
+        for r in reporters:
+            r.on_end(ev)
     except BaseException as e:
         interrupt = interrupt_of(e)
         if interrupt is None:
             raise
-        path = save_checkpoint(run_dir, ev)
+        with deferred_signals():           # a second Ctrl-C cannot split this checkpoint
+            ev.state = recorded
+            if checkpoints is not None:
+                checkpoints.save_state(ev)
+                path = Path(run_dir) / CHECKPOINT_FILE
+            else:
+                path = save_checkpoint(run_dir, ev)
         if on_interrupt:
             on_interrupt(path)
         raise interrupt from None
-    for r in reporters:
-        r.on_end(ev)
     return ev
