@@ -4,13 +4,14 @@ each team design, and a replay of its best team as a GIF (`swarmcode-torch repla
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 from typing import Sequence
 
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..coevo.population import genome_phenotype
 from .render import record_episode, save_gif, team_genome
-from .runs import (REPLAY_FILE, RunError, generation_team, load_checkpoint,
+from .runs import (REPLAY_FILE, RunError, atomic_write_bytes, generation_team, load_checkpoint,
                    read_config, read_summary, read_teams, run_scenario)
 from ..sim.scenario import Scenario
 from ..sim.state import WorldParams, capabilities
@@ -103,5 +104,9 @@ def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0
         ticks = cfg.ticks or scenario.episode_ticks
     ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every)
     ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
-    save_gif(ep, out, fps=fps, dpi=dpi)
+    buf = io.BytesIO()
+    save_gif(ep, buf, fps=fps, dpi=dpi)
+    # replaced whole (a temporary file renamed over it): a link at `out` is replaced, never
+    # written through, and a reader never sees half a GIF
+    atomic_write_bytes(out, buf.getvalue())
     return out, dict(ep.metrics)

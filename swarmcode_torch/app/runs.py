@@ -30,9 +30,9 @@ import torch
 from ..coevo.config import SwarmCoDeConfig, with_overrides
 from ..coevo.evolve import Evolution, GenerationResult
 from . import records
-from ..sim.hardware import (Catalog, CatalogError, catalog_toml_lines, default_catalog,
+from ..sim.hardware import (MAX_NESTING, Catalog, CatalogError, nesting_depth, catalog_toml_lines, default_catalog,
                             default_catalog_bytes, parse_catalog)
-from ..sim.scenario import Scenario, load_scenario
+from ..sim.scenario import Scenario, load_scenario, parse_scenario
 
 try:
     import fcntl
@@ -67,9 +67,7 @@ ATOMIC_FILES = (CONFIG_FILE, CHECKPOINT_FILE, SUMMARY_FILE, SCENARIO_COPY, HARDW
 MAX_TEXT_BYTES = 16 * 2 ** 20
 #: The most bytes read from teams.jsonl and metrics.csv (one record a generation).
 MAX_RECORD_BYTES = 2 * 2 ** 30
-#: The deepest nesting of tables and lists accepted in a TOML or JSON file of a run or scenario
-#: (real ones nest 4 deep); deeper input is refused before a parser could recurse too far.
-MAX_NESTING = 64
+
 #: The memory assumed when the machine's cannot be read.
 FALLBACK_MEMORY = 64 * 2 ** 30
 
@@ -187,24 +185,8 @@ def read_file_bytes(path: Path, limit: int = MAX_TEXT_BYTES) -> bytes:
         os.close(fd)
 
 
-def nesting_depth(text: str) -> int:
-    """An upper bound of how deep tables and lists nest in TOML or JSON text: the most brackets
-    and braces open at once, counted without parsing (brackets inside strings count too, so the
-    bound is never too low)."""
-    depth = most = 0
-    for m in re.finditer(r"[\[\]{}]", text):
-        if m.group() in "[{":
-            depth += 1
-            most = max(most, depth)
-        else:
-            depth = max(0, depth - 1)
-    return most
-
-
 def check_nesting(text: str, source: str, error=None) -> None:
     """`error` (RunError by default) naming `source` when `text` nests deeper than MAX_NESTING."""
-    if text.count("[") + text.count("{") <= MAX_NESTING:
-        return
     d = nesting_depth(text)
     if d > MAX_NESTING:
         raise (error or RunError)(f"{source}: nested {d} levels deep (at most {MAX_NESTING})")
@@ -328,7 +310,8 @@ def trim_teams(run_dir: Path, generation: int) -> int:
     keep, dropped = [], 0
     for line in data.splitlines(keepends=True):
         try:
-            rec = json.loads(line)
+            rec = json.loads(line) if nesting_depth(line.decode("utf-8", "replace")) \
+                <= MAX_NESTING else None
             g = rec.get("generation") if isinstance(rec, dict) else None
         except (ValueError, RecursionError):
             g = None
@@ -556,11 +539,24 @@ def read_config(run_dir: Path) -> SwarmCoDeConfig:
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise RunError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
+    text = read_text(path)
+    check_nesting(text, str(path))
     try:
-        d = tomllib.loads(read_text(path))
+        d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise RunError(f"{path}: malformed config ({e})") from None
+    except RecursionError:
+        raise RunError(f"{path}: nested too deeply") from None
+    missing = [k for k in CONFIG_REQUIRED if k not in d]
+    if missing:
+        # an empty or cut config would read as the defaults: another run than the one made
+        raise RunError(f"{path}: {'empty' if not d else 'incomplete'} config (no "
+                       f"{', '.join(missing)}); restore it from the run's checkpoint or backup")
     return config_from_dict(d, str(path))
+
+
+#: Keys every config.toml a run has written holds (each version wrote them all).
+CONFIG_REQUIRED = ("scenario", "generations", "population", "seed")
 
 
 # ------------------------------------------------------------------ a run's own scenario
@@ -592,7 +588,7 @@ def run_scenario_source(run_dir: Path, cfg: SwarmCoDeConfig) -> str:
     any working directory will do), or, in a run directory made before runs kept one, the
     config's scenario."""
     copy = Path(run_dir) / SCENARIO_COPY
-    return str(copy.resolve()) if copy.is_file() else cfg.scenario
+    return str(copy.absolute()) if copy.is_file() or copy.is_symlink() else cfg.scenario
 
 
 def run_catalog(run_dir: Path) -> Catalog | None:
@@ -600,10 +596,10 @@ def run_catalog(run_dir: Path) -> Catalog | None:
     read or is not a valid catalog), or None for a run made before runs kept one (it used the
     installed catalog)."""
     copy = Path(run_dir) / HARDWARE_COPY
-    if not copy.is_file():
+    if not copy.is_file() and not copy.is_symlink():
         return None
     try:
-        data = copy.read_bytes()
+        data = read_file_bytes(copy)
     except OSError as e:
         raise RunError(f"{copy}: cannot be read ({e.strerror or type(e).__name__})") from None
     try:
@@ -617,7 +613,15 @@ def run_scenario(run_dir: Path, cfg: SwarmCoDeConfig) -> Scenario:
     own hardware.toml (`run_catalog`): whatever has become of the installed catalog or of the
     file the scenario named, a resumed or replayed run computes with the catalog it started
     with."""
-    return load_scenario(run_scenario_source(run_dir, cfg), run_catalog(run_dir))
+    copy = Path(run_dir) / SCENARIO_COPY
+    catalog = run_catalog(run_dir)
+    if not copy.is_file() and not copy.is_symlink():
+        return load_scenario(cfg.scenario, catalog)      # a run made before runs kept copies
+    try:
+        data = read_file_bytes(copy)                     # never through a link
+    except OSError as e:
+        raise RunError(f"{copy} cannot be read ({e.strerror or type(e).__name__})") from None
+    return parse_scenario(data, str(copy.absolute()), copy.parent, catalog)
 
 
 def config_differences(a: SwarmCoDeConfig, b: SwarmCoDeConfig, scenario: Scenario | None = None,
@@ -745,7 +749,8 @@ def read_checkpoint(path: Path) -> dict:
     swarmcode-torch checkpoint."""
     path = Path(path)
     try:
-        d = torch.load(path, map_location="cpu", weights_only=True)
+        with os.fdopen(open_nofollow(path, os.O_RDONLY), "rb") as f:   # never through a link
+            d = torch.load(f, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:
         if "weights only load failed" in str(e).lower() or "unsupported global" in str(e).lower():
             raise RunError(f"{path} was refused: loading it would run code (only tensors, "
@@ -769,9 +774,24 @@ def read_checkpoint(path: Path) -> dict:
 def load_checkpoint(run_dir: Path) -> dict:
     """The checkpoint of a run directory (see `read_checkpoint`)."""
     path = Path(run_dir) / CHECKPOINT_FILE
-    if not path.is_file():
+    if not path.is_file() and not path.is_symlink():
         raise RunError(f"{run_dir} has no {CHECKPOINT_FILE} to resume from")
     return read_checkpoint(path)
+
+
+#: The files of a run directory (each must be the run's own file, never a link).
+RUN_FILES = (CONFIG_FILE, CHECKPOINT_FILE, SUMMARY_FILE, TEAMS_FILE, TEAMS_FILE + PARTIAL_SUFFIX,
+             SCENARIO_COPY, HARDWARE_COPY, LOCK_FILE, METRICS_FILE, REPLAY_FILE)
+
+
+def refuse_links(run_dir: Path) -> None:
+    """RunError naming the first file of `RUN_FILES` in `run_dir` that is a symbolic link: a
+    run reads and writes only its own files, never what a link planted in it points to."""
+    for name in RUN_FILES:
+        path = Path(run_dir) / name
+        if path.is_symlink():
+            raise RunError(f"{path} is a symbolic link; a run's files must be its own (remove "
+                           "the link, or put the file itself there)")
 
 
 def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
@@ -779,6 +799,7 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     config.toml must agree with the config saved in the checkpoint in every key but generations
     and device (RunError otherwise); the scenario is built with the run's own catalog."""
     run_dir = Path(run_dir)
+    refuse_links(run_dir)
     cfg = read_config(run_dir)
     d = load_checkpoint(run_dir)
     scenario = run_scenario(run_dir, cfg)
@@ -959,10 +980,14 @@ def read_summary(run_dir: Path, figures: bool = True) -> dict:
     if not path.is_file():
         raise RunError(f"{run_dir} has no {SUMMARY_FILE} (is it a run directory with a finished "
                        "generation?)")
+    text = read_text(path)
+    check_nesting(text, str(path))
     try:
-        s = json.loads(read_text(path))
+        s = json.loads(text)
     except json.JSONDecodeError as e:
         raise RunError(f"{path}: malformed JSON ({e})") from None
+    except RecursionError:
+        raise RunError(f"{path}: nested too deeply") from None
     if not isinstance(s, dict):
         raise RunError(f"{path}: expected a JSON object")
     for key in _SUMMARY_NUMBERS if figures else ():
@@ -984,9 +1009,12 @@ def read_teams(run_dir: Path) -> dict[int, dict]:
     skipped); {} when the run has no teams.jsonl."""
     path = Path(run_dir) / TEAMS_FILE
     out: dict[int, dict] = {}
-    if not path.is_file():
+    if not path.is_file() and not path.is_symlink():
         return out
-    for line in read_text(path).splitlines():
+    for line in read_text(path, MAX_RECORD_BYTES).splitlines():
+        if nesting_depth(line) > MAX_NESTING:
+            raise RunError(f"{path}: a record nested {nesting_depth(line)} levels deep (at most "
+                           f"{MAX_NESTING})")
         try:
             rec = json.loads(line)
         except json.JSONDecodeError:

@@ -12,7 +12,7 @@ from pathlib import Path
 from ..coevo.config import SwarmCoDeConfig
 from ..coevo.dynamics import mean_std
 from ..sim.scenario import Scenario
-from .runs import (BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, TABLE_CSV, TABLE_MD,
+from .runs import (BUDGET_PLOT, atomic_write_bytes, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, TABLE_CSV, TABLE_MD,
                    RunError, config_differences, load_checkpoint, load_run, read_config,
                    read_summary, run_scenario)
 
@@ -141,13 +141,16 @@ def plot(rows: list[dict], path: Path) -> None:
                  marker="s", color="tab:orange", capsize=3)
     ax2.set_ylabel("species in the best team", color="tab:orange")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, format="png")
 
 
 def write_outputs(rows: list[dict], out_dir: Path) -> list[Path]:
     out_dir = Path(out_dir)
     paths = [out_dir / TABLE_MD, out_dir / TABLE_CSV, out_dir / BUDGET_PLOT]
-    paths[0].write_text(markdown(rows))
-    paths[1].write_text(csv_text(rows))
-    plot(rows, paths[2])
+    # each replaced whole (`atomic_write_bytes`): a link planted in --out is never written through
+    atomic_write_bytes(paths[0], markdown(rows).encode())
+    atomic_write_bytes(paths[1], csv_text(rows).encode())
+    buf = io.BytesIO()
+    plot(rows, buf)
+    atomic_write_bytes(paths[2], buf.getvalue())
     return paths
