@@ -476,6 +476,11 @@ def test_a_run_made_before_runs_kept_copies_still_resumes_and_replays(finished_r
     run = _copy_run(finished_run, tmp_path / "run")
     (run / "scenario.toml").unlink()
     (run / "hardware.toml").unlink()
+    # such a run's checkpoint has no digests of its copies ("run_files"); with them, a copy
+    # that went missing is refused (test_an_edited_or_missing_copy_is_refused_on_resume)
+    d = torch.load(run / "checkpoint.pt", weights_only=True)
+    del d["run_files"]
+    torch.save(d, run / "checkpoint.pt")
     r = invoke("evolve", "--resume", run, "--generations", 3, *RFAST)
     assert r.exit_code == 0, r.output
     assert not (run / "scenario.toml").exists()          # no copy made up after the fact
@@ -494,6 +499,9 @@ def test_a_run_whose_catalog_differs_from_the_installed_one_resumes_with_its_own
                      count=1)
     assert changed != text
     (run / "hardware.toml").write_text(changed)       # as if the installed catalog had changed
+    d = torch.load(run / "checkpoint.pt", weights_only=True)   # since the run started with it
+    d["run_files"] = runs_module.copy_digests(run)
+    torch.save(d, run / "checkpoint.pt")
     assert resume_run(run, generations=3).ctx.scenario.hardware.base_mass == 9.75
     r = invoke("evolve", "--resume", run, "--generations", 3, *RFAST)
     assert r.exit_code == 0, r.output

@@ -5,14 +5,16 @@ each team design, and a replay of its best team as a GIF (`swarmcode-torch repla
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..coevo.population import genome_phenotype
 from .render import record_episode, save_gif, team_genome
-from .runs import (REPLAY_FILE, RunError, atomic_write_bytes, generation_team, load_checkpoint,
-                   read_config, read_summary, read_teams, run_scenario)
+from .runs import (REPLAY_FILE, RunError, _size, atomic_write_bytes, estimate_bytes,
+                   generation_team, load_checkpoint, memory_limit, read_config, read_summary,
+                   read_teams, run_scenario)
 from ..sim.scenario import Scenario
 from ..sim.state import WorldParams, capabilities
 
@@ -99,6 +101,12 @@ def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0
     else:
         designs = read_summary(run_dir, figures=False)["designs"]
     scenario = run_scenario(run_dir, cfg)        # the run's own copies, when it has them
+    robots = sum(d["count"] for d in designs)
+    need = estimate_bytes(replace(cfg, population=1, trials=1, swarm_size=robots), scenario)
+    limit, what = memory_limit("cpu")
+    if need > limit:
+        raise RunError(f"the team to replay has {robots} robots, which would need about "
+                       f"{_size(need)} of memory, more than the {_size(limit)} of {what}")
     genome, team = team_genome(designs, cfg.tag_length)
     if ticks is None:
         ticks = cfg.ticks or scenario.episode_ticks

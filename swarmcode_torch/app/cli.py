@@ -116,6 +116,29 @@ def fail(msg: str) -> None:
     raise _Failed(msg)
 
 
+#: The longest path an option takes (PATH_MAX).
+MAX_PATH = 4096
+
+
+def _path(value: str | None, option: str) -> Path | None:
+    """An option's path, checked: not empty (an empty --logdir would write into the working
+    directory; '.' says so), at most MAX_PATH characters, no NUL, and text that can be printed
+    (bytes that are not UTF-8 reach Python as surrogates no message can print)."""
+    if value is None:
+        return None
+    if not value.strip():
+        fail(f"{option} is empty: give a directory ('.' for the working directory)")
+    if len(value) > MAX_PATH or "\0" in value:
+        fail(f"{option}: not a path ({len(value)} characters{', a NUL' if chr(0) in value else ''};"
+             f" at most {MAX_PATH})")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        fail(f"{option}: the path {value.encode('utf-8', 'backslashreplace').decode()[:200]} "
+             "is not UTF-8 text; rename it or give another")
+    return Path(value)
+
+
 def _os_fail(e: OSError, doing: str) -> None:
     from .runs import os_error_text
 
@@ -197,18 +220,19 @@ def evolve(
     seed: Annotated[Optional[int], typer.Option(help="Random seed [default: 0].")] = None,
     device: Annotated[Optional[str], typer.Option(metavar=DEVICE_METAVAR, autocompletion=_complete_device, help="Where the run computes: auto (cuda if available), cpu, cuda or cuda:N [default: auto].")] = None,
     compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick [default: on CUDA, and on CPU for >= 50 generations].")] = None,
-    logdir: Annotated[Optional[Path], typer.Option(help="Directory that holds run directories [default: runs].")] = None,
+    logdir: Annotated[Optional[str], typer.Option(metavar="PATH", help="Directory that holds run directories [default: runs].")] = None,
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines when not on a terminal.")] = 10,
     render_every: Annotated[int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")] = 50,
     figure_every: Annotated[int, typer.Option(help="Generations between species-composition figures in TensorBoard (one is also drawn at the end of every run).")] = 50,
-    resume: Annotated[Optional[Path], typer.Option(help="Continue the run in this directory.")] = None,
+    resume: Annotated[Optional[str], typer.Option(metavar="PATH", help="Continue the run in this directory.")] = None,
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key, e.g. --set p_tag_flip=0.0625 (repeatable; keys as in the run's config.toml).")] = None,
     eval_workers: Annotated[int, typer.Option(help="Evaluate each generation in this many shards on Ray actors, one GPU each on CUDA, else CPUs (needs Ray; same results as 1).")] = 1,
     cpus_per_eval_worker: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1].")] = None,
     ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one].")] = None,
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
+    logdir, resume = _path(logdir, "--logdir"), _path(resume, "--resume")
     shards = _eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
     where = _Where()
     with _terminate_as_interrupt() as terminated:
@@ -351,6 +375,9 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
                  swarm_size=swarm_size, trials=trials, ticks=ticks, seed=seed, compile=compile)
     try:
         if resume is not None:
+            if generations is not None and generations < 1:
+                fail(f"--generations must be >= 1 (the total to extend the run to), got "
+                     f"{generations}")
             extra = [k.replace("_", "-") for k, v in given.items() if v is not None]
             extra += ["set"] if settings else []
             if extra:
@@ -569,8 +596,8 @@ def sweep(
     ticks: Annotated[Optional[int], typer.Option(help="Episode length [default: the scenario's].")] = None,
     device: Annotated[Optional[str], typer.Option(metavar=DEVICE_METAVAR, autocompletion=_complete_device, help="auto (cuda if available), cpu, cuda or cuda:N [default: auto].")] = None,
     compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick.")] = None,
-    logdir: Annotated[Optional[Path], typer.Option(help="Directory that holds the new sweep directory, sweep-<time>, as evolve's --logdir holds run directories [default: runs].")] = None,
-    out: Annotated[Optional[Path], typer.Option(help="The sweep directory itself [default: LOGDIR/sweep-<time>]; run again with the same --out to resume.")] = None,
+    logdir: Annotated[Optional[str], typer.Option(metavar="PATH", help="Directory that holds the new sweep directory, sweep-<time>, as evolve's --logdir holds run directories [default: runs].")] = None,
+    out: Annotated[Optional[str], typer.Option(metavar="PATH", help="The sweep directory itself [default: LOGDIR/sweep-<time>]; run again with the same --out to resume.")] = None,
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines off a terminal.")] = 50,
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key of every run (repeatable), as in evolve.")] = None,
@@ -588,6 +615,7 @@ def sweep(
     from ..sim.scenario import read_scenario
     from .sweep import table_rows, write_outputs
 
+    logdir, out = _path(logdir, "--logdir"), _path(out, "--out")
     budget_list = _parse_list(budgets, float, "--budgets")
     seed_list = _parse_list(seeds, int, "--seeds")
     if checkpoint_every < 1 or log_every < 1:
@@ -833,8 +861,9 @@ def _print_team(run_dir: Path) -> None:
 
 
 @app.command()
-def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory.")]) -> None:
+def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")]) -> None:
     """Show the best team of a run: robots per design, hardware, cost and behavior trees."""
+    run_dir = _path(run_dir, "RUN_DIR")
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
     designs = _print_team(run_dir)
@@ -866,7 +895,7 @@ def _capabilities(run_dir: Path, designs: list[dict]):
 
 @app.command()
 def dynamics(
-    run_dir: Annotated[Path, typer.Argument(help="A run directory.")],
+    run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")],
     window: Annotated[Optional[list[str]], typer.Option(help="Generations A:B (from A to before B); repeatable [default: every 100, and the last 50].")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ) -> None:
@@ -874,6 +903,8 @@ def dynamics(
     and extinction per generation, ages and lifetimes, over windows of generations."""
     from .analysis import run_dynamics
     from .runs import RunError
+
+    run_dir = _path(run_dir, "RUN_DIR")
 
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
@@ -913,8 +944,8 @@ def dynamics(
 
 @app.command()
 def replay(
-    run_dir: Annotated[Path, typer.Argument(help="A run directory.")],
-    out: Annotated[Optional[Path], typer.Option(help="Output GIF [default: RUN_DIR/team.gif].")] = None,
+    run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")],
+    out: Annotated[Optional[str], typer.Option(metavar="PATH", help="Output GIF [default: RUN_DIR/team.gif].")] = None,
     generation: Annotated[Optional[int], typer.Option(help="Replay this generation's best team instead of the run's.")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the random environment.")] = 0,
     ticks: Annotated[Optional[int], typer.Option(help="Episode length [default: the run's].")] = None,
@@ -923,6 +954,8 @@ def replay(
     """Render a rollout of the best team headless, as an animated GIF."""
     from .analysis import replay_run
     from .runs import RunError
+
+    run_dir, out = _path(run_dir, "RUN_DIR"), _path(out, "--out")
 
     from ..coevo.config import MAX_SEED, UPPER_BOUNDS
 

@@ -9,6 +9,7 @@ into it. docs/RELIABILITY.md lists what the files promise and the tests that sho
 from __future__ import annotations
 
 import errno
+import hashlib
 import io
 import json
 import math
@@ -32,6 +33,7 @@ from ..coevo.evolve import Evolution, GenerationResult
 from . import records
 from ..sim.hardware import (MAX_NESTING, Catalog, CatalogError, nesting_depth, catalog_toml_lines, default_catalog,
                             default_catalog_bytes, parse_catalog)
+from ..sim.bt import NUM_OPCODES
 from ..sim.scenario import Scenario, load_scenario, parse_scenario
 
 try:
@@ -667,6 +669,7 @@ def estimate_bytes(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> in
       (state and constants, distances to the C grip points of the packages, contact pairs);
     - the layouts: population x trials environments of 32 candidate positions for each of the
       K packages (checked against the O obstacles) and each obstacle: 4 x 32 x (K (O + 4) + 2 O);
+    - the start slots: 3 x 8 x N^2 bytes (pairwise distances of the N robots' slots);
     - the programs: population x (4 x 11,664 lookup-table entries + 16 x bt_length + tag_length).
     """
     from ..sim.bt import NUM_COMBOS
@@ -681,6 +684,10 @@ def estimate_bytes(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> in
     envs = 2 * P * T
     batch = envs * N * 16 * (16 + C + min(N, 500))
     layouts = P * T * 4 * 32 * (K * (O + 4) + 2 * O)
+    # the start slots: pairwise distances of the scenario's robots, three [N, N] float64
+    # tensors at once (layout.spawn_slots: cdist, eye, their sum)
+    M = max(N, scenario.num_robots if scenario is not None else 1)
+    layouts += 3 * 8 * M * M
     programs = P * (4 * NUM_COMBOS + 16 * cfg.bt_length + cfg.tag_length)
     return batch + layouts + programs
 
@@ -726,9 +733,36 @@ def check_config(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
 
 
 # ------------------------------------------------------------------ checkpoints
+def copy_digests(run_dir: Path) -> dict[str, str]:
+    """sha256 of the run's scenario.toml and hardware.toml copies (those it has): a checkpoint
+    keeps them ("run_files"), so that a resume notices a copy edited since."""
+    out = {}
+    for name in (SCENARIO_COPY, HARDWARE_COPY):
+        path = Path(run_dir) / name
+        if path.is_file() and not path.is_symlink():
+            out[name] = hashlib.sha256(read_file_bytes(path)).hexdigest()
+    return out
+
+
+def check_copies(run_dir: Path, d: dict) -> None:
+    """RunError naming a scenario.toml or hardware.toml copy whose bytes are not those the
+    checkpoint `d` recorded (edited since the run started; a checkpoint without "run_files",
+    written before they were recorded, is not checked)."""
+    saved = d.get("run_files")
+    if not isinstance(saved, dict):
+        return
+    now = copy_digests(run_dir)
+    for name in (SCENARIO_COPY, HARDWARE_COPY):
+        if saved.get(name) != now.get(name):
+            state = "is missing" if name not in now else "was changed"
+            raise RunError(f"{Path(run_dir) / name} {state} since the run started (its sha256 "
+                           f"is not the one {CHECKPOINT_FILE} recorded); the run computes with "
+                           "its own copy: restore it, or start a new run")
+
+
 def save_checkpoint(run_dir: Path, ev: Evolution) -> Path:
     buf = io.BytesIO()
-    torch.save(ev.state_dict(), buf)
+    torch.save({**ev.state_dict(), "run_files": copy_digests(run_dir)}, buf)
     path = Path(run_dir) / CHECKPOINT_FILE
     atomic_write_bytes(path, buf.getvalue())
     return path
@@ -802,6 +836,7 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     refuse_links(run_dir)
     cfg = read_config(run_dir)
     d = load_checkpoint(run_dir)
+    check_copies(run_dir, d)
     scenario = run_scenario(run_dir, cfg)
     saved = config_from_dict(d["config"], f"{run_dir / CHECKPOINT_FILE} (its config)")
     diff = config_differences(cfg, saved, scenario)
@@ -809,6 +844,10 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
         raise RunError(f"{run_dir / CONFIG_FILE} does not match the config saved in "
                        f"{CHECKPOINT_FILE} (differing keys: {', '.join(diff)}); restore "
                        f"{CONFIG_FILE} or start a new run")
+    metrics = run_dir / METRICS_FILE
+    if metrics.exists() or metrics.is_symlink():
+        from .reporting import read_metrics_csv
+        read_metrics_csv(metrics, raw=True)      # a header a resume would lose rows under
     return cfg, d, scenario
 
 
@@ -833,7 +872,9 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
     check_config(cfg, scenario)
     try:                           # the run keeps the scenario it names; it runs on its copy
         return Evolution.from_checkpoint(d, cfg, fitness, scenario)
-    except (KeyError, TypeError, RuntimeError) as e:
+    except ValueError as e:
+        raise RunError(f"{run_dir / CHECKPOINT_FILE} does not fit the run's config: {e}") from None
+    except (KeyError, TypeError, RuntimeError, IndexError) as e:
         raise RunError(f"checkpoint in {run_dir} is incompatible ({type(e).__name__}: {e})") from None
 
 
@@ -931,6 +972,11 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+#: The most robots the designs of a summary.json or teams.jsonl record may add up to (the
+#: swarm_size bound); a replay also checks the memory its team needs (`analysis.replay_run`).
+MAX_TEAM = 10_000_000
+
+
 def check_designs(designs: Any, source: str) -> list[dict]:
     """The "designs" of a summary.json or teams.jsonl record, every field checked (RunError
     naming `source`, the design and the field)."""
@@ -956,14 +1002,19 @@ def check_designs(designs: Any, source: str) -> list[dict]:
                 ("dominance", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
                 ("cost", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
                 ("bt", lambda v: isinstance(v, list) and 0 < len(v) <= 4096 and all(
-                    isinstance(x, int) and not isinstance(x, bool) and 0 <= x < 256 for x in v),
-                 "a list of opcodes")):
+                    isinstance(x, int) and not isinstance(x, bool) and 0 <= x < NUM_OPCODES
+                    for x in v),
+                 f"a list of opcodes 0..{NUM_OPCODES - 1}")):
             if key not in d:
                 raise RunError(f"{w}: missing {key!r}")
             if not ok(d[key]):
                 raise RunError(f"{w}.{key}: expected {what}, got {d[key]!r:.60}")
-    if sum(d["count"] for d in designs) < 1:
+    total = sum(d["count"] for d in designs)
+    if total < 1:
         raise RunError(f"{source}: designs: the counts add up to no robot")
+    if total > MAX_TEAM:
+        raise RunError(f"{source}: designs: the counts add up to {total} robots, more than any "
+                       f"run can have ({MAX_TEAM})")
     return designs
 
 

@@ -32,6 +32,8 @@ MAX_FILE_BYTES = 16 * 2 ** 20
 MAX_NAME = 200
 MAX_DESCRIPTION = 10_000
 MAX_PATH = 4096
+#: The most packages a scenario places (each environment places and senses every one).
+MAX_PACKAGES = 10_000
 #: Room kept free around a package for a robot at each grip (layout.make_layouts: size + 0.6).
 PACKAGE_CLEARANCE = 0.6
 
@@ -257,6 +259,9 @@ def _scenario_from_dict(d: dict, source: str, folder: Path | None = None,
         classes.append(PackageClass(kind, count, dist, mass, grips, band, dw, size))
     if sum(c.count for c in classes) < 1:
         raise ScenarioError("packages: the scenario places no package")
+    if sum(c.count for c in classes) > MAX_PACKAGES:
+        raise ScenarioError(f"packages: {sum(c.count for c in classes)} packages, more than "
+                            f"{MAX_PACKAGES} (each is placed one by one in every environment)")
     description = d.get("description", "")
     if not isinstance(description, str):
         raise ScenarioError(f"description: expected str, got {description!r:.60}")
