@@ -83,7 +83,10 @@ def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
     for budget, summaries in by_budget.items():
         row = {"budget": budget, "seeds": len(summaries)}
         for col in COLUMNS[1:]:
-            row[col], row[f"{col}_std"] = mean_std([float(s[col]) for s in summaries])
+            # a figure a run could not give (null in summary.json: not finite) is left out of
+            # the mean; a column no run gives is "none"
+            vals = [float(s[col]) for s in summaries if s.get(col) is not None]
+            row[col], row[f"{col}_std"] = mean_std(vals) if vals else (None, None)
         rows.append(row)
     rows.sort(key=lambda r: math.inf if r["budget"] is None else r["budget"])
     return rows
@@ -128,7 +131,8 @@ def plot(rows: list[dict], path: Path) -> None:
     `matplotlib.figure.Figure` (no pyplot, no backend change) and written as a PNG."""
     from matplotlib.figure import Figure
 
-    rows = [r for r in rows if r["budget"] is not None]
+    rows = [r for r in rows if r["budget"] is not None and r["best_fitness"] is not None
+            and r["num_species"] is not None]
     x = [r["budget"] for r in rows]
     fig = Figure(figsize=(6, 3.6))
     ax1 = fig.subplots()
