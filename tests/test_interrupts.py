@@ -177,3 +177,30 @@ def test_interrupt_sweep_every_write_step(tmp_path, straight, how, seed, every, 
     if nth > steps:
         pytest.skip(f"the run has {steps} write steps")
     _interrupted_then_resumed(tmp_path, straight, seed, every, nth, how)
+
+
+@pytest.mark.parametrize("how", ["int", "term"])
+def test_a_signal_in_the_end_of_run_work_names_the_checkpoint_the_file_holds(tmp_path, how):
+    """SIGTERM or Ctrl-C while the end-of-run reporters draw (the last figure, hparams): the
+    last generation's checkpoint was written with its records, and the message says so."""
+    from swarmcode_torch.app.reporting import TensorBoardReporter
+
+    real = TensorBoardReporter.on_end
+
+    def on_end(self, ev):
+        signal.raise_signal(signal.SIGINT if how == "int" else signal.SIGTERM)
+        return real(self, ev)
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(TensorBoardReporter, "on_end", on_end)
+    try:
+        r = invoke("evolve", *BASE, "--seed", 0, "--generations", 3, "--checkpoint-every", 2,
+                   "--logdir", tmp_path)
+    finally:
+        mp.undo()
+    (run,) = list(tmp_path.iterdir())
+    assert r.exit_code == (130 if how == "int" else 143), r.output
+    assert load_checkpoint(run)["generation"] == 3
+    assert "checkpoint of generation 3 is in" in r.stderr, r.output
+    teams = [json.loads(x)["generation"] for x in (run / "teams.jsonl").read_text().splitlines()]
+    assert teams == [0, 1, 2]
