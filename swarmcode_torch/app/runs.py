@@ -836,8 +836,8 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     refuse_links(run_dir)
     cfg = read_config(run_dir)
     d = load_checkpoint(run_dir)
+    scenario = run_scenario(run_dir, cfg)       # a damaged copy: the file and field named
     check_copies(run_dir, d)
-    scenario = run_scenario(run_dir, cfg)
     saved = config_from_dict(d["config"], f"{run_dir / CHECKPOINT_FILE} (its config)")
     diff = config_differences(cfg, saved, scenario)
     if diff:
