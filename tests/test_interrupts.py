@@ -204,3 +204,19 @@ def test_a_signal_in_the_end_of_run_work_names_the_checkpoint_the_file_holds(tmp
     assert "checkpoint of generation 3 is in" in r.stderr, r.output
     teams = [json.loads(x)["generation"] for x in (run / "teams.jsonl").read_text().splitlines()]
     assert teams == [0, 1, 2]
+
+
+def test_deferred_signals_hold_ctrl_c_until_the_step_is_done():
+    from swarmcode_torch.app.runs import deferred_signals
+
+    done = []
+    with pytest.raises(KeyboardInterrupt):
+        with deferred_signals() as held:
+            signal.raise_signal(signal.SIGINT)
+            done.append("records")                 # the step goes on
+            done.append("checkpoint")
+    assert done == ["records", "checkpoint"] and held == [signal.SIGINT]
+    with deferred_signals(deliver=False) as held:  # a stop under way: a second one is dropped
+        signal.raise_signal(signal.SIGINT)
+    assert held == [signal.SIGINT]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

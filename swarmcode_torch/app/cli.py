@@ -476,7 +476,7 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
             with _terminate_as_interrupt() as terminated:
                 run(ev, run_dir, reporters)
     except KeyboardInterrupt:
-        with deferred_signals():
+        with deferred_signals(deliver=False):      # the writers close whole (TensorBoard's thread)
             if progress is not None:
                 progress.stop()
             _close_writers(reporters)

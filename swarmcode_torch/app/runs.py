@@ -105,13 +105,14 @@ def interrupt_point(what: str) -> None:
 
 
 @contextmanager
-def deferred_signals() -> Iterator[list[int]]:
+def deferred_signals(deliver: bool = True) -> Iterator[list[int]]:
     """Within the block Ctrl-C (SIGINT) and SIGTERM are held, not acted on: a step that must
     not be split (a generation's records and its checkpoint; the checkpoint written on an
     interrupt) completes, then the first held signal is delivered to the handler that was in
     place (Ctrl-C's KeyboardInterrupt, the CLI's SIGTERM handler, or the default action). Off
-    the main thread signals cannot be handled and the block runs as it is. Yields the list of
-    held signal numbers."""
+    the main thread signals cannot be handled and the block runs as it is. `deliver=False`:
+    held signals are dropped (a second Ctrl-C while a stopping run writes its checkpoint or
+    closes its files: the stop is under way). Yields the list of held signal numbers."""
     held: list[int] = []
     if threading.current_thread() is not threading.main_thread():
         yield held
@@ -136,7 +137,7 @@ def deferred_signals() -> Iterator[list[int]]:
     finally:
         for sig, h in previous.items():
             signal.signal(sig, h if h is not None else signal.SIG_DFL)
-        if held and not failed:            # an error in the block is reported, not replaced
+        if held and deliver and not failed:  # an error in the block is reported, not replaced
             sig = held[0]
             h = previous.get(sig)
             if callable(h):
@@ -1139,7 +1140,7 @@ def run(ev: Evolution, run_dir: Path, reporters: Iterable[Reporter],
         interrupt = interrupt_of(e)
         if interrupt is None:
             raise
-        with deferred_signals():           # a second Ctrl-C cannot split this checkpoint
+        with deferred_signals(deliver=False):   # a second Ctrl-C cannot split this checkpoint
             ev.state = recorded
             if checkpoints is not None:
                 checkpoints.save_state(ev)
