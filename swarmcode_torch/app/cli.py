@@ -233,6 +233,7 @@ def evolve(
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
     logdir, resume = _path(logdir, "--logdir"), _path(resume, "--resume")
+    _TERMINATED.clear()                    # this command's SIGTERM, not an earlier one's
     shards = _eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
     where = _Where()
     with _terminate_as_interrupt() as terminated:
@@ -295,6 +296,7 @@ def _stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | N
 
 
 def _stopped(where: _Where, terminated: bool) -> None:
+    terminated = terminated or bool(_TERMINATED)
     how = "Terminated" if terminated else "Interrupted"
     err.print(_stop_line(how, where.run_dir, where.holds(), where.again, where.resuming),
               markup=False, highlight=False, soft_wrap=True)
@@ -480,10 +482,11 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
             if progress is not None:
                 progress.stop()
             _close_writers(reporters)
-        how = "Terminated" if terminated else "Interrupted"
-        err.print(_stop_line(how, run_dir, checkpoints.saved, again), markup=False,
-                  highlight=False, soft_wrap=True)
-        raise typer.Exit(code=143 if terminated else 130)
+        stopped = bool(terminated or _TERMINATED)      # SIGTERM here or before the run loop
+        err.print(_stop_line("Terminated" if stopped else "Interrupted", run_dir,
+                             checkpoints.saved, again), markup=False, highlight=False,
+                  soft_wrap=True)
+        raise typer.Exit(code=143 if stopped else 130)
     except RunError as e:
         if progress is not None:
             progress.stop()
@@ -616,6 +619,7 @@ def sweep(
     from .sweep import table_rows, write_outputs
 
     logdir, out = _path(logdir, "--logdir"), _path(out, "--out")
+    _TERMINATED.clear()
     budget_list = _parse_list(budgets, float, "--budgets")
     seed_list = _parse_list(seeds, int, "--seeds")
     if checkpoint_every < 1 or log_every < 1:
