@@ -86,3 +86,22 @@ def test_substitute_rule_demotes_the_lower_ranked_of_a_species_and_its_nearest_p
         adm = update(adm, species, ids, gated, SUBSTITUTE, near)
         seen.append(adm.partner.tolist())
     assert seen == [[True] * 3, [True, True, False], [True, True, False]]
+
+
+def test_a_checkpoint_with_a_damaged_admission_state_is_refused():
+    from dataclasses import replace
+
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+    from swarmcode_torch.coevo.evolve import Evolution
+
+    cfg = SwarmCoDeConfig(scenario="one-niche", population=8, swarm_size=4, trials=1, ticks=10,
+                          generations=2, device="cpu", compile=False)
+    ev = Evolution(cfg)
+    ev.step()
+    d = ev.state_dict()
+    assert d["admission"]["partner"].numel() == d["next_species_id"]
+    assert Evolution.from_checkpoint(d, cfg).state.admission is not None
+    short = {**d, "admission": {k: v[:-1] for k, v in d["admission"].items()}}
+    with pytest.raises(ValueError, match="admission"):
+        Evolution.from_checkpoint(short, cfg)
+    assert Evolution.from_checkpoint({**d, "admission": None}, replace(cfg)).state.admission is None

@@ -47,7 +47,9 @@ def test_a_user_fitness_replaces_the_team_score_and_the_rest_applies_to_it():
     assert twice.species == base.species
     assert twice.config.fitness_function == "test_custom_fitness.doubled"
     assert base.config.fitness_function is None
-    assert twice.evolution.ctx.score_fn is doubled and base.evolution.ctx.score_fn is team_scores
+    # the run calls the function through a check (copies of its arguments, bounded scores)
+    assert twice.evolution.ctx.score_fn.__wrapped__ is doubled
+    assert base.evolution.ctx.score_fn is team_scores
 
 
 def test_a_custom_run_records_its_function_and_resume_needs_it(tmp_path):

@@ -147,12 +147,20 @@ def test_ctrl_c_checkpoints_the_last_finished_generation(tmp_path, wrapped):
                 except KeyboardInterrupt as e:
                     raise ImportError("initialization failed") from e
 
+    # after the records' step (the reporters past the CheckpointReporter): generation 2 is whole
     ev = Evolution(TINY)
     write_config(tmp_path, TINY)
     with pytest.raises(KeyboardInterrupt):
-        run(ev, tmp_path, [Interrupt()])
+        run(ev, tmp_path, [CheckpointReporter(tmp_path, every=100), Interrupt()])
     assert load_checkpoint(tmp_path)["generation"] == 2
     assert resume(tmp_path).state.generation == 2
+    # inside the records' step (no CheckpointReporter: every reporter records): generation 1's
+    # records may be half written, so the checkpoint is of the last generation recorded whole
+    (tmp_path / "checkpoint.pt").unlink()
+    ev = Evolution(TINY)
+    with pytest.raises(KeyboardInterrupt):
+        run(ev, tmp_path, [Interrupt()])
+    assert load_checkpoint(tmp_path)["generation"] == 1
 
 
 def test_interrupt_of_finds_an_interrupt_in_the_chain_only():

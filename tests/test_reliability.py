@@ -295,13 +295,21 @@ def test_a_full_disk_in_tensorboard_ends_the_run_in_one_line(tmp_path, monkeypat
     _full_disk_line(r, run, 2)
 
 
-def test_a_real_full_disk_dev_full_is_one_line(finished_run, tmp_path):
+def test_a_real_full_disk_dev_full_is_one_line(finished_run, tmp_path, monkeypatch):
     if not os.path.exists("/dev/full"):
         pytest.skip("no /dev/full")
     run = _copy_run(finished_run, tmp_path / "run")
-    (run / "teams.jsonl").unlink()
-    (run / "teams.jsonl").symlink_to("/dev/full")       # every write to it: ENOSPC, for real
+    # teams.jsonl opened for appending is /dev/full: every write to it is ENOSPC, for real (a
+    # link to /dev/full is refused: test_links_planted_in_a_run_directory_are_never_followed)
+    real_open = os.open
+
+    def to_dev_full(path, flags, *args, **kw):
+        if os.path.basename(os.fspath(path)) == "teams.jsonl" and flags & os.O_APPEND:
+            return real_open("/dev/full", os.O_WRONLY)
+        return real_open(path, flags, *args, **kw)
+    monkeypatch.setattr(os, "open", to_dev_full)
     r = invoke("evolve", "--resume", run, "--generations", 4, *RFAST)
+    monkeypatch.undo()
     _full_disk_line(r, run, 2)
 
 
@@ -468,6 +476,11 @@ def test_a_run_made_before_runs_kept_copies_still_resumes_and_replays(finished_r
     run = _copy_run(finished_run, tmp_path / "run")
     (run / "scenario.toml").unlink()
     (run / "hardware.toml").unlink()
+    # such a run's checkpoint has no digests of its copies ("run_files"); with them, a copy
+    # that went missing is refused (test_an_edited_or_missing_copy_is_refused_on_resume)
+    d = torch.load(run / "checkpoint.pt", weights_only=True)
+    del d["run_files"]
+    torch.save(d, run / "checkpoint.pt")
     r = invoke("evolve", "--resume", run, "--generations", 3, *RFAST)
     assert r.exit_code == 0, r.output
     assert not (run / "scenario.toml").exists()          # no copy made up after the fact
@@ -486,6 +499,9 @@ def test_a_run_whose_catalog_differs_from_the_installed_one_resumes_with_its_own
                      count=1)
     assert changed != text
     (run / "hardware.toml").write_text(changed)       # as if the installed catalog had changed
+    d = torch.load(run / "checkpoint.pt", weights_only=True)   # since the run started with it
+    d["run_files"] = runs_module.copy_digests(run)
+    torch.save(d, run / "checkpoint.pt")
     assert resume_run(run, generations=3).ctx.scenario.hardware.base_mass == 9.75
     r = invoke("evolve", "--resume", run, "--generations", 3, *RFAST)
     assert r.exit_code == 0, r.output
@@ -676,14 +692,21 @@ def test_unwritable_and_unreadable_paths_are_one_line(finished_run, tmp_path):
 def test_unreadable_run_files_are_one_line(finished_run, tmp_path, monkeypatch):
     # as root, chmod 000 does not deny a read: the read itself is made to fail with EACCES
     run = _copy_run(finished_run, tmp_path / "run")
-    real = Path.read_bytes
+    real, real_open = Path.read_bytes, os.open
+    names = ("summary.json", "config.toml", "s.toml")
 
     def denied(self):
-        if self.name in ("summary.json", "config.toml", "s.toml"):
+        if self.name in names:
             raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(self))
         return real(self)
+
+    def denied_open(path, flags, *args, **kw):
+        if os.path.basename(os.fspath(path)) in names and not flags & os.O_CREAT:
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), os.fspath(path))
+        return real_open(path, flags, *args, **kw)
     scen = _scenario(tmp_path, MINE)
     monkeypatch.setattr(Path, "read_bytes", denied)
+    monkeypatch.setattr(os, "open", denied_open)
     results = [(invoke("inspect", run), run / "summary.json"),
                (invoke("replay", run, "--out", tmp_path / "t.gif"), run / "config.toml"),
                (invoke("evolve", "--scenario", scen, "--logdir", tmp_path / "x"), scen)]

@@ -4,6 +4,8 @@ each team design, and a replay of its best team as a GIF (`swarmcode-torch repla
 
 from __future__ import annotations
 
+import io
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
@@ -11,8 +13,9 @@ from ..coevo.dynamics import median, niche_count, replay, window_stats
 from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
 from .replay_page import HTML_FILE, page_data, write_page
-from .runs import (REPLAY_FILE, RunError, generation_team, load_checkpoint,
-                   read_config, read_summary, read_teams, run_scenario)
+from .runs import (REPLAY_FILE, RunError, _size, atomic_write_bytes, estimate_bytes,
+                   generation_team, load_checkpoint, memory_limit, read_config, read_summary,
+                   read_teams, run_scenario)
 from ..sim.scenario import Scenario
 
 
@@ -94,6 +97,12 @@ def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0
         record = read_summary(run_dir, figures=False)
     designs = record["designs"]
     scenario = run_scenario(run_dir, cfg)        # the run's own copies, when it has them
+    robots = sum(d["count"] for d in designs)
+    need = estimate_bytes(replace(cfg, population=1, trials=1, swarm_size=robots), scenario)
+    limit, what = memory_limit("cpu")
+    if need > limit:
+        raise RunError(f"the team to replay has {robots} robots, which would need about "
+                       f"{_size(need)} of memory, more than the {_size(limit)} of {what}")
     if ticks is None:
         ticks = cfg.ticks or scenario.episode_ticks
     if html:
@@ -109,5 +118,9 @@ def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0
     genome, team = team_genome(designs, cfg.tag_length)
     ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every)
     ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
-    save_gif(ep, out, fps=fps, dpi=dpi)
+    buf = io.BytesIO()
+    save_gif(ep, buf, fps=fps, dpi=dpi)
+    # replaced whole (a temporary file renamed over it): a link at `out` is replaced, never
+    # written through, and a reader never sees half a GIF
+    atomic_write_bytes(out, buf.getvalue())
     return out, dict(ep.metrics)

@@ -17,6 +17,7 @@ replayed).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import re
@@ -26,7 +27,7 @@ from typing import Any, Callable, Iterable
 
 from . import records, runs
 from ..coevo.config import PRESETS, SwarmCoDeConfig
-from ..coevo.evaluation import ScoreFn
+from ..coevo.evaluation import ScoreFn, score_fn_name
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.hardware import catalog_toml_lines, default_catalog
 from ..sim.scenario import EFFECTORS, Scenario, parse_scenario, read_scenario
@@ -164,8 +165,69 @@ class _History:
 
 
 def _check_every(checkpoint_every: int, render_every: int, figure_every: int) -> None:
+    for name, v in (("checkpoint_every", checkpoint_every), ("render_every", render_every),
+                    ("figure_every", figure_every)):
+        if not isinstance(v, int) or isinstance(v, bool):
+            raise TypeError(f"{name} must be an integer, got {v!r:.40}")
     if checkpoint_every < 1 or render_every < 0 or figure_every < 1:
         raise ValueError("checkpoint_every and figure_every must be >= 1, render_every >= 0")
+
+
+def _check_hooks(callback, reporters) -> list:
+    """`callback` callable (or None) and every reporter with callable on_start, on_generation
+    and on_end: TypeError before any file is written, not a crash mid-run. The reporters as a
+    list."""
+    if callback is not None and not callable(callback):
+        raise TypeError(f"callback must be a function of a GenerationResult, got "
+                        f"{type(callback).__name__}")
+    if isinstance(reporters, (str, bytes)) or not hasattr(reporters, "__iter__"):
+        raise TypeError(f"reporters must be a list of reporters, got {type(reporters).__name__}")
+    reporters = list(reporters)
+    for i, r in enumerate(reporters):
+        missing = [m for m in ("on_start", "on_generation", "on_end")
+                   if not callable(getattr(r, m, None))]
+        if missing:
+            raise TypeError(f"reporters[{i}] ({type(r).__name__}) has no {', '.join(missing)} "
+                            "method (a reporter has on_start(ev), on_generation(ev, result) and "
+                            "on_end(ev))")
+    return reporters
+
+
+#: The largest score a user fitness function may return: the mean of a population's scores
+#: stays finite in float32 (3.4e38).
+MAX_SCORE = 1e30
+
+
+def _checked_fitness(fitness: ScoreFn | None) -> ScoreFn | None:
+    """A user fitness function as a run calls it: with copies of the metrics and the cost (a
+    function that edits them in place cannot change what the run records), and its scores
+    refused (ValueError) when beyond +-MAX_SCORE, where a mean would overflow. It keeps the
+    function's name (`score_fn_name`), which the run records."""
+    if fitness is None:
+        return None
+    if not callable(fitness):
+        raise TypeError(f"fitness must be a function (metrics, cost, cfg) -> Tensor, "
+                        f"got {type(fitness).__name__}")
+    if getattr(fitness, "__wrapped_fitness__", False):
+        return fitness
+
+    @functools.wraps(fitness)
+    def checked(metrics, cost, cfg):
+        import torch
+
+        out = fitness({k: v.clone() for k, v in metrics.items()}, cost.clone(), cfg)
+        if isinstance(out, torch.Tensor) and out.numel() and out.is_floating_point():
+            big = out.abs().max()
+            if bool(torch.isfinite(big)) and float(big) > MAX_SCORE:
+                raise ValueError(f"the fitness function {score_fn_name(fitness)} returned a "
+                                 f"score of {float(big):.3g}, beyond the +-{MAX_SCORE:g} a run "
+                                 "can average (scale it down)")
+        return out
+
+    checked.__module__ = getattr(fitness, "__module__", None) or type(fitness).__module__
+    checked.__qualname__ = getattr(fitness, "__qualname__", None) or type(fitness).__qualname__
+    checked.__wrapped_fitness__ = True
+    return checked
 
 
 def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int = 50,
@@ -258,6 +320,8 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     generation (continue with `resume`) and re-raises KeyboardInterrupt.
     """
     _check_every(checkpoint_every, render_every, figure_every)
+    reporters = _check_hooks(callback, reporters)
+    fitness = _checked_fitness(fitness)
     scenario_obj = scenario if isinstance(scenario, Scenario) else None
     if scenario is not None and scenario_obj is None:
         settings["scenario"] = scenario
@@ -285,9 +349,7 @@ def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
     scenario file (a run directory keeps them as scenario.toml). `scenario`: a Scenario object
     to run instead of `cfg.scenario`'s file; `fitness`: a user score function (`evolve`).
     ValueError (ScenarioError is one) otherwise."""
-    if fitness is not None and not callable(fitness):
-        raise TypeError(f"fitness must be a function (metrics, cost, cfg) -> Tensor, "
-                        f"got {type(fitness).__name__}")
+    fitness = _checked_fitness(fitness)
     cfg.validate(bounds=False)
     if scenario is None:
         scen, data = read_scenario(cfg.scenario)
@@ -322,6 +384,12 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
     the run has one), then this part's. RunError (a ValueError) for a directory, config or
     checkpoint that cannot be used."""
     _check_every(checkpoint_every, render_every, figure_every)
+    reporters = _check_hooks(callback, reporters)
+    fitness = _checked_fitness(fitness)
+    if generations is not None and (not isinstance(generations, int)
+                                    or isinstance(generations, bool) or generations < 1):
+        raise ValueError(f"generations must be an integer >= 1 (the total to extend the run "
+                         f"to), got {generations!r:.40}")
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise runs.RunError(f"{run_dir} is not a run directory (no such directory)")

@@ -24,6 +24,7 @@ from rich.table import Table
 
 from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
+from .runs import deferred_signals
 
 class _OneLineErrors(TyperGroup):
     """The command group, with usage errors (an option value that is not a number, an unknown
@@ -115,6 +116,29 @@ def fail(msg: str) -> None:
     raise _Failed(msg)
 
 
+#: The longest path an option takes (PATH_MAX).
+MAX_PATH = 4096
+
+
+def _path(value: str | None, option: str) -> Path | None:
+    """An option's path, checked: not empty (an empty --logdir would write into the working
+    directory; '.' says so), at most MAX_PATH characters, no NUL, and text that can be printed
+    (bytes that are not UTF-8 reach Python as surrogates no message can print)."""
+    if value is None:
+        return None
+    if not value.strip():
+        fail(f"{option} is empty: give a directory ('.' for the working directory)")
+    if len(value) > MAX_PATH or "\0" in value:
+        fail(f"{option}: not a path ({len(value)} characters{', a NUL' if chr(0) in value else ''};"
+             f" at most {MAX_PATH})")
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError:
+        fail(f"{option}: the path {value.encode('utf-8', 'backslashreplace').decode()[:200]} "
+             "is not UTF-8 text; rename it or give another")
+    return Path(value)
+
+
 def _os_fail(e: OSError, doing: str) -> None:
     from .runs import os_error_text
 
@@ -196,12 +220,12 @@ def evolve(
     seed: Annotated[Optional[int], typer.Option(help="Random seed [default: 0].")] = None,
     device: Annotated[Optional[str], typer.Option(metavar=DEVICE_METAVAR, autocompletion=_complete_device, help="Where the run computes: auto (cuda if available), cpu, cuda or cuda:N [default: auto].")] = None,
     compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick [default: on CUDA, and on CPU for >= 50 generations].")] = None,
-    logdir: Annotated[Optional[Path], typer.Option(help="Directory that holds run directories [default: runs].")] = None,
+    logdir: Annotated[Optional[str], typer.Option(metavar="PATH", help="Directory that holds run directories [default: runs].")] = None,
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines when not on a terminal.")] = 10,
     render_every: Annotated[int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")] = 50,
     figure_every: Annotated[int, typer.Option(help="Generations between species-composition figures in TensorBoard (one is also drawn at the end of every run).")] = 50,
-    resume: Annotated[Optional[Path], typer.Option(help="Continue the run in this directory.")] = None,
+    resume: Annotated[Optional[str], typer.Option(metavar="PATH", help="Continue the run in this directory.")] = None,
     preset: Annotated[Optional[str], typer.Option(help="Algorithm settings to start from: default, or paper (the paper's text and nothing beyond it); --set goes on top [default: default].")] = None,
     settings: Annotated[Optional[list[str]], typer.Option("--set", metavar="KEY=VALUE", help="Set an algorithm config key, e.g. --set p_tag_flip=0.0625 (repeatable; keys as in the run's config.toml).")] = None,
     eval_workers: Annotated[int, typer.Option(help="Evaluate each generation in this many shards on Ray actors, one GPU each on CUDA, else CPUs (needs Ray; same results as 1).")] = 1,
@@ -209,26 +233,75 @@ def evolve(
     ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one].")] = None,
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
+    logdir, resume = _path(logdir, "--logdir"), _path(resume, "--resume")
+    _TERMINATED.clear()                    # this command's SIGTERM, not an earlier one's
     shards = _eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
-    with ExitStack() as stack:
-        attach = None if shards is None else (lambda ev: _attach_shards(stack, ev, *shards))
-        ev, run_dir, saved = _start_evolve(
-            stack, scenario=scenario, budget=budget, objective=_objective(objective),
-            generations=generations, population=population, swarm_size=swarm_size,
-            trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
-            logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
-            render_every=render_every, resume=resume, settings=settings, attach=attach, preset=preset,
-            figure_every=figure_every)
-        if ev is None:
-            return
-        _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
-                 figure_every=figure_every)
-        if shards is not None:
-            _print_shard_traffic(ev.ctx.evaluator)
-    console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
-    _print_team(run_dir)
-    console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir "
-                  f"{run_dir.parent}", markup=False, highlight=False)
+    where = _Where()
+    with _terminate_as_interrupt() as terminated:
+        try:
+            with ExitStack() as stack:
+                attach = None if shards is None else (lambda ev: _attach_shards(stack, ev, *shards))
+                ev, run_dir, saved = _start_evolve(
+                    stack, scenario=scenario, budget=budget, objective=_objective(objective),
+                    generations=generations, population=population, swarm_size=swarm_size,
+                    trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
+                    logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
+                    render_every=render_every, resume=resume, settings=settings, attach=attach,
+                    figure_every=figure_every, where=where, preset=preset)
+                if ev is None:
+                    return
+                _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
+                         figure_every=figure_every, where=where)
+                if shards is not None:
+                    _print_shard_traffic(ev.ctx.evaluator)
+            console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
+            _print_team(run_dir)
+            console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard "
+                          f"--logdir {run_dir.parent}", markup=False, highlight=False)
+        except KeyboardInterrupt:
+            _stopped(where, bool(terminated))
+
+
+class _Where:
+    """Where an evolve command stands, for the line an interrupt prints: its run directory (None
+    before one is made or locked), whether it resumes one, the generation its checkpoint file
+    holds (`saved`; the `CheckpointReporter`'s once the run loop has it) and how to continue."""
+
+    def __init__(self):
+        self.run_dir: Path | None = None
+        self.resuming = False
+        self.saved: int | None = None
+        self.checkpoints = None
+        self.again: str | None = None
+
+    def holds(self) -> int | None:
+        return self.checkpoints.saved if self.checkpoints is not None else self.saved
+
+
+def _stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | None,
+               resuming: bool = False) -> str:
+    """The line an interrupted run prints: the generation its checkpoint file really holds, or
+    that there is none."""
+    if run_dir is None:
+        return f"{how}: no run directory was made"
+    if saved is None:
+        if resuming:
+            return f"{how} before the run resumed; {run_dir} is unchanged"
+        return (f"{how}: no checkpoint was written yet, so {run_dir} holds no generation to "
+                "continue from; start the run again")
+    done = "no generation finished yet" if saved == 0 else \
+        f"generations 0-{saved - 1} recorded"
+    again = again or f"swarmcode-torch evolve --resume {run_dir}"
+    return (f"{how}: checkpoint of generation {saved} is in {run_dir} ({done}); continue "
+            f"with: {again}")
+
+
+def _stopped(where: _Where, terminated: bool) -> None:
+    terminated = terminated or bool(_TERMINATED)
+    how = "Terminated" if terminated else "Interrupted"
+    err.print(_stop_line(how, where.run_dir, where.holds(), where.again, where.resuming),
+              markup=False, highlight=False, soft_wrap=True)
+    raise typer.Exit(code=143 if terminated else 130)
 
 
 def _eval_shards_option(eval_workers: int, cpus: float | None, address: str | None):
@@ -285,7 +358,7 @@ def _print_shard_traffic(evaluator) -> None:
 def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
                   swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
                   log_every, render_every, resume, settings, attach=None, figure_every=50,
-                  preset=None):
+                  where: "_Where | None" = None, preset=None):
     """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
     The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
@@ -305,6 +378,9 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
                  swarm_size=swarm_size, trials=trials, ticks=ticks, seed=seed, compile=compile)
     try:
         if resume is not None:
+            if generations is not None and generations < 1:
+                fail(f"--generations must be >= 1 (the total to extend the run to), got "
+                     f"{generations}")
             extra = [k.replace("_", "-") for k, v in given.items() if v is not None]
             extra += ["set"] if settings else []
             extra += ["preset"] if preset is not None else []
@@ -318,8 +394,12 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
                 fail(f"--resume {resume} is not a run directory (no such directory)")
             run_dir = resume
             stack.enter_context(RunLock(run_dir))
+            if where is not None:
+                where.run_dir, where.resuming = run_dir, True
             loaded = load_run(run_dir)
             cfg, ck = loaded[0], loaded[1]
+            if where is not None:
+                where.saved = ck["generation"]
             target = cfg.generations if generations is None else generations
             if target <= ck["generation"]:
                 console.print(f"{run_dir} already has {ck['generation']} generations"
@@ -353,6 +433,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
         except OSError as e:
             _os_fail(e, f"--logdir {logdir}: cannot make a run directory")
         stack.enter_context(RunLock(run_dir))
+        if where is not None:
+            where.run_dir = run_dir
         write_run_files(run_dir, ev.cfg, data, ev.ctx.scenario.hardware)
         console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
                       f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
@@ -366,7 +448,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
 
 def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
              render_every: int = 0, saved: int | None = None,
-             again: str | None = None, figure_every: int = 50) -> None:
+             again: str | None = None, figure_every: int = 50,
+             where: _Where | None = None) -> None:
     """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints.
     Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
     failed write (a full disk: OSError from the checkpoint, summary.json, teams.jsonl or
@@ -375,15 +458,19 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     generation of the checkpoint the run resumed from; `again` is the command to continue with
     (default: swarmcode-torch evolve --resume RUN_DIR)."""
     from .distributed import ShardError
-    from .runs import CheckpointReporter, SummaryReporter, os_error_text, run
+    from .runs import CheckpointReporter, RunError, SummaryReporter, os_error_text, run
 
     again = again or f"swarmcode-torch evolve --resume {run_dir}"
-    progress = _Progress(ev.cfg.generations, ev.state.generation, log_every)
     checkpoints = CheckpointReporter(run_dir, checkpoint_every)
     checkpoints.saved = saved
-    reporters = [progress, SummaryReporter(run_dir)]
+    if where is not None:
+        where.run_dir, where.checkpoints, where.again = run_dir, checkpoints, again
+    reporters: list = []
     terminated: list[int] = []
+    progress = None
     try:
+        progress = _Progress(ev.cfg.generations, ev.state.generation, log_every)
+        reporters = [progress, SummaryReporter(run_dir)]
         with _quiet_thread_os_errors():
             from .reporting import CsvReporter, TensorBoardReporter
 
@@ -393,11 +480,20 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
             with _terminate_as_interrupt() as terminated:
                 run(ev, run_dir, reporters)
     except KeyboardInterrupt:
-        progress.stop()
-        how = "Terminated" if terminated else "Interrupted"
-        err.print(f"{how}: checkpoint of generation {ev.state.generation} written to "
-                  f"{run_dir}; continue with: {again}", markup=False, highlight=False)
-        raise typer.Exit(code=143 if terminated else 130)
+        with deferred_signals(deliver=False):      # the writers close whole (TensorBoard's thread)
+            if progress is not None:
+                progress.stop()
+            _close_writers(reporters)
+        stopped = bool(terminated or _TERMINATED)      # SIGTERM here or before the run loop
+        err.print(_stop_line("Terminated" if stopped else "Interrupted", run_dir,
+                             checkpoints.saved, again), markup=False, highlight=False,
+                  soft_wrap=True)
+        raise typer.Exit(code=143 if stopped else 130)
+    except RunError as e:
+        if progress is not None:
+            progress.stop()
+        _close_writers(reporters)
+        fail(f"{e}; the last checkpoint is of generation {checkpoints.saved}")
     except OSError as e:
         progress.stop()
         _close_writers(reporters)
@@ -425,6 +521,7 @@ def _close_writers(reporters) -> None:
         if writer is not None:
             try:
                 writer.close()
+                r.writer = None
             except Exception:  # noqa: BLE001 - the run already failed; this is cleanup
                 pass
 
@@ -504,8 +601,8 @@ def sweep(
     ticks: Annotated[Optional[int], typer.Option(help="Episode length [default: the scenario's].")] = None,
     device: Annotated[Optional[str], typer.Option(metavar=DEVICE_METAVAR, autocompletion=_complete_device, help="auto (cuda if available), cpu, cuda or cuda:N [default: auto].")] = None,
     compile: Annotated[Optional[bool], typer.Option("--compile/--no-compile", help="torch.compile the tick.")] = None,
-    logdir: Annotated[Optional[Path], typer.Option(help="Directory that holds the new sweep directory, sweep-<time>, as evolve's --logdir holds run directories [default: runs].")] = None,
-    out: Annotated[Optional[Path], typer.Option(help="The sweep directory itself [default: LOGDIR/sweep-<time>]; run again with the same --out to resume.")] = None,
+    logdir: Annotated[Optional[str], typer.Option(metavar="PATH", help="Directory that holds the new sweep directory, sweep-<time>, as evolve's --logdir holds run directories [default: runs].")] = None,
+    out: Annotated[Optional[str], typer.Option(metavar="PATH", help="The sweep directory itself [default: LOGDIR/sweep-<time>]; run again with the same --out to resume.")] = None,
     checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
     log_every: Annotated[int, typer.Option(help="Generations between log lines off a terminal.")] = 50,
     preset: Annotated[Optional[str], typer.Option(help="Algorithm settings to start from, as in evolve [default: default].")] = None,
@@ -524,6 +621,8 @@ def sweep(
     from ..sim.scenario import read_scenario
     from .sweep import table_rows, write_outputs
 
+    logdir, out = _path(logdir, "--logdir"), _path(out, "--out")
+    _TERMINATED.clear()
     budget_list = _parse_list(budgets, float, "--budgets")
     seed_list = _parse_list(seeds, int, "--seeds")
     if checkpoint_every < 1 or log_every < 1:
@@ -770,8 +869,9 @@ def _print_team(run_dir: Path) -> None:
 
 
 @app.command()
-def inspect(run_dir: Annotated[Path, typer.Argument(help="A run directory.")]) -> None:
+def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")]) -> None:
     """Show the best team of a run: robots per design, hardware, cost and behavior trees."""
+    run_dir = _path(run_dir, "RUN_DIR")
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
     designs = _print_team(run_dir)
@@ -803,7 +903,7 @@ def _capabilities(run_dir: Path, designs: list[dict]):
 
 @app.command()
 def dynamics(
-    run_dir: Annotated[Path, typer.Argument(help="A run directory.")],
+    run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")],
     window: Annotated[Optional[list[str]], typer.Option(help="Generations A:B (from A to before B); repeatable [default: every 100, and the last 50].")] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
 ) -> None:
@@ -811,6 +911,8 @@ def dynamics(
     and extinction per generation, ages and lifetimes, over windows of generations."""
     from .analysis import run_dynamics
     from .runs import RunError
+
+    run_dir = _path(run_dir, "RUN_DIR")
 
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
@@ -850,8 +952,8 @@ def dynamics(
 
 @app.command()
 def replay(
-    run_dir: Annotated[Path, typer.Argument(help="A run directory.")],
-    out: Annotated[Optional[Path], typer.Option(help="Output file [default: RUN_DIR/team.gif, with --html RUN_DIR/team.html].")] = None,
+    run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")],
+    out: Annotated[Optional[str], typer.Option(metavar="PATH", help="Output file [default: RUN_DIR/team.gif, with --html RUN_DIR/team.html].")] = None,
     generation: Annotated[Optional[int], typer.Option(help="Replay this generation's best team instead of the run's.")] = None,
     seed: Annotated[int, typer.Option(help="Seed of the random environment.")] = 0,
     ticks: Annotated[Optional[int], typer.Option(help="Episode length [default: the run's].")] = None,
@@ -862,6 +964,8 @@ def replay(
     interactive page)."""
     from .analysis import replay_run
     from .runs import RunError
+
+    run_dir, out = _path(run_dir, "RUN_DIR"), _path(out, "--out")
 
     from ..coevo.config import MAX_SEED, UPPER_BOUNDS
 

@@ -66,6 +66,64 @@ def require_ray(what: str):
     return ray
 
 
+#: The address a local Ray cluster (no --ray-address) listens on.
+LOCAL_NODE_IP = "127.0.0.1"
+#: Seconds to wait for a Ray cluster at HOST:PORT to answer before giving up
+#: (SWARMCODE_RAY_CONNECT_TIMEOUT overrides it).
+RAY_CONNECT_TIMEOUT = 15.0
+#: The HTTP/2 client preface and an empty SETTINGS frame: a Ray head (its GCS, a gRPC server)
+#: answers them with a SETTINGS frame of its own.
+_H2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + b"\x00\x00\x00\x04\x00\x00\x00\x00\x00"
+
+
+def _connect_timeout() -> float:
+    try:
+        t = float(os.environ.get("SWARMCODE_RAY_CONNECT_TIMEOUT", RAY_CONNECT_TIMEOUT))
+    except ValueError:
+        t = RAY_CONNECT_TIMEOUT
+    return t if 0 < t < 3600 else RAY_CONNECT_TIMEOUT
+
+
+def check_ray_address(address: str, what: str) -> None:
+    """RayUnavailable, within `_connect_timeout()` seconds, unless a HOST:PORT address answers
+    as a Ray head does (a gRPC server: it answers the HTTP/2 preface with a SETTINGS frame):
+    a closed port, a host that does not answer and a server of another kind are one line here,
+    where `ray.init` would wait for them for a long time. 'auto' and ray:// addresses are left
+    to Ray."""
+    import socket
+
+    if address == "auto" or "://" in address:
+        return
+    host, sep, port_text = address.rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host or not port_text.isdigit() or not 0 < int(port_text) < 65536:
+        raise RayUnavailable(f"{what}: --ray-address must be auto or HOST:PORT, got "
+                             f"{address[:100]!r}")
+    timeout = _connect_timeout()
+    where = f"the Ray cluster at {address}"
+    try:
+        with socket.create_connection((host, int(port_text)), timeout=timeout) as sock:
+            sock.settimeout(timeout)
+            sock.sendall(_H2_PREFACE)
+            answer = b""
+            deadline = time.monotonic() + timeout
+            while len(answer) < 9 and time.monotonic() < deadline:
+                chunk = sock.recv(9 - len(answer))
+                if not chunk:
+                    break
+                answer += chunk
+    except socket.timeout:
+        raise RayUnavailable(f"{what}: cannot join {where}: no answer within {timeout:g} s") \
+            from None
+    except OSError as e:
+        raise RayUnavailable(f"{what}: cannot join {where} "
+                             f"({e.strerror or type(e).__name__})") from None
+    if len(answer) < 9 or answer[3] != 0x04:
+        raise RayUnavailable(f"{what}: cannot join {where}: it does not answer as a Ray head "
+                             "(no gRPC answer); give the address of the head's GCS, "
+                             "HOST:6379 by default")
+
+
 @contextmanager
 def ray_session(address: str | None, what: str) -> Iterator[Any]:
     """Ray, connected: the session already open in this process (as it is), else a new one:
@@ -77,9 +135,13 @@ def ray_session(address: str | None, what: str) -> Iterator[Any]:
         return
     try:
         if address is None:
-            ray.init(include_dashboard=False)
+            # a local cluster is one node: it listens on the loopback address only
+            ray.init(include_dashboard=False, _node_ip_address=LOCAL_NODE_IP)
         else:
+            check_ray_address(address, what)
             ray.init(address=address)
+    except RayUnavailable:
+        raise
     except Exception as e:  # noqa: BLE001 - any failure to connect is one line
         where = f"join the Ray cluster at {address}" if address else "start a local Ray cluster"
         raise RayUnavailable(f"{what}: cannot {where} ({one_line(e)})") from None

@@ -347,15 +347,16 @@ def save_png(episode: Episode, path: str | Path, index: int = -1, dpi: int = 100
 
 
 def save_gif(episode: Episode, path: str | Path, fps: float = 10, dpi: int = 80) -> Path:
-    """Write every snapshot of the episode as an animated GIF (looping)."""
+    """Write every snapshot of the episode as an animated GIF (looping) to `path` (a file name,
+    or a binary file object)."""
     from PIL import Image
-    path = Path(path)
+    path = Path(path) if isinstance(path, (str, Path)) else path
     cv = _Canvas(episode, dpi)
     frames = [Image.fromarray(cv.render(s)).quantize(colors=128, method=Image.Quantize.MEDIANCUT)
               for s in episode.snapshots]
     duration = max(int(round(1000.0 / fps)), 20)
-    frames[0].save(path, save_all=True, append_images=frames[1:], duration=duration, loop=0,
-                   optimize=False)
+    frames[0].save(path, format="GIF", save_all=True, append_images=frames[1:],
+                   duration=duration, loop=0, optimize=False)
     return path
 
 

@@ -108,15 +108,20 @@ class TensorBoardReporter:
         # the figure redraws the whole history with matplotlib: on a 2-core VM, a 300-generation
         # four-niche run at 20 ticks took 162 s with a figure every 10 generations, 133 s every
         # 50; on a GPU a generation takes about 0.1 s, less than one figure
-        from torch.utils.tensorboard import SummaryWriter
-
-        self.writer = SummaryWriter(log_dir=str(run_dir))
+        self.run_dir = Path(run_dir)
+        self.writer = None
         self.figure_every = max(1, figure_every)
         self.render_every = render_every
         self._figure_step: int | None = None      # the generation of the last figure drawn
 
     def on_start(self, ev: Evolution) -> None:
-        self.writer.add_text("config", config_markdown(ev), ev.state.generation)
+        # on a resume, events of the generations the run computes again (those from its
+        # checkpoint on) are purged: TensorBoard shows each generation once
+        from torch.utils.tensorboard import SummaryWriter
+
+        gen = ev.state.generation
+        self.writer = SummaryWriter(log_dir=str(self.run_dir), purge_step=gen if gen else None)
+        self.writer.add_text("config", config_markdown(ev), gen)
 
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
         step = result.generation
@@ -140,12 +145,19 @@ class TensorBoardReporter:
             self._figure_step = step
 
     def on_end(self, ev: Evolution) -> None:
+        if self.writer is None:
+            return
         if ev.state.history:
             step = ev.state.history[-1]["generation"]
             if self._figure_step != step:       # the last generation's figure, once
                 self._figure(ev, step)
             self._hparams(ev, step)
-        self.writer.close()
+        self.close()
+
+    def close(self) -> None:
+        """Flush and close the event file (its writer thread ends)."""
+        if self.writer is not None:
+            self.writer.close()
 
     def _hparams(self, ev: Evolution, step: int) -> None:
         # SummaryWriter.add_hparams would write into a new sub-run; these summaries go into the
@@ -219,10 +231,23 @@ def _number(text: str):
 def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[str]]:
     """The rows of a metrics.csv (numbers as int or float, empty cells None; rows cut short by
     an interruption, or whose generation is not a number, are skipped) and its header. With
-    `raw`, the cells other than `generation` are kept as text."""
-    with open(path, newline="") as f:
-        reader = csv.DictReader(f)
+    `raw`, the cells other than `generation` are kept as text. The file is read without
+    following a link and up to `runs.MAX_RECORD_BYTES`; RunError naming the file for one that
+    cannot be read, is not UTF-8 or not CSV, or whose header is not metrics.csv's (no
+    `generation` column, or columns that are no tag: a resume would otherwise drop its rows)."""
+    from .runs import MAX_RECORD_BYTES, RunError, read_text
+
+    text = read_text(path, MAX_RECORD_BYTES)
+    try:
+        reader = csv.DictReader(io.StringIO(text, newline=""))
         columns = list(reader.fieldnames or [])
+        unknown = [c for c in columns if c != "generation" and c not in SCALAR_TAGS]
+        if columns and ("generation" not in columns or unknown or len(set(columns)) < len(columns)):
+            what = (f"unknown columns {', '.join(repr(c[:40]) for c in unknown[:5])}" if unknown
+                    else "no 'generation' column" if "generation" not in columns
+                    else "a column named twice")
+            raise RunError(f"{path}: not a metrics.csv header ({what}); restore the header or "
+                           "move the file away")
         rows = []
         for r in reader:
             if None in r or any(v is None for v in r.values()):
@@ -234,4 +259,6 @@ def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[st
                 continue
             row["generation"] = gen
             rows.append(row)
+    except csv.Error as e:
+        raise RunError(f"{path}: malformed CSV ({e})") from None
     return rows, columns

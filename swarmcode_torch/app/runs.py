@@ -9,27 +9,32 @@ into it. docs/RELIABILITY.md lists what the files promise and the tests that sho
 from __future__ import annotations
 
 import errno
+import hashlib
 import io
 import json
 import math
 import os
 import pickle
 import re
+import signal
 import socket
 import sys
+import threading
 import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Callable, Iterable, Protocol
+from typing import Any, Callable, Iterable, Iterator, Protocol
 
 import torch
 
 from ..coevo.config import SwarmCoDeConfig, with_overrides
 from ..coevo.evolve import Evolution, GenerationResult
 from . import records
-from ..sim.hardware import (Catalog, CatalogError, catalog_toml_lines, default_catalog,
+from ..sim.hardware import (MAX_NESTING, Catalog, CatalogError, nesting_depth, catalog_toml_lines, default_catalog,
                             default_catalog_bytes, parse_catalog)
-from ..sim.scenario import Scenario, load_scenario
+from ..sim.bt import NUM_OPCODES
+from ..sim.scenario import Scenario, load_scenario, parse_scenario
 
 try:
     import fcntl
@@ -57,7 +62,14 @@ TABLE_MD, TABLE_CSV, BUDGET_PLOT = "table.md", "table.csv", "budget.png"
 #: Files of a run directory written with `atomic_write_bytes`; a temporary `.NAME.xxxxxxxx` of
 #: one of them (or of any file that exists) left by a killed write is removed on start.
 ATOMIC_FILES = (CONFIG_FILE, CHECKPOINT_FILE, SUMMARY_FILE, SCENARIO_COPY, HARDWARE_COPY,
-                METRICS_FILE, TABLE_MD, TABLE_CSV)
+                METRICS_FILE, TEAMS_FILE, REPLAY_FILE, TABLE_MD, TABLE_CSV)
+#: The most bytes read from a text file of a run or a scenario (config.toml, scenario.toml,
+#: hardware.toml, summary.json; a scenario file and the catalog it names): far above any real
+#: one, far below what would exhaust memory.
+MAX_TEXT_BYTES = 16 * 2 ** 20
+#: The most bytes read from teams.jsonl and metrics.csv (one record a generation).
+MAX_RECORD_BYTES = 2 * 2 ** 30
+
 #: The memory assumed when the machine's cannot be read.
 FALLBACK_MEMORY = 64 * 2 ** 30
 
@@ -86,6 +98,103 @@ def current_umask() -> int:
     return mask
 
 
+def interrupt_point(what: str) -> None:
+    """Called after each step of a run that writes (a file replaced or appended to) and after
+    each generation is computed; does nothing. Tests replace it to interrupt or kill a run at
+    every such point (tests/test_reliability.py, the interrupt sweep)."""
+
+
+@contextmanager
+def deferred_signals(deliver: bool = True) -> Iterator[list[int]]:
+    """Within the block Ctrl-C (SIGINT) and SIGTERM are held, not acted on: a step that must
+    not be split (a generation's records and its checkpoint; the checkpoint written on an
+    interrupt) completes, then the first held signal is delivered to the handler that was in
+    place (Ctrl-C's KeyboardInterrupt, the CLI's SIGTERM handler, or the default action). Off
+    the main thread signals cannot be handled and the block runs as it is. `deliver=False`:
+    held signals are dropped (a second Ctrl-C while a stopping run writes its checkpoint or
+    closes its files: the stop is under way). Yields the list of held signal numbers."""
+    held: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield held
+        return
+
+    def hold(signum, frame):
+        held.append(signum)
+
+    previous = {}
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            previous[sig] = signal.signal(sig, hold)
+    except (ValueError, OSError):          # pragma: no cover - no signals here
+        for sig, h in previous.items():
+            signal.signal(sig, h)
+        yield held
+        return
+    failed = True
+    try:
+        yield held
+        failed = False
+    finally:
+        for sig, h in previous.items():
+            signal.signal(sig, h if h is not None else signal.SIG_DFL)
+        if held and deliver and not failed:  # an error in the block is reported, not replaced
+            sig = held[0]
+            h = previous.get(sig)
+            if callable(h):
+                h(sig, None)
+            elif h != signal.SIG_IGN:
+                signal.raise_signal(sig)   # the default action, as if it arrived now
+
+
+def open_nofollow(path: Path, flags: int, mode: int = 0o666) -> int:
+    """os.open that never follows a symbolic link at `path` (O_NOFOLLOW): a run's files are its
+    own, and a link planted in a run directory must not make a run read or write elsewhere.
+    OSError (ELOOP) for a link, reported as "is a symbolic link"."""
+    try:
+        return os.open(path, flags | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0),
+                       mode)
+    except OSError as e:
+        if e.errno == errno.ELOOP or (e.errno == errno.EMLINK and os.path.islink(path)):
+            raise OSError(errno.ELOOP, "is a symbolic link (refused: a run's files must be "
+                          "its own)", str(path)) from None
+        raise
+
+
+def read_file_bytes(path: Path, limit: int = MAX_TEXT_BYTES) -> bytes:
+    """The bytes of a regular file, opened without following a link (`open_nofollow`), read up
+    to `limit` bytes: OSError for a link, a file that is not regular (a FIFO, a device) or one
+    larger than `limit` (EFBIG), before more than `limit` bytes are read."""
+    fd = open_nofollow(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    try:
+        st = os.fstat(fd)
+        import stat as _stat
+        if not _stat.S_ISREG(st.st_mode):
+            raise OSError(errno.EINVAL, "not a regular file", str(path))
+        if st.st_size > limit:
+            raise OSError(errno.EFBIG, f"file too large ({st.st_size} bytes, at most {limit})",
+                          str(path))
+        chunks, total = [], 0
+        while True:
+            b = os.read(fd, min(1 << 20, limit + 1 - total))
+            if not b:
+                break
+            chunks.append(b)
+            total += len(b)
+            if total > limit:
+                raise OSError(errno.EFBIG, f"file too large (more than {limit} bytes)",
+                              str(path))
+        return b"".join(chunks)
+    finally:
+        os.close(fd)
+
+
+def check_nesting(text: str, source: str, error=None) -> None:
+    """`error` (RunError by default) naming `source` when `text` nests deeper than MAX_NESTING."""
+    d = nesting_depth(text)
+    if d > MAX_NESTING:
+        raise (error or RunError)(f"{source}: nested {d} levels deep (at most {MAX_NESTING})")
+
+
 def _write_all(fd: int, data: bytes) -> None:
     view = memoryview(data)
     while view:
@@ -108,11 +217,12 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
-        os.replace(tmp, path)
+        os.replace(tmp, path)              # replaces a link at `path`, never writes through it
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+    interrupt_point(path.name)
 
 
 _TEMP_NAME = re.compile(r"^\.(?P<target>.+)\.[A-Za-z0-9_]{8}$")
@@ -148,9 +258,9 @@ def repair_teams(run_dir: Path) -> int:
     file is truncated to its last complete line, so that the next record starts a line of its
     own. Returns the number of bytes set aside (0: the file was whole)."""
     path = Path(run_dir) / TEAMS_FILE
-    if not path.is_file():
+    if not path.exists() and not path.is_symlink():
         return 0
-    with open(path, "rb+") as f:
+    with os.fdopen(open_nofollow(path, os.O_RDWR), "rb+") as f:
         size = f.seek(0, os.SEEK_END)
         if size == 0:
             return 0
@@ -168,7 +278,7 @@ def repair_teams(run_dir: Path) -> int:
                 break
         f.seek(cut)
         tail = f.read()
-        fd = os.open(str(path) + PARTIAL_SUFFIX, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+        fd = open_nofollow(str(path) + PARTIAL_SUFFIX, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
         try:
             _write_all(fd, tail + b"\n")
             os.fsync(fd)
@@ -181,12 +291,40 @@ def repair_teams(run_dir: Path) -> int:
 
 
 def append_line(path: Path, line: str) -> None:
-    """Append one line to a file (one os.write per chunk; no buffering in Python)."""
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+    """Append one line to a file (one os.write per chunk; no buffering in Python); a link at
+    `path` is refused (`open_nofollow`)."""
+    fd = open_nofollow(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT)
     try:
         _write_all(fd, (line + "\n").encode("utf-8"))
     finally:
         os.close(fd)
+    interrupt_point(Path(path).name)
+
+
+def trim_teams(run_dir: Path, generation: int) -> int:
+    """Drop the records of teams.jsonl of generations >= `generation` (those a resume from a
+    checkpoint of `generation` computes again), so that the file keeps one record per
+    generation; the file is rewritten atomically, and only when something is dropped. Returns
+    the number of records dropped."""
+    path = Path(run_dir) / TEAMS_FILE
+    if not path.exists() and not path.is_symlink():
+        return 0
+    data = read_file_bytes(path, MAX_RECORD_BYTES)
+    keep, dropped = [], 0
+    for line in data.splitlines(keepends=True):
+        try:
+            rec = json.loads(line) if nesting_depth(line.decode("utf-8", "replace")) \
+                <= MAX_NESTING else None
+            g = rec.get("generation") if isinstance(rec, dict) else None
+        except (ValueError, RecursionError):
+            g = None
+        if isinstance(g, int) and not isinstance(g, bool) and g >= generation:
+            dropped += 1
+            continue
+        keep.append(line)
+    if dropped:
+        atomic_write_bytes(path, b"".join(keep))
+    return dropped
 
 
 def prepare_run_dir(run_dir: Path) -> None:
@@ -197,12 +335,13 @@ def prepare_run_dir(run_dir: Path) -> None:
 
 
 # ------------------------------------------------------------------ reading run files
-def read_text(path: Path) -> str:
-    """The UTF-8 text of a run file (a byte-order mark is dropped); RunError naming the file
-    when it cannot be read or is not UTF-8."""
+def read_text(path: Path, limit: int = MAX_TEXT_BYTES) -> str:
+    """The UTF-8 text of a run file (a byte-order mark is dropped), read without following a
+    link and up to `limit` bytes (`read_file_bytes`); RunError naming the file when it cannot be
+    read, is a link or too large, or is not UTF-8."""
     path = Path(path)
     try:
-        data = path.read_bytes()
+        data = read_file_bytes(path, limit)
     except OSError as e:
         raise RunError(f"{path} cannot be read ({e.strerror or type(e).__name__})") from None
     try:
@@ -233,7 +372,7 @@ class RunLock:
 
     def _holder(self) -> str:
         try:
-            text = self.path.read_text(encoding="utf-8", errors="replace").strip()
+            text = read_file_bytes(self.path, 4096).decode("utf-8", "replace").strip()
         except OSError:
             text = ""
         return text or "an unknown process"
@@ -241,7 +380,13 @@ class RunLock:
     def acquire(self) -> "RunLock":
         info = f"pid={os.getpid()} host={socket.gethostname()} since={time.strftime('%Y-%m-%dT%H:%M:%S')}\n"
         while True:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666)
+            try:                           # a link planted as the lock file is refused
+                fd = open_nofollow(self.path, os.O_RDWR | os.O_CREAT)
+            except OSError as e:
+                if e.errno == errno.ELOOP:
+                    raise RunError(f"{self.path} is a symbolic link; a run's lock must be its "
+                                   "own file (remove the link)") from None
+                raise
             try:
                 if fcntl is not None:
                     try:
@@ -401,11 +546,24 @@ def read_config(run_dir: Path) -> SwarmCoDeConfig:
     path = Path(run_dir) / CONFIG_FILE
     if not path.is_file():
         raise RunError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
+    text = read_text(path)
+    check_nesting(text, str(path))
     try:
-        d = tomllib.loads(read_text(path))
+        d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise RunError(f"{path}: malformed config ({e})") from None
+    except RecursionError:
+        raise RunError(f"{path}: nested too deeply") from None
+    missing = [k for k in CONFIG_REQUIRED if k not in d]
+    if missing:
+        # an empty or cut config would read as the defaults: another run than the one made
+        raise RunError(f"{path}: {'empty' if not d else 'incomplete'} config (no "
+                       f"{', '.join(missing)}); restore it from the run's checkpoint or backup")
     return config_from_dict(d, str(path))
+
+
+#: Keys every config.toml a run has written holds (each version wrote them all).
+CONFIG_REQUIRED = ("scenario", "generations", "population", "seed")
 
 
 # ------------------------------------------------------------------ a run's own scenario
@@ -437,7 +595,7 @@ def run_scenario_source(run_dir: Path, cfg: SwarmCoDeConfig) -> str:
     any working directory will do), or, in a run directory made before runs kept one, the
     config's scenario."""
     copy = Path(run_dir) / SCENARIO_COPY
-    return str(copy.resolve()) if copy.is_file() else cfg.scenario
+    return str(copy.absolute()) if copy.is_file() or copy.is_symlink() else cfg.scenario
 
 
 def run_catalog(run_dir: Path) -> Catalog | None:
@@ -445,10 +603,10 @@ def run_catalog(run_dir: Path) -> Catalog | None:
     read or is not a valid catalog), or None for a run made before runs kept one (it used the
     installed catalog)."""
     copy = Path(run_dir) / HARDWARE_COPY
-    if not copy.is_file():
+    if not copy.is_file() and not copy.is_symlink():
         return None
     try:
-        data = copy.read_bytes()
+        data = read_file_bytes(copy)
     except OSError as e:
         raise RunError(f"{copy}: cannot be read ({e.strerror or type(e).__name__})") from None
     try:
@@ -462,7 +620,15 @@ def run_scenario(run_dir: Path, cfg: SwarmCoDeConfig) -> Scenario:
     own hardware.toml (`run_catalog`): whatever has become of the installed catalog or of the
     file the scenario named, a resumed or replayed run computes with the catalog it started
     with."""
-    return load_scenario(run_scenario_source(run_dir, cfg), run_catalog(run_dir))
+    copy = Path(run_dir) / SCENARIO_COPY
+    catalog = run_catalog(run_dir)
+    if not copy.is_file() and not copy.is_symlink():
+        return load_scenario(cfg.scenario, catalog)      # a run made before runs kept copies
+    try:
+        data = read_file_bytes(copy)                     # never through a link
+    except OSError as e:
+        raise RunError(f"{copy} cannot be read ({e.strerror or type(e).__name__})") from None
+    return parse_scenario(data, str(copy.absolute()), copy.parent, catalog)
 
 
 def config_differences(a: SwarmCoDeConfig, b: SwarmCoDeConfig, scenario: Scenario | None = None,
@@ -508,6 +674,7 @@ def estimate_bytes(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> in
       (state and constants, distances to the C grip points of the packages, contact pairs);
     - the layouts: population x trials environments of 32 candidate positions for each of the
       K packages (checked against the O obstacles) and each obstacle: 4 x 32 x (K (O + 4) + 2 O);
+    - the start slots: 3 x 8 x N^2 bytes (pairwise distances of the N robots' slots);
     - the programs: population x (4 x 11,664 lookup-table entries + 16 x bt_length + tag_length).
     """
     from ..sim.bt import NUM_COMBOS
@@ -522,6 +689,10 @@ def estimate_bytes(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> in
     envs = 2 * P * T
     batch = envs * N * 16 * (16 + C + min(N, 500))
     layouts = P * T * 4 * 32 * (K * (O + 4) + 2 * O)
+    # the start slots: pairwise distances of the scenario's robots, three [N, N] float64
+    # tensors at once (layout.spawn_slots: cdist, eye, their sum)
+    M = max(N, scenario.num_robots if scenario is not None else 1)
+    layouts += 3 * 8 * M * M
     programs = P * (4 * NUM_COMBOS + 16 * cfg.bt_length + cfg.tag_length)
     return batch + layouts + programs
 
@@ -567,9 +738,36 @@ def check_config(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
 
 
 # ------------------------------------------------------------------ checkpoints
+def copy_digests(run_dir: Path) -> dict[str, str]:
+    """sha256 of the run's scenario.toml and hardware.toml copies (those it has): a checkpoint
+    keeps them ("run_files"), so that a resume notices a copy edited since."""
+    out = {}
+    for name in (SCENARIO_COPY, HARDWARE_COPY):
+        path = Path(run_dir) / name
+        if path.is_file() and not path.is_symlink():
+            out[name] = hashlib.sha256(read_file_bytes(path)).hexdigest()
+    return out
+
+
+def check_copies(run_dir: Path, d: dict) -> None:
+    """RunError naming a scenario.toml or hardware.toml copy whose bytes are not those the
+    checkpoint `d` recorded (edited since the run started; a checkpoint without "run_files",
+    written before they were recorded, is not checked)."""
+    saved = d.get("run_files")
+    if not isinstance(saved, dict):
+        return
+    now = copy_digests(run_dir)
+    for name in (SCENARIO_COPY, HARDWARE_COPY):
+        if saved.get(name) != now.get(name):
+            state = "is missing" if name not in now else "was changed"
+            raise RunError(f"{Path(run_dir) / name} {state} since the run started (its sha256 "
+                           f"is not the one {CHECKPOINT_FILE} recorded); the run computes with "
+                           "its own copy: restore it, or start a new run")
+
+
 def save_checkpoint(run_dir: Path, ev: Evolution) -> Path:
     buf = io.BytesIO()
-    torch.save(ev.state_dict(), buf)
+    torch.save({**ev.state_dict(), "run_files": copy_digests(run_dir)}, buf)
     path = Path(run_dir) / CHECKPOINT_FILE
     atomic_write_bytes(path, buf.getvalue())
     return path
@@ -590,7 +788,8 @@ def read_checkpoint(path: Path) -> dict:
     swarmcode-torch checkpoint."""
     path = Path(path)
     try:
-        d = torch.load(path, map_location="cpu", weights_only=True)
+        with os.fdopen(open_nofollow(path, os.O_RDONLY), "rb") as f:   # never through a link
+            d = torch.load(f, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:
         if "weights only load failed" in str(e).lower() or "unsupported global" in str(e).lower():
             raise RunError(f"{path} was refused: loading it would run code (only tensors, "
@@ -614,9 +813,24 @@ def read_checkpoint(path: Path) -> dict:
 def load_checkpoint(run_dir: Path) -> dict:
     """The checkpoint of a run directory (see `read_checkpoint`)."""
     path = Path(run_dir) / CHECKPOINT_FILE
-    if not path.is_file():
+    if not path.is_file() and not path.is_symlink():
         raise RunError(f"{run_dir} has no {CHECKPOINT_FILE} to resume from")
     return read_checkpoint(path)
+
+
+#: The files of a run directory (each must be the run's own file, never a link).
+RUN_FILES = (CONFIG_FILE, CHECKPOINT_FILE, SUMMARY_FILE, TEAMS_FILE, TEAMS_FILE + PARTIAL_SUFFIX,
+             SCENARIO_COPY, HARDWARE_COPY, LOCK_FILE, METRICS_FILE, REPLAY_FILE)
+
+
+def refuse_links(run_dir: Path) -> None:
+    """RunError naming the first file of `RUN_FILES` in `run_dir` that is a symbolic link: a
+    run reads and writes only its own files, never what a link planted in it points to."""
+    for name in RUN_FILES:
+        path = Path(run_dir) / name
+        if path.is_symlink():
+            raise RunError(f"{path} is a symbolic link; a run's files must be its own (remove "
+                           "the link, or put the file itself there)")
 
 
 def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
@@ -624,15 +838,21 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     config.toml must agree with the config saved in the checkpoint in every key but generations
     and device (RunError otherwise); the scenario is built with the run's own catalog."""
     run_dir = Path(run_dir)
+    refuse_links(run_dir)
     cfg = read_config(run_dir)
     d = load_checkpoint(run_dir)
-    scenario = run_scenario(run_dir, cfg)
+    scenario = run_scenario(run_dir, cfg)       # a damaged copy: the file and field named
+    check_copies(run_dir, d)
     saved = config_from_dict(d["config"], f"{run_dir / CHECKPOINT_FILE} (its config)")
     diff = config_differences(cfg, saved, scenario)
     if diff:
         raise RunError(f"{run_dir / CONFIG_FILE} does not match the config saved in "
                        f"{CHECKPOINT_FILE} (differing keys: {', '.join(diff)}); restore "
                        f"{CONFIG_FILE} or start a new run")
+    metrics = run_dir / METRICS_FILE
+    if metrics.exists() or metrics.is_symlink():
+        from .reporting import read_metrics_csv
+        read_metrics_csv(metrics, raw=True)      # a header a resume would lose rows under
     return cfg, d, scenario
 
 
@@ -657,7 +877,9 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
     check_config(cfg, scenario)
     try:                           # the run keeps the scenario it names; it runs on its copy
         return Evolution.from_checkpoint(d, cfg, fitness, scenario)
-    except (KeyError, TypeError, RuntimeError) as e:
+    except ValueError as e:
+        raise RunError(f"{run_dir / CHECKPOINT_FILE} does not fit the run's config: {e}") from None
+    except (KeyError, TypeError, RuntimeError, IndexError) as e:
         raise RunError(f"checkpoint in {run_dir} is incompatible ({type(e).__name__}: {e})") from None
 
 
@@ -694,7 +916,9 @@ def new_run_dir(logdir: Path, cfg: SwarmCoDeConfig) -> Path:
 # ------------------------------------------------------------------ summary.json
 class SummaryReporter:
     """Rewrites summary.json (atomically) after every generation and appends the generation's
-    best team to teams.jsonl (one JSON object per line)."""
+    best team to teams.jsonl (one JSON object per line). On a start or resume it prepares the
+    directory (`prepare_run_dir`) and drops the records of teams.jsonl past the checkpoint the
+    run continues from (`trim_teams`): those generations are computed again."""
 
     def __init__(self, run_dir: Path):
         self.run_dir = Path(run_dir)
@@ -703,10 +927,11 @@ class SummaryReporter:
 
     def on_start(self, ev: Evolution) -> None:
         prepare_run_dir(self.run_dir)       # no leftover temporary files, no cut-off line
+        trim_teams(self.run_dir, ev.state.generation)
 
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
-        atomic_write_bytes(self.path, json.dumps(records.summary(ev, result), indent=2).encode())
         append_line(self.teams, json.dumps(records.team_line(result)))
+        atomic_write_bytes(self.path, json.dumps(records.summary(ev, result), indent=2).encode())
 
     def on_end(self, ev: Evolution) -> None:
         pass
@@ -715,14 +940,17 @@ class SummaryReporter:
 class CheckpointReporter:
     """Writes checkpoint.pt at the start of a new run (generation 0, so that a run stopped
     before its first periodic checkpoint can still be resumed), every `every` generations and
-    at the end. `saved` is the generation of the checkpoint on disk (None: none yet)."""
+    after the last one (as part of that generation's step: `run` writes the records of a
+    generation, then its checkpoint, with signals held). `saved` is the generation of the
+    checkpoint on disk (None: none yet)."""
 
     def __init__(self, run_dir: Path, every: int):
         self.run_dir, self.every = Path(run_dir), max(1, every)
         self.saved: int | None = None
 
     def on_start(self, ev: Evolution) -> None:
-        if (self.run_dir / CHECKPOINT_FILE).is_file():
+        path = self.run_dir / CHECKPOINT_FILE
+        if path.exists() or path.is_symlink():
             self.saved = ev.state.generation        # resumed from it
         else:
             self._save(ev)
@@ -731,17 +959,27 @@ class CheckpointReporter:
         save_checkpoint(self.run_dir, ev)
         self.saved = ev.state.generation
 
+    def save_state(self, ev: Evolution) -> None:
+        """The checkpoint of `ev`'s state, unless the file holds that generation already."""
+        if self.saved != ev.state.generation:
+            self._save(ev)
+
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
-        if ev.state.generation % self.every == 0:
+        if ev.state.generation % self.every == 0 or ev.done:
             self._save(ev)
 
     def on_end(self, ev: Evolution) -> None:
-        self._save(ev)
+        self.save_state(ev)
 
 
 # ------------------------------------------------------------------ run files read back
 def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+#: The most robots the designs of a summary.json or teams.jsonl record may add up to (the
+#: swarm_size bound); a replay also checks the memory its team needs (`analysis.replay_run`).
+MAX_TEAM = 10_000_000
 
 
 def check_designs(designs: Any, source: str) -> list[dict]:
@@ -769,14 +1007,19 @@ def check_designs(designs: Any, source: str) -> list[dict]:
                 ("dominance", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
                 ("cost", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
                 ("bt", lambda v: isinstance(v, list) and 0 < len(v) <= 4096 and all(
-                    isinstance(x, int) and not isinstance(x, bool) and 0 <= x < 256 for x in v),
-                 "a list of opcodes")):
+                    isinstance(x, int) and not isinstance(x, bool) and 0 <= x < NUM_OPCODES
+                    for x in v),
+                 f"a list of opcodes 0..{NUM_OPCODES - 1}")):
             if key not in d:
                 raise RunError(f"{w}: missing {key!r}")
             if not ok(d[key]):
                 raise RunError(f"{w}.{key}: expected {what}, got {d[key]!r:.60}")
-    if sum(d["count"] for d in designs) < 1:
+    total = sum(d["count"] for d in designs)
+    if total < 1:
         raise RunError(f"{source}: designs: the counts add up to no robot")
+    if total > MAX_TEAM:
+        raise RunError(f"{source}: designs: the counts add up to {total} robots, more than any "
+                       f"run can have ({MAX_TEAM})")
     return designs
 
 
@@ -793,10 +1036,14 @@ def read_summary(run_dir: Path, figures: bool = True) -> dict:
     if not path.is_file():
         raise RunError(f"{run_dir} has no {SUMMARY_FILE} (is it a run directory with a finished "
                        "generation?)")
+    text = read_text(path)
+    check_nesting(text, str(path))
     try:
-        s = json.loads(read_text(path))
+        s = json.loads(text)
     except json.JSONDecodeError as e:
         raise RunError(f"{path}: malformed JSON ({e})") from None
+    except RecursionError:
+        raise RunError(f"{path}: nested too deeply") from None
     if not isinstance(s, dict):
         raise RunError(f"{path}: expected a JSON object")
     for key in _SUMMARY_NUMBERS if figures else ():
@@ -818,9 +1065,12 @@ def read_teams(run_dir: Path) -> dict[int, dict]:
     skipped); {} when the run has no teams.jsonl."""
     path = Path(run_dir) / TEAMS_FILE
     out: dict[int, dict] = {}
-    if not path.is_file():
+    if not path.is_file() and not path.is_symlink():
         return out
-    for line in read_text(path).splitlines():
+    for line in read_text(path, MAX_RECORD_BYTES).splitlines():
+        if nesting_depth(line) > MAX_NESTING:
+            raise RunError(f"{path}: a record nested {nesting_depth(line)} levels deep (at most "
+                           f"{MAX_NESTING})")
         try:
             rec = json.loads(line)
         except json.JSONDecodeError:
@@ -858,23 +1108,50 @@ def interrupt_of(e: BaseException) -> KeyboardInterrupt | None:
 
 def run(ev: Evolution, run_dir: Path, reporters: Iterable[Reporter],
         on_interrupt: Callable[[Path], None] | None = None) -> Evolution:
-    """Run generations until the configured total; Ctrl-C checkpoints the last finished one."""
+    """Run generations until the configured total.
+
+    Each generation is one step that Ctrl-C or SIGTERM cannot split (`deferred_signals`): the
+    reporters up to the last `CheckpointReporter` in `reporters` (the run's records: summary,
+    teams.jsonl, metrics.csv, TensorBoard) write it, then its checkpoint is written when one is
+    due; the reporters after it (a progress callback, a user's) run outside that step. On an
+    interrupt (anywhere: while a generation computes, while the run starts, in the end-of-run
+    work) the state whose records are all written is kept (a generation computed but not yet
+    recorded is dropped: a resume computes it again, identically), its checkpoint written if the
+    file does not hold it yet, and KeyboardInterrupt re-raised; the `CheckpointReporter`'s
+    `saved` then names the generation the file holds."""
     reporters = list(reporters)
-    for r in reporters:
-        r.on_start(ev)
+    marks = [i for i, r in enumerate(reporters) if isinstance(r, CheckpointReporter)]
+    checkpoints = reporters[marks[-1]] if marks else None
+    cut = marks[-1] + 1 if marks else len(reporters)
+    step_reporters, after = reporters[:cut], reporters[cut:]
+    recorded = ev.state                    # the last state whose records are all written
     try:
+        with deferred_signals():
+            for r in reporters:
+                r.on_start(ev)
         while not ev.done:
             result = records.step(ev)
-            for r in reporters:
+            interrupt_point("generation")
+            with deferred_signals():
+                for r in step_reporters:
+                    r.on_generation(ev, result)
+                recorded = ev.state
+            for r in after:
                 r.on_generation(ev, result)
+        for r in reporters:
+            r.on_end(ev)
     except BaseException as e:
         interrupt = interrupt_of(e)
         if interrupt is None:
             raise
-        path = save_checkpoint(run_dir, ev)
+        with deferred_signals(deliver=False):   # a second Ctrl-C cannot split this checkpoint
+            ev.state = recorded
+            if checkpoints is not None:
+                checkpoints.save_state(ev)
+                path = Path(run_dir) / CHECKPOINT_FILE
+            else:
+                path = save_checkpoint(run_dir, ev)
         if on_interrupt:
             on_interrupt(path)
         raise interrupt from None
-    for r in reporters:
-        r.on_end(ev)
     return ev

@@ -12,7 +12,7 @@ from pathlib import Path
 from ..coevo.config import SwarmCoDeConfig
 from ..coevo.dynamics import mean_std
 from ..sim.scenario import Scenario
-from .runs import (BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, TABLE_CSV, TABLE_MD,
+from .runs import (BUDGET_PLOT, atomic_write_bytes, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, TABLE_CSV, TABLE_MD,
                    RunError, config_differences, load_checkpoint, load_run, read_config,
                    read_summary, run_scenario)
 
@@ -83,7 +83,10 @@ def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
     for budget, summaries in by_budget.items():
         row = {"budget": budget, "seeds": len(summaries)}
         for col in COLUMNS[1:]:
-            row[col], row[f"{col}_std"] = mean_std([float(s[col]) for s in summaries])
+            # a figure a run could not give (null in summary.json: not finite) is left out of
+            # the mean; a column no run gives is "none"
+            vals = [float(s[col]) for s in summaries if s.get(col) is not None]
+            row[col], row[f"{col}_std"] = mean_std(vals) if vals else (None, None)
         rows.append(row)
     rows.sort(key=lambda r: math.inf if r["budget"] is None else r["budget"])
     return rows
@@ -128,7 +131,8 @@ def plot(rows: list[dict], path: Path) -> None:
     `matplotlib.figure.Figure` (no pyplot, no backend change) and written as a PNG."""
     from matplotlib.figure import Figure
 
-    rows = [r for r in rows if r["budget"] is not None]
+    rows = [r for r in rows if r["budget"] is not None and r["best_fitness"] is not None
+            and r["num_species"] is not None]
     x = [r["budget"] for r in rows]
     fig = Figure(figsize=(6, 3.6))
     ax1 = fig.subplots()
@@ -141,13 +145,16 @@ def plot(rows: list[dict], path: Path) -> None:
                  marker="s", color="tab:orange", capsize=3)
     ax2.set_ylabel("species in the best team", color="tab:orange")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120, format="png")
 
 
 def write_outputs(rows: list[dict], out_dir: Path) -> list[Path]:
     out_dir = Path(out_dir)
     paths = [out_dir / TABLE_MD, out_dir / TABLE_CSV, out_dir / BUDGET_PLOT]
-    paths[0].write_text(markdown(rows))
-    paths[1].write_text(csv_text(rows))
-    plot(rows, paths[2])
+    # each replaced whole (`atomic_write_bytes`): a link planted in --out is never written through
+    atomic_write_bytes(paths[0], markdown(rows).encode())
+    atomic_write_bytes(paths[1], csv_text(rows).encode())
+    buf = io.BytesIO()
+    plot(rows, buf)
+    atomic_write_bytes(paths[2], buf.getvalue())
     return paths

@@ -7,6 +7,8 @@ function is elementwise over any batch shape.
 
 from __future__ import annotations
 
+import re
+
 import math
 import sys
 from dataclasses import dataclass
@@ -127,13 +129,41 @@ def catalog_from_dict(d, source: str = "hardware catalog") -> Catalog:
 def parse_catalog(data: bytes, source: str) -> Catalog:
     """A Catalog from the bytes of a hardware TOML file (CatalogError naming `source`)."""
     try:
-        d = tomllib.loads(data.decode("utf-8-sig"))
+        text = data.decode("utf-8-sig")
+        if nesting_depth(text) > MAX_NESTING:
+            raise CatalogError(f"{source}: nested {nesting_depth(text)} levels deep (at most "
+                               f"{MAX_NESTING})")
+        d = tomllib.loads(text)
     except UnicodeDecodeError as e:
         raise CatalogError(f"{source}: not UTF-8 text (byte 0x{data[e.start]:02x} at offset "
                            f"{e.start})") from None
     except tomllib.TOMLDecodeError as e:
         raise CatalogError(f"{source}: not valid TOML ({e})") from None
+    except RecursionError:
+        raise CatalogError(f"{source}: nested too deeply") from None
     return catalog_from_dict(d, source)
+
+
+#: The deepest nesting of tables and lists accepted in a TOML or JSON file of a scenario or a
+#: run (real ones nest 4 deep): deeper input is refused before a parser recurses into it.
+MAX_NESTING = 64
+
+
+def nesting_depth(text: str) -> int:
+    """An upper bound of how deep tables and lists nest in TOML or JSON text: the most brackets
+    and braces open at once, counted without parsing (brackets inside strings and dotted keys'
+    tables are not told apart, so the bound is never too low for a parser's recursion)."""
+    if text.count("[") + text.count("{") <= MAX_NESTING:
+        return text.count("[") + text.count("{")
+    depth = most = 0
+    for ch in re.findall(r"[\[\]{}]", text):
+        if ch in "[{":
+            depth += 1
+            if depth > most:
+                most = depth
+        else:
+            depth = max(0, depth - 1)
+    return most
 
 
 def catalog_tables(cat: Catalog) -> dict[str, dict]:

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import math
+import os
+import stat
 import sys
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from .hardware import (R_MAX, R_MIN, Catalog, CatalogError, catalog_from_dict,
-                       default_catalog, parse_catalog)
+from .hardware import (MAX_NESTING, R_MAX, R_MIN, Catalog, CatalogError, catalog_from_dict,
+                       default_catalog, nesting_depth, parse_catalog)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -24,6 +26,14 @@ ROBOT_RADII = (R_MIN, R_MAX)
 MAX_ARENA = 10_000.0          # m
 MAX_EPISODE_TICKS = 1_000_000
 MAX_NUMBER = 1e15             # any number of a scenario: float32 holds it with room to spare
+#: The most bytes read from a scenario file or the hardware catalog file it names.
+MAX_FILE_BYTES = 16 * 2 ** 20
+#: The longest scenario name, description and --scenario name or path (characters).
+MAX_NAME = 200
+MAX_DESCRIPTION = 10_000
+MAX_PATH = 4096
+#: The most packages a scenario places (each environment places and senses every one).
+MAX_PACKAGES = 10_000
 #: Room kept free around a package for a robot at each grip (layout.make_layouts: size + 0.6).
 PACKAGE_CLEARANCE = 0.6
 
@@ -146,14 +156,22 @@ def _hardware(v, folder: Path | None) -> Catalog:
         if folder is None:
             raise ScenarioError(f"hardware: {v!r} is a file name, but this scenario has no "
                                 "folder to find it in (give the catalog inline as a table)")
+        if len(v) > MAX_PATH or "\0" in v:
+            raise ScenarioError(f"hardware: not a file name ({len(v)} characters)")
         path = folder / v
-        if not path.is_file():
-            raise ScenarioError(f"hardware: catalog file not found: {path}")
+        # the catalog lies beside the scenario (README): a path that leads out of its folder
+        # (an absolute path, '..', a link) is refused before anything is read
         try:
-            data = path.read_bytes()
-        except OSError as e:
-            raise ScenarioError(f"hardware: {path} cannot be read "
-                                f"({e.strerror or type(e).__name__})") from None
+            real, home = path.resolve(), folder.resolve()
+        except (OSError, RuntimeError) as e:
+            raise ScenarioError(f"hardware: {v!r:.100} cannot be resolved "
+                                f"({getattr(e, 'strerror', None) or type(e).__name__})") from None
+        if not real.is_relative_to(home):
+            raise ScenarioError(f"hardware: {v!r:.100} is outside the scenario's folder {home}; "
+                                "the catalog file must lie in that folder")
+        if not real.is_file():
+            raise ScenarioError(f"hardware: catalog file not found: {path}")
+        data = read_limited(real, f"hardware: {path}")
         try:
             return parse_catalog(data, f"hardware ({path})")
         except CatalogError as e:
@@ -174,6 +192,9 @@ def _scenario_from_dict(d: dict, source: str, folder: Path | None = None,
         if k not in known:
             raise ScenarioError(f"{k}: unknown field (known: {', '.join(sorted(known))})")
     name = _get(d, "name", "", str)
+    if not name.strip() or len(name) > MAX_NAME or not name.isprintable():
+        raise ScenarioError(f"name: expected 1 to {MAX_NAME} printable characters, got "
+                            f"{len(name)} characters {name[:40]!r}")
     arena = _get(d, "arena", "", float)
     base_radius = _get(d, "base_radius", "", float)
     num_robots = _get(d, "num_robots", "", int)
@@ -238,9 +259,15 @@ def _scenario_from_dict(d: dict, source: str, folder: Path | None = None,
         classes.append(PackageClass(kind, count, dist, mass, grips, band, dw, size))
     if sum(c.count for c in classes) < 1:
         raise ScenarioError("packages: the scenario places no package")
+    if sum(c.count for c in classes) > MAX_PACKAGES:
+        raise ScenarioError(f"packages: {sum(c.count for c in classes)} packages, more than "
+                            f"{MAX_PACKAGES} (each is placed one by one in every environment)")
     description = d.get("description", "")
     if not isinstance(description, str):
-        raise ScenarioError(f"description: expected str, got {description!r}")
+        raise ScenarioError(f"description: expected str, got {description!r:.60}")
+    if len(description) > MAX_DESCRIPTION:
+        raise ScenarioError(f"description: {len(description)} characters, at most "
+                            f"{MAX_DESCRIPTION}")
     named = d.get("hardware")
     if named is not None and not (isinstance(named, dict) or isinstance(named, str) and named):
         raise ScenarioError(f"hardware: expected a file name or a table, got {named!r}")
@@ -314,6 +341,28 @@ def builtin_names() -> list[str]:
     return sorted(f.name[:-5] for f in files if f.name.endswith(".toml"))
 
 
+def read_limited(path: Path, source: str, limit: int = MAX_FILE_BYTES) -> bytes:
+    """The bytes of a regular file, at most `limit` of them (ScenarioError naming `source` for
+    one that cannot be read, is not a regular file or is larger: nothing past `limit` is
+    read)."""
+    try:
+        with os.fdopen(os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)), "rb") as f:
+            st = os.fstat(f.fileno())
+            if not stat.S_ISREG(st.st_mode):
+                raise ScenarioError(f"{source}: not a regular file")
+            if st.st_size > limit:
+                raise ScenarioError(f"{source}: {st.st_size} bytes, more than the {limit} a "
+                                    "scenario or catalog file may have")
+            data = f.read(limit + 1)
+    except OSError as e:
+        raise ScenarioError(f"{source}: cannot be read ({e.strerror or type(e).__name__})") \
+            from None
+    if len(data) > limit:
+        raise ScenarioError(f"{source}: more than the {limit} bytes a scenario or catalog file "
+                            "may have")
+    return data
+
+
 def decode_text(data: bytes, source: str) -> str:
     """UTF-8 text (a leading byte-order mark is dropped); ScenarioError naming `source` for bytes
     that are not UTF-8."""
@@ -327,10 +376,19 @@ def decode_text(data: bytes, source: str) -> str:
 def parse_scenario(data: bytes, source: str, folder: Path | None = None,
                    hardware: Catalog | None = None) -> Scenario:
     """A scenario from the bytes of its TOML file (`folder`, `hardware`: `scenario_from_dict`)."""
+    if len(data) > MAX_FILE_BYTES:
+        raise ScenarioError(f"{source}: {len(data)} bytes, more than a scenario file may have "
+                            f"({MAX_FILE_BYTES})")
+    text = decode_text(data, source)
+    depth = nesting_depth(text)
+    if depth > MAX_NESTING:
+        raise ScenarioError(f"{source}: nested {depth} levels deep (at most {MAX_NESTING})")
     try:
-        d = tomllib.loads(decode_text(data, source))
+        d = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{source}: not valid TOML ({e})") from None
+    except RecursionError:
+        raise ScenarioError(f"{source}: nested too deeply") from None
     return scenario_from_dict(d, source, folder, hardware)
 
 
@@ -339,7 +397,10 @@ def read_scenario(name_or_path: str, hardware: Catalog | None = None) -> tuple[S
     from (a run keeps them as its scenario.toml). A file's `hardware` file name is looked up
     beside it; `hardware`: a catalog to use instead (`scenario_from_dict`)."""
     if not isinstance(name_or_path, str) or not name_or_path:
-        raise ScenarioError(f"scenario: expected a name or a path, got {name_or_path!r}")
+        raise ScenarioError(f"scenario: expected a name or a path, got {name_or_path!r:.60}")
+    if len(name_or_path) > MAX_PATH or "\0" in name_or_path:
+        raise ScenarioError(f"scenario: a name or path of {len(name_or_path)} characters "
+                            f"{name_or_path[:40]!r}... (at most {MAX_PATH}, no NUL)")
     if name_or_path in builtin_names():
         data = resources.files("swarmcode_torch").joinpath(f"scenarios/{name_or_path}.toml").read_bytes()
         return parse_scenario(data, name_or_path, None, hardware), data
@@ -347,10 +408,7 @@ def read_scenario(name_or_path: str, hardware: Catalog | None = None) -> tuple[S
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
             raise ScenarioError(f"scenario file not found: {path}")
-        try:
-            data = path.read_bytes()
-        except OSError as e:
-            raise ScenarioError(f"{path}: cannot be read ({e.strerror or type(e).__name__})") from None
+        data = read_limited(path, str(path))
         return parse_scenario(data, str(path), path.parent, hardware), data
     raise ScenarioError(f"unknown scenario {name_or_path!r} (known: {', '.join(builtin_names())}; "
                         "or give a path to a .toml file)")
