@@ -58,7 +58,8 @@ def cell(values: list[float], fmt: str) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("groups", nargs="*", help="LABEL=RUN_DIR[,RUN_DIR...]")
+    ap.add_argument("groups", nargs="*", help="LABEL=RUN_DIR[,RUN_DIR...], or @FILE:LABEL[=SHOWN] "
+                                               "(as --stored, in this place in the table)")
     ap.add_argument("--last", type=int, default=50)
     ap.add_argument("--founding-from", type=int, default=100)
     ap.add_argument("--json", type=Path)
@@ -69,11 +70,14 @@ def main() -> None:
     out = {}
     print("| group | runs | " + " | ".join(c[1] for c in COLUMNS) + " |")
     print("|---|---|" + "---|" * len(COLUMNS))
-    groups = [(g, None) for g in a.groups]
-    for spec in a.stored:
-        path, _, labels = spec.partition(":")
-        label, _, shown = labels.partition("=")
-        groups.append((shown or label, json.loads(Path(path).read_text())[label]))
+    groups = []
+    for g in a.groups + ["@" + spec for spec in a.stored]:
+        if g.startswith("@"):         # @FILE:LABEL[=SHOWN], as --stored, in its place
+            path, _, labels = g[1:].partition(":")
+            label, _, shown = labels.partition("=")
+            groups.append((shown or label, json.loads(Path(path).read_text())[label]))
+        else:
+            groups.append((g, None))
     for g, stored in groups:
         if stored is not None:
             label, rows = g, stored
