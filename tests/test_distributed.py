@@ -180,7 +180,7 @@ def test_sharded_evolution_equals_unsharded(ray_cluster, tmp_path):
     for k in ca:
         if isinstance(ca[k], torch.Tensor):
             assert torch.equal(ca[k], cb[k]), k
-        elif isinstance(ca[k], dict) and k in ("genome", "proto"):
+        elif isinstance(ca[k], dict) and k in ("genome", "proto", "admission"):
             assert all(torch.equal(ca[k][f], cb[k][f]) for f in ca[k]), k
         else:
             assert ca[k] == cb[k], k
