@@ -8,7 +8,8 @@
 //   * sensing visits only the grip points a robot is compatible with (its effector's), built
 //     once per call from `compat`, not all H;
 //   * robot-robot contacts sum only the pairs that overlap (the others add exact zeros), found
-//     by all pairs (N < 64) or a uniform grid of cells of side cell_size (no per-cell capacity);
+//     by sweep and prune along x (every overlapping pair: no per-cell capacity as in the
+//     reference's broad phase from broad_phase_min_robots); obstacles likewise;
 //   * a robot runs all ticks of the call in cache, one environment after the other.
 #include <torch/extension.h>
 #include <ATen/Parallel.h>
@@ -64,15 +65,22 @@ struct Contact {
   float c, k;  // position and velocity coefficients of the pair
 };
 
+struct Pair {
+  int i, j;
+  float dx, dy, d, overlap;
+};
+
 struct Scratch {
   std::vector<float> gpos, best_d, rand_d, d_base, tx, ty, fx, fy, share, px0, py0, px, py, vx,
       vy, mcol, pcx, pcy, vcx, vcy, fpx, fpy, mpk, cnt, spx, spy, svx, svy, inv_m, ppx, ppy,
       pvx, pvy;
-  std::vector<int> best, rand_, action, pidx, comp_start, comp_h, winner, cell_start, cell_items,
-      cell_of;
+  std::vector<int> best, rand_, action, pidx, comp_start, comp_h, winner;
   std::vector<uint8_t> avail, released, delivered, lifted, alive, fdrop, fpick, carrying,
       in_lifted;
   std::vector<Contact> contacts;
+  std::vector<Pair> pairs;
+  std::vector<int> order, ncnt, nfill;
+  std::vector<float> nx, ny;
 };
 
 template <typename T>
@@ -94,98 +102,110 @@ struct Env {
 };
 
 void robot_contacts(const Env& w, Scratch& s, int N, const Params& P) {
-  // _robot_contacts_dense over the overlapping pairs only; pos in s.pcx/pcy, vel in s.vcx/vcy
+  // _robot_contacts_dense over the overlapping pairs only (the others add exact zeros), found by
+  // sweep and prune along x (the order is kept between passes and ticks, so insertion sort
+  // mostly has nothing to do); each robot sums its pairs in ascending partner order, as the
+  // reference's row sums do. pos in s.pcx/pcy, vel in s.vcx/vcy (Jacobi: every pair of a pass
+  // sees the positions and velocities from before the pass).
   float* px = s.pcx.data();
   float* py = s.pcy.data();
   float* vx = s.vcx.data();
   float* vy = s.vcy.data();
   float* inv_m = s.inv_m.data();
-  for (int i = 0; i < N; ++i) inv_m[i] = 1.0f / s.mcol[i];
-  const bool use_grid = N >= 64;
-  const int g = static_cast<int>(P.grid);
-  std::vector<float> nx(N), ny(N), nvx(vx, vx + N), nvy(vy, vy + N);
+  float rmax = 0.0f;
+  for (int i = 0; i < N; ++i) {
+    inv_m[i] = 1.0f / s.mcol[i];
+    if (w.present[i]) rmax = std::max(rmax, w.radius[i]);
+  }
+  const float window = 2.0f * rmax * 1.001f + 1e-6f;
+  std::vector<int>& order = s.order;
+  if (static_cast<int>(order.size()) != N) {
+    order.resize(N);
+    for (int i = 0; i < N; ++i) order[i] = i;
+  }
+  ensure(s.ncnt, static_cast<size_t>(N + 1));
   for (int64_t it = 0; it < P.collision_iters; ++it) {
-    if (use_grid) {  // counting sort of the present robots by cell, ascending index in a cell
-      ensure(s.cell_start, static_cast<size_t>(g * g + 1));
-      ensure(s.cell_items, static_cast<size_t>(N));
-      ensure(s.cell_of, static_cast<size_t>(N));
-      std::fill(s.cell_start.begin(), s.cell_start.begin() + g * g + 1, 0);
-      for (int i = 0; i < N; ++i) {
-        if (!w.present[i]) {
-          s.cell_of[i] = -1;
-          continue;
-        }
-        int cx = std::min(std::max(static_cast<int>(std::floor(px[i] / P.cell_size)), 0), g - 1);
-        int cy = std::min(std::max(static_cast<int>(std::floor(py[i] / P.cell_size)), 0), g - 1);
-        s.cell_of[i] = cx * g + cy;
-        s.cell_start[cx * g + cy + 1]++;
+    for (int a = 1; a < N; ++a) {  // insertion sort by x
+      const int i = order[a];
+      const float x = px[i];
+      int b = a - 1;
+      while (b >= 0 && px[order[b]] > x) {
+        order[b + 1] = order[b];
+        --b;
       }
-      for (int c = 0; c < g * g; ++c) s.cell_start[c + 1] += s.cell_start[c];
-      std::vector<int> fill(s.cell_start.begin(), s.cell_start.begin() + g * g);
-      for (int i = 0; i < N; ++i)
-        if (s.cell_of[i] >= 0) s.cell_items[fill[s.cell_of[i]]++] = i;
+      order[b + 1] = i;
+    }
+    s.pairs.clear();
+    for (int a = 0; a < N; ++a) {
+      const int i = order[a];
+      if (!w.present[i]) continue;
+      const float xi = px[i], yi = py[i], ri = w.radius[i];
+      for (int b = a + 1; b < N; ++b) {
+        const int j = order[b];
+        const float dx = xi - px[j];
+        if (-dx > window) break;
+        if (!w.present[j]) continue;
+        const float dy = yi - py[j];
+        const float rsum = ri + w.radius[j];
+        const float dd = dx * dx + dy * dy;
+        if (dd >= rsum * rsum * 1.0001f + 1e-12f) continue;  // no overlap (margin for rounding)
+        const float d = std::sqrt(dd);
+        const float overlap = std::max(rsum - d, 0.0f);
+        if (!(overlap > 0.0f)) continue;
+        s.pairs.push_back({i, j, dx, dy, d, overlap});
+      }
+    }
+    if (s.pairs.empty()) break;  // nothing overlaps: the later passes change nothing either
+    // per robot, its pairs in ascending partner order
+    std::fill(s.ncnt.begin(), s.ncnt.begin() + N + 1, 0);
+    for (const Pair& p : s.pairs) {
+      s.ncnt[p.i + 1]++;
+      s.ncnt[p.j + 1]++;
+    }
+    for (int i = 0; i < N; ++i) s.ncnt[i + 1] += s.ncnt[i];
+    s.contacts.resize(s.ncnt[N]);
+    s.nfill.assign(s.ncnt.begin(), s.ncnt.begin() + N);
+    for (const Pair& p : s.pairs) {
+      const float inv_d = 1.0f / std::max(p.d, 1e-6f);
+      const float inv_sum = inv_m[p.i] + inv_m[p.j];
+      float k = 0.0f;
+      if (it == 0) {
+        const float vn = ((vx[p.i] - vx[p.j]) * p.dx + (vy[p.i] - vy[p.j]) * p.dy) * inv_d;
+        if (vn < 0.0f) k = (-2.0f * vn / inv_sum) * inv_d;
+      }
+      s.contacts[s.nfill[p.i]++] = {p.j, p.overlap * (inv_m[p.i] / inv_sum) * inv_d, k};
+      s.contacts[s.nfill[p.j]++] = {p.i, p.overlap * (inv_m[p.j] / inv_sum) * inv_d, k};
+    }
+    ensure(s.nx, static_cast<size_t>(N));
+    ensure(s.ny, static_cast<size_t>(N));
+    for (int i = 0; i < N; ++i) {
+      s.nx[i] = px[i];
+      s.ny[i] = py[i];
     }
     for (int i = 0; i < N; ++i) {
-      nx[i] = px[i];
-      ny[i] = py[i];
-      if (!w.present[i]) continue;
-      s.contacts.clear();
-      auto visit = [&](int j) {
-        if (j == i) return;
-        float dx = px[i] - px[j];
-        float dy = py[i] - py[j];
-        float rsum = w.radius[i] + w.radius[j];
-        float dd = dx * dx + dy * dy;
-        if (dd >= rsum * rsum * 1.0001f + 1e-12f) return;  // no overlap (margin for rounding)
-        float d = std::sqrt(dd);
-        float inv_d = 1.0f / std::max(d, 1e-6f);
-        float overlap = std::max(rsum - d, 0.0f);
-        if (!(overlap > 0.0f)) return;
-        float inv_sum = inv_m[i] + inv_m[j];
-        float wgt = inv_m[i] / inv_sum;
-        float c = overlap * wgt * inv_d;
-        float k = 0.0f;
-        if (it == 0) {
-          float vn = ((vx[i] - vx[j]) * dx + (vy[i] - vy[j]) * dy) * inv_d;
-          if (vn < 0.0f) k = (-2.0f * vn / inv_sum) * inv_d;
-        }
-        s.contacts.push_back({j, c, k});
-      };
-      if (use_grid) {
-        int cx = s.cell_of[i] / g, cy = s.cell_of[i] % g;
-        for (int ax = std::max(cx - 1, 0); ax <= std::min(cx + 1, g - 1); ++ax)
-          for (int ay = std::max(cy - 1, 0); ay <= std::min(cy + 1, g - 1); ++ay) {
-            int c = ax * g + ay;
-            for (int q = s.cell_start[c]; q < s.cell_start[c + 1]; ++q) visit(s.cell_items[q]);
-          }
-        std::sort(s.contacts.begin(), s.contacts.end(),
-                  [](const Contact& a, const Contact& b) { return a.j < b.j; });
-      } else {
-        for (int j = 0; j < N; ++j)
-          if (w.present[j]) visit(j);
-      }
-      if (s.contacts.empty()) continue;
+      const int lo = s.ncnt[i], hi = s.ncnt[i + 1];
+      if (lo == hi) continue;
+      Contact* c0 = s.contacts.data() + lo;
+      std::sort(c0, c0 + (hi - lo), [](const Contact& a, const Contact& b) { return a.j < b.j; });
       float S = 0.0f, Bx = 0.0f, By = 0.0f, K = 0.0f, KBx = 0.0f, KBy = 0.0f;
-      for (const Contact& ct : s.contacts) {
-        S += ct.c;
-        Bx += ct.c * px[ct.j];
-        By += ct.c * py[ct.j];
-        K += ct.k;
-        KBx += ct.k * px[ct.j];
-        KBy += ct.k * py[ct.j];
+      for (const Contact* ct = c0; ct != c0 + (hi - lo); ++ct) {
+        S += ct->c;
+        Bx += ct->c * px[ct->j];
+        By += ct->c * py[ct->j];
+        K += ct->k;
+        KBx += ct->k * px[ct->j];
+        KBy += ct->k * py[ct->j];
       }
-      nx[i] = px[i] + px[i] * S - Bx;
-      ny[i] = py[i] + py[i] * S - By;
-      if (it == 0) {
-        nvx[i] = vx[i] + inv_m[i] * (px[i] * K - KBx);
-        nvy[i] = vy[i] + inv_m[i] * (py[i] * K - KBy);
+      s.nx[i] = px[i] + px[i] * S - Bx;
+      s.ny[i] = py[i] + py[i] * S - By;
+      if (it == 0) {  // positions read here are the pass's old ones: s.nx is written apart
+        vx[i] = vx[i] + inv_m[i] * (px[i] * K - KBx);
+        vy[i] = vy[i] + inv_m[i] * (py[i] * K - KBy);
       }
     }
-    std::copy(nx.begin(), nx.end(), px);
-    std::copy(ny.begin(), ny.end(), py);
-    if (it == 0) {
-      std::copy(nvx.begin(), nvx.end(), vx);
-      std::copy(nvy.begin(), nvy.end(), vy);
+    for (int i = 0; i < N; ++i) {
+      px[i] = s.nx[i];
+      py[i] = s.ny[i];
     }
   }
 }
@@ -200,7 +220,10 @@ void static_contacts(const Env& w, Scratch& s, int N, int O, const Params& P) {
     float dpx = 0.0f, dpy = 0.0f, dvx = 0.0f, dvy = 0.0f;
     for (int o = 0; o < O; ++o) {
       float dx = px[i] - w.o_pos[2 * o], dy = py[i] - w.o_pos[2 * o + 1];
-      float d = norm2(dx, dy);
+      const float rs = r + w.o_radius[o];
+      const float dd = dx * dx + dy * dy;
+      if (!w.o_present[o] || dd >= rs * rs * 1.0001f + 1e-12f) continue;  // adds exact zeros
+      float d = std::sqrt(dd);
       float dm = std::max(d, 1e-6f);
       float nxo = dx / dm, nyo = dy / dm;
       float overlap = w.o_present[o] ? std::max(r + w.o_radius[o] - d, 0.0f) : 0.0f;
