@@ -114,21 +114,28 @@ class FusedTicks:
     def error(self) -> Exception | None:
         return build_error()
 
+    def ready(self, warn: bool = True) -> bool:
+        """Build (or load the cached build of) the extension; False, with a warning once, where
+        it cannot be built."""
+        if load_extension() is not None:
+            return True
+        if warn and not self.warned:
+            self.warned = True
+            lines = [ln.strip() for ln in str(_error).splitlines() if ln.strip()]
+            why = f"{type(_error).__name__}: {lines[-1][:200]}" if lines else type(_error).__name__
+            warnings.warn(f"the fused C++ tick could not be built ({why}); running the Python "
+                          "tick", RuntimeWarning, stacklevel=3)
+        return False
+
     def _native(self, state: State, inputs: TickInputs):
         if state.pos.device.type != "cpu":
             return None
         ins = _inputs(inputs)
         if ins is None or any(t.dtype != d for t, d in zip(state, _STATE_DTYPES)):
             return None
-        mod = load_extension()
-        if mod is None:
-            if not self.warned:
-                self.warned = True
-                warnings.warn(f"the fused C++ tick could not be built ({type(_error).__name__}: "
-                              f"{str(_error).strip().splitlines()[-1][:200] if str(_error).strip() else ''}); "
-                              "running the Python tick", RuntimeWarning, stacklevel=3)
+        if not self.ready():
             return None
-        return mod, ins
+        return _module, ins
 
     def run_ticks(self, state: State, inputs: TickInputs, params: WorldParams,
                   ticks: int) -> State:

@@ -1,6 +1,6 @@
-"""How the tick runs: compiled (`CompiledStep`, eager fallback), replayed from CUDA graphs
-(`CudaGraphTicks`), the choice between them for a run (`tick_function`, `tick_mode`), and the
-device of a run (`resolve_device`)."""
+"""How the tick runs: the fused C++ tick on the CPU (`fused.FusedTicks`), compiled
+(`CompiledStep`, eager fallback), replayed from CUDA graphs (`CudaGraphTicks`), the choice between
+them for a run (`tick_function`, `tick_mode`), and the device of a run (`resolve_device`)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import torch
 
 from .layout import Layout
 from .state import Robots, State, TickInputs, WorldParams
+from .fused import FusedTicks, tick_choice
 from .step import step
 
 # compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
@@ -150,9 +151,18 @@ def resolve_device(name: str) -> torch.device:
 
 def tick_function(device: torch.device, compile: bool | None = None,
                   cuda_graphs: bool | None = None, generations: int = 0) -> tuple[Callable, bool]:
-    """The tick function of a run on `device` and whether it is compiled. `compile` unset: on
-    CUDA, or for runs of at least COMPILE_MIN_GENERATIONS generations; `cuda_graphs` unset: on
-    CUDA with the compiled tick, and a tick that fails to compile then runs eagerly."""
+    """The tick function of a run on `device` and whether it is compiled. On the CPU, unless
+    `compile` is true or ``SWARMCODE_TICK=reference``: the fused C++ tick (`FusedTicks`, which
+    is built on first use; where it cannot be, a warning and the choice below), not compiled.
+    Otherwise the Python
+    tick: `compile` unset compiles it on CUDA, or for runs of at least COMPILE_MIN_GENERATIONS
+    generations; `cuda_graphs` unset: on CUDA with the compiled tick, and a tick that fails to
+    compile then runs eagerly."""
+    if device.type == "cpu" and compile is not True and not cuda_graphs \
+            and tick_choice() == "fused":
+        fused = FusedTicks()
+        if fused.ready(warn=True):
+            return fused, False
     use_compile = compile if compile is not None else (
         device.type == "cuda" or generations >= COMPILE_MIN_GENERATIONS)
     if cuda_graphs and (device.type != "cuda" or not use_compile):
@@ -166,8 +176,10 @@ def tick_function(device: torch.device, compile: bool | None = None,
 
 
 def tick_mode(step_fn: Callable, compiled: bool) -> str:
-    """How the tick runs: 'eager', 'compiled', 'compiled, CUDA graphs', or 'eager (compiling
+    """How the tick runs: 'fused', 'eager', 'compiled', 'compiled, CUDA graphs', 'eager (compiling
     failed)' once a compiled tick has fallen back."""
+    if isinstance(step_fn, FusedTicks):
+        return "fused"
     graphs = isinstance(step_fn, CudaGraphTicks)
     compiled_step = step_fn.step_fn if graphs else step_fn
     if isinstance(compiled_step, CompiledStep) and compiled_step.error is not None:
