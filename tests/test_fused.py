@@ -131,3 +131,57 @@ def test_inputs_it_does_not_take_run_the_python_tick():
     assert a == "python"
     rob2 = Robots(*rob)
     assert rob2.radius.dtype == torch.float32
+
+
+# ------------------------------------------------------------------ threads (--threads, threads=)
+def test_default_threads_leave_the_loaded_cores_alone(monkeypatch):
+    import os
+
+    from swarmcode_torch.sim import runtime
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    for load, want in ((0.0, 2), (0.6, 1), (0.4, 2), (2.5, 1), (9.0, 1)):
+        monkeypatch.setattr(os, "getloadavg", lambda load=load: (load, 0.0, 0.0))
+        assert runtime.default_threads() == want
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(8)), raising=False)
+    monkeypatch.setattr(os, "getloadavg", lambda: (3.2, 0.0, 0.0))
+    assert runtime.default_threads() == 5
+
+
+def test_set_threads(monkeypatch):
+    from swarmcode_torch.sim.runtime import set_threads
+
+    before = torch.get_num_threads()
+    try:
+        assert set_threads(1) == 1 and torch.get_num_threads() == 1
+        monkeypatch.setenv("OMP_NUM_THREADS", "1")
+        torch.set_num_threads(1)
+        assert set_threads(None) == 1  # the environment's choice stands
+        monkeypatch.delenv("OMP_NUM_THREADS")
+        assert set_threads(None) >= 1
+        for bad in (0, -2, 1.5, True):
+            with pytest.raises(ValueError, match="threads must be an integer >= 1"):
+                set_threads(bad)
+    finally:
+        torch.set_num_threads(before)
+
+
+def test_cli_and_api_take_threads(tmp_path):
+    from typer.testing import CliRunner
+
+    from swarmcode_torch.app import api
+    from swarmcode_torch.app.cli import app
+
+    before = torch.get_num_threads()
+    try:
+        r = CliRunner().invoke(app, ["evolve", "--threads", "0", "--logdir", str(tmp_path)])
+        assert r.exit_code != 0 and "--threads must be >= 1" in r.output
+        r = CliRunner().invoke(app, ["sweep", "--threads", "0", "--out", str(tmp_path / "s")])
+        assert r.exit_code != 0 and "--threads must be >= 1" in r.output
+        res = api.evolve(scenario="one-niche", population=4, generations=1, trials=1, ticks=10,
+                         logdir=None, threads=1)
+        assert torch.get_num_threads() == 1 and len(res.history) == 1
+        with pytest.raises(ValueError, match="threads"):
+            api.evolve(scenario="one-niche", population=4, generations=1, logdir=None, threads=0)
+    finally:
+        torch.set_num_threads(before)

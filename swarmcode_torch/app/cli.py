@@ -207,8 +207,10 @@ def evolve(
     eval_workers: Annotated[int, typer.Option(help="Evaluate each generation in this many shards on Ray actors, one GPU each on CUDA, else CPUs (needs Ray; same results as 1).")] = 1,
     cpus_per_eval_worker: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1].")] = None,
     ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one].")] = None,
+    threads: Annotated[Optional[int], typer.Option(help=THREADS_HELP)] = None,
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
+    _set_threads(threads)
     shards = _eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
     with ExitStack() as stack:
         attach = None if shards is None else (lambda ev: _attach_shards(stack, ev, *shards))
@@ -229,6 +231,19 @@ def evolve(
     _print_team(run_dir)
     console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard --logdir "
                   f"{run_dir.parent}", markup=False, highlight=False)
+
+
+THREADS_HELP = ("CPU threads of this process [default: OMP_NUM_THREADS if set, else the cores "
+                "less the load average, at least 1].")
+
+
+def _set_threads(threads: int | None) -> None:
+    from ..sim.runtime import set_threads
+
+    try:
+        set_threads(threads)
+    except ValueError:
+        fail(f"--threads must be >= 1, got {threads}")
 
 
 def _eval_shards_option(eval_workers: int, cpus: float | None, address: str | None):
@@ -514,8 +529,10 @@ def sweep(
     cpus_per_run: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) each run reserves [default: 1].")] = None,
     gpus_per_run: Annotated[Optional[float], typer.Option(help="Ray: GPUs each run reserves; 0.25 packs four runs on a GPU [default: 0].")] = None,
     ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT [default: start a local one]; the runs go to Ray.")] = None,
+    threads: Annotated[Optional[int], typer.Option(help=THREADS_HELP)] = None,
 ) -> None:
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
+    _set_threads(threads)
     import time
 
     from ..coevo.config import preset_config, with_overrides
