@@ -146,6 +146,9 @@ class FusedTicks:
                 state = self.fallback(state, *inputs, params)
             return state
         mod, ins = native
+        prog = ins[12]
+        if prog.numel() and (int(prog.min()) < 0 or int(prog.max()) >= ins[15].shape[0]):
+            raise IndexError(f"robot programs index {ins[15].shape[0]} behavior-tree tables")
         st = [t.clone(memory_format=torch.contiguous_format) for t in state]
         fp, ip = _params(params)
         mod.run_ticks(st, ins, fp, ip, int(ticks))
