@@ -210,11 +210,14 @@ def bench_first(args, old: Path, new: Path) -> dict:
                     "team_cost": s.get("team_cost"), "deliveries": s.get("deliveries")}
 
     out = {"command": "swarmcode-torch " + " ".join(FIRST)}
-    with tempfile.TemporaryDirectory() as cold:
-        out["new_cold_build"] = run(new, cold)
-    out["old"] = run(old, None)
+    if args.first_cold:
+        with tempfile.TemporaryDirectory() as cold:
+            out["new_cold_build"] = run(new, cold)
+    if args.first_old:
+        out["old"] = run(old, None)
     out["new"] = run(new, None)
-    out["ratio_old_over_new"] = out["old"]["seconds"] / out["new"]["seconds"]
+    if args.first_old:
+        out["ratio_old_over_new"] = out["old"]["seconds"] / out["new"]["seconds"]
     print(json.dumps(out), flush=True)
     return out
 
@@ -235,6 +238,10 @@ def main() -> None:
     ap.add_argument("--tick-threads", type=int, default=1)
     ap.add_argument("--gen-threads", type=int, default=2)
     ap.add_argument("--gen-reps", type=int, default=4)
+    ap.add_argument("--first-old", action=argparse.BooleanOptionalAction, default=True,
+                    help="first: run the old tree's command too (it takes minutes)")
+    ap.add_argument("--first-cold", action=argparse.BooleanOptionalAction, default=True,
+                    help="first: run the new tree once more with an empty extension cache")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     meta = run_metadata(torch.device("cpu"))
