@@ -636,6 +636,62 @@ void run_ticks(std::vector<torch::Tensor> st, std::vector<torch::Tensor> in,
   st[0].fill_(t0 + ticks);
 }
 
+// bt.build_tables' walk (`_build_chunk`), every (program, leaf-status combination) pair from
+// the program's first leaf through its continuations to the end of the tick; the same packed
+// int32 words. ops [P, L], start [P], cont [P, L, 2] (long, from `_continuations`),
+// col_status [14 * NC] (long: status of opcode o under combination c at o * NC + c).
+torch::Tensor walk_tables(torch::Tensor ops, torch::Tensor start, torch::Tensor cont,
+                          torch::Tensor col_status) {
+  TORCH_CHECK(ops.dtype() == torch::kLong && start.dtype() == torch::kLong &&
+                  cont.dtype() == torch::kLong && col_status.dtype() == torch::kLong,
+              "walk_tables: long tensors");
+  ops = ops.contiguous();
+  start = start.contiguous();
+  cont = cont.contiguous();
+  col_status = col_status.contiguous();
+  const int64_t P = ops.size(0), L = ops.size(1);
+  const int64_t NC = col_status.numel() / 14;
+  auto out = torch::empty({P, NC}, torch::dtype(torch::kInt32));
+  const int64_t* op = ops.data_ptr<int64_t>();
+  const int64_t* st0 = start.data_ptr<int64_t>();
+  const int64_t* ct = cont.data_ptr<int64_t>();
+  const int64_t* cs = col_status.data_ptr<int64_t>();
+  int32_t* o = out.data_ptr<int32_t>();
+  constexpr int64_t STATUS_SHIFT = 10;
+  at::parallel_for(0, P, 1, [&](int64_t b, int64_t e) {
+    for (int64_t p = b; p < e; ++p) {
+      const int64_t* pop = op + p * L;
+      const int64_t* pct = ct + p * L * 2;
+      for (int64_t c = 0; c < NC; ++c) {
+        int64_t s = st0[p];
+        int64_t acc = 0, fin = -1;
+        for (int64_t step = 0; step <= L && s < L; ++step) {
+          const int64_t code = pop[s];
+          const int64_t status = cs[code * NC + c];
+          if (status == S_RUNNING) {
+            fin = code | (static_cast<int64_t>(S_RUNNING) << STATUS_SHIFT);
+            break;
+          }
+          if (status == S_SUCCESS) {
+            if (code >= ACT_MOVE_TO_PACK && code <= ACT_MOVE_TO_RANDOM_PACK)
+              acc |= int64_t(1) << (FIRED_SHIFT + code - ACT_MOVE_TO_PACK);
+            s = pct[s * 2];
+          } else {
+            s = pct[s * 2 + 1];
+          }
+        }
+        if (fin < 0) {
+          TORCH_CHECK(s >= L && s <= L + 1, "walk_tables: a walk did not end");
+          fin = NOP | ((s - L) << STATUS_SHIFT);
+        }
+        o[p * NC + c] = static_cast<int32_t>(fin | acc);
+      }
+    }
+  });
+  return out;
+}
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("run_ticks", &run_ticks, "the fused CPU tick, `ticks` times, in place");
+  m.def("walk_tables", &walk_tables, "bt.build_tables' walk over (program, combination) pairs");
 }
