@@ -7,6 +7,8 @@ under ``TORCH_EXTENSIONS_DIR`` (default ``~/.cache/torch_extensions``); a change
 Where it cannot be built (no compiler), or for inputs it does not take (not on the CPU, other
 dtypes), `FusedTicks` runs the Python tick instead and says so once.
 
+The same extension holds `walk_tables`, the CPU walk of `bt.build_tables` (exact: integers).
+
 The Python tick stays the reference: ``SWARMCODE_TICK=reference`` makes `tick_function` choose
 it everywhere. The two agree to float rounding (tests/test_fused.py; the tolerance is in
 benchmarks/README.md): the contact solver sums its pairs in another order.
