@@ -99,6 +99,7 @@ def test_rollout_and_tick_function_use_it_on_the_cpu(monkeypatch):
     monkeypatch.setenv("SWARMCODE_TICK", "bogus")
     with pytest.raises(ValueError, match="SWARMCODE_TICK"):
         tick_function(torch.device("cpu"))
+    monkeypatch.delenv("SWARMCODE_TICK")
     layout, rob, tables, p = _world("one-niche", 2, seed=1)
     m = rollout(layout, rob, tables, p, 30, step_fn=fused)
     assert all(torch.isfinite(v).all() for v in m.values())
