@@ -6,6 +6,12 @@ kernels themselves, and the top-kernel table says which.
 
     python benchmarks/profile_tick.py --device cuda --configs 400:20,400:200,400:1000
     python benchmarks/profile_tick.py --device cuda --configs 400:20,400:200 --cuda-graphs
+    OMP_NUM_THREADS=1 python benchmarks/profile_tick.py --device cpu --configs 300:20,64:200 --ticks 10
+
+On the CPU, inductor's kernel profiling (`torch._inductor.config.cpp.enable_kernel_profile`)
+names each generated C++ kernel in the profile; the generated code (`run_and_get_code`) says for
+each kernel whether inductor vectorised it (`at::vec::Vectorized` in its body) and which ops it
+fuses, so each top kernel gets `vectorized` and `ops` (the aten-level names inductor gives it).
 """
 
 from __future__ import annotations
@@ -35,10 +41,33 @@ def _device_us(evt) -> float:
     return 0.0
 
 
+def _cpp_kernels(code: str) -> dict[str, bool]:
+    """Generated C++ kernel name -> whether its body uses at::vec (vectorised)."""
+    import re
+
+    out = {}
+    parts = re.split(r"(cpp_fused_\w+)\s*=\s*async_compile\.cpp_pybinding", code)
+    for name, body in zip(parts[1::2], parts[2::2]):
+        body = body.split("async_compile.cpp_pybinding")[0]
+        out[name] = "at::vec::Vectorized" in body or "at::vec::" in body
+    return out
+
+
 def profile_config(E: int, N: int, args, device: torch.device) -> dict:
     w = Workload(scenario_for(N), E, 0, 16, device)
     torch._dynamo.reset()
+    vec = {}
+    if device.type == "cpu":
+        import torch._inductor.config as ic
+
+        ic.cpp.enable_kernel_profile = True
     fn = torch.compile(step, dynamic=False, fullgraph=True, mode=args.compile_mode)
+    if device.type == "cpu":
+        from torch._inductor.utils import run_and_get_code
+
+        _, codes = run_and_get_code(lambda s: w.tick(fn, s), w.start())
+        for c in codes:
+            vec.update(_cpp_kernels(c))
     graphs = args.compile_mode in ("reduce-overhead", "max-autotune")
     state = w.start()
 
@@ -69,7 +98,10 @@ def profile_config(E: int, N: int, args, device: torch.device) -> dict:
         state = ticks(state)
         if device.type == "cuda":
             torch.cuda.synchronize()
-    kernels = [e for e in prof.events() if e.device_type == torch.autograd.DeviceType.CUDA]
+    if device.type == "cuda":
+        kernels = [e for e in prof.events() if e.device_type == torch.autograd.DeviceType.CUDA]
+    else:  # inductor's C++ kernels, named by enable_kernel_profile
+        kernels = [e for e in prof.events() if "cpp_fused" in e.name]
     busy_us = sum(e.time_range.elapsed_us() for e in kernels) / args.ticks
     table = {}
     for e in kernels:
@@ -86,7 +118,9 @@ def profile_config(E: int, N: int, args, device: torch.device) -> dict:
         "kernels_per_tick": len(kernels) / args.ticks,
         "robot_ticks_per_s": E * N / wall,
         "top_kernels": [{"name": n[:120], "calls_per_tick": c / args.ticks,
-                         "us_per_tick": t / args.ticks} for n, (c, t) in top],
+                         "us_per_tick": t / args.ticks,
+                         **({"vectorized": next((v for k, v in vec.items() if k in n), None)}
+                            if vec else {})} for n, (c, t) in top],
     }
 
 

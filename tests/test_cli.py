@@ -85,7 +85,8 @@ def test_evolve_writes_a_complete_run_directory(tmp_path):
     assert list(run.glob("events.out.tfevents.*"))
     summary = json.loads((run / "summary.json").read_text())
     assert (summary["generation"], summary["generations"]) == (1, 2)
-    assert (summary["device"], summary["tick"]) == ("cpu", "eager")
+    from swarmcode_torch.sim.fused import available
+    assert (summary["device"], summary["tick"]) == ("cpu", "fused" if available() else "eager")
     assert "done 2/2" in r.output and "generation 1 " in r.output  # plain lines off a terminal
     assert "done 1/2" in r.output                   # the first generation is reported at once
     r = invoke("inspect", run)

@@ -370,7 +370,9 @@ def test_cuda_graphs_need_cuda_and_the_compiled_tick():
         make_context(SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu",
                                   cuda_graphs=True))
     # unset (the default) is "on where the tick runs compiled on CUDA": off on the CPU
-    for compiled, mode in ((False, "eager"), (True, "compiled")):
+    from swarmcode_torch.sim.fused import available
+    # not compiled on the CPU: the fused C++ tick where it builds (sim/fused.py)
+    for compiled, mode in ((False, "fused" if available() else "eager"), (True, "compiled")):
         ctx = make_context(SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu",
                                         compile=compiled))
         assert ctx.cfg.cuda_graphs is None and ctx.tick_mode == mode

@@ -1,4 +1,7 @@
-"""Physics invariants and task rules of the batched world."""
+"""Physics invariants and task rules of the batched world, for both ticks: the Python tick
+(the reference) and the fused C++ tick (`sim.fused`, skipped where it cannot be built)."""
+
+import sys
 
 import pytest
 import torch
@@ -14,6 +17,21 @@ from swarmcode_torch.sim.state import (DELIVERED, GROUND, Robots, WorldParams, c
                                        random_keys, reset)
 from swarmcode_torch.sim.step import step
 from worldkit import build, package, random_world, robot
+
+
+@pytest.fixture(autouse=True, params=["reference", "fused"])
+def tick(request, monkeypatch):
+    """Every test once with each tick: `rollout`'s default tick and this module's `step`."""
+    if request.param == "fused":
+        import swarmcode_torch.sim.rollout as rollout_module
+        from swarmcode_torch.sim.fused import FusedTicks
+
+        fused = FusedTicks()
+        if not fused.ready(warn=False):
+            pytest.skip("the fused C++ tick cannot be built here")
+        monkeypatch.setattr(rollout_module, "step", fused)
+        monkeypatch.setattr(sys.modules[__name__], "step", fused)
+    return request.param
 
 
 def run(layout, rob, tables, params, ticks, each=None):
@@ -219,7 +237,9 @@ def test_forage_template_delivers_packages():
     assert (m["energy_used"] > 0).all()
 
 
-def test_compiled_step_falls_back_to_eager_when_compiling_fails(monkeypatch):
+def test_compiled_step_falls_back_to_eager_when_compiling_fails(monkeypatch, tick):
+    if tick == "fused":
+        pytest.skip("compares the compiled Python tick's fallback with the Python tick")
     def broken_compile(fn, **kw):
         def compiled(*args):
             raise RuntimeError("InvalidCxxCompiler: No working C++ compiler found\n\n"

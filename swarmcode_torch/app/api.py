@@ -28,6 +28,7 @@ from typing import Any, Callable, Iterable
 from . import records, runs
 from ..coevo.config import PRESETS, SwarmCoDeConfig
 from ..coevo.evaluation import ScoreFn, score_fn_name
+from ..sim.runtime import set_threads
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.hardware import catalog_toml_lines, default_catalog
 from ..sim.scenario import EFFECTORS, Scenario, parse_scenario, read_scenario
@@ -291,7 +292,8 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
            logdir: str | os.PathLike | None = "runs", checkpoint_every: int = 10,
            render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
            callback: Callable[[GenerationResult], Any] | None = None,
-           fitness: ScoreFn | None = None, **settings) -> RunResult:
+           fitness: ScoreFn | None = None, threads: int | None = None,
+           **settings) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
     config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
@@ -314,6 +316,8 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
         `EvalConfig` (weights, budget, lam, objective). The marginal gate, the mean over trials
         and the EMA apply to its scores. The run records its name (config.toml's
         `fitness_function`, summary.json's "fitness"), and `resume` needs it again.
+    threads: torch's CPU threads for this process (`sim.runtime.set_threads`; default:
+        OMP_NUM_THREADS if set, else the cores less the load average, at least 1).
 
     Raises ValueError (`ScenarioError` is one) for an invalid setting or scenario before any
     file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
@@ -322,6 +326,7 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     _check_every(checkpoint_every, render_every, figure_every)
     reporters = _check_hooks(callback, reporters)
     fitness = _checked_fitness(fitness)
+    set_threads(threads)
     scenario_obj = scenario if isinstance(scenario, Scenario) else None
     if scenario is not None and scenario_obj is None:
         settings["scenario"] = scenario
@@ -376,13 +381,13 @@ def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
 def resume(run_dir: str | os.PathLike, generations: int | None = None, device: str | None = None,
            *, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50,
            reporters: Iterable = (), callback: Callable[[dict], Any] | None = None,
-           fitness: ScoreFn | None = None) -> RunResult:
+           fitness: ScoreFn | None = None, threads: int | None = None) -> RunResult:
     """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
     to `generations` in all (default: the run's), on `device` (default: the run's);
     `fitness`: the run's own fitness function, for a run started with one (`evolve`). The
     result's history has every generation: those before the checkpoint from metrics.csv (when
     the run has one), then this part's. RunError (a ValueError) for a directory, config or
-    checkpoint that cannot be used."""
+    checkpoint that cannot be used. `threads`: as in `evolve`."""
     _check_every(checkpoint_every, render_every, figure_every)
     reporters = _check_hooks(callback, reporters)
     fitness = _checked_fitness(fitness)
@@ -390,6 +395,7 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
                                     or isinstance(generations, bool) or generations < 1):
         raise ValueError(f"generations must be an integer >= 1 (the total to extend the run "
                          f"to), got {generations!r:.40}")
+    set_threads(threads)
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise runs.RunError(f"{run_dir} is not a run directory (no such directory)")

@@ -231,10 +231,12 @@ def evolve(
     eval_workers: Annotated[int, typer.Option(help="Evaluate each generation in this many shards on Ray actors, one GPU each on CUDA, else CPUs (needs Ray; same results as 1).")] = 1,
     cpus_per_eval_worker: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1].")] = None,
     ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one].")] = None,
+    threads: Annotated[Optional[int], typer.Option(help=THREADS_HELP)] = None,
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
     logdir, resume = _path(logdir, "--logdir"), _path(resume, "--resume")
     _TERMINATED.clear()                    # this command's SIGTERM, not an earlier one's
+    _set_threads(threads)
     shards = _eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
     where = _Where()
     with _terminate_as_interrupt() as terminated:
@@ -302,6 +304,19 @@ def _stopped(where: _Where, terminated: bool) -> None:
     err.print(_stop_line(how, where.run_dir, where.holds(), where.again, where.resuming),
               markup=False, highlight=False, soft_wrap=True)
     raise typer.Exit(code=143 if terminated else 130)
+
+
+THREADS_HELP = ("CPU threads of this process [default: OMP_NUM_THREADS if set, else the cores "
+                "less the load average, at least 1].")
+
+
+def _set_threads(threads: int | None) -> None:
+    from ..sim.runtime import set_threads
+
+    try:
+        set_threads(threads)
+    except ValueError:
+        fail(f"--threads must be >= 1, got {threads}")
 
 
 def _eval_shards_option(eval_workers: int, cpus: float | None, address: str | None):
@@ -611,8 +626,10 @@ def sweep(
     cpus_per_run: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) each run reserves [default: 1].")] = None,
     gpus_per_run: Annotated[Optional[float], typer.Option(help="Ray: GPUs each run reserves; 0.25 packs four runs on a GPU [default: 0].")] = None,
     ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT [default: start a local one]; the runs go to Ray.")] = None,
+    threads: Annotated[Optional[int], typer.Option(help=THREADS_HELP)] = None,
 ) -> None:
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
+    _set_threads(threads)
     import time
 
     from ..coevo.config import preset_config, with_overrides

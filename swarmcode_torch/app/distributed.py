@@ -31,9 +31,8 @@ from ..coevo.evaluation import EvalPlan, SimBatch, gather_metrics, sim_batch, si
 from ..coevo.population import Population
 from ..sim.hardware import Catalog, default_catalog
 from ..sim.layout import Layout
-from ..sim.runtime import CompiledStep, CudaGraphTicks
+from ..sim.runtime import CompiledStep, CudaGraphTicks, tick_function
 from ..sim.state import WorldParams
-from ..sim.step import step as world_step
 
 RAY_INSTALL = 'pip install "swarmcode-torch[ray]"'
 #: Seconds to wait for the evaluation actors to start (the cluster may be busy).
@@ -304,7 +303,8 @@ class EvalShard:
         torch.set_num_threads(max(1, spec.threads))
         self.spec = spec
         self.device = torch.device(spec.device)
-        fn = CompiledStep() if spec.compiled else world_step
+        # not compiled: the tick the run's own process uses (the fused C++ tick on the CPU)
+        fn = CompiledStep() if spec.compiled else tick_function(self.device, compile=False)[0]
         if spec.cuda_graphs:
             fn = CudaGraphTicks(fn, required=spec.cuda_graphs_required)
         self.step_fn = fn

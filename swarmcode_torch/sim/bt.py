@@ -391,10 +391,16 @@ def build_tables(opcodes: torch.Tensor, chunk: int | None = None,
     Programs are walked `chunk` at a time over all combinations. `compact` sets finished
     (program, combination) pairs aside after each step, which saves work but syncs the device
     twice a step; without it every pair takes L + 1 steps with no sync (finished pairs stay put).
-    Defaults: compact on the CPU, 32 programs a chunk; on a GPU no compaction, 512 a chunk.
+    Defaults: compact on the CPU, 32 programs a chunk; on a GPU no compaction, 512 a chunk. On
+    the CPU with neither given, the walk runs in C++ where the fused tick's extension is built
+    (`_native_tables`; identical tables).
     """
     ops = opcodes.long()
     on_cpu = ops.device.type == "cpu"
+    if on_cpu and compact is None and chunk is None and ops.shape[0]:
+        native = _native_tables(ops)
+        if native is not None:
+            return native
     compact = on_cpu if compact is None else compact
     chunk = chunk or (32 if on_cpu else 512)
     col_status = combo_statuses(ops.device).t().reshape(-1)
@@ -403,6 +409,23 @@ def build_tables(opcodes: torch.Tensor, chunk: int | None = None,
     if not parts:
         return torch.zeros(0, NUM_COMBOS, dtype=torch.int32, device=ops.device)
     return torch.cat(parts, 0)
+
+
+def _native_tables(ops: torch.Tensor) -> torch.Tensor | None:
+    """`build_tables` on the CPU by the fused tick's C++ extension (`sim.fused`): the same walk
+    over every (program, combination) pair, the same int32 words (tests/test_bt.py). None where
+    the extension is not built or not wanted (``SWARMCODE_TICK=reference``)."""
+    from .fused import load_extension, tick_choice
+
+    if tick_choice() != "fused":
+        return None
+    mod = load_extension()
+    walk = getattr(mod, "walk_tables", None)
+    if walk is None:
+        return None
+    start, cont = _continuations(ops)
+    col_status = combo_statuses(ops.device).t().reshape(-1).contiguous()
+    return walk(ops.contiguous(), start, cont, col_status)
 
 
 def unpack(packed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -72,7 +72,7 @@ def rollout(layout: Layout, robots: Robots, tables: torch.Tensor, params: WorldP
             state = fn(state, *inputs, params)
             if observe is not None:
                 observe(t, state)
-    elif isinstance(fn, CudaGraphTicks):
+    elif isinstance(fn, CudaGraphTicks) or hasattr(fn, "run_ticks"):  # FusedTicks too
         state = fn.run_ticks(state, inputs, params, ticks)
     else:
         for _ in range(ticks):

@@ -1,15 +1,17 @@
-"""How the tick runs: compiled (`CompiledStep`, eager fallback), replayed from CUDA graphs
-(`CudaGraphTicks`), the choice between them for a run (`tick_function`, `tick_mode`), and the
-device of a run (`resolve_device`)."""
+"""How the tick runs: the fused C++ tick on the CPU (`fused.FusedTicks`), compiled
+(`CompiledStep`, eager fallback), replayed from CUDA graphs (`CudaGraphTicks`), the choice between
+them for a run (`tick_function`, `tick_mode`), and the device of a run (`resolve_device`)."""
 
 from __future__ import annotations
 
+import os
 from typing import Callable
 
 import torch
 
 from .layout import Layout
 from .state import Robots, State, TickInputs, WorldParams
+from .fused import FusedTicks, tick_choice
 from .step import step
 
 # compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
@@ -150,9 +152,18 @@ def resolve_device(name: str) -> torch.device:
 
 def tick_function(device: torch.device, compile: bool | None = None,
                   cuda_graphs: bool | None = None, generations: int = 0) -> tuple[Callable, bool]:
-    """The tick function of a run on `device` and whether it is compiled. `compile` unset: on
-    CUDA, or for runs of at least COMPILE_MIN_GENERATIONS generations; `cuda_graphs` unset: on
-    CUDA with the compiled tick, and a tick that fails to compile then runs eagerly."""
+    """The tick function of a run on `device` and whether it is compiled. On the CPU, unless
+    `compile` is true or ``SWARMCODE_TICK=reference``: the fused C++ tick (`FusedTicks`, which
+    is built on first use; where it cannot be, a warning and the choice below), not compiled.
+    Otherwise the Python
+    tick: `compile` unset compiles it on CUDA, or for runs of at least COMPILE_MIN_GENERATIONS
+    generations; `cuda_graphs` unset: on CUDA with the compiled tick, and a tick that fails to
+    compile then runs eagerly."""
+    if device.type == "cpu" and compile is not True and not cuda_graphs \
+            and tick_choice() == "fused":
+        fused = FusedTicks()
+        if fused.ready(warn=True):
+            return fused, False
     use_compile = compile if compile is not None else (
         device.type == "cuda" or generations >= COMPILE_MIN_GENERATIONS)
     if cuda_graphs and (device.type != "cuda" or not use_compile):
@@ -166,8 +177,10 @@ def tick_function(device: torch.device, compile: bool | None = None,
 
 
 def tick_mode(step_fn: Callable, compiled: bool) -> str:
-    """How the tick runs: 'eager', 'compiled', 'compiled, CUDA graphs', or 'eager (compiling
+    """How the tick runs: 'fused', 'eager', 'compiled', 'compiled, CUDA graphs', 'eager (compiling
     failed)' once a compiled tick has fallen back."""
+    if isinstance(step_fn, FusedTicks):
+        return "fused"
     graphs = isinstance(step_fn, CudaGraphTicks)
     compiled_step = step_fn.step_fn if graphs else step_fn
     if isinstance(compiled_step, CompiledStep) and compiled_step.error is not None:
@@ -175,3 +188,34 @@ def tick_mode(step_fn: Callable, compiled: bool) -> str:
     if graphs:
         return "compiled, CUDA graphs"
     return "compiled" if compiled else "eager"
+
+
+# ---------------------------------------------------------------- CPU threads
+def default_threads() -> int:
+    """The CPU threads a run takes when it is not told: the cores this process may use less the
+    machine's 1-minute load average (rounded), at least 1. On an idle 2-core machine that is 2;
+    under a load of 2 or more, 1, because threads that wait for cores another process holds
+    make the tick slower than one thread does (issue #30: 5.6 against 36-52 s a generation)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cores = os.cpu_count() or 1
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):
+        load = 0.0
+    return max(1, min(cores, int(cores - load + 0.5)))
+
+
+def set_threads(threads: int | None = None) -> int:
+    """Set torch's CPU threads (the fused tick runs environments in parallel on them) and return
+    the number: `threads`, or unset: `OMP_NUM_THREADS` where the environment sets it (torch
+    already follows it), else `default_threads()`. ValueError below 1."""
+    if threads is None:
+        if os.environ.get("OMP_NUM_THREADS", "").strip():
+            return torch.get_num_threads()
+        threads = default_threads()
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"threads must be an integer >= 1, got {threads!r}")
+    torch.set_num_threads(threads)
+    return threads
