@@ -11,7 +11,8 @@
 //     by sweep and prune along x (every overlapping pair: no per-cell capacity as in the
 //     reference's broad phase from broad_phase_min_robots); obstacles likewise;
 //   * a robot runs all ticks of the call in cache, one environment after the other.
-#include <torch/extension.h>
+#include <torch/types.h>
+#include <torch/python.h>
 #include <ATen/Parallel.h>
 
 #include <algorithm>
