@@ -20,6 +20,7 @@ import torch
 from typer.testing import CliRunner
 
 from swarmcode_torch.app.cli import app
+from test_reliability import _copy_run  # the same copy of a run directory
 
 runner = CliRunner()
 TINY = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
@@ -52,12 +53,6 @@ def finished_run(tmp_path_factory):
     return run
 
 
-def _copy_run(run: Path, to: Path) -> Path:
-    to.mkdir()
-    for f in run.iterdir():
-        if f.is_file():
-            (to / f.name).write_bytes(f.read_bytes())
-    return to
 
 
 def _snapshot(run: Path) -> dict[str, bytes]:

@@ -209,22 +209,12 @@ Node = Union[int, tuple[int, list["Node"]]]  # a leaf opcode, or (SEQ|SEL, child
 
 
 def parse(program: Sequence[int]) -> list[Node]:
-    """Pre-order opcode list -> the implicit root's children (NOP skipped, stray END ignored)."""
-    root: list[Node] = []
-    stack = [root]
-    for op in (int(o) for o in program):
-        if op == NOP:
-            continue
-        if op == END:
-            if len(stack) > 1:
-                stack.pop()
-        elif op in CONTROL_OPS:
-            children: list[Node] = []
-            stack[-1].append((op, children))
-            stack.append(children)
-        else:
-            stack[-1].append(op)
-    return root
+    """Pre-order opcode list -> the implicit root's children (NOP skipped, stray END ignored):
+    `parse_slots` without the slots."""
+    def strip(nodes: list["SlotNode"]) -> list[Node]:
+        return [(op, strip(children)) if op in CONTROL_OPS else op
+                for _, op, children in nodes]
+    return strip(parse_slots(program))
 
 
 def _eval(node: Node, leaf_status: Sequence[int], fired: set[int]) -> tuple[int, int]:
@@ -529,8 +519,8 @@ SlotNode = tuple[int, int, list]  # (slot of the node in the program array, opco
 
 
 def parse_slots(program: Sequence[int]) -> list[SlotNode]:
-    """Like :func:`parse`, keeping each node's slot: the implicit root's children as
-    ``(slot, opcode, children)`` (a leaf has no children)."""
+    """Pre-order opcode list -> the implicit root's children as ``(slot, opcode, children)``
+    (a leaf has no children; NOP skipped, stray END ignored); `parse` drops the slots."""
     root: list[SlotNode] = []
     stack = [root]
     for slot, op in enumerate(int(o) for o in program):
