@@ -26,7 +26,8 @@ def sh(*args, cwd=None, timeout=300):
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
     """(python, console script) of a venv with the wheel of this source tree installed; the
-    venv sees the system site-packages for torch and the other dependencies (no download)."""
+    venv sees the test interpreter's site-packages for torch and the other dependencies (no
+    download)."""
     tmp = tmp_path_factory.mktemp("wheel")
     src = tmp / "src"                      # build from a copy: no build/ or egg-info here
     src.mkdir()
@@ -39,8 +40,15 @@ def installed(tmp_path_factory):
     wheels = list((tmp / "dist").glob("swarmcode_torch-*.whl"))
     assert len(wheels) == 1, wheels
     env = tmp / "venv"
-    venv.EnvBuilder(system_site_packages=True, with_pip=False).create(env)
+    venv.EnvBuilder(with_pip=False).create(env)
     python = env / "bin" / "python"
+    # The dependencies (torch, ...) are those of the interpreter running the tests, which may
+    # itself be a virtual environment: `system_site_packages` would give the base interpreter's
+    # instead. A .pth file puts this interpreter's site-packages after the new venv's own, as
+    # plain paths (their .pth files, such as this source tree's editable install, are not run).
+    own = sh(python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])").strip()
+    outer = [p for p in sys.path if p.endswith("site-packages") and Path(p).is_dir()]
+    (Path(own) / "outer-site-packages.pth").write_text("\n".join(outer) + "\n")
     sh(sys.executable, "-m", "pip", "--python", python, "install", "--no-deps", "-q", wheels[0])
     return python, env / "bin" / "swarmcode-torch", tmp
 
