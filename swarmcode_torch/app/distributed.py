@@ -417,7 +417,7 @@ def sharded_evaluation(ev, workers: int, address: str | None = None,
     process is connected already); the actors are stopped on leaving it.
 
         with sharded_evaluation(ev, 4, address="auto"):
-            runs.run(ev, run_dir, reporters)
+            session.run(ev, run_dir, reporters)
     """
     with ray_session(address, f"--eval-workers {workers}"):
         evaluator = ShardedEvaluator(ev.ctx, workers, cpus_per_worker)
