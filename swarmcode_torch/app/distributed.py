@@ -5,7 +5,7 @@ used, never when the package is imported. docs/DISTRIBUTED.md shows local, multi
 clusters.
 
 - `run_tasks` runs a function once per job as Ray tasks, at most `workers` at once, each with
-  its CPUs and GPUs (the sweep's per-run function, `cli._sweep_task`), and reports each as it
+  its CPUs and GPUs (the sweep's per-run function, `sweep_run.sweep_task`), and reports each as it
   ends; a failed job does not stop the others.
 - `ShardedEvaluator` is an evaluator for `evolve.Context.evaluator`: it cuts a generation's
   evaluation plan (`evaluation.plan_evaluation`, drawn in the driver) into shards of whole

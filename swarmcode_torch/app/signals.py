@@ -8,6 +8,7 @@ import threading
 from contextlib import contextmanager
 from typing import Iterator
 
+
 @contextmanager
 def deferred_signals(deliver: bool = True) -> Iterator[list[int]]:
     """Within the block Ctrl-C (SIGINT) and SIGTERM are held, not acted on: a step that must
@@ -60,3 +61,33 @@ def interrupt_of(e: BaseException) -> KeyboardInterrupt | None:
             return e
         e, seen = e.__cause__ or e.__context__, seen + 1
     return None
+
+
+#: Set once SIGTERM has arrived in this process (the exit status is then 143, not 130).
+TERMINATED: list[int] = []
+
+
+@contextmanager
+def terminate_as_interrupt():
+    """Within the block SIGTERM (a scheduler's or `kill`'s stop) acts as Ctrl-C: the run writes
+    the checkpoint of its last finished generation. A second SIGTERM while that checkpoint is
+    written is ignored, so the write completes. Yields a list that is non-empty once SIGTERM
+    has arrived."""
+    terminated: list[int] = []
+
+    def handler(signum, frame):
+        if terminated:
+            return                         # already stopping: let the checkpoint be written
+        terminated.append(signum)
+        TERMINATED.append(signum)
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:                     # not the main thread: leave signals alone
+        yield terminated
+        return
+    try:
+        yield terminated
+    finally:
+        signal.signal(signal.SIGTERM, previous)
