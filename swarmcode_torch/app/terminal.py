@@ -253,7 +253,7 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
             close_writers(reporters)
         stopped = bool(terminated or TERMINATED)      # SIGTERM here or before the run loop
         err.print(stop_line("Terminated" if stopped else "Interrupted", run_dir,
-                             checkpoints.saved, again), markup=False, highlight=False,
+                            checkpoints.saved, again), markup=False, highlight=False,
                   soft_wrap=True)
         raise typer.Exit(code=143 if stopped else 130)
     except RunError as e:
