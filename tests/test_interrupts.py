@@ -17,7 +17,7 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from swarmcode_torch.app import runs as runs_module
+from swarmcode_torch.app import files as files_module
 from swarmcode_torch.app.cli import app
 from swarmcode_torch.app.runs import load_checkpoint
 
@@ -91,7 +91,7 @@ def straight(tmp_path_factory):
             logdir = tmp_path_factory.mktemp(f"straight{seed}_{every}")
             counter = StopAt(0, "int")
             mp = pytest.MonkeyPatch()
-            mp.setattr(runs_module, "interrupt_point", counter)
+            mp.setattr(files_module, "interrupt_point", counter)
             try:
                 r = invoke("evolve", *BASE, "--seed", seed, "--generations", GENERATIONS,
                            "--checkpoint-every", every, "--logdir", logdir)
@@ -110,7 +110,7 @@ def _interrupted_then_resumed(tmp_path: Path, straight, seed: int, every: int, n
     assert nth <= steps
     stop = StopAt(nth, how)
     mp = pytest.MonkeyPatch()
-    mp.setattr(runs_module, "interrupt_point", stop)
+    mp.setattr(files_module, "interrupt_point", stop)
     r = None
     try:
         r = invoke("evolve", *BASE, "--seed", seed, "--generations", GENERATIONS,

@@ -135,6 +135,9 @@ import sys  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
 
+from swarmcode_torch.app import checkpoints as checkpoints_module  # noqa: E402
+from swarmcode_torch.app import files as files_module  # noqa: E402
+from swarmcode_torch.app import runconfig as runconfig_module  # noqa: E402
 from swarmcode_torch.app import runs as runs_module  # noqa: E402
 from swarmcode_torch.app.runs import (LOCK_FILE, RunLock, clean_temporary_files, new_run_dir,
                                       repair_teams)
@@ -274,7 +277,7 @@ def test_a_full_disk_in_tensorboard_ends_the_run_in_one_line(tmp_path, monkeypat
     from tensorboard.summary.writer import record_writer
 
     state = {"full": False}
-    real_save, real_write = runs_module.save_checkpoint, record_writer.RecordWriter.write
+    real_save, real_write = checkpoints_module.save_checkpoint, record_writer.RecordWriter.write
 
     def save(run_dir, ev):
         path = real_save(run_dir, ev)
@@ -286,7 +289,7 @@ def test_a_full_disk_in_tensorboard_ends_the_run_in_one_line(tmp_path, monkeypat
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         return real_write(self, data)
 
-    monkeypatch.setattr(runs_module, "save_checkpoint", save)
+    monkeypatch.setattr(checkpoints_module, "save_checkpoint", save)
     monkeypatch.setattr(record_writer.RecordWriter, "write", write)
     r = invoke("evolve", *TINY, "--generations", 4, "--checkpoint-every", 2, *FAST,
                "--logdir", tmp_path)
@@ -402,7 +405,7 @@ def test_a_stale_lock_of_a_dead_pid_is_taken_over(finished_run, tmp_path):
 def test_run_directories_made_at_the_same_second_never_collide(tmp_path, monkeypatch):
     from swarmcode_torch.coevo.config import SwarmCoDeConfig
 
-    monkeypatch.setattr(runs_module.time, "strftime", lambda fmt, *when: "20250101-000000")
+    monkeypatch.setattr(files_module.time, "strftime", lambda fmt, *when: "20250101-000000")
     n = 12
     barrier, made, errors = threading.Barrier(n), [], []
 
@@ -842,7 +845,7 @@ def test_usage_errors_are_one_line(tmp_path):
 def test_a_run_too_big_for_this_machine_replays_and_inspects_but_does_not_resume(
         finished_run, tmp_path, monkeypatch):
     run = _copy_run(finished_run, tmp_path / "run")
-    monkeypatch.setattr(runs_module, "memory_limit", lambda device="auto": (1024, "memory"))
+    monkeypatch.setattr(runconfig_module, "memory_limit", lambda device="auto": (1024, "memory"))
     r = invoke("replay", run, "--ticks", 4, "--out", tmp_path / "t.gif")
     assert r.exit_code == 0, r.output
     assert invoke("inspect", run).exit_code == 0

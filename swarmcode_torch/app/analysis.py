@@ -13,14 +13,15 @@ from ..coevo.dynamics import median, niche_count, replay, window_stats
 from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
 from .replay_page import HTML_FILE, page_data, write_page
-from .runs import (REPLAY_FILE, RunError, _size, atomic_write_bytes, estimate_bytes,
-                   generation_team, load_checkpoint, memory_limit, read_config, read_summary,
-                   read_teams, run_scenario)
+from .checkpoints import load_checkpoint
+from .files import REPLAY_FILE, RunError, atomic_write_bytes
+from .runconfig import _size, estimate_bytes, memory_limit, read_config, run_scenario
+from .summary import generation_team, read_summary, read_teams
 from ..sim.scenario import Scenario
 
 
 def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:
-    """generation -> {"niches", "score"} of its best team, from teams.jsonl (`runs.read_teams`;
+    """generation -> {"niches", "score"} of its best team, from teams.jsonl (`summary.read_teams`;
     a record without the fields it needs is skipped)."""
     out: dict[int, dict] = {}
     for g, rec in read_teams(run_dir).items():

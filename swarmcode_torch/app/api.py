@@ -21,79 +21,27 @@ import functools
 import math
 import os
 import re
-from dataclasses import dataclass, field, fields, replace
+from contextlib import ExitStack
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from . import records, runs
-from ..coevo.config import PRESETS, SwarmCoDeConfig
+from . import records, session
+from ..coevo.config import SwarmCoDeConfig
 from ..coevo.evaluation import ScoreFn, score_fn_name
 from ..sim.runtime import set_threads
 from ..coevo.evolve import Evolution, GenerationResult
-from ..sim.hardware import catalog_toml_lines, default_catalog
-from ..sim.scenario import EFFECTORS, Scenario, parse_scenario, read_scenario
-
-_CONFIG_KEYS = tuple(f.name for f in fields(SwarmCoDeConfig))
-
-
-# ------------------------------------------------------------------ scenarios as TOML
-def _toml(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml(x) for x in v) + "]"
-    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+from ..sim.scenario import Scenario
+from .checkpoints import load_run
+from .files import RunError, new_run_dir
+from .runconfig import scenario_to_toml  # noqa: F401 - the API's, as before
+from .session import make_config  # noqa: F401 - the API's, as before
 
 
-def scenario_to_toml(s: Scenario) -> str:
-    """A scenario TOML file that loads back (`load_scenario`) as a scenario equal to `s`."""
-    names = {v: k for k, v in EFFECTORS.items()}
-    lines = [f"name = {_toml(s.name)}", f"description = {_toml(s.description)}",
-             f"arena = {_toml(float(s.arena))}", f"base_radius = {_toml(float(s.base_radius))}",
-             f"num_robots = {_toml(int(s.num_robots))}",
-             f"episode_ticks = {_toml(int(s.episode_ticks))}",
-             f"species_overhead = {_toml(float(s.species_overhead))}", "", "[obstacles]",
-             f"count = {_toml(int(s.obstacle_count))}",
-             f"radius = {_toml([float(x) for x in s.obstacle_radius])}"]
-    for p in s.packages:
-        lines += ["", "[[packages]]", f"kind = {_toml(p.kind)}"]
-        if p.kind == "individual":
-            lines.append(f"effector = {_toml(names[p.grips[0]])}")
-        else:
-            lines.append(f"grips = {_toml([names[g] for g in p.grips])}")
-        lines += [f"count = {_toml(int(p.count))}",
-                  f"distance = {_toml([float(x) for x in p.distance])}",
-                  f"mass = {_toml([float(x) for x in p.mass])}",
-                  f"radius_band = {_toml([float(x) for x in p.radius_band])}",
-                  f"size = {_toml(float(p.size))}",
-                  f"distance_weighting = {_toml(bool(p.distance_weighting))}"]
-    if s.hardware != default_catalog():                 # its own catalog, inline
-        lines += catalog_toml_lines(s.hardware, prefix="hardware.")
-    return "\n".join(lines) + "\n"
-
-
+# ------------------------------------------------------------------ scenarios
 def _scenario_stem(s: Scenario) -> str:
     """The scenario's name as a file stem (a run directory is named after it)."""
     return re.sub(r"[^A-Za-z0-9._-]+", "_", s.name).strip("._") or "scenario"
-
-
-def _scenario_data(s: Scenario) -> bytes:
-    """The TOML of a Scenario object, checked to load back as the same scenario (parsing it
-    validates it: ScenarioError names the field)."""
-    data = scenario_to_toml(s).encode("utf-8")
-    if parse_scenario(data, f"scenario {s.name!r}") != s:
-        raise ValueError(f"scenario {s.name!r} does not survive a round trip through TOML")
-    return data
-
-
-def _object_evolution(cfg: SwarmCoDeConfig, s: Scenario, data: bytes,
-                      fitness: ScoreFn | None = None) -> Evolution:
-    """An Evolution of a Scenario object, named by the scenario's name (nothing reloads the
-    scenario during a run; a run directory keeps `data`, its TOML, as its scenario.toml, which
-    resume, replay and inspect read)."""
-    return Evolution(replace(cfg, scenario=s.name), fitness=fitness, scenario=s)
 
 
 # ------------------------------------------------------------------ results
@@ -237,12 +185,8 @@ def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int 
     summary.json and teams.jsonl, metrics.csv, TensorBoard events (a replay image every
     `render_every` generations, 0: never; the composition figure every `figure_every`) and
     checkpoint.pt every `checkpoint_every` generations and at the end."""
-    from .reporting import CsvReporter, TensorBoardReporter
-
     _check_every(checkpoint_every, render_every, figure_every)
-    return [runs.SummaryReporter(run_dir), CsvReporter(run_dir),
-            TensorBoardReporter(run_dir, figure_every=figure_every, render_every=render_every),
-            runs.CheckpointReporter(run_dir, checkpoint_every)]
+    return session.file_reporters(run_dir, checkpoint_every, render_every, figure_every)
 
 
 def _result(ev: Evolution, run_dir: Path | None, history: list[dict]) -> RunResult:
@@ -252,42 +196,7 @@ def _result(ev: Evolution, run_dir: Path | None, history: list[dict]) -> RunResu
                      scenario=ev.ctx.scenario, evolution=ev)
 
 
-def _execute(ev: Evolution, run_dir: Path | None, reporters: list) -> None:
-    if run_dir is not None:
-        runs.run(ev, run_dir, reporters)
-        return
-    for r in reporters:                     # in memory: runs.run less the interrupt checkpoint
-        r.on_start(ev)
-    while not ev.done:
-        result = records.step(ev)
-        for r in reporters:
-            r.on_generation(ev, result)
-    for r in reporters:
-        r.on_end(ev)
-
-
 # ------------------------------------------------------------------ evolve, resume, load
-def make_config(config: SwarmCoDeConfig | None = None, **settings) -> SwarmCoDeConfig:
-    """`config` (default `SwarmCoDeConfig()`) with `settings` (config keys) replaced; TypeError for
-    an unknown key. A path scenario becomes a string. `preset="paper"` (`coevo.config.PRESETS`)
-    sets the preset's algorithm settings first; the other settings go on top."""
-    if config is not None and not isinstance(config, SwarmCoDeConfig):
-        raise TypeError(f"config must be an SwarmCoDeConfig, got {type(config).__name__}")
-    unknown = sorted(set(settings) - set(_CONFIG_KEYS))
-    if unknown:
-        raise TypeError(f"unknown setting(s) {', '.join(unknown)} (the keys of SwarmCoDeConfig: "
-                        f"{', '.join(_CONFIG_KEYS)})")
-    if isinstance(settings.get("scenario"), os.PathLike):
-        settings["scenario"] = os.fspath(settings["scenario"])
-    if "preset" in settings:        # the preset's settings first, then the others on top
-        name = settings.pop("preset")
-        if name not in PRESETS:
-            raise ValueError(f"unknown preset {name!r} (presets: {', '.join(PRESETS)})")
-        config = replace(config if config is not None else SwarmCoDeConfig(), **PRESETS[name],
-                         preset=name)
-    return replace(config if config is not None else SwarmCoDeConfig(), **settings)
-
-
 def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike | Scenario | None = None,
            logdir: str | os.PathLike | None = "runs", checkpoint_every: int = 10,
            render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
@@ -333,18 +242,15 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     cfg = make_config(config, **settings)
     if scenario_obj is not None:
         cfg = replace(cfg, scenario=scenario_obj.name)
-    ev, data = start_evolution(cfg, scenario_obj, fitness)
-    history = _History(callback)
-    if logdir is None:
-        _execute(ev, None, [history, *reporters])
-        return _result(ev, None, history.rows)
     name = cfg if scenario_obj is None else replace(cfg, scenario=_scenario_stem(scenario_obj))
-    run_dir = runs.new_run_dir(Path(logdir), name)
-    with runs.RunLock(run_dir):
-        runs.write_run_files(run_dir, ev.cfg, data, ev.ctx.scenario.hardware)
-        reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
-        _execute(ev, run_dir, [*reps, history, *reporters])
-    return _result(ev, run_dir, history.rows)
+    make_dir = None if logdir is None else (lambda ev: new_run_dir(Path(logdir), name))
+    history = _History(callback)
+    with ExitStack() as stack:
+        start = session.start_new(stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness)
+        reps = [] if logdir is None else \
+            file_reporters(start.run_dir, checkpoint_every, render_every, figure_every)
+        session.run(start.ev, start.run_dir, [*reps, history, *reporters])
+    return _result(start.ev, start.run_dir, history.rows)
 
 
 def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
@@ -355,22 +261,13 @@ def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
     to run instead of `cfg.scenario`'s file; `fitness`: a user score function (`evolve`).
     ValueError (ScenarioError is one) otherwise."""
     fitness = _checked_fitness(fitness)
-    cfg.validate(bounds=False)
-    if scenario is None:
-        scen, data = read_scenario(cfg.scenario)
-    else:
-        scen, data = scenario, _scenario_data(scenario)
-    runs.check_config(cfg, scen)
-    ev = (Evolution(cfg, fitness=fitness) if scenario is None
-          else _object_evolution(cfg, scenario, data, fitness))
-    if ev.ctx.scenario != scen:
-        raise ValueError(f"{cfg.scenario} changed while the run was starting; start it again")
-    return ev, data
+    checked, data = session.check_start(cfg, scenario)
+    return session.build(cfg, checked, scenario, fitness), data
 
 
 def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
+    from .files import METRICS_FILE
     from .reporting import read_metrics_csv
-    from .runs import METRICS_FILE
 
     path = Path(run_dir) / METRICS_FILE
     if not path.is_file():
@@ -398,18 +295,17 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
     set_threads(threads)
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
-        raise runs.RunError(f"{run_dir} is not a run directory (no such directory)")
-    with runs.RunLock(run_dir):
-        loaded = runs.load_run(run_dir)
-        ev = runs.resume(run_dir, generations=generations, device=device, loaded=loaded,
-                         fitness=fitness)
+        raise RunError(f"{run_dir} is not a run directory (no such directory)")
+    with ExitStack() as stack:
+        start = session.start_resume(stack, run_dir, generations=generations, device=device,
+                                     fitness=fitness)
+        ev = start.ev
         earlier = _earlier_rows(run_dir, ev.state.generation)
         if ev.done:                         # nothing to run: no file changes (as the CLI)
             return _result(ev, run_dir, earlier)
-        runs.write_config(run_dir, ev.cfg)
         history = _History(callback)
         reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
-        _execute(ev, run_dir, [*reps, history, *reporters])
+        session.run(ev, run_dir, [*reps, history, *reporters])
     return _result(ev, run_dir, earlier + history.rows)
 
 
@@ -418,7 +314,7 @@ def load(run_dir: str | os.PathLike) -> RunResult:
     metrics.csv as the history (empty for a run written before metrics.csv existed), species
     composition and best team from the checkpoint. `evolution` is None."""
     run_dir = Path(run_dir)
-    cfg, ck, scenario = runs.load_run(run_dir)
+    cfg, ck, scenario = load_run(run_dir)
     best = ck["best"]
     return RunResult(config=cfg, run_dir=run_dir, history=_earlier_rows(run_dir, math.inf),
                      species=list(ck["history"]), best_team=dict(best) if best else None,

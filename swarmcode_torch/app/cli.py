@@ -1,14 +1,13 @@
-"""The `swarmcode-torch` command line: scenarios, evolve, inspect."""
+"""The `swarmcode-torch` command line: its commands and options, parsed, and what they print.
+
+The work is done elsewhere: a run starts and runs through `session` (with `terminal.execute`),
+a sweep through `sweep_run`, the analyses in `analysis`."""
 
 from __future__ import annotations
 
 import json
-import math
-import signal
 import sys
-import threading
-from contextlib import ExitStack, contextmanager
-from dataclasses import replace
+from contextlib import ExitStack
 from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
@@ -18,13 +17,16 @@ from rich import box
 from rich.console import Console
 from rich.markup import escape
 from typer.core import TyperGroup
-from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
-                           TimeRemainingColumn)
 from rich.table import Table
 
 from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
-from .runs import deferred_signals
+from . import session
+from .signals import TERMINATED, terminate_as_interrupt
+from .terminal import (THREADS_HELP, Where, attach_shards, check_path, console, err,
+                       eval_shards_option, execute, fail, os_fail, print_shard_traffic, print_team,
+                       set_threads_option, stopped)
+
 
 class _OneLineErrors(TyperGroup):
     """The command group, with usage errors (an option value that is not a number, an unknown
@@ -59,8 +61,6 @@ class _OneLineErrors(TyperGroup):
 app = typer.Typer(add_completion=True, no_args_is_help=True, cls=_OneLineErrors, rich_markup_mode=None,
                   help="SwarmCoDe: co-design the behavior trees and hardware of robot swarms.")
 # off a terminal (logs, pipes) Rich would wrap at 80 columns; tables need a little more
-console = Console(width=None if sys.stdout.isatty() else 120)
-err = Console(stderr=True, width=None if sys.stderr.isatty() else 200)
 
 
 class Objective(str, Enum):
@@ -85,14 +85,6 @@ def _objective(value: "Objective | None") -> str | None:
     return None if value is None else Objective(value).value
 
 
-class _Failed(typer.Exit):
-    """The exit (code 2) of `fail`; `message` is its line (a sweep's Ray task reports it)."""
-
-    def __init__(self, message: str):
-        super().__init__(code=2)
-        self.message = message
-
-
 def _print_version(value: bool) -> None:
     if value:
         from .. import __version__
@@ -105,44 +97,6 @@ def _options(version: Annotated[Optional[bool], typer.Option(
         "--version", callback=_print_version, is_eager=True,
         help="Print the version and exit.")] = None) -> None:
     """SwarmCoDe: co-design the behavior trees and hardware of robot swarms."""
-
-
-def fail(msg: str) -> None:
-    """Print a one-line error and exit non-zero. The message is printed as it is: brackets such
-    as [low, high] or [[packages]] are not read as Rich markup; a newline inside it becomes a
-    space, so the error stays on one line."""
-    msg = " ".join(str(msg).split())
-    err.print(f"[bold red]Error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
-    raise _Failed(msg)
-
-
-#: The longest path an option takes (PATH_MAX).
-MAX_PATH = 4096
-
-
-def _path(value: str | None, option: str) -> Path | None:
-    """An option's path, checked: not empty (an empty --logdir would write into the working
-    directory; '.' says so), at most MAX_PATH characters, no NUL, and text that can be printed
-    (bytes that are not UTF-8 reach Python as surrogates no message can print)."""
-    if value is None:
-        return None
-    if not value.strip():
-        fail(f"{option} is empty: give a directory ('.' for the working directory)")
-    if len(value) > MAX_PATH or "\0" in value:
-        fail(f"{option}: not a path ({len(value)} characters{', a NUL' if chr(0) in value else ''};"
-             f" at most {MAX_PATH})")
-    try:
-        value.encode("utf-8")
-    except UnicodeEncodeError:
-        fail(f"{option}: the path {value.encode('utf-8', 'backslashreplace').decode()[:200]} "
-             "is not UTF-8 text; rename it or give another")
-    return Path(value)
-
-
-def _os_fail(e: OSError, doing: str) -> None:
-    from .runs import os_error_text
-
-    fail(f"{doing}: {os_error_text(e)}")
 
 
 @app.command()
@@ -166,45 +120,6 @@ def scenarios() -> None:
     # on a terminal a description is cut to the window; off one (a pipe, a file) every row is
     # one whole line, however long
     (console if console.is_terminal else Console(width=100_000, highlight=False)).print(t)
-
-
-class _Progress:
-    """Rich progress bar on a terminal; a plain line every few generations otherwise."""
-
-    def __init__(self, total: int, start: int, every: int):
-        self.tty = sys.stdout.isatty()
-        self.every = every
-        self.bar = None
-        if self.tty:
-            self.bar = Progress(TextColumn("done"), MofNCompleteColumn(), BarColumn(),
-                                TextColumn("{task.description}"), TimeElapsedColumn(),
-                                TextColumn("left"), TimeRemainingColumn(), console=console)
-            self.task = self.bar.add_task("", total=total, completed=start)
-
-    def on_start(self, ev) -> None:
-        if self.bar:
-            self.bar.start()
-
-    def on_generation(self, ev, r) -> None:
-        # generations are numbered from 0 (summary.json, teams.jsonl, TensorBoard steps); the
-        # count "done" is how many have finished: generation g is the (g + 1)-th
-        team = r.team
-        text = (f"generation {r.generation}  best team {r.best['fitness']:.1f} "
-                f"(this generation {team['fitness']:.1f})  species {r.num_species}  "
-                f"team {team['species']} sp, {team['niches']} niches, "
-                f"${team['cost']:.0f}  {r.seconds:.2f}s/gen")
-        if self.bar:
-            self.bar.update(self.task, completed=ev.state.generation, description=text)
-        elif r.generation % self.every == 0 or ev.done:
-            print(f"done {ev.state.generation}/{ev.cfg.generations}  {text}", flush=True)
-
-    def on_end(self, ev) -> None:
-        self.stop()
-
-    def stop(self) -> None:
-        if self.bar:
-            self.bar.stop()
-            self.bar = None
 
 
 @app.command()
@@ -234,15 +149,15 @@ def evolve(
     threads: Annotated[Optional[int], typer.Option(help=THREADS_HELP)] = None,
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
-    logdir, resume = _path(logdir, "--logdir"), _path(resume, "--resume")
-    _TERMINATED.clear()                    # this command's SIGTERM, not an earlier one's
-    _set_threads(threads)
-    shards = _eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
-    where = _Where()
-    with _terminate_as_interrupt() as terminated:
+    logdir, resume = check_path(logdir, "--logdir"), check_path(resume, "--resume")
+    TERMINATED.clear()                    # this command's SIGTERM, not an earlier one's
+    set_threads_option(threads)
+    shards = eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
+    where = Where()
+    with terminate_as_interrupt() as terminated:
         try:
             with ExitStack() as stack:
-                attach = None if shards is None else (lambda ev: _attach_shards(stack, ev, *shards))
+                attach = None if shards is None else (lambda ev: attach_shards(stack, ev, *shards))
                 ev, run_dir, saved = _start_evolve(
                     stack, scenario=scenario, budget=budget, objective=_objective(objective),
                     generations=generations, population=population, swarm_size=swarm_size,
@@ -252,139 +167,28 @@ def evolve(
                     figure_every=figure_every, where=where, preset=preset)
                 if ev is None:
                     return
-                _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
-                         figure_every=figure_every, where=where)
+                execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
+                        figure_every=figure_every, where=where)
                 if shards is not None:
-                    _print_shard_traffic(ev.ctx.evaluator)
+                    print_shard_traffic(ev.ctx.evaluator)
             console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
-            _print_team(run_dir)
+            print_team(run_dir)
             console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard "
                           f"--logdir {run_dir.parent}", markup=False, highlight=False)
         except KeyboardInterrupt:
-            _stopped(where, bool(terminated))
-
-
-class _Where:
-    """Where an evolve command stands, for the line an interrupt prints: its run directory (None
-    before one is made or locked), whether it resumes one, the generation its checkpoint file
-    holds (`saved`; the `CheckpointReporter`'s once the run loop has it) and how to continue."""
-
-    def __init__(self):
-        self.run_dir: Path | None = None
-        self.resuming = False
-        self.saved: int | None = None
-        self.checkpoints = None
-        self.again: str | None = None
-
-    def holds(self) -> int | None:
-        return self.checkpoints.saved if self.checkpoints is not None else self.saved
-
-
-def _stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | None,
-               resuming: bool = False) -> str:
-    """The line an interrupted run prints: the generation its checkpoint file really holds, or
-    that there is none."""
-    if run_dir is None:
-        return f"{how}: no run directory was made"
-    if saved is None:
-        if resuming:
-            return f"{how} before the run resumed; {run_dir} is unchanged"
-        return (f"{how}: no checkpoint was written yet, so {run_dir} holds no generation to "
-                "continue from; start the run again")
-    done = "no generation finished yet" if saved == 0 else \
-        f"generations 0-{saved - 1} recorded"
-    again = again or f"swarmcode-torch evolve --resume {run_dir}"
-    return (f"{how}: checkpoint of generation {saved} is in {run_dir} ({done}); continue "
-            f"with: {again}")
-
-
-def _stopped(where: _Where, terminated: bool) -> None:
-    terminated = terminated or bool(_TERMINATED)
-    how = "Terminated" if terminated else "Interrupted"
-    err.print(_stop_line(how, where.run_dir, where.holds(), where.again, where.resuming),
-              markup=False, highlight=False, soft_wrap=True)
-    raise typer.Exit(code=143 if terminated else 130)
-
-
-THREADS_HELP = ("CPU threads of this process [default: OMP_NUM_THREADS if set, else the cores "
-                "less the load average, at least 1].")
-
-
-def _set_threads(threads: int | None) -> None:
-    from ..sim.runtime import set_threads
-
-    try:
-        set_threads(threads)
-    except ValueError:
-        fail(f"--threads must be >= 1, got {threads}")
-
-
-def _eval_shards_option(eval_workers: int, cpus: float | None, address: str | None):
-    """(workers, CPUs per worker, address) of a sharded evaluation, or None for the evaluation
-    in this process; a one-line error for bad values or Ray options without Ray."""
-    if eval_workers < 1:
-        fail(f"--eval-workers must be >= 1, got {eval_workers}")
-    if eval_workers == 1 and address is None:
-        if cpus is not None:
-            fail("--cpus-per-eval-worker is for evaluation shards on Ray: use it with "
-                 "--eval-workers N > 1 or --ray-address")
-        return None
-    if cpus is not None and not (cpus > 0 and math.isfinite(cpus)):
-        fail(f"--cpus-per-eval-worker must be a finite number > 0, got {cpus}")
-    _need_ray(f"--eval-workers {eval_workers}" if eval_workers > 1 else "--ray-address")
-    return eval_workers, 1.0 if cpus is None else cpus, address
-
-
-def _need_ray(what: str) -> None:
-    """A one-line error naming the extra to install when Ray is missing."""
-    from .distributed import RayUnavailable, require_ray
-
-    try:
-        require_ray(what)
-    except RayUnavailable as e:
-        fail(str(e))
-
-
-def _attach_shards(stack: ExitStack, ev, workers: int, cpus: float, address: str | None) -> None:
-    """Evaluate `ev`'s generations in shards on Ray actors until `stack` closes."""
-    from .distributed import RayUnavailable, sharded_evaluation
-
-    try:
-        evaluator = stack.enter_context(sharded_evaluation(ev, workers, address, cpus))
-    except RayUnavailable as e:
-        fail(str(e))
-    where = sorted(set(evaluator.where))
-    console.print(f"Evaluation: {workers} shards on Ray actors ({escape('; '.join(where))})",
-                  highlight=False)
-
-
-def _print_shard_traffic(evaluator) -> None:
-    stats = getattr(evaluator, "stats", None)
-    if not stats:
-        return
-    n = len(stats)
-    sent = sum(s["bytes_sent"] for s in stats) / n
-    back = sum(s["bytes_received"] for s in stats) / n
-    console.print(f"Evaluation shards: {sent / 1024:.1f} KiB sent and {back / 1024:.1f} KiB "
-                  f"received per generation (pickled, mean of {n} generations)",
-                  highlight=False, markup=False)
+            stopped(where, bool(terminated))
 
 
 def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
                   swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
                   log_every, render_every, resume, settings, attach=None, figure_every=50,
-                  where: "_Where | None" = None, preset=None):
+                  where: Where, preset=None):
     """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
     The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
     once the Evolution exists and before any file is written (evaluation shards)."""
-    from ..coevo.config import preset_config, with_overrides
-    from ..coevo.evolve import Evolution
-    from .settings import option_names, parse_settings
-    from .runs import (RunError, RunLock, check_config, load_run, new_run_dir, write_config,
-                       write_run_files)
-    from .runs import resume as resume_run
-    from ..sim.scenario import read_scenario
+    from .files import RunError, new_run_dir
+    from .settings import option_names
 
     if checkpoint_every < 1 or log_every < 1 or figure_every < 1 or render_every < 0:
         fail("--checkpoint-every, --log-every and --figure-every must be >= 1, "
@@ -407,50 +211,44 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
                      f"directory ({resume})")
             if not resume.is_dir():
                 fail(f"--resume {resume} is not a run directory (no such directory)")
-            run_dir = resume
-            stack.enter_context(RunLock(run_dir))
-            if where is not None:
+
+            def locked(run_dir: Path) -> None:
                 where.run_dir, where.resuming = run_dir, True
-            loaded = load_run(run_dir)
-            cfg, ck = loaded[0], loaded[1]
-            if where is not None:
-                where.saved = ck["generation"]
-            target = cfg.generations if generations is None else generations
-            if target <= ck["generation"]:
-                console.print(f"{run_dir} already has {ck['generation']} generations"
+
+            def loaded(saved: int) -> None:
+                where.saved = saved
+
+            start = session.start_resume(stack, resume, generations=generations, device=device,
+                                         stop_if_done=True, on_locked=locked, on_loaded=loaded,
+                                         attach=attach)
+            if start.ev is None:
+                console.print(f"{resume} already has {start.saved} generations"
                               f"{'' if generations is None else f' (asked for {generations})'}; "
                               "nothing to do, no file changed", markup=False, highlight=False,
                               soft_wrap=True)
-                return None, run_dir, None
-            ev = resume_run(run_dir, generations=generations, device=device, loaded=loaded)
-            if attach is not None:
-                attach(ev)
-            write_config(run_dir, ev.cfg)
-            console.print(f"Resuming [bold]{escape(str(run_dir))}[/] at generation "
+                return None, resume, None
+            ev = start.ev
+            console.print(f"Resuming [bold]{escape(str(resume))}[/] at generation "
                           f"{ev.state.generation} of {ev.cfg.generations}")
-            return ev, run_dir, ev.state.generation
-        # --set values are applied as given, none included (with_overrides skips None)
-        cfg = replace(with_overrides(preset_config(preset or "default"), generations=generations,
-                                     device=device, **given), **parse_settings(settings or []))
-        cfg.validate(option_names(), bounds=False)
-        scen, data = read_scenario(cfg.scenario)  # a clear error before anything is created
-        check_config(cfg, scen, option_names())
+            return ev, resume, start.saved
+        cfg = session.resolve_config(preset, settings, generations=generations, device=device,
+                                     **given)
         logdir = logdir if logdir is not None else Path("runs")
-        if logdir.exists() and not logdir.is_dir():
-            fail(f"--logdir {logdir} is not a directory")
-        ev = Evolution(cfg)
-        if ev.ctx.scenario != scen:
-            fail(f"{cfg.scenario} changed while the run was starting; start it again")
-        if attach is not None:
-            attach(ev)
-        try:
-            run_dir = new_run_dir(logdir, cfg)
-        except OSError as e:
-            _os_fail(e, f"--logdir {logdir}: cannot make a run directory")
-        stack.enter_context(RunLock(run_dir))
-        if where is not None:
-            where.run_dir = run_dir
-        write_run_files(run_dir, ev.cfg, data, ev.ctx.scenario.hardware)
+
+        def check_logdir() -> None:        # after the config's checks, before the Evolution
+            if logdir.exists() and not logdir.is_dir():
+                fail(f"--logdir {logdir} is not a directory")
+
+        def make_dir(ev) -> Path:
+            try:
+                return new_run_dir(logdir, cfg)
+            except OSError as e:
+                os_fail(e, f"--logdir {logdir}: cannot make a run directory")
+
+        start = session.start_new(stack, cfg, make_dir, names=option_names(),
+                                  before_build=check_logdir, attach=attach,
+                                  on_dir=lambda run_dir: setattr(where, "run_dir", run_dir))
+        ev, run_dir = start.ev, start.run_dir
         console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
                       f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
                       f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})")
@@ -458,149 +256,7 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
     except OSError as e:
-        _os_fail(e, "cannot start the run")
-
-
-def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
-             render_every: int = 0, saved: int | None = None,
-             again: str | None = None, figure_every: int = 50,
-             where: _Where | None = None) -> None:
-    """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints.
-    Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
-    failed write (a full disk: OSError from the checkpoint, summary.json, teams.jsonl or
-    TensorBoard) ends the run with a one-line error that names the last checkpointed generation
-    and how to continue (exit 2); the checkpoint on disk is the last complete one. `saved` is the
-    generation of the checkpoint the run resumed from; `again` is the command to continue with
-    (default: swarmcode-torch evolve --resume RUN_DIR)."""
-    from .distributed import ShardError
-    from .runs import CheckpointReporter, RunError, SummaryReporter, os_error_text, run
-
-    again = again or f"swarmcode-torch evolve --resume {run_dir}"
-    checkpoints = CheckpointReporter(run_dir, checkpoint_every)
-    checkpoints.saved = saved
-    if where is not None:
-        where.run_dir, where.checkpoints, where.again = run_dir, checkpoints, again
-    reporters: list = []
-    terminated: list[int] = []
-    progress = None
-    try:
-        progress = _Progress(ev.cfg.generations, ev.state.generation, log_every)
-        reporters = [progress, SummaryReporter(run_dir)]
-        with _quiet_thread_os_errors():
-            from .reporting import CsvReporter, TensorBoardReporter
-
-            reporters += [CsvReporter(run_dir),
-                          TensorBoardReporter(run_dir, figure_every=figure_every,
-                                              render_every=render_every), checkpoints]
-            with _terminate_as_interrupt() as terminated:
-                run(ev, run_dir, reporters)
-    except KeyboardInterrupt:
-        with deferred_signals(deliver=False):      # the writers close whole (TensorBoard's thread)
-            if progress is not None:
-                progress.stop()
-            _close_writers(reporters)
-        stopped = bool(terminated or _TERMINATED)      # SIGTERM here or before the run loop
-        err.print(_stop_line("Terminated" if stopped else "Interrupted", run_dir,
-                             checkpoints.saved, again), markup=False, highlight=False,
-                  soft_wrap=True)
-        raise typer.Exit(code=143 if stopped else 130)
-    except RunError as e:
-        if progress is not None:
-            progress.stop()
-        _close_writers(reporters)
-        fail(f"{e}; the last checkpoint is of generation {checkpoints.saved}")
-    except OSError as e:
-        progress.stop()
-        _close_writers(reporters)
-        what = (f"writing the run's files failed after {ev.state.generation} generations "
-                f"({os_error_text(e)})")
-        if checkpoints.saved is None:
-            fail(f"{what}; no checkpoint was written yet: free space or fix the cause, then start "
-                 "the run again")
-        fail(f"{what}; the last checkpoint is of generation {checkpoints.saved} "
-             f"({run_dir / 'checkpoint.pt'}); free space or fix the cause, then continue with: "
-             f"{again}")
-    except ShardError as e:
-        progress.stop()
-        _close_writers(reporters)
-        fail(f"{e} after {ev.state.generation} generations; the last checkpoint is of "
-             f"generation {checkpoints.saved} ({run_dir / 'checkpoint.pt'}); continue with: "
-             f"{again}")
-    progress.stop()
-
-
-def _close_writers(reporters) -> None:
-    """Stop the TensorBoard writer threads of a failed run (their errors are already reported)."""
-    for r in reporters:
-        writer = getattr(r, "writer", None)
-        if writer is not None:
-            try:
-                writer.close()
-                r.writer = None
-            except Exception:  # noqa: BLE001 - the run already failed; this is cleanup
-                pass
-
-
-@contextmanager
-def _quiet_thread_os_errors():
-    """Within the block an OSError in a background thread (TensorBoard's writer on a full disk)
-    prints no traceback: the writer re-raises it in the run, which reports it in one line."""
-    previous = threading.excepthook
-
-    def hook(args):
-        if not issubclass(args.exc_type, OSError):
-            previous(args)
-
-    threading.excepthook = hook
-    try:
-        yield
-    finally:
-        threading.excepthook = previous
-
-
-#: Set once SIGTERM has arrived in this process (the exit status is then 143, not 130).
-_TERMINATED: list[int] = []
-
-
-@contextmanager
-def _terminate_as_interrupt():
-    """Within the block SIGTERM (a scheduler's or `kill`'s stop) acts as Ctrl-C: the run writes
-    the checkpoint of its last finished generation. A second SIGTERM while that checkpoint is
-    written is ignored, so the write completes. Yields a list that is non-empty once SIGTERM
-    has arrived."""
-    terminated: list[int] = []
-
-    def handler(signum, frame):
-        if terminated:
-            return                         # already stopping: let the checkpoint be written
-        terminated.append(signum)
-        _TERMINATED.append(signum)
-        raise KeyboardInterrupt
-
-    try:
-        previous = signal.signal(signal.SIGTERM, handler)
-    except ValueError:                     # not the main thread: leave signals alone
-        yield terminated
-        return
-    try:
-        yield terminated
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-def _parse_list(text: str, kind, option: str) -> list:
-    try:
-        vals = [kind(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        fail(f"{option} expects a comma-separated list of numbers, got {text!r}")
-    if not vals:
-        fail(f"{option} is empty")
-    for v in vals:
-        if kind is float and not math.isfinite(v):
-            fail(f"{option}: {v} is not a finite number")
-        if vals.count(v) > 1:
-            fail(f"{option} lists {v:g} twice (each run is one budget and one seed)")
-    return vals
+        os_fail(e, "cannot start the run")
 
 
 @app.command()
@@ -629,269 +285,20 @@ def sweep(
     threads: Annotated[Optional[int], typer.Option(help=THREADS_HELP)] = None,
 ) -> None:
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
-    _set_threads(threads)
-    import time
+    from .sweep_run import run_sweep
 
-    from ..coevo.config import preset_config, with_overrides
-    from .settings import option_names, parse_settings
-    from .runs import SWEEP_LOCK_FILE, TABLE_MD, RunError, RunLock, check_config, read_summary
-    from ..sim.scenario import read_scenario
-    from .sweep import table_rows, write_outputs
-
-    logdir, out = _path(logdir, "--logdir"), _path(out, "--out")
-    _TERMINATED.clear()
-    budget_list = _parse_list(budgets, float, "--budgets")
-    seed_list = _parse_list(seeds, int, "--seeds")
-    if checkpoint_every < 1 or log_every < 1:
-        fail("--checkpoint-every and --log-every must be >= 1")
-    on_ray = _sweep_ray_options(workers, cpus_per_run, gpus_per_run, ray_address, device)
-    if logdir is not None and out is not None:
-        fail(f"--logdir and --out cannot both be given: --out is the sweep directory itself "
-             f"({out}), --logdir the directory a new one is made in ({logdir})")
-    if logdir is not None and logdir.exists() and not logdir.is_dir():
-        fail(f"--logdir {logdir} is not a directory")
-    out = out or (logdir or Path("runs")) / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
-    names = option_names({"seed": "--seeds", "budget": "--budgets"})
-    try:
-        base = replace(with_overrides(preset_config(preset or "default"),
-                                      objective=_objective(objective),
-                                      scenario=scenario, generations=generations,
-                                      population=population, swarm_size=swarm_size,
-                                      trials=trials, ticks=ticks, device=device,
-                                      compile=compile), **parse_settings(settings or [], names))
-        for b in budget_list:
-            for sd in seed_list:
-                with_overrides(base, budget=b, seed=sd).validate(option_names=names, bounds=False)
-        scen, data = read_scenario(base.scenario)
-        for b in budget_list:
-            for sd in seed_list:
-                check_config(with_overrides(base, budget=b, seed=sd), scen, names)
-    except (ScenarioError, ValueError) as e:
-        fail(str(e))
-    if out.exists() and not out.is_dir():
-        fail(f"--out {out} is not a directory")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        _os_fail(e, f"--out {out}: cannot make the sweep directory")
-    runs = []
-    with ExitStack() as stack:
-        try:
-            stack.enter_context(RunLock(out, SWEEP_LOCK_FILE))
-        except RunError as e:
-            fail(str(e))
-        except OSError as e:
-            _os_fail(e, f"--out {out}: cannot lock the sweep directory")
-        plans = [_plan_sweep_run(out, with_overrides(base, budget=b, seed=sd), scen, data)
-                 for b in budget_list for sd in seed_list]      # every refusal before any run
-        again = f"swarmcode-torch sweep with the same options and --out {out}"
-        console.print(f"Sweep directory: {out} (resume with --out {out})", markup=False,
-                      highlight=False, soft_wrap=True)
-        failed: list[tuple[str, str]] = []
-        if on_ray is None:
-            for b, sd, run_dir, cfg, state in plans:
-                if state != "done":
-                    _run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
-                runs.append((b, sd, run_dir))
-        else:
-            runs, failed = _sweep_on_ray(plans, data, checkpoint_every, log_every, again, *on_ray)
-            if not runs:
-                fail(f"every run of the sweep failed ({failed[0][0]}: {failed[0][1]}); fix the "
-                     f"cause, then run it again: {again}")
-        try:
-            for _, _, run_dir in runs:
-                read_summary(run_dir)                  # every figure of the table is checked
-            rows = table_rows(runs)
-            paths = write_outputs(rows, out)
-        except (RunError, ValueError) as e:
-            fail(str(e))
-        except OSError as e:
-            _os_fail(e, f"--out {out}: cannot write the table")
-    console.print((out / TABLE_MD).read_text(), highlight=False, markup=False)
-    console.print("Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False)
-    if failed:
-        names = ", ".join(name for name, _ in failed)
-        fail(f"{len(failed)} of {len(plans)} runs failed ({names}); the table has the "
-             f"{len(runs)} that finished; fix the cause, then resume them: {again}")
-
-
-def _sweep_ray_options(workers: int, cpus: float | None, gpus: float | None,
-                       address: str | None, device: str | None):
-    """(workers, CPUs per run, GPUs per run, address) of a sweep on Ray, or None for the runs
-    one after the other in this process; a one-line error for bad values or Ray options without
-    Ray."""
-    if workers < 1:
-        fail(f"--workers must be >= 1, got {workers}")
-    if workers == 1 and address is None:
-        if cpus is not None or gpus is not None:
-            fail("--cpus-per-run and --gpus-per-run are for runs on Ray: use them with "
-                 "--workers N > 1 or --ray-address")
-        return None
-    for name, v in (("--cpus-per-run", cpus), ("--gpus-per-run", gpus)):
-        if v is not None and not (v >= 0 and math.isfinite(v)):
-            fail(f"{name} must be a finite number >= 0, got {v}")
-    cpus = 1.0 if cpus is None else cpus
-    gpus = 0.0 if gpus is None else gpus
-    if gpus > 1 and gpus != int(gpus):
-        fail(f"--gpus-per-run above 1 must be a whole number of GPUs, got {gpus:g}")
-    if device is not None and device.startswith("cuda") and gpus == 0:
-        fail(f"--device {device} on Ray needs --gpus-per-run > 0 (each run reserves its share "
-             "of a GPU; Ray hides the GPUs from a run that reserves none)")
-    _need_ray(f"--workers {workers}" if workers > 1 else "--ray-address")
-    return workers, cpus, gpus, address
-
-
-def _sweep_on_ray(plans, data: bytes, checkpoint_every: int, log_every: int, again: str,
-                  workers: int, cpus: float, gpus: float, address: str | None):
-    """Run the unfinished runs of a sweep as Ray tasks (`_sweep_task`, up to `workers` at once),
-    a line as each ends; ([(budget, seed, run directory)] of the finished runs, in the sweep's
-    order, [(run name, error)] of the failed ones)."""
-    from .distributed import RayUnavailable, check_resources, ray_session, run_tasks
-
-    todo = [p for p in plans if p[4] != "done"]
-    # absolute paths: a worker's working directory may not be this one
-    jobs = [(run_dir.resolve(), cfg, data, state, checkpoint_every, log_every, again)
-            for _, _, run_dir, cfg, state in todo]
-    what = f"--workers {workers}" if workers > 1 else "--ray-address"
-
-    def on_finish(i: int, error: str | None, n: dict) -> None:
-        name = todo[i][2].name
-        counts = (f"{n['done']} done, {n['running']} running, {n['failed']} failed of "
-                  f"{n['total']}")
-        if error is None:
-            console.print(f"{name}: finished ({counts})", markup=False, highlight=False)
-        else:
-            console.print(f"{name}: failed: {error} ({counts})", markup=False, highlight=False,
-                          soft_wrap=True)
-
-    errors: list = []
-    terminated: list = []
-    if jobs:
-        try:
-            with ray_session(address, what) as ray, _terminate_as_interrupt() as terminated:
-                check_resources(ray, {"CPU": cpus, "GPU": gpus}, f"a run with --cpus-per-run "
-                                f"{cpus:g} and --gpus-per-run {gpus:g}")
-                console.print(f"Ray: {len(jobs)} runs, up to {workers} at once ({cpus:g} CPU, "
-                              f"{gpus:g} GPU each)", markup=False, highlight=False)
-                errors = run_tasks(_sweep_task, jobs, workers=workers, num_cpus=cpus,
-                                   num_gpus=gpus, on_finish=on_finish)
-        except RayUnavailable as e:
-            fail(str(e))
-        except KeyboardInterrupt:
-            how = "Terminated" if terminated else "Interrupted"
-            err.print(f"{how}: the running runs were stopped after writing their checkpoints; "
-                      f"continue with: {again}", markup=False, highlight=False)
-            raise typer.Exit(code=143 if terminated else 130)
-    failed_at = {id(p): e for p, e in zip(todo, errors) if e is not None}
-    finished = [p[:3] for p in plans if id(p) not in failed_at]
-    failed = [(p[2].name, failed_at[id(p)]) for p in plans if id(p) in failed_at]
-    return finished, failed
-
-
-def _sweep_task(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int,
-                log_every: int, again: str) -> str | None:
-    """One run of a sweep as a Ray task (`distributed.run_tasks`): `_run_sweep_run`, as the
-    sweep runs it in this process. None when the run finished; else its error in one line (a
-    failed start or write; a stop by Ctrl-C or SIGTERM, after its checkpoint was written)."""
-    try:
-        _run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
-    except _Failed as e:
-        return e.message
-    except typer.Exit as e:
-        return f"stopped (exit {e.exit_code}) after writing its checkpoint"
-    except Exception as e:  # noqa: BLE001 - the run's error; the sweep's other runs go on
-        return " ".join(f"{type(e).__name__}: {e}".split())
-    return None
-
-
-def _plan_sweep_run(out: Path, cfg, scenario, data: bytes):
-    """(budget, seed, run directory, config, state) of one run of a sweep (`sweep.plan_run`),
-    state 'done', 'resume' or 'new'; a one-line error for a run it cannot take over."""
-    from .runs import RunError
-    from .sweep import plan_run, run_name
-
-    try:
-        p = plan_run(out, cfg, scenario)
-    except (ScenarioError, RunError, ValueError) as e:
-        fail(str(e))
-    except OSError as e:
-        _os_fail(e, f"{out / run_name(cfg.budget, cfg.seed)}: cannot read the run")
-    if p.state == "done":
-        more = f" (it has {p.done}, more than the {cfg.generations} asked for)" \
-            if p.done > cfg.generations else ""
-        console.print(f"{p.run_dir.name}: already done{more}", markup=False, highlight=False)
-    return p.budget, p.seed, p.run_dir, p.cfg, p.state
-
-
-def _run_sweep_run(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int,
-                   log_every: int, again: str) -> None:
-    from ..coevo.evolve import Evolution
-    from .runs import RunError, RunLock, write_config, write_run_files
-    from .runs import resume as resume_run
-
-    with ExitStack() as stack:
-        try:
-            if state == "resume":
-                stack.enter_context(RunLock(run_dir))
-                ev = resume_run(run_dir, generations=cfg.generations)
-                write_config(run_dir, ev.cfg)
-                saved = ev.state.generation
-            else:
-                ev = Evolution(cfg)            # a config error leaves no directory behind
-                run_dir.mkdir(exist_ok=True)
-                stack.enter_context(RunLock(run_dir))
-                write_run_files(run_dir, ev.cfg, data, ev.ctx.scenario.hardware)
-                saved = None
-        except (ScenarioError, RunError, ValueError) as e:
-            fail(str(e))
-        except OSError as e:
-            _os_fail(e, f"{run_dir}: cannot start the run")
-        console.print(f"[bold]{escape(run_dir.name)}[/]: generation {ev.state.generation} -> "
-                      f"{cfg.generations}")
-        _execute(ev, run_dir, checkpoint_every, log_every, saved=saved, again=again)
-
-
-def _num(v, fmt: str) -> str:
-    return "n/a" if v is None else format(v, fmt)
-
-
-def _print_team(run_dir: Path) -> None:
-    from .runs import RunError, read_summary
-
-    try:
-        s = read_summary(run_dir)
-    except RunError as e:
-        fail(str(e))
-    designs = s["designs"]
-    budget = "none" if s.get("budget") is None else f"${s['budget']:g}"
-    console.print(
-        f"Best team (generation {s['best_generation']}): fitness {_num(s['best_fitness'], '.2f')}, "
-        f"cost ${_num(s['team_cost'], '.0f')} (budget {budget}), {s['num_species']} species, "
-        f"deliveries {_num(s['deliveries'], '.2f')} ({_num(s['deliveries_individual'], '.2f')} "
-        f"individual, {_num(s['deliveries_collab'], '.2f')} collaborative), energy used "
-        f"{_num(s['energy_used'], '.1f')}%", markup=False)
-    t = Table(title="Robots per design", box=box.SIMPLE_HEAD,
-              caption="ch/bat/mot: chassis, battery, motor tier (1-3); torque, capacity: "
-                      "operating points (0-1); dom: dominance")
-    for col in ("robots", "species", "tool", "radius", "ch", "bat", "mot",
-                "torque", "capacity", "dom", "$ each"):
-        t.add_column(col, justify="right", no_wrap=True)
-    for d in designs:
-        t.add_row(str(d["count"]), str(d["species"]), d["effector"], f"{d['radius']:.3f}",
-                  str(d["chassis_tier"]), str(d["battery_tier"]), str(d["motor_tier"]),
-                  f"{d['torque_point']:.2f}", f"{d['battery_point']:.2f}",
-                  f"{d['dominance']:.2f}", f"{d['cost']:.0f}")
-    console.print(t)
-    return designs
-
+    run_sweep(budgets, seeds, _objective(objective), scenario, generations, population,
+              swarm_size, trials, ticks, device, compile, logdir, out, checkpoint_every,
+              log_every, preset, settings, workers, cpus_per_run, gpus_per_run, ray_address,
+              threads)
 
 @app.command()
 def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")]) -> None:
     """Show the best team of a run: robots per design, hardware, cost and behavior trees."""
-    run_dir = _path(run_dir, "RUN_DIR")
+    run_dir = check_path(run_dir, "RUN_DIR")
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
-    designs = _print_team(run_dir)
+    designs = print_team(run_dir)
     caps = _capabilities(run_dir, designs)
     for i, d in enumerate(designs):
         console.print(f"[bold]species {d['species']}[/] ({d['count']} robots, {d['effector']}):")
@@ -929,7 +336,7 @@ def dynamics(
     from .analysis import run_dynamics
     from .runs import RunError
 
-    run_dir = _path(run_dir, "RUN_DIR")
+    run_dir = check_path(run_dir, "RUN_DIR")
 
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
@@ -982,7 +389,7 @@ def replay(
     from .analysis import replay_run
     from .runs import RunError
 
-    run_dir, out = _path(run_dir, "RUN_DIR"), _path(out, "--out")
+    run_dir, out = check_path(run_dir, "RUN_DIR"), check_path(out, "--out")
 
     from ..coevo.config import MAX_SEED, UPPER_BOUNDS
 
@@ -1002,7 +409,7 @@ def replay(
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
     except OSError as e:
-        _os_fail(e, "replay failed")
+        os_fail(e, "replay failed")
     console.print(f"Wrote {path}: {'the focal team: ' if html else ''}"
                   f"{m['delivered_individual']:.0f} individual and "
                   f"{m['delivered_collab']:.0f} collaborative deliveries, "
@@ -1016,7 +423,7 @@ def main() -> None:
         # an interrupt outside a run's own handling (while starting, or while a stopped run is
         # closing): no traceback, and the exit status of a stop, never death by SIGINT
         err.print("Interrupted", markup=False, highlight=False)
-        sys.exit(143 if _TERMINATED else 130)
+        sys.exit(143 if TERMINATED else 130)
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ used, never when the package is imported. docs/DISTRIBUTED.md shows local, multi
 clusters.
 
 - `run_tasks` runs a function once per job as Ray tasks, at most `workers` at once, each with
-  its CPUs and GPUs (the sweep's per-run function, `cli._sweep_task`), and reports each as it
+  its CPUs and GPUs (the sweep's per-run function, `sweep_run.sweep_task`), and reports each as it
   ends; a failed job does not stop the others.
 - `ShardedEvaluator` is an evaluator for `evolve.Context.evaluator`: it cuts a generation's
   evaluation plan (`evaluation.plan_evaluation`, drawn in the driver) into shards of whole
@@ -417,7 +417,7 @@ def sharded_evaluation(ev, workers: int, address: str | None = None,
     process is connected already); the actors are stopped on leaving it.
 
         with sharded_evaluation(ev, 4, address="auto"):
-            runs.run(ev, run_dir, reporters)
+            session.run(ev, run_dir, reporters)
     """
     with ray_session(address, f"--eval-workers {workers}"):
         evaluator = ShardedEvaluator(ev.ctx, workers, cpus_per_worker)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..coevo.evolve import Evolution, GenerationResult
 from .records import HISTOGRAMS, SCALAR_TAGS, scalars
-from .runs import METRICS_FILE
+from .files import METRICS_FILE
 
 
 def composition_figure(history: list[dict], legend: int = 8):
@@ -191,7 +191,7 @@ class CsvReporter:
         self._rewrite(columns, rows)
 
     def _rewrite(self, columns: list[str], rows: list[dict]) -> None:
-        from .runs import atomic_write_bytes
+        from .files import atomic_write_bytes
 
         buf = io.StringIO()
         w = csv.DictWriter(buf, fieldnames=columns, restval="", extrasaction="ignore",
@@ -208,7 +208,7 @@ class CsvReporter:
             old, _ = read_metrics_csv(self.path, raw=True) if self.path.is_file() else ([], [])
             self._rewrite((self.columns or []) + [k for k in row if k not in (self.columns or [])],
                           old)
-        from .runs import append_line
+        from .files import append_line
 
         buf = io.StringIO()
         csv.DictWriter(buf, fieldnames=self.columns, restval="", lineterminator="").writerow(
@@ -232,10 +232,10 @@ def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[st
     """The rows of a metrics.csv (numbers as int or float, empty cells None; rows cut short by
     an interruption, or whose generation is not a number, are skipped) and its header. With
     `raw`, the cells other than `generation` are kept as text. The file is read without
-    following a link and up to `runs.MAX_RECORD_BYTES`; RunError naming the file for one that
+    following a link and up to `files.MAX_RECORD_BYTES`; RunError naming the file for one that
     cannot be read, is not UTF-8 or not CSV, or whose header is not metrics.csv's (no
     `generation` column, or columns that are no tag: a resume would otherwise drop its rows)."""
-    from .runs import MAX_RECORD_BYTES, RunError, read_text
+    from .files import MAX_RECORD_BYTES, RunError, read_text
 
     text = read_text(path, MAX_RECORD_BYTES)
     try:

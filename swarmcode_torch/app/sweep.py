@@ -12,9 +12,11 @@ from pathlib import Path
 from ..coevo.config import SwarmCoDeConfig
 from ..coevo.dynamics import mean_std
 from ..sim.scenario import Scenario
-from .runs import (BUDGET_PLOT, atomic_write_bytes, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, TABLE_CSV, TABLE_MD,
-                   RunError, config_differences, load_checkpoint, load_run, read_config,
-                   read_summary, run_scenario)
+from .checkpoints import load_checkpoint, load_run
+from .files import (BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, TABLE_CSV, TABLE_MD,
+                    RunError, atomic_write_bytes)
+from .runconfig import config_differences, read_config, run_scenario
+from .summary import read_summary
 
 COLUMNS = ("budget", "best_fitness", "team_cost", "deliveries", "deliveries_individual",
            "deliveries_collab", "energy_used", "num_species")

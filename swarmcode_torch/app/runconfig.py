@@ -1,0 +1,317 @@
+"""A run's config and scenario: config.toml written and read back (through the migrations),
+the run's own scenario.toml and hardware.toml copies, and the checks a config passes before a
+run starts (its settings, then the memory it needs)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any, Iterable
+
+import torch
+
+from ..coevo.config import SwarmCoDeConfig
+from ..sim.hardware import Catalog, CatalogError, catalog_toml_lines, default_catalog, default_catalog_bytes, parse_catalog
+from ..sim.scenario import EFFECTORS, Scenario, load_scenario, parse_scenario
+from . import records
+from .files import (CONFIG_FILE, HARDWARE_COPY, SCENARIO_COPY, RunError, atomic_write_bytes,
+                    check_nesting, read_file_bytes, read_text)
+from .migrations import migrate_config
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+#: The memory assumed when the machine's cannot be read.
+FALLBACK_MEMORY = 64 * 2 ** 30
+
+
+# ------------------------------------------------------------------ config.toml
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    return json.dumps(str(v))
+
+
+def config_to_toml(cfg: SwarmCoDeConfig, software: dict | None = None) -> str:
+    """config.toml: every set key of `cfg`; `software` (`records.software`), what wrote it, goes
+    into a comment line (a config file holds settings only)."""
+    lines = ["# swarmcode-torch run configuration (re-run with: swarmcode-torch evolve --resume DIR)"]
+    if software:
+        lines.append("# written by " + ", ".join(f"{k} {v}" for k, v in software.items()
+                                                  if v is not None))
+    defaults = SwarmCoDeConfig().to_dict()
+    for k, v in cfg.to_dict().items():
+        if v is not None:
+            lines.append(f"{k} = {_toml_value(v)}")
+        elif defaults.get(k) is not None:
+            # TOML has no null: a key unset where its default is set (quota_size_exponent)
+            # is written "none", which reading a config turns back into None
+            lines.append(f'{k} = "none"')
+    return "\n".join(lines) + "\n"
+
+
+def write_config(run_dir: Path, cfg: SwarmCoDeConfig) -> None:
+    atomic_write_bytes(Path(run_dir) / CONFIG_FILE,
+                       config_to_toml(cfg, records.software(cfg.device)).encode())
+
+
+def config_from_dict(d: Any, source: str) -> SwarmCoDeConfig:
+    """A validated config from a parsed table (config.toml, a checkpoint's "config") of any
+    version; RunError naming `source` and the key for anything malformed or out of range."""
+    try:
+        cfg = SwarmCoDeConfig.from_dict(migrate_config(d))
+        # a run made on a larger machine can still be inspected and replayed here; a resume
+        # checks the memory it needs (`resume`)
+        cfg.validate()
+    except (TypeError, ValueError) as e:
+        raise RunError(f"{source}: malformed config ({e})") from None
+    return cfg
+
+
+def read_config(run_dir: Path) -> SwarmCoDeConfig:
+    """The config of a run directory, every value checked (`SwarmCoDeConfig.validate`)."""
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.is_file():
+        raise RunError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
+    text = read_text(path)
+    check_nesting(text, str(path))
+    try:
+        d = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise RunError(f"{path}: malformed config ({e})") from None
+    except RecursionError:
+        raise RunError(f"{path}: nested too deeply") from None
+    missing = [k for k in CONFIG_REQUIRED if k not in d]
+    if missing:
+        # an empty or cut config would read as the defaults: another run than the one made
+        raise RunError(f"{path}: {'empty' if not d else 'incomplete'} config (no "
+                       f"{', '.join(missing)}); restore it from the run's checkpoint or backup")
+    return config_from_dict(d, str(path))
+
+
+#: Keys every config.toml a run has written holds (each version wrote them all).
+CONFIG_REQUIRED = ("scenario", "generations", "population", "seed")
+
+
+# ------------------------------------------------------------------ a Scenario object as TOML
+def _toml(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml(x) for x in v) + "]"
+    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+
+
+def scenario_to_toml(s: Scenario) -> str:
+    """A scenario TOML file that loads back (`load_scenario`) as a scenario equal to `s`."""
+    names = {v: k for k, v in EFFECTORS.items()}
+    lines = [f"name = {_toml(s.name)}", f"description = {_toml(s.description)}",
+             f"arena = {_toml(float(s.arena))}", f"base_radius = {_toml(float(s.base_radius))}",
+             f"num_robots = {_toml(int(s.num_robots))}",
+             f"episode_ticks = {_toml(int(s.episode_ticks))}",
+             f"species_overhead = {_toml(float(s.species_overhead))}", "", "[obstacles]",
+             f"count = {_toml(int(s.obstacle_count))}",
+             f"radius = {_toml([float(x) for x in s.obstacle_radius])}"]
+    for p in s.packages:
+        lines += ["", "[[packages]]", f"kind = {_toml(p.kind)}"]
+        if p.kind == "individual":
+            lines.append(f"effector = {_toml(names[p.grips[0]])}")
+        else:
+            lines.append(f"grips = {_toml([names[g] for g in p.grips])}")
+        lines += [f"count = {_toml(int(p.count))}",
+                  f"distance = {_toml([float(x) for x in p.distance])}",
+                  f"mass = {_toml([float(x) for x in p.mass])}",
+                  f"radius_band = {_toml([float(x) for x in p.radius_band])}",
+                  f"size = {_toml(float(p.size))}",
+                  f"distance_weighting = {_toml(bool(p.distance_weighting))}"]
+    if s.hardware != default_catalog():                 # its own catalog, inline
+        lines += catalog_toml_lines(s.hardware, prefix="hardware.")
+    return "\n".join(lines) + "\n"
+
+
+def scenario_data(s: Scenario) -> bytes:
+    """The TOML of a Scenario object, checked to load back as the same scenario (parsing it
+    validates it: ScenarioError names the field)."""
+    data = scenario_to_toml(s).encode("utf-8")
+    if parse_scenario(data, f"scenario {s.name!r}") != s:
+        raise ValueError(f"scenario {s.name!r} does not survive a round trip through TOML")
+    return data
+
+
+# ------------------------------------------------------------------ a run's own scenario
+def hardware_bytes(hardware: Catalog | None = None) -> bytes:
+    """What a run keeps as its hardware.toml: the installed catalog file as read
+    (swarmcode_torch/data/hardware.toml) when the run uses it, else the run's scenario's own
+    catalog written out as TOML (it parses back to the same catalog)."""
+    if hardware is None or hardware == default_catalog():
+        return default_catalog_bytes()
+    head = ["# The hardware catalog of this run's scenario (its `hardware` key), as the run "
+            "read it.",
+            "# Tiers are listed 1, 2, 3. Units and the meaning of each field: data/hardware.toml."]
+    return ("\n".join(head + catalog_toml_lines(hardware)) + "\n").encode("utf-8")
+
+
+def write_run_files(run_dir: Path, cfg: SwarmCoDeConfig, scenario_data: bytes,
+                    hardware: Catalog | None = None) -> None:
+    """config.toml, and the copies that make a new run self-contained: scenario.toml (the bytes
+    its scenario was read from) and hardware.toml (the catalog its robots are built from,
+    `hardware_bytes`)."""
+    run_dir = Path(run_dir)
+    write_config(run_dir, cfg)
+    atomic_write_bytes(run_dir / SCENARIO_COPY, scenario_data)
+    atomic_write_bytes(run_dir / HARDWARE_COPY, hardware_bytes(hardware))
+
+
+def run_scenario_source(run_dir: Path, cfg: SwarmCoDeConfig) -> str:
+    """Where the scenario of a run is read from: its scenario.toml copy (an absolute path, so
+    any working directory will do), or, in a run directory made before runs kept one, the
+    config's scenario."""
+    copy = Path(run_dir) / SCENARIO_COPY
+    return str(copy.absolute()) if copy.is_file() or copy.is_symlink() else cfg.scenario
+
+
+def run_catalog(run_dir: Path) -> Catalog | None:
+    """The hardware catalog a run ran with: its hardware.toml copy (RunError when that cannot be
+    read or is not a valid catalog), or None for a run made before runs kept one (it used the
+    installed catalog)."""
+    copy = Path(run_dir) / HARDWARE_COPY
+    if not copy.is_file() and not copy.is_symlink():
+        return None
+    try:
+        data = read_file_bytes(copy)
+    except OSError as e:
+        raise RunError(f"{copy}: cannot be read ({e.strerror or type(e).__name__})") from None
+    try:
+        return parse_catalog(data, str(copy))
+    except CatalogError as e:
+        raise RunError(str(e)) from None
+
+
+def run_scenario(run_dir: Path, cfg: SwarmCoDeConfig) -> Scenario:
+    """The scenario a run ran on (see `run_scenario_source`), its robots built from the run's
+    own hardware.toml (`run_catalog`): whatever has become of the installed catalog or of the
+    file the scenario named, a resumed or replayed run computes with the catalog it started
+    with."""
+    copy = Path(run_dir) / SCENARIO_COPY
+    catalog = run_catalog(run_dir)
+    if not copy.is_file() and not copy.is_symlink():
+        return load_scenario(cfg.scenario, catalog)      # a run made before runs kept copies
+    try:
+        data = read_file_bytes(copy)                     # never through a link
+    except OSError as e:
+        raise RunError(f"{copy} cannot be read ({e.strerror or type(e).__name__})") from None
+    return parse_scenario(data, str(copy.absolute()), copy.parent, catalog)
+
+
+def config_differences(a: SwarmCoDeConfig, b: SwarmCoDeConfig, scenario: Scenario | None = None,
+                       ignore: Iterable[str] = ("generations", "device")) -> list[str]:
+    """The config keys in which `a` and `b` differ (except `ignore`); an unset swarm_size or
+    ticks counts as the scenario's (what a run pins when it starts)."""
+    da, db = a.to_dict(), b.to_dict()
+    if scenario is not None:
+        for d in (da, db):
+            if d["swarm_size"] is None:
+                d["swarm_size"] = scenario.num_robots
+            if d["ticks"] is None:
+                d["ticks"] = scenario.episode_ticks
+    ignore = set(ignore)
+    return sorted(k for k in da if k not in ignore and da[k] != db[k])
+
+
+# ------------------------------------------------------------------ memory
+def memory_limit(device: str = "auto") -> tuple[int, str]:
+    """(bytes, what) of the memory a run's evaluation batch lives in: the total memory of the
+    CUDA device it would run on, or this machine's physical memory; FALLBACK_MEMORY (64 GiB)
+    when neither can be read."""
+    try:
+        if device != "cpu" and torch.cuda.is_available():
+            idx = torch.device("cuda" if device == "auto" else device).index or 0
+            if idx < torch.cuda.device_count():
+                return torch.cuda.get_device_properties(idx).total_memory, f"cuda:{idx} memory"
+        if device == "cpu" or not device.startswith("cuda"):
+            n = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+            if n > 0:
+                return n, "memory"
+    except (ValueError, OSError, RuntimeError, AttributeError):
+        pass
+    return FALLBACK_MEMORY, "assumed memory (64 GiB)"
+
+
+def estimate_bytes(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> int:
+    """A rough estimate of the memory one generation needs (a lower bound of the peak, close to
+    the measured peak of a swarm1000 generation), in bytes:
+
+    - the evaluation batch: E = 2 x population x trials environments of N robots (the swarm
+      size; the scenario's robots; 1 when unknown), 16 x (16 + C + min(N, 500)) bytes a robot
+      (state and constants, distances to the C grip points of the packages, contact pairs);
+    - the layouts: population x trials environments of 32 candidate positions for each of the
+      K packages (checked against the O obstacles) and each obstacle: 4 x 32 x (K (O + 4) + 2 O);
+    - the start slots: 3 x 8 x N^2 bytes (pairwise distances of the N robots' slots);
+    - the programs: population x (4 x 11,664 lookup-table entries + 16 x bt_length + tag_length).
+    """
+    from ..sim.bt import NUM_COMBOS
+
+    P, T = cfg.population, cfg.trials
+    if scenario is not None:
+        N = cfg.swarm_size or scenario.num_robots
+        C = sum(c.count * len(c.grips) for c in scenario.packages)
+        K, O = scenario.num_packages, scenario.obstacle_count
+    else:
+        N, C, K, O = cfg.swarm_size or 1, 1, 1, 0
+    envs = 2 * P * T
+    batch = envs * N * 16 * (16 + C + min(N, 500))
+    layouts = P * T * 4 * 32 * (K * (O + 4) + 2 * O)
+    # the start slots: pairwise distances of the scenario's robots, three [N, N] float64
+    # tensors at once (layout.spawn_slots: cdist, eye, their sum)
+    M = max(N, scenario.num_robots if scenario is not None else 1)
+    layouts += 3 * 8 * M * M
+    programs = P * (4 * NUM_COMBOS + 16 * cfg.bt_length + cfg.tag_length)
+    return batch + layouts + programs
+
+
+def _size(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"):
+        if n < 1024 or unit == "EiB":
+            return f"{n:.3g} {unit}" if unit != "B" else f"{int(n)} B"
+        n /= 1024
+    return f"{n:.3g} EiB"  # pragma: no cover
+
+
+def check_memory(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
+                 option_names: dict[str, str] | None = None) -> None:
+    """ValueError, before anything is allocated, when `estimate_bytes` exceeds `memory_limit`:
+    the message gives the estimate and the settings that size it, by their config keys
+    (`population`, as the API takes them) or as `option_names` spells them (--population)."""
+    need = estimate_bytes(cfg, scenario)
+    limit, what = memory_limit(cfg.device if isinstance(cfg.device, str) else "auto")
+    if need <= limit:
+        return
+    names = {"population": "population", "trials": "trials", "swarm_size": "swarm_size",
+             **(option_names or {})}
+    N = cfg.swarm_size or (scenario.num_robots if scenario is not None else 1)
+    robots = f"{N} robots" if cfg.swarm_size or scenario is None else \
+        f"{N} robots (num_robots of scenario {cfg.scenario})"
+    raise ValueError(
+        f"this run would need about {_size(need)} of memory, more than the {_size(limit)} of "
+        f"{what}: {2 * cfg.population * cfg.trials} environments of {robots} a generation "
+        f"(2 x population x trials) and the programs of {cfg.population} individuals of "
+        f"bt_length {cfg.bt_length}; use a smaller {names['population']}, {names['trials']} or "
+        f"{names['swarm_size']}")
+
+
+def check_config(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
+                 option_names: dict[str, str] | None = None) -> None:
+    """Everything a run's config must pass before anything is made: its settings' types and
+    ranges, then the memory its sizes need (so that sizes far too large are told what they
+    would need), then the upper bounds that memory does not bound. ValueError, one line."""
+    cfg.validate(option_names, bounds=False)
+    check_memory(cfg, scenario, option_names)
+    cfg.check_bounds(option_names)

@@ -1,0 +1,159 @@
+"""summary.json and teams.jsonl: written every generation (`SummaryReporter`) and read back
+with every field checked."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from ..coevo.evolve import Evolution, GenerationResult
+from ..sim.bt import NUM_OPCODES
+from ..sim.hardware import MAX_NESTING, nesting_depth
+from . import records
+from .files import (MAX_RECORD_BYTES, SUMMARY_FILE, TEAMS_FILE, RunError, append_line,
+                    atomic_write_bytes, check_nesting, prepare_run_dir, read_text, trim_teams)
+
+class SummaryReporter:
+    """Rewrites summary.json (atomically) after every generation and appends the generation's
+    best team to teams.jsonl (one JSON object per line). On a start or resume it prepares the
+    directory (`prepare_run_dir`) and drops the records of teams.jsonl past the checkpoint the
+    run continues from (`trim_teams`): those generations are computed again."""
+
+    def __init__(self, run_dir: Path):
+        self.run_dir = Path(run_dir)
+        self.path = self.run_dir / SUMMARY_FILE
+        self.teams = self.run_dir / TEAMS_FILE
+
+    def on_start(self, ev: Evolution) -> None:
+        prepare_run_dir(self.run_dir)       # no leftover temporary files, no cut-off line
+        trim_teams(self.run_dir, ev.state.generation)
+
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        append_line(self.teams, json.dumps(records.team_line(result)))
+        atomic_write_bytes(self.path, json.dumps(records.summary(ev, result), indent=2).encode())
+
+    def on_end(self, ev: Evolution) -> None:
+        pass
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+#: The most robots the designs of a summary.json or teams.jsonl record may add up to (the
+#: swarm_size bound); a replay also checks the memory its team needs (`analysis.replay_run`).
+MAX_TEAM = 10_000_000
+
+
+def check_designs(designs: Any, source: str) -> list[dict]:
+    """The "designs" of a summary.json or teams.jsonl record, every field checked (RunError
+    naming `source`, the design and the field)."""
+    if not isinstance(designs, list) or not designs:
+        raise RunError(f"{source}: designs: expected a non-empty list, got {designs!r:.60}")
+    for i, d in enumerate(designs):
+        w = f"{source}: designs[{i}]"
+        if not isinstance(d, dict):
+            raise RunError(f"{w}: expected a table, got {d!r:.60}")
+        for key, ok, what in (
+                ("count", lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0,
+                 "an integer >= 0"),
+                ("species", lambda v: isinstance(v, int) and not isinstance(v, bool),
+                 "an integer"),
+                ("effector", lambda v: v in ("suction", "pincher"), "suction or pincher"),
+                ("radius", lambda v: _is_number(v) and math.isfinite(v) and 0 < v <= 10,
+                 "a radius in (0, 10] m"),
+                ("chassis_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
+                ("battery_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
+                ("motor_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
+                ("torque_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+                ("battery_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+                ("dominance", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+                ("cost", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+                ("bt", lambda v: isinstance(v, list) and 0 < len(v) <= 4096 and all(
+                    isinstance(x, int) and not isinstance(x, bool) and 0 <= x < NUM_OPCODES
+                    for x in v),
+                 f"a list of opcodes 0..{NUM_OPCODES - 1}")):
+            if key not in d:
+                raise RunError(f"{w}: missing {key!r}")
+            if not ok(d[key]):
+                raise RunError(f"{w}.{key}: expected {what}, got {d[key]!r:.60}")
+    total = sum(d["count"] for d in designs)
+    if total < 1:
+        raise RunError(f"{source}: designs: the counts add up to no robot")
+    if total > MAX_TEAM:
+        raise RunError(f"{source}: designs: the counts add up to {total} robots, more than any "
+                       f"run can have ({MAX_TEAM})")
+    return designs
+
+
+#: summary.json keys and whether each must be a number (None allowed: a non-finite value).
+_SUMMARY_NUMBERS = ("best_fitness", "team_cost", "deliveries", "deliveries_individual",
+                    "deliveries_collab", "energy_used", "num_species", "best_generation")
+
+
+def read_summary(run_dir: Path, figures: bool = True) -> dict:
+    """summary.json of a run, checked: a table whose designs are well-formed and (`figures`)
+    whose figures are numbers (or null, where a value was not finite) and budget a number or
+    null. A replay needs only the designs (figures=False)."""
+    path = Path(run_dir) / SUMMARY_FILE
+    if not path.is_file():
+        raise RunError(f"{run_dir} has no {SUMMARY_FILE} (is it a run directory with a finished "
+                       "generation?)")
+    text = read_text(path)
+    check_nesting(text, str(path))
+    try:
+        s = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise RunError(f"{path}: malformed JSON ({e})") from None
+    except RecursionError:
+        raise RunError(f"{path}: nested too deeply") from None
+    if not isinstance(s, dict):
+        raise RunError(f"{path}: expected a JSON object")
+    for key in _SUMMARY_NUMBERS if figures else ():
+        if key not in s:
+            raise RunError(f"{path}: missing {key!r}")
+        v = s[key]
+        if v is not None and not (_is_number(v) and math.isfinite(v)):
+            raise RunError(f"{path}: {key}: expected a number, got {v!r:.60}")
+    b = s.get("budget")
+    if b is not None and not (_is_number(b) and math.isfinite(b)):
+        raise RunError(f"{path}: budget: expected a number or null, got {b!r:.60}")
+    check_designs(s.get("designs"), str(path))
+    return s
+
+
+def read_teams(run_dir: Path) -> dict[int, dict]:
+    """generation -> its best-team record, from teams.jsonl (the last record of a generation
+    wins after a resume; a line that is not a JSON object, cut short by an interruption, is
+    skipped); {} when the run has no teams.jsonl."""
+    path = Path(run_dir) / TEAMS_FILE
+    out: dict[int, dict] = {}
+    if not path.is_file() and not path.is_symlink():
+        return out
+    for line in read_text(path, MAX_RECORD_BYTES).splitlines():
+        if nesting_depth(line) > MAX_NESTING:
+            raise RunError(f"{path}: a record nested {nesting_depth(line)} levels deep (at most "
+                           f"{MAX_NESTING})")
+        try:
+            rec = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line cut short by an interruption
+        g = rec.get("generation") if isinstance(rec, dict) else None
+        if isinstance(g, int) and not isinstance(g, bool):
+            out[g] = rec
+    return out
+
+
+def generation_team(run_dir: Path, generation: int) -> dict:
+    """The best team of one generation, from teams.jsonl (`read_teams`); its designs are
+    checked (`check_designs`)."""
+    path = Path(run_dir) / TEAMS_FILE
+    if not path.is_file():
+        raise RunError(f"{run_dir} has no {TEAMS_FILE}")
+    found = read_teams(run_dir).get(generation)
+    if found is None:
+        raise RunError(f"{run_dir} has no record of generation {generation}")
+    check_designs(found.get("designs"), f"{path} (generation {generation})")
+    return found
