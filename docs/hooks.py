@@ -23,10 +23,8 @@ from pathlib import Path
 from mkdocs.plugins import event_priority
 from mkdocs.structure.files import File
 
+#: the repository: the folder of mkdocs.yml (set by on_config)
 ROOT = Path(__file__).resolve().parent.parent
-# document this checkout's package, whatever else is installed
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 #: pages made from repository files outside docs/, at the same path in the site
 EXTRA_PAGES = ("CHANGELOG.md",)
@@ -40,12 +38,21 @@ HARDWARE_MARKER = "<!-- hardware-catalog -->"
 HELP_COLUMNS = 100
 
 
+def on_config(config):
+    global ROOT
+    ROOT = Path(config.config_file_path).resolve().parent
+    # document this checkout's package, whatever else is installed
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+    return config
+
+
 @event_priority(100)  # before mkdocs-jupyter's on_files, which wraps the notebooks
 def on_files(files, config):
     # as files of the repository root (src_dir), so that they keep their own path; mkdocs-jupyter
     # needs a File whose src_dir and src_uri lead to the notebook
     for path in [*sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / TUTORIALS).glob("*.ipynb")),
-                 *EXTRA_PAGES]:
+                 *(p for p in EXTRA_PAGES if (ROOT / p).is_file())]:
         files.append(File(path, str(ROOT), config.site_dir, config.use_directory_urls))
     return files
 
