@@ -97,7 +97,8 @@ def repo_target(url: str, src_uri: str, config, files) -> str | None:
         file = files.get_file_from_path(target)
         if file is not None and not file.inclusion.is_excluded():
             return None                     # a page or file of the site
-        if absolute.is_dir() and not config.exclude_docs.match_file(target.rstrip("/") + "/"):
+        excluded = config.exclude_docs
+        if absolute.is_dir() and not (excluded and excluded.match_file(target.rstrip("/") + "/")):
             return None                     # a folder of the site
     rel = absolute.relative_to(ROOT).as_posix()
     return rel + ("/" if absolute.is_dir() else "") + url[len(url.split("#", 1)[0]):]
