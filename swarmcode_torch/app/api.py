@@ -355,13 +355,12 @@ def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
     to run instead of `cfg.scenario`'s file; `fitness`: a user score function (`evolve`).
     ValueError (ScenarioError is one) otherwise."""
     fitness = _checked_fitness(fitness)
-    cfg.validate(bounds=False)
     if scenario is None:
         scen, data = read_scenario(cfg.scenario)
     else:
         scen, data = scenario, _scenario_data(scenario)
     runs.check_config(cfg, scen)
-    ev = (Evolution(cfg, fitness=fitness) if scenario is None
+    ev = (Evolution(cfg, fitness=fitness, checked=True) if scenario is None
           else _object_evolution(cfg, scenario, data, fitness))
     if ev.ctx.scenario != scen:
         raise ValueError(f"{cfg.scenario} changed while the run was starting; start it again")

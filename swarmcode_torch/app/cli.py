@@ -432,13 +432,12 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
         # --set values are applied as given, none included (with_overrides skips None)
         cfg = replace(with_overrides(preset_config(preset or "default"), generations=generations,
                                      device=device, **given), **parse_settings(settings or []))
-        cfg.validate(option_names(), bounds=False)
         scen, data = read_scenario(cfg.scenario)  # a clear error before anything is created
         check_config(cfg, scen, option_names())
         logdir = logdir if logdir is not None else Path("runs")
         if logdir.exists() and not logdir.is_dir():
             fail(f"--logdir {logdir} is not a directory")
-        ev = Evolution(cfg)
+        ev = Evolution(cfg, checked=True)
         if ev.ctx.scenario != scen:
             fail(f"{cfg.scenario} changed while the run was starting; start it again")
         if attach is not None:
@@ -659,9 +658,6 @@ def sweep(
                                       population=population, swarm_size=swarm_size,
                                       trials=trials, ticks=ticks, device=device,
                                       compile=compile), **parse_settings(settings or [], names))
-        for b in budget_list:
-            for sd in seed_list:
-                with_overrides(base, budget=b, seed=sd).validate(option_names=names, bounds=False)
         scen, data = read_scenario(base.scenario)
         for b in budget_list:
             for sd in seed_list:

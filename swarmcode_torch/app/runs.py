@@ -28,9 +28,10 @@ from typing import Any, Callable, Iterable, Iterator, Protocol
 
 import torch
 
-from ..coevo.config import SwarmCoDeConfig, with_overrides
+from ..coevo.config import SettingError, SwarmCoDeConfig, with_overrides
 from ..coevo.evolve import Evolution, GenerationResult
 from . import records
+from .settings import setting_message
 from ..sim.hardware import (MAX_NESTING, Catalog, CatalogError, nesting_depth, catalog_toml_lines, default_catalog,
                             default_catalog_bytes, parse_catalog)
 from ..sim.bt import NUM_OPCODES
@@ -489,10 +490,11 @@ LEGACY_DEFAULTS = {"quota_basis": "mean", "hw_sigma": 0.1, "social_sigma": 0.1,
 LEGACY_EPISODE_TICKS = {"one-niche": 250, "two-niche": 250, "four-niche": 250}
 
 
-def migrate_config(d: Any) -> Any:
+def migrate_config(d: Any, keep_retired: bool = False) -> Any:
     """A config table written by any version -> this version's keys, with the values the run
-    was made with for every setting added since (the one place config migrations live).
-    Anything but a table is returned as it is (`SwarmCoDeConfig.from_dict` refuses it)."""
+    was made with for every setting added since (the one place config migrations live), less
+    the retired settings (`drop_retired_settings`; kept with `keep_retired`). Anything but a
+    table is returned as it is (`SwarmCoDeConfig.from_dict` refuses it)."""
     if not isinstance(d, dict):
         return d
     d = {k: (None if v == "none" else v) for k, v in d.items()}
@@ -525,7 +527,64 @@ def migrate_config(d: Any) -> Any:
     if d.get("ticks") is None and d.get("scenario") in LEGACY_EPISODE_TICKS:
         # written before runs pinned their episode length: the scenario's length of that time
         d["ticks"] = LEGACY_EPISODE_TICKS[d["scenario"]]
-    return d
+    return d if keep_retired else drop_retired_settings(d)
+
+
+# ------------------------------------------------------------------ retired settings
+#: Settings this version no longer has: key -> (the values that run as this version does, the
+#: last version that ran the setting). Rejected experiments, and settings that kept behaviour
+#: from before 0.2 for old runs; their results are in the research notes.
+RETIRED_SETTINGS: dict[str, tuple[tuple[Any, ...], str]] = {
+    "gate_margin": ((0, 0.0), "0.6.0"),
+    "quota_inertia": ((0, 0.0), "0.6.0"),
+    "effector_flip": (("gene",), "0.6.0"),
+    "merge_species": ((False,), "0.6.0"),
+    "evaluated_partners": ((False,), "0.6.0"),
+    "baseline_refill": (("any",), "0.6.0"),
+    "d_hw_tiers": ((False,), "0.6.0"),
+    "bt_point_on_nodes": ((True,), "0.6.0"),
+    # with quota_size_exponent set, quota_basis changed nothing (`retired_setting`)
+    "quota_basis": (("sum",), "0.6.0"),
+}
+#: Retired values of settings this version keeps: (key, value) -> the last version that ran it.
+RETIRED_VALUES = {("partner_admission", "gate"): "0.6.0"}
+
+
+def retired_setting(d: dict) -> str | None:
+    """For a migrated config table (`migrate_config` before it drops the retired keys): a
+    one-line message naming the first setting whose value this version cannot run (a retired
+    key at a value other than one that runs as this version does, or a retired value), with
+    the last version that ran it; None if this version runs the config as it was run."""
+    for key, (same, last) in RETIRED_SETTINGS.items():
+        if key not in d:
+            continue
+        v = d[key]
+        if key == "quota_basis" and d.get("quota_size_exponent") is not None:
+            continue               # the exponent set the quotas
+        if not any(v == ok and type(v) is type(ok) for ok in same):
+            return (f"{key} = {v!r} is a retired setting that this version cannot run (last "
+                    f"run by swarmcode-torch {last})")
+    for (key, value), last in RETIRED_VALUES.items():
+        if d.get(key) == value:
+            return (f"{key} = {value!r} is retired; this version cannot run it (last run by "
+                    f"swarmcode-torch {last})")
+    return None
+
+
+def drop_retired_settings(d: dict) -> dict:
+    """A migrated config table without the retired settings (`RETIRED_SETTINGS`): what a run
+    directory records of them is read, not run (`retired_setting` tells a resume)."""
+    return {k: v for k, v in d.items() if k not in RETIRED_SETTINGS}
+
+
+def check_runnable(d: Any, source: str) -> None:
+    """RunError naming the setting, for a config table (of any version) that holds a retired
+    setting at a value this version cannot run (`retired_setting`)."""
+    if not isinstance(d, dict):
+        return
+    problem = retired_setting(migrate_config(d, keep_retired=True))
+    if problem:
+        raise RunError(f"{source}: {problem}")
 
 
 def config_from_dict(d: Any, source: str) -> SwarmCoDeConfig:
@@ -731,10 +790,14 @@ def check_config(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
                  option_names: dict[str, str] | None = None) -> None:
     """Everything a run's config must pass before anything is made: its settings' types and
     ranges, then the memory its sizes need (so that sizes far too large are told what they
-    would need), then the upper bounds that memory does not bound. ValueError, one line."""
-    cfg.validate(option_names, bounds=False)
-    check_memory(cfg, scenario, option_names)
-    cfg.check_bounds(option_names)
+    would need), then the upper bounds that memory does not bound. ValueError, one line, that
+    names a setting by its key or as `option_names` spells it (`settings.setting_message`)."""
+    try:
+        cfg.validate(bounds=False)
+        check_memory(cfg, scenario, option_names)
+        cfg.check_bounds()
+    except SettingError as e:
+        raise ValueError(setting_message(e, option_names)) from None
 
 
 # ------------------------------------------------------------------ checkpoints
@@ -873,10 +936,11 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
     if cfg.fitness_function is None and fitness is not None:
         raise RunError(f"{run_dir} was scored by the built-in fitness; a resume cannot change "
                        "its fitness function (start a new run with fitness=fn)")
+    check_runnable(d["config"], str(run_dir / CHECKPOINT_FILE))
     cfg = with_overrides(cfg, generations=generations, device=device)
     check_config(cfg, scenario)
     try:                           # the run keeps the scenario it names; it runs on its copy
-        return Evolution.from_checkpoint(d, cfg, fitness, scenario)
+        return Evolution.from_checkpoint(d, cfg, fitness, scenario, checked=True)
     except ValueError as e:
         raise RunError(f"{run_dir / CHECKPOINT_FILE} does not fit the run's config: {e}") from None
     except (KeyError, TypeError, RuntimeError, IndexError) as e:
