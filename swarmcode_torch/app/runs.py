@@ -498,6 +498,9 @@ def migrate_config(d: Any, keep_retired: bool = False) -> Any:
     if not isinstance(d, dict):
         return d
     d = {k: (None if v == "none" else v) for k, v in d.items()}
+    if "w_tag" in d:
+        # written since 0.7, which writes every key and none of the retired ones
+        return d if keep_retired else drop_retired_settings(d)
     if "quota_basis" not in d:
         # written before these settings existed: keep the run's original algorithm
         d = {**LEGACY_DEFAULTS, **d}
@@ -564,6 +567,12 @@ def retired_setting(d: dict) -> str | None:
         if not any(v == ok and type(v) is type(ok) for ok in same):
             return (f"{key} = {v!r} is a retired setting that this version cannot run (last "
                     f"run by swarmcode-torch {last})")
+    return retired_value(d)
+
+
+def retired_value(d: dict) -> str | None:
+    """A one-line message naming the first setting of a config table at a retired value
+    (`RETIRED_VALUES`), which this version can neither run nor read; None if there is none."""
     for (key, value), last in RETIRED_VALUES.items():
         if d.get(key) == value:
             return (f"{key} = {value!r} is retired; this version cannot run it (last run by "
@@ -590,6 +599,9 @@ def check_runnable(d: Any, source: str) -> None:
 def config_from_dict(d: Any, source: str) -> SwarmCoDeConfig:
     """A validated config from a parsed table (config.toml, a checkpoint's "config") of any
     version; RunError naming `source` and the key for anything malformed or out of range."""
+    problem = retired_value(d) if isinstance(d, dict) else None
+    if problem:
+        raise RunError(f"{source}: {problem}")
     try:
         cfg = SwarmCoDeConfig.from_dict(migrate_config(d))
         # a run made on a larger machine can still be inspected and replayed here; a resume
