@@ -35,7 +35,7 @@ def setting_message(e: SettingError, names: dict[str, str] | None = None) -> str
 
 def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None) -> dict[str, Any]:
     """["key=value", ...] -> {key: typed value} for the algorithm's config keys (e.g. delta=0.5,
-    p_tag_flip=0.0625, quota_basis=mean; `none` unsets a key that may be unset, such as
+    p_tag_flip=0.0625, w_tool=0.5; `none` unsets a key that may be unset, such as
     quota_size_exponent=none); ValueError with a one-line message for a malformed
     pair, an unknown key, a key that has its own option (named `option_names[key]`, default
     --key), or a value of the wrong type."""

@@ -81,7 +81,7 @@ def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -
     """Genomes [K] -> [K, K] float32: the hardware terms of D between them (w_hw d_hw + w_tool
     d_tool + w_size d_size), how far apart their robots are as designs. The tag (a signal for
     partner choice, not a property of the robot) and the tree are left out: which partner's
-    robots are most like a species' robots (`baseline_refill = "nearest"`)."""
+    robots are most like a species' robots (`partner_admission = "substitute"`)."""
     t = distance_terms(proto, proto, w)
     return t["hw"] + t["tool"] + t["size"]
 
