@@ -326,10 +326,10 @@ def test_a_run_records_its_software_device_and_commit(tmp_path):
 
 def test_api_preset_sets_the_papers_rules_under_explicit_settings(tmp_path):
     r = sc.evolve(preset="paper", scenario="one-niche", generations=1, population=6, swarm_size=4,
-                  trials=1, ticks=10, seed=1, logdir=None, baseline_refill="senior")
+                  trials=1, ticks=10, seed=1, logdir=None, partner_admission="substitute")
     cfg = r.config
     assert (cfg.preset, cfg.partners_per_niche, cfg.quota_size_exponent) == ("paper", "all", None)
-    assert cfg.baseline_refill == "senior"       # an explicit setting goes on top of the preset
+    assert cfg.partner_admission == "substitute"  # an explicit setting goes on top of the preset
     given = sc.evolve(SwarmCoDeConfig(quota_size_exponent=0.5), preset="paper",
                       scenario="one-niche", generations=1, population=6, swarm_size=4, trials=1,
                       ticks=10, logdir=None).config

@@ -102,18 +102,18 @@ def test_evolve_writes_a_complete_run_directory(tmp_path):
 
 def test_set_writes_algorithm_keys_into_the_run_config(tmp_path):
     r = invoke("evolve", *TINY, "--generations", 1, "--logdir", tmp_path,
-               "--set", "p_tag_flip=0.25", "--set", "quota_basis=mean",
+               "--set", "p_tag_flip=0.25", "--set", "w_tool=0.5",
                "--set", "quota_size_exponent=none", "--set", "dominance=false")
     assert r.exit_code == 0, r.output
     run = only_run(tmp_path)
     from swarmcode_torch.app.runs import read_config
     cfg = read_config(run)
-    assert (cfg.p_tag_flip, cfg.quota_basis, cfg.dominance) == (0.25, "mean", False)
+    assert (cfg.p_tag_flip, cfg.w_tool, cfg.dominance) == (0.25, 0.5, False)
     assert cfg.quota_size_exponent is None      # written "none": its default is 0.75
     assert_clean_error(invoke("evolve", "--resume", run, "--set", "delta=0.5"), "--set")
-    # the quota exponent (0.75 by default since 0.4) sets the quotas: a basis alone is refused
+    # a retired setting is an unknown key
     assert_clean_error(invoke("evolve", *TINY, "--generations", 1, "--logdir", tmp_path / "b",
-                              "--set", "quota_basis=mean"), "quota_size_exponent=none")
+                              "--set", "quota_basis=mean"), "quota_basis")
 
 
 def test_preset_paper_runs_the_papers_rules_and_is_recorded(tmp_path):
@@ -125,7 +125,7 @@ def test_preset_paper_runs_the_papers_rules_and_is_recorded(tmp_path):
     assert r.exit_code == 0, r.output
     run = only_run(tmp_path)
     cfg = read_config(run)
-    assert (cfg.preset, cfg.partners_per_niche, cfg.baseline_refill) == ("paper", "all", "any")
+    assert (cfg.preset, cfg.partners_per_niche, cfg.partner_admission) == ("paper", "all", "open")
     assert (cfg.quota_size_exponent, cfg.p_effector, cfg.p_tag_flip) == (None, None, 0.25)
     assert json.loads((run / "summary.json").read_text())["preset"] == "paper"
     assert_clean_error(invoke("evolve", *TINY, "--generations", 1, "--logdir", tmp_path / "b",

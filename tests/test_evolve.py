@@ -10,7 +10,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from swarmcode_torch.coevo.evaluation import EvalConfig, evaluate
 from swarmcode_torch.app.runs import migrate_config
 from swarmcode_torch.coevo.evolve import Evolution, random_population
-from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.coevo.config import DISTANCE_KEYS, SwarmCoDeConfig
 from swarmcode_torch.app.reporting import SCALAR_TAGS, TensorBoardReporter
 from swarmcode_torch.app.runs import (CheckpointReporter, SummaryReporter, load_checkpoint, resume,
                                       run, write_config)
@@ -50,29 +50,13 @@ def test_identical_partner_gives_zero_marginal_and_gated_fitness():
     # the paper's refill: the baseline replaces the focal by an identical design in identical
     # environments, so both teams score exactly the same and the gate applies to both
     pop = _two_identical()
-    cfg = EvalConfig(swarm_size=6, trials=2, ticks=60, baseline_refill="any")
+    cfg = EvalConfig(swarm_size=6, trials=2, ticks=60)
     res = evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
                    torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"),
                    cfg, torch.Generator().manual_seed(4))
     assert (res.swarms.baseline_team[0] == 1).all() and (res.swarms.baseline_team[1] == 0).all()
     assert torch.equal(res.focal, res.baseline)
     assert torch.allclose(res.fitness, res.focal * cfg.p_marginal)
-
-
-def test_senior_refill_gates_only_the_junior_of_two_identical_species():
-    # two identical one-member species: species 0 is the older, so it is senior to species 1.
-    # The junior's slots are re-filled by the senior's robot (same score: gated); the senior's
-    # slots stay empty (its baseline is the team without it: not gated)
-    pop = _two_identical()
-    cfg = EvalConfig(swarm_size=6, trials=2, ticks=60, baseline_refill="senior")
-    res = evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
-                   torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"),
-                   cfg, torch.Generator().manual_seed(4))
-    sw = res.swarms
-    assert (sw.baseline_team[1] == 0).all()
-    assert torch.equal(sw.baseline_team[0], torch.where(sw.focal_slot[0], -1, sw.focal_team[0]))
-    assert res.focal[1] == res.baseline[1] and res.fitness[1] == res.focal[1] * cfg.p_marginal
-    assert res.focal[0] > res.baseline[0] and res.fitness[0] == res.focal[0]
 
 
 def test_alone_an_individual_beats_an_empty_baseline():
@@ -92,18 +76,20 @@ def test_generations_keep_population_and_report_metrics():
     for _ in range(3):
         m = ev.step()
         assert ev.state.genome.size == TINY.population
-        assert m.num_species >= 1 and m.team["species"] >= 1
-        assert 1 <= sum(d["count"] for d in m.team["designs"]) == TINY.swarm_size
+        t = m.best_team
+        assert m.num_species >= 1 and t.rows.numel() >= 1
+        assert int(t.count.sum()) == TINY.swarm_size == int((m.team_rows >= 0).sum())
+        assert torch.equal(t.rows, torch.unique(m.team_rows[m.team_rows >= 0]))
         assert m.best_fitness >= m.mean_fitness > 0
-        assert m.team["cost"] > 0
+        assert t.cost > 0 and int(t.focal.sum()) == 1
+        assert m.team is None and m.best is None       # the algorithm builds no records
     assert ev.state.generation == 3 and len(ev.state.history) == 3
-    assert m.best["fitness"] >= m.team["fitness"]
 
 
 def test_roi_objective_divides_by_cost():
     ev = Evolution(replace(TINY, objective="roi"))
     m = ev.step()
-    assert m.team["fitness"] < 1.0  # fitness (~100s) divided by a team cost (~$500+)
+    assert m.best_team.fitness < 1.0  # fitness (~100s) divided by a team cost (~$500+)
 
 
 def _same_state(a, b):
@@ -202,25 +188,30 @@ def test_swarm_larger_than_the_population():
     ev = Evolution(replace(TINY, population=4, swarm_size=12, generations=2))
     for _ in range(2):
         m = ev.step()
-        assert sum(d["count"] for d in m.team["designs"]) == 12
+        assert int(m.best_team.count.sum()) == 12
         assert m.team_rows.shape == (12,) and int(m.team_rows.max()) < 4
 
 
-def test_config_saved_before_quota_basis_keeps_its_algorithm():
+def test_config_saved_before_quota_basis_keeps_its_steps():
+    from swarmcode_torch.app.runs import retired_setting
     from swarmcode_torch.coevo.evolve import make_context
 
     new = SwarmCoDeConfig(scenario="one-niche", population=8)
     legacy = {k: v for k, v in new.to_dict().items()
-              if k not in ("quota_basis", "hw_sigma", "social_sigma", "p_categorical",
-                           "quota_size_exponent", "partners_per_niche")}
+              if k not in ("hw_sigma", "social_sigma", "p_categorical", "quota_size_exponent",
+                           "partners_per_niche", *DISTANCE_KEYS)}
     old = SwarmCoDeConfig.from_dict(migrate_config(legacy))
-    assert (old.quota_basis, old.hw_sigma, old.social_sigma, old.p_categorical) == \
-        ("mean", 0.1, 0.1, 0.1)
+    assert (old.hw_sigma, old.social_sigma, old.p_categorical) == (0.1, 0.1, 0.1)
     assert (old.quota_size_exponent, old.partners_per_niche) == (None, "all")
+    # its quotas were the mean's (`quota_basis`, retired) and its d_hw over the tiers
+    # (`d_hw_tiers`, retired): this version reads it but cannot run it
+    migrated = migrate_config(legacy, keep_retired=True)
+    assert (migrated["quota_basis"], migrated["d_hw_tiers"]) == ("mean", True)
+    assert "cannot run (last run by swarmcode-torch 0.6.0)" in retired_setting(migrated)
     pinned = make_context(new).cfg                               # what a run saves
     assert SwarmCoDeConfig.from_dict(pinned.to_dict()) == pinned    # a current config round-trips
     repro = make_context(old).repro
-    assert (repro.quota_basis, repro.hw_sigma, repro.p_categorical) == ("mean", 0.1, 0.1)
+    assert (repro.hw_sigma, repro.p_categorical) == (0.1, 0.1)
     with pytest.raises(ValueError, match="p_categorical"):
         SwarmCoDeConfig(p_categorical=1.5).validate()
 
@@ -238,7 +229,8 @@ def test_runs_pin_the_episode_and_old_configs_keep_250_ticks(tmp_path):
     write_config(tmp_path, ev.cfg)
     assert read_config(tmp_path).ticks == 200
     # a config saved before runs pinned it ran the niche scenarios' episode of that time
-    old = {k: v for k, v in SwarmCoDeConfig(scenario="four-niche").to_dict().items() if k != "ticks"}
+    old = {k: v for k, v in SwarmCoDeConfig(scenario="four-niche").to_dict().items()
+           if k not in ("ticks", *DISTANCE_KEYS)}
     assert make_context(SwarmCoDeConfig.from_dict(migrate_config(old))).eval_cfg.ticks == 250
     old["scenario"] = "budget"                                   # unchanged scenario: its own
     assert make_context(SwarmCoDeConfig.from_dict(migrate_config(old))).eval_cfg.ticks == 250
@@ -251,7 +243,7 @@ def test_config_saved_before_p_tag_flip_keeps_one_flip_in_l():
 
     new = SwarmCoDeConfig(scenario="one-niche", population=8, tag_length=8)
     assert make_context(new).repro.p_tag_flip == new.p_tag_flip == 0.01
-    old = {k: v for k, v in new.to_dict().items() if k != "p_tag_flip"}
+    old = {k: v for k, v in new.to_dict().items() if k not in ("p_tag_flip", *DISTANCE_KEYS)}
     assert SwarmCoDeConfig.from_dict(migrate_config(old)).p_tag_flip == 1 / 8
     assert make_context(SwarmCoDeConfig.from_dict(migrate_config(old))).repro.p_tag_flip == 1 / 8
 
@@ -261,22 +253,23 @@ def test_config_saved_before_min_share_keeps_every_species_share():
 
     new = SwarmCoDeConfig(scenario="one-niche", population=8)
     assert make_context(new).repro.min_share == new.min_share == 1.0
-    old = SwarmCoDeConfig.from_dict(migrate_config({k: v for k, v in new.to_dict().items() if k != "min_share"}))
+    old = SwarmCoDeConfig.from_dict(migrate_config({k: v for k, v in new.to_dict().items() if k not in ("min_share", *DISTANCE_KEYS)}))
     assert old.min_share == 0.0 and make_context(old).repro.min_share == 0.0
 
 
-def test_config_saved_before_the_paper_text_fixes_keeps_the_old_operators():
+def test_config_saved_before_the_paper_text_fixes_keeps_the_old_rates():
+    from swarmcode_torch.app.runs import retired_setting
     from swarmcode_torch.coevo.evolve import make_context
 
     new = SwarmCoDeConfig(scenario="one-niche", population=8)
     ctx = make_context(new)
-    assert (ctx.speciation.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (False, True)
     assert (ctx.repro.bt_mutation_rate, ctx.repro.p_gene_mutation) == (0.5, 0.2)
     saved = {k: v for k, v in new.to_dict().items()
-             if k not in ("d_hw_tiers", "bt_point_on_nodes", "bt_mutation_rate", "p_gene_mutation")}
+             if k not in ("bt_mutation_rate", "p_gene_mutation", *DISTANCE_KEYS)}
     ctx = make_context(SwarmCoDeConfig.from_dict(migrate_config(saved)))
-    assert (ctx.speciation.weights.hw_tiers, ctx.repro.bt_point_on_nodes) == (True, False)
     assert (ctx.repro.bt_mutation_rate, ctx.repro.p_gene_mutation) == (1.0, 1.0)
+    # its d_hw over the tiers (`d_hw_tiers`, retired) is read, not run
+    assert "d_hw_tiers = True" in retired_setting(migrate_config(saved, keep_retired=True))
 
 
 def test_config_saved_before_0_4_keeps_every_partner_and_its_quota_rule():
@@ -286,7 +279,7 @@ def test_config_saved_before_0_4_keeps_every_partner_and_its_quota_rule():
     ctx = make_context(new)
     assert (ctx.eval_cfg.partners_per_niche, ctx.repro.quota_size_exponent) == ("one", 0.75)
     saved = {k: v for k, v in new.to_dict().items()
-             if k not in ("partners_per_niche", "quota_size_exponent")}      # before 0.3.3
+             if k not in ("partners_per_niche", "quota_size_exponent", *DISTANCE_KEYS)}  # 0.3.2
     ctx = make_context(SwarmCoDeConfig.from_dict(migrate_config(saved)))
     assert (ctx.eval_cfg.partners_per_niche, ctx.repro.quota_size_exponent) == ("all", None)
     # 0.3.3 wrote the exponent ("none" unset; a branch set 0.75): it is kept as written
@@ -303,7 +296,7 @@ def test_config_saved_before_0_5_keeps_the_effector_rate():
 
     new = SwarmCoDeConfig(scenario="one-niche", population=8)
     assert make_context(new).repro.p_effector == 0.005
-    saved = {k: v for k, v in new.to_dict().items() if k != "p_effector"}
+    saved = {k: v for k, v in new.to_dict().items() if k not in ("p_effector", *DISTANCE_KEYS)}
     ctx = make_context(SwarmCoDeConfig.from_dict(migrate_config(saved)))
     assert (ctx.repro.p_effector, ctx.repro.p_categorical) == (None, 0.02)
     assert SwarmCoDeConfig.from_dict(migrate_config({**saved, "p_effector": 0.01})).p_effector \
@@ -317,45 +310,35 @@ def test_config_saved_before_0_5_keeps_the_effector_rate():
 def test_parse_settings_types_and_refusals():
     from swarmcode_torch.app.settings import parse_settings
 
-    assert parse_settings(["delta=0.5", "max-elite=2", "dominance=False", "quota_basis=mean"]) == \
-        {"delta": 0.5, "max_elite": 2, "dominance": False, "quota_basis": "mean"}
+    assert parse_settings(["delta=0.5", "max-elite=2", "dominance=False", "w_tag=2"]) == \
+        {"delta": 0.5, "max_elite": 2, "dominance": False, "w_tag": 2.0}
     # a key that may be unset takes none; one that may not refuses it
     assert parse_settings(["quota_size_exponent=none", "p_effector=None"]) == \
         {"quota_size_exponent": None, "p_effector": None}
     for bad, needle in (("max_elite=2.5", "type int"), ("dominance=yes", "type bool"),
                         ("delta=none", "type float"),
                         ("=3", "KEY=VALUE"), ("budget=9", "--budget option"),
-                        ("gamma=2", "unknown key")):
+                        ("quota_basis=mean", "unknown key")):
         with pytest.raises(ValueError, match=needle):
             parse_settings([bad])
 
 
-def test_best_team_is_the_team_of_the_fittest_individual(monkeypatch):
+def test_best_team_is_the_team_of_the_fittest_individual():
     """The generation's best team is the focal team of the highest gated fitness, which need not
     be the highest focal team score (a focal that weakens its team is penalised)."""
-    import swarmcode_torch.coevo.evolve as E
-
     seen = {}
-    real = E.evaluate
-
-    def spy(*a, **k):
-        seen["r"] = res = real(*a, **k)
-        return res
-
-    monkeypatch.setattr(E, "evaluate", spy)
-    # a run in which the two definitions are known to disagree (the operators before 0.2)
     ev = Evolution(SwarmCoDeConfig(scenario="two-niche", population=12, swarm_size=6, trials=1,
                                 ticks=40, generations=6, seed=1, device="cpu", compile=False,
-                                d_hw_tiers=True, bt_point_on_nodes=False,
                                 bt_mutation_rate=1.0, p_gene_mutation=1.0,
                                 partners_per_niche="all", quota_size_exponent=None))
+    ev.hooks.after_evaluation.append(lambda e: seen.update(r=e.evaluation))
     differed = 0
     while not ev.done:
         m = ev.step()
         r = seen["r"]
         b = int(r.fitness.argmax())
         assert torch.equal(m.team_rows, r.swarms.focal_team[b])
-        assert m.team["fitness"] == pytest.approx(float(r.focal[b]))
+        assert m.best_team.fitness == pytest.approx(float(r.focal[b]))
         assert m.focal_max == pytest.approx(float(r.focal.max()))
         differed += int(int(r.focal.argmax()) != b)
     assert differed > 0         # the two definitions disagree in some generation of this run
@@ -409,8 +392,7 @@ def _patch_niche_knowledge(monkeypatch):
     return patched
 
 
-@pytest.mark.parametrize("preset,settings", [("default", {}), ("paper", {}),
-                                             ("default", {"partner_admission": "gate"})])
+@pytest.mark.parametrize("preset,settings", [("default", {}), ("paper", {})])
 def test_the_presets_algorithm_reads_no_capabilities_or_niches(monkeypatch, preset, settings):
     from swarmcode_torch.coevo.config import preset_config
 
@@ -420,7 +402,7 @@ def test_the_presets_algorithm_reads_no_capabilities_or_niches(monkeypatch, pres
     ev = Evolution(cfg)
     while not ev.done:
         r = ev.step()
-    assert "niches" not in r.team and all("capability" not in d for d in r.team["designs"])
+    assert r.team is None and r.best_team.rows.numel() > 0     # the application's records
     # the diagnostic oracle does read them, so the patch is where the algorithm would look
     oracle = Evolution(replace(cfg, partners_per_niche="one"))
     with pytest.raises(AssertionError, match="capabilities"):
@@ -446,7 +428,7 @@ def test_presets_set_the_papers_rules_and_record_their_name():
 
     paper = preset_config("paper")
     assert paper.preset == "paper" and paper.partners_per_niche == "all"
-    assert (paper.baseline_refill, paper.quota_size_exponent, paper.p_effector) == ("any", None, None)
+    assert (paper.quota_size_exponent, paper.p_effector) == (None, None)
     default = preset_config()
     assert default == SwarmCoDeConfig() and default.partner_admission == "substitute"
     assert default.partners_per_niche == "all"          # no niche oracle by default
@@ -456,7 +438,8 @@ def test_presets_set_the_papers_rules_and_record_their_name():
         preset_config("nope")
     with pytest.raises(ValueError, match="preset must be"):
         replace(default, preset="nope").validate()
-    # a config written before 0.6 re-fills from any partner and names no preset
-    old = {k: v for k, v in default.to_dict().items() if k not in ("baseline_refill", "preset")}
+    # a config written before 0.6 admits every partner at once and names no preset
+    old = {k: v for k, v in default.to_dict().items()
+           if k not in ("partner_admission", "preset", *DISTANCE_KEYS)}
     cfg = SwarmCoDeConfig.from_dict(migrate_config(old))
-    assert (cfg.baseline_refill, cfg.preset) == ("any", None)
+    assert (cfg.partner_admission, cfg.preset) == ("open", None)

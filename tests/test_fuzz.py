@@ -100,15 +100,15 @@ def test_fuzz_options_long(case):
 
 # ------------------------------------------------------------------ --set values
 SET_KEYS = ["delta", "p_marginal", "alpha", "lam", "max_elite", "tag_length", "bt_length",
-            "quota_basis", "min_share", "hw_sigma", "social_sigma", "p_categorical",
-            "p_tag_flip", "bt_mutation_rate", "p_gene_mutation", "dominance", "merge_species",
-            "evaluated_partners", "cuda_graphs", "d_hw_tiers", "bt_point_on_nodes", "seed",
-            "w_delivery", "inactive_factor", "fitness_floor", "p_effector", "effector_flip",
-            "gate_margin", "quota_inertia", "quota_size_exponent", "partners_per_niche",
-            "unknown_key"]
+            "min_share", "hw_sigma", "social_sigma", "p_categorical",
+            "p_tag_flip", "bt_mutation_rate", "p_gene_mutation", "dominance",
+            "cuda_graphs", "seed", "w_tag", "w_tool", "gamma",
+            "w_delivery", "inactive_factor", "fitness_floor", "p_effector",
+            "quota_size_exponent", "partners_per_niche", "partner_admission",
+            "quota_basis", "unknown_key"]
 SET_VALUES = ["nan", "inf", "-inf", "-1", "0", "0.5", "1", "1.5", "4", "1e300", "1e400",
-              "100000000000", "true", "false", "none", "x", "sum", "mean", "sqrt", "gene",
-              "prototype", "all", "one", ""]
+              "100000000000", "true", "false", "none", "x", "mean", "open", "substitute",
+              "gate", "all", "one", ""]
 set_cases = st.lists(st.tuples(st.sampled_from(SET_KEYS), st.sampled_from(SET_VALUES)),
                      min_size=1, max_size=3)
 

@@ -27,7 +27,7 @@ def test_evolve_runs_on_cuda(compiled, graphs, mode):
     assert ev.ctx.tick_mode == mode
     while not ev.done:
         m = ev.step()
-        assert m.team["cost"] > 0 and m.best_fitness > 0
+        assert m.best_team.cost > 0 and m.best_fitness > 0
     assert ev.state.genome.bt.device.type == "cuda"
     if compiled:  # it really ran compiled
         compiled_step = ev.ctx.step_fn.step_fn if graphs is None else ev.ctx.step_fn
@@ -76,7 +76,7 @@ def test_evolve_with_cuda_graphs_replays_captured_ticks():
     assert isinstance(ev.ctx.step_fn, CudaGraphTicks)
     while not ev.done:
         m = ev.step()
-        assert m.team["cost"] > 0 and m.best_fitness > 0
+        assert m.best_team.cost > 0 and m.best_fitness > 0
     assert ev.ctx.step_fn.graph is not None and ev.ctx.step_fn.step_fn.error is None
 
 

@@ -75,29 +75,17 @@ def test_elite_rows_ties_missing_fitness_and_empty_species():
     assert out.tolist() == [[0, 1, 2], [-1, -1, -1], [3, -1, -1]]
 
 
-def test_elite_rows_evaluated_only():
-    # species 4: 6 members (N = 2), 1 evaluated -> 1 elite; species 9: a new species of 2
-    # unevaluated members -> no elite; species 2: 11 members (N = 3), all evaluated
+def test_elite_rows_rank_unevaluated_members_last():
+    # species 4: 6 members (N = 2), 1 evaluated; species 9: a new species of 2 unevaluated
+    # members; species 2: 11 members (N = 3), all evaluated
     species = torch.tensor([4] * 6 + [9] * 2 + [2] * 11)
     fitness = torch.arange(19, dtype=torch.float)
     has = torch.ones(19, dtype=torch.bool)
     has[[0, 1, 2, 3, 5, 6, 7]] = False                   # species 4 keeps only row 4 evaluated
     ids = torch.tensor([4, 9, 2])
-    out = elite_rows(fitness, has, species, ids, lambda s: elite_count(s, 3), evaluated_only=True)
-    assert out.tolist() == [[4, -1, -1], [-1, -1, -1], [18, 17, 16]]
-    # without the option unevaluated members fill the elite count, lowest row first
+    # unevaluated members fill the elite count after the evaluated ones, lowest row first
     out = elite_rows(fitness, has, species, ids, lambda s: elite_count(s, 3))
     assert out.tolist() == [[4, 0, -1], [6, -1, -1], [18, 17, 16]]
-    # first generation: nobody has a fitness, so every species keeps its members as elites
-    none = torch.zeros(19, dtype=torch.bool)
-    assert torch.equal(elite_rows(fitness, none, species, ids, lambda s: elite_count(s, 3), True),
-                       elite_rows(fitness, none, species, ids, lambda s: elite_count(s, 3)))
-    # a species with no elite is never a partner
-    tag = torch.zeros(1, 16, dtype=torch.bool)
-    out = elite_rows(fitness, has, species, ids, lambda s: elite_count(s, 3), evaluated_only=True)
-    rows = choose_partners(tag, torch.ones(1), torch.tensor([4]), ids,
-                           torch.zeros(3, 16, dtype=torch.bool), out, torch.Generator().manual_seed(0))
-    assert rows[0, 0] == -1 and rows[0, 1] == -1 and rows[0, 2] in (16, 17, 18)
 
 
 def test_assemble_dominance_frequencies():
@@ -236,32 +224,6 @@ def test_one_partner_per_niche_puts_a_duplicate_beside_its_resident():
     assert one[0] == [12, 13]                   # the resident's team leaves the duplicate out
     assert one[3] == [10, 12, 13]               # the duplicate's team holds the resident
     assert one[5] == [10, 13] and one[6] == [10, 12]   # one species of each other niche
-
-
-def test_senior_partners_rank_by_size_then_age():
-    from swarmcode_torch.coevo.partners import senior_partners
-
-    # species 2 (3 members), 5 (2 members), 7 (2 members), 9 (1 member)
-    species = torch.tensor([2, 2, 2, 5, 5, 7, 7, 9])
-    proto_ids = torch.tensor([2, 5, 7, 9])
-    sen = senior_partners(species, proto_ids)
-    expected = {2: [], 5: [2], 7: [2, 5], 9: [2, 5, 7]}
-    for i, s in enumerate(species.tolist()):
-        assert proto_ids[sen[i]].tolist() == expected[s], s
-    assert not sen[torch.arange(8), torch.searchsorted(proto_ids, species)].any()
-
-
-def test_senior_refill_leaves_a_slot_empty_without_a_senior_partner():
-    from swarmcode_torch.coevo.partners import assemble_swarms
-
-    partner_rows = torch.tensor([[-1, 4], [3, -1]])       # focal 0's partner: 4; focal 1's: 3
-    refill = torch.tensor([[True, False], [True, True]])   # 4 is not senior to focal 0
-    g = torch.Generator().manual_seed(0)
-    sw = assemble_swarms(torch.tensor([0, 1]), partner_rows, torch.ones(5), 4, g, refill)
-    assert (sw.baseline_team[0][sw.focal_slot[0]] == -1).all()
-    assert (sw.baseline_team[1][sw.focal_slot[1]] == 3).all()
-    assert torch.equal(sw.baseline_team[0][~sw.focal_slot[0]], sw.focal_team[0][~sw.focal_slot[0]])
-    assert sw.baseline_species_count.tolist() == [1, 1]
 
 
 def test_nearest_refill_gives_every_focal_slot_to_the_nearest_partner_in_the_team():

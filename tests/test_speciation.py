@@ -50,7 +50,7 @@ def test_distance_each_term(term, expected):
     assert distance(b, a, w).item() == pytest.approx(expected, abs=1e-6)
 
 
-def test_d_hw_is_over_the_continuous_genes_unless_tiers_are_asked_for():
+def test_d_hw_is_over_the_continuous_genes():
     a, b = pair()                          # torque point 0 vs 0.5, chassis tier 1 vs 3
     hw_only = {**ONLY, "w_hw": 1.0}
     # the paper: the two continuous operating points only, sqrt(0.5^2) / sqrt(2)
@@ -58,10 +58,6 @@ def test_d_hw_is_over_the_continuous_genes_unless_tiers_are_asked_for():
     # a tier change alone is not a hardware distance
     c = make(1, chassis=[2], battery=[1], motor=[2])
     assert distance(a, c, DistanceWeights(**hw_only)).item() == 0.0
-    # the old behaviour: tiers scaled to [0, 1] beside the points, sqrt(1 + 0.25) / sqrt(5)
-    old = DistanceWeights(**hw_only, hw_tiers=True)
-    assert distance(a, b, old).item() == pytest.approx(0.5, abs=1e-6)
-    assert distance(a, c, old).item() == pytest.approx((1 + 0.25 + 1) ** 0.5 / 5 ** 0.5)
 
 
 def test_distance_gamma_and_weighted_sum():
@@ -163,28 +159,6 @@ def test_speciate_carry_over_and_extinction():
     assert r.species.tolist() == [10, 5, 5, 5, 5]
     assert r.proto_ids.tolist() == [5, 10] and r.proto_index.tolist() == [1, 0]
     assert r.next_species_id == 11
-
-
-def test_speciate_merge_dissolves_a_younger_species_within_delta():
-    # old species 2, 5, 8 (oldest first); 5's new prototype (row 1, 0.3) is within 0.4 of 2's
-    # (0.0), 8's (0.9) is not
-    prev = line([0.0, 0.5, 0.9])
-    g = line([0.0, 0.3, 0.9, 0.2, 0.7])
-    hint = torch.tensor([2, 5, 8, 5, -1])
-    ids = torch.tensor([2, 5, 8])
-    plain = speciate(g, hint, prev, ids, next_species_id=9, w=SIZE_ONLY)
-    assert plain.proto_ids.tolist() == [2, 5, 8] and plain.proto_index.tolist() == [0, 1, 2]
-    assert plain.species.tolist() == [2, 5, 8, 5, 8]
-    merged = speciate(g, hint, prev, ids, next_species_id=9, w=SIZE_ONLY, merge=True)
-    # 5 is dissolved and its members join the closest remaining prototype
-    assert merged.proto_ids.tolist() == [2, 8] and merged.proto_index.tolist() == [0, 2]
-    assert merged.species.tolist() == [2, 2, 8, 2, 8]
-    assert merged.next_species_id == 9
-    # the older species (earlier in the previous ids) is the one kept
-    merged = speciate(g, hint, line([0.5, 0.0, 0.9]), torch.tensor([5, 2, 8]), 9,
-                      w=SIZE_ONLY, merge=True)
-    assert merged.proto_ids.tolist() == [5, 8] and merged.proto_index.tolist() == [1, 2]
-    assert merged.species.tolist() == [5, 5, 8, 5, 8]
 
 
 def test_speciate_carried_members_reassigned():

@@ -34,11 +34,11 @@ def founders(checkpoint: str, generations: int) -> list[dict]:
     ev = E.Evolution.from_checkpoint(d, cfg)
     w = ev.ctx.speciation.weights
     found: list[dict] = []
-    speciate = E.speciate
 
-    def spy(genome, hint, prev_proto, prev_ids, next_id, *a, **k):
-        r = speciate(genome, hint, prev_proto, prev_ids, next_id, *a, **k)
-        prev = prev_ids.tolist()
+    def spy(e: E.AfterSpeciation) -> None:
+        st, r = e.state, e.speciation
+        genome, hint, prev_proto, next_id = st.genome, st.species_hint, st.proto, st.next_species_id
+        prev = st.proto_ids.tolist()
         for row in r.proto_index[r.proto_ids >= next_id].tolist():
             g = genome.index(slice(row, row + 1))
             item = {"generation": ev.state.generation, "parent_species": int(hint[row])}
@@ -51,14 +51,10 @@ def founders(checkpoint: str, generations: int) -> list[dict]:
             if prev_proto is not None and len(prev):
                 item["nearest"] = float(distance(g, prev_proto, w).min())
             found.append(item)
-        return r
 
-    E.speciate = spy
-    try:
-        while not ev.done:
-            ev.step()
-    finally:
-        E.speciate = speciate
+    ev.hooks.after_speciation.append(spy)
+    while not ev.done:
+        ev.step()
     return found
 
 

@@ -30,8 +30,7 @@ def relative_marginals(checkpoint: Path, seeds: tuple[int, ...] = (1, 2)) -> lis
     ev = E.Evolution.from_checkpoint(d, dataclasses.replace(cfg, generations=d["generation"] + 1))
     st, ctx = ev.state, ev.ctx
     sp = E.speciate(st.genome, st.species_hint, st.proto, st.proto_ids, st.next_species_id,
-                    ctx.speciation.delta, w=ctx.speciation.weights,
-                    merge=ctx.speciation.merge_species)
+                    ctx.speciation.delta, w=ctx.speciation.weights)
     out = []
     for seed in seeds:
         g = torch.Generator(device=ctx.device).manual_seed(seed)

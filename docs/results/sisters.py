@@ -33,20 +33,13 @@ def continue_and_record(checkpoint: str, generations: int, settings: dict) -> li
     cfg = dataclasses.replace(cfg, generations=d["generation"] + generations)
     ev = E.Evolution.from_checkpoint(d, cfg)
     ctx = ev.ctx
-    seen: dict = {}
-    evaluate, reproduce = E.evaluate, E.reproduce
     rows: list[dict] = []
 
-    def spy_eval(genome, species, proto_ids, proto_index, *a, **k):
-        res = evaluate(genome, species, proto_ids, proto_index, *a, **k)
-        seen.update(genome=genome, species=species, proto_ids=proto_ids,
-                    proto_index=proto_index, res=res)
-        return res
-
-    def spy_repro(genome, fit, species, proto_index, proto_ids, params, g, *a, **k):
-        out = reproduce(genome, fit, species, proto_index, proto_ids, params, g, *a, **k)
-        res = seen["res"]
-        hint = out[1]
+    def spy_repro(e: E.AfterReproduction) -> None:
+        genome, fit, res = e.state.genome, e.fitness, e.evaluation
+        species, proto_ids, proto_index = (e.speciation.species, e.speciation.proto_ids,
+                                           e.speciation.proto_index)
+        hint = e.next_state.species_hint
         can = capabilities(genome_phenotype(genome.index(proto_index), ctx.scenario.hardware),
                            ctx.scenario, ctx.params)
         gated = res.focal - res.baseline <= 0
@@ -62,14 +55,10 @@ def continue_and_record(checkpoint: str, generations: int, settings: dict) -> li
                 "gated": float(gated[m].float().mean()),
                 "fitness": float(fit[m].float().mean()),
                 "quota": int((hint == sid).sum())})
-        return out
 
-    E.evaluate, E.reproduce = spy_eval, spy_repro
-    try:
-        while not ev.done:
-            ev.step()
-    finally:
-        E.evaluate, E.reproduce = evaluate, reproduce
+    ev.hooks.after_reproduction.append(spy_repro)
+    while not ev.done:
+        ev.step()
     return rows
 
 

@@ -25,13 +25,13 @@ import torch
 
 from swarmcode_torch.coevo.population import Population
 from swarmcode_torch.app.runs import load_checkpoint, read_checkpoint, read_config
-from swarmcode_torch.coevo.speciation import DistanceWeights, distance_terms
+from swarmcode_torch.coevo.speciation import distance_terms
 
 
 def spread(run: Path, checkpoint: str | None = None) -> dict:
     cfg = read_config(run)
     ck = read_checkpoint(run / checkpoint) if checkpoint else load_checkpoint(run)
-    w = DistanceWeights(hw_tiers=cfg.d_hw_tiers)
+    w = cfg.distance_weights
     pop = Population.from_state_dict(ck["genome"])
     proto = Population.from_state_dict(ck["proto"])
     ids = ck["proto_ids"].tolist()

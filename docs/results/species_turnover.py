@@ -93,38 +93,32 @@ def cause(rec: dict) -> str:
 
 def founders_report(args) -> None:
     log: list[dict] = []
-    original = evolve.speciate
-    generation = [0]
 
-    def recording_speciate(genome, hint, prev_proto, prev_ids, next_id, delta=0.4, *rest, **kw):
-        sp = original(genome, hint, prev_proto, prev_ids, next_id, delta, *rest, **kw)
+    def recording_speciate(e: evolve.AfterSpeciation) -> None:
+        genome, hint, next_id, sp = (e.state.genome, e.state.species_hint,
+                                     e.state.next_species_id, e.speciation)
         ids = sp.proto_ids.tolist()
         n_new = sp.next_species_id - next_id
         for row in sp.proto_index[len(ids) - n_new:].tolist():
-            rec = {"generation": generation[0]}
+            rec = {"generation": e.generation}
             parent_species = int(hint[row])
             if parent_species in ids:
                 proto_row = int(sp.proto_index[ids.index(parent_species)])
                 rec.update(terms(genome.index(slice(row, row + 1)),
                                  genome.index(slice(proto_row, proto_row + 1))))
             log.append(rec)
-        generation[0] += 1
-        return sp
 
-    evolve.speciate = recording_speciate
-    try:
-        cfg = with_overrides(
-            SwarmCoDeConfig(scenario=args.founders, population=50, swarm_size=20,
-                                generations=args.generations, seed=args.seed, device="cpu",
-                                compile=True, ticks=args.ticks),
-            **parse_settings(args.settings or []))
-        ev = evolve.Evolution(cfg)
-        counts = []
-        while not ev.done:
-            m = ev.step()
-            counts.append((m.num_species, m.team["species"]))
-    finally:
-        evolve.speciate = original
+    cfg = with_overrides(
+        SwarmCoDeConfig(scenario=args.founders, population=50, swarm_size=20,
+                        generations=args.generations, seed=args.seed, device="cpu",
+                        compile=True, ticks=args.ticks),
+        **parse_settings(args.settings or []))
+    ev = evolve.Evolution(cfg)
+    ev.hooks.after_speciation.append(recording_speciate)
+    counts = []
+    while not ev.done:
+        m = ev.step()
+        counts.append((m.num_species, int(m.best_team.rows.numel())))
     late = [r for r in log if r["generation"] >= 50]
     n_late = max(args.generations - 50, 1)
     print(f"{args.founders}, seed {args.seed}, {args.generations} generations, {ev.cfg.ticks} ticks: "

@@ -17,6 +17,7 @@ from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.scenario import Scenario
 from .files import (CHECKPOINT_FILE, CONFIG_FILE, HARDWARE_COPY, METRICS_FILE, SCENARIO_COPY,
                     RunError, atomic_write_bytes, open_nofollow, read_file_bytes, refuse_links)
+from .migrations import check_runnable
 from .runconfig import check_config, config_differences, config_from_dict, read_config, run_scenario
 
 def copy_digests(run_dir: Path) -> dict[str, str]:
@@ -139,10 +140,11 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
     if cfg.fitness_function is None and fitness is not None:
         raise RunError(f"{run_dir} was scored by the built-in fitness; a resume cannot change "
                        "its fitness function (start a new run with fitness=fn)")
+    check_runnable(d["config"], str(run_dir / CHECKPOINT_FILE))
     cfg = with_overrides(cfg, generations=generations, device=device)
     check_config(cfg, scenario)
     try:                           # the run keeps the scenario it names; it runs on its copy
-        return Evolution.from_checkpoint(d, cfg, fitness, scenario)
+        return Evolution.from_checkpoint(d, cfg, fitness, scenario, checked=True)
     except ValueError as e:
         raise RunError(f"{run_dir / CHECKPOINT_FILE} does not fit the run's config: {e}") from None
     except (KeyError, TypeError, RuntimeError, IndexError) as e:

@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..coevo.config import SwarmCoDeConfig
+from .files import RunError
 
 #: Settings of configs saved before `quota_basis` and the mutation steps were config keys.
 LEGACY_DEFAULTS = {"quota_basis": "mean", "hw_sigma": 0.1, "social_sigma": 0.1,
@@ -16,13 +17,17 @@ LEGACY_DEFAULTS = {"quota_basis": "mean", "hw_sigma": 0.1, "social_sigma": 0.1,
 LEGACY_EPISODE_TICKS = {"one-niche": 250, "two-niche": 250, "four-niche": 250}
 
 
-def migrate_config(d: Any) -> Any:
+def migrate_config(d: Any, keep_retired: bool = False) -> Any:
     """A config table written by any version -> this version's keys, with the values the run
-    was made with for every setting added since (the one place config migrations live).
-    Anything but a table is returned as it is (`SwarmCoDeConfig.from_dict` refuses it)."""
+    was made with for every setting added since (the one place config migrations live), less
+    the retired settings (`drop_retired_settings`; kept with `keep_retired`). Anything but a
+    table is returned as it is (`SwarmCoDeConfig.from_dict` refuses it)."""
     if not isinstance(d, dict):
         return d
     d = {k: (None if v == "none" else v) for k, v in d.items()}
+    if "w_tag" in d:
+        # written since 0.7, which writes every key and none of the retired ones
+        return d if keep_retired else drop_retired_settings(d)
     if "quota_basis" not in d:
         # written before these settings existed: keep the run's original algorithm
         d = {**LEGACY_DEFAULTS, **d}
@@ -52,4 +57,67 @@ def migrate_config(d: Any) -> Any:
     if d.get("ticks") is None and d.get("scenario") in LEGACY_EPISODE_TICKS:
         # written before runs pinned their episode length: the scenario's length of that time
         d["ticks"] = LEGACY_EPISODE_TICKS[d["scenario"]]
-    return d
+    return d if keep_retired else drop_retired_settings(d)
+
+
+# ------------------------------------------------------------------ retired settings
+#: Settings this version no longer has: key -> (the values that run as this version does, the
+#: last version that ran the setting). Rejected experiments, and settings that kept behaviour
+#: from before 0.2 for old runs; their results are in the research notes.
+RETIRED_SETTINGS: dict[str, tuple[tuple[Any, ...], str]] = {
+    "gate_margin": ((0, 0.0), "0.6.0"),
+    "quota_inertia": ((0, 0.0), "0.6.0"),
+    "effector_flip": (("gene",), "0.6.0"),
+    "merge_species": ((False,), "0.6.0"),
+    "evaluated_partners": ((False,), "0.6.0"),
+    "baseline_refill": (("any",), "0.6.0"),
+    "d_hw_tiers": ((False,), "0.6.0"),
+    "bt_point_on_nodes": ((True,), "0.6.0"),
+    # with quota_size_exponent set, quota_basis changed nothing (`retired_setting`)
+    "quota_basis": (("sum",), "0.6.0"),
+}
+#: Retired values of settings this version keeps: (key, value) -> the last version that ran it.
+RETIRED_VALUES = {("partner_admission", "gate"): "0.6.0"}
+
+
+def retired_setting(d: dict) -> str | None:
+    """For a migrated config table (`migrate_config` before it drops the retired keys): a
+    one-line message naming the first setting whose value this version cannot run (a retired
+    key at a value other than one that runs as this version does, or a retired value), with
+    the last version that ran it; None if this version runs the config as it was run."""
+    for key, (same, last) in RETIRED_SETTINGS.items():
+        if key not in d:
+            continue
+        v = d[key]
+        if key == "quota_basis" and d.get("quota_size_exponent") is not None:
+            continue               # the exponent set the quotas
+        if not any(v == ok and type(v) is type(ok) for ok in same):
+            return (f"{key} = {v!r} is a retired setting that this version cannot run (last "
+                    f"run by swarmcode-torch {last})")
+    return retired_value(d)
+
+
+def retired_value(d: dict) -> str | None:
+    """A one-line message naming the first setting of a config table at a retired value
+    (`RETIRED_VALUES`), which this version can neither run nor read; None if there is none."""
+    for (key, value), last in RETIRED_VALUES.items():
+        if d.get(key) == value:
+            return (f"{key} = {value!r} is retired; this version cannot run it (last run by "
+                    f"swarmcode-torch {last})")
+    return None
+
+
+def drop_retired_settings(d: dict) -> dict:
+    """A migrated config table without the retired settings (`RETIRED_SETTINGS`): what a run
+    directory records of them is read, not run (`retired_setting` tells a resume)."""
+    return {k: v for k, v in d.items() if k not in RETIRED_SETTINGS}
+
+
+def check_runnable(d: Any, source: str) -> None:
+    """RunError naming the setting, for a config table (of any version) that holds a retired
+    setting at a value this version cannot run (`retired_setting`)."""
+    if not isinstance(d, dict):
+        return
+    problem = retired_setting(migrate_config(d, keep_retired=True))
+    if problem:
+        raise RunError(f"{source}: {problem}")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import platform
 import subprocess
+from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -14,8 +15,9 @@ from typing import Any
 import torch
 
 from ..coevo.dynamics import niche_count
-from ..coevo.evolve import Evolution, GenerationResult
-from ..coevo.population import from_designs, genome_phenotype
+from ..coevo.evolve import BestTeam, Evolution, GenerationResult
+from ..coevo.population import design_record, from_designs, genome_phenotype
+from ..sim.hardware import Phenotype
 from ..sim.state import WorldParams, capabilities
 
 #: The scalar tags of a generation, in the order of metrics.csv's columns.
@@ -40,16 +42,45 @@ def design_capabilities(designs, scenario) -> list[list[int]]:
     if not designs:
         return []
     genome, _ = from_designs(designs)
-    can = capabilities(genome_phenotype(genome, scenario.hardware), scenario,
-                       WorldParams.for_scenario(scenario))
+    return _capability_lists(genome_phenotype(genome, scenario.hardware), scenario)
+
+
+def _capability_lists(ph: Phenotype, scenario) -> list[list[int]]:
+    can = capabilities(ph, scenario, WorldParams.for_scenario(scenario))
     return [[j for j, ok in enumerate(row) if ok] for row in can.tolist()]
 
 
+def team_record(team: BestTeam, generation: int, scenario) -> dict:
+    """A generation's best team (`GenerationResult.best_team`) as its teams.jsonl record: the
+    team's scores and its designs, most robots first, each with its capability (the
+    scenario's package classes it can lift), and the team's niches, its distinct capabilities
+    (`dynamics.niche_count`)."""
+    host, caps = team.genome, _capability_lists(team.phenotype, scenario)
+    # focal: the design of the focal individual; baseline_count: its robots in the baseline
+    # team (the focal's slots refilled by its partners), which the replay page shows
+    designs = [dict(design_record(host, i, s, c), count=n, focal=bool(f), baseline_count=nb,
+                    capability=cap)
+               for i, (s, c, n, nb, f, cap) in enumerate(zip(
+                   team.species.tolist(), team.phenotype.cost.tolist(), team.count.tolist(),
+                   team.baseline_count.tolist(), team.focal.tolist(), caps))]
+    designs.sort(key=lambda d: -d["count"])
+    tm = team.metrics
+    return {
+        "generation": generation, "fitness": team.fitness,
+        "cost": team.cost, "species": len(designs),
+        "deliveries_individual": tm["delivered_individual"],
+        "deliveries_collab": tm["delivered_collab"],
+        "deliveries": tm["delivered_individual"] + tm["delivered_collab"],
+        "energy_used": tm["energy_used"], "designs": designs,
+        "niches": niche_count(d["capability"] for d in designs),
+    }
+
+
 def describe_team(record: dict | None, scenario) -> dict | None:
-    """Add to a team record (`GenerationResult.team`, `.best`) what the algorithm does not know:
-    each design's capability, the scenario's package classes it can lift, and the team's
-    niches, its distinct capabilities (`dynamics.niche_count`). In place; a record that has
-    them is left as it is."""
+    """Add to a team record written before records held them (a checkpoint's best team) each
+    design's capability, the scenario's package classes it can lift, and the team's niches,
+    its distinct capabilities (`dynamics.niche_count`). In place; a record that has them is
+    left as it is."""
     if record is None or "niches" in record:
         return record
     designs = record.get("designs", [])
@@ -60,12 +91,16 @@ def describe_team(record: dict | None, scenario) -> dict | None:
 
 
 def step(ev: Evolution) -> GenerationResult:
-    """One generation of `ev`, its team records described (`describe_team`): what the
-    application's reporters and callbacks receive."""
+    """One generation of `ev` with its report records: the generation's best team
+    (`team_record`) and the run's best team so far, which `ev.state.best` keeps (a checkpoint
+    saves it): what the application's reporters and callbacks receive."""
     result = ev.step()
-    describe_team(result.team, ev.ctx.scenario)
-    describe_team(result.best, ev.ctx.scenario)
-    return result
+    team = team_record(result.best_team, result.generation, ev.ctx.scenario)
+    best = describe_team(ev.state.best, ev.ctx.scenario)
+    if best is None or team["fitness"] > best["fitness"]:
+        best = team
+    ev.state.best = best
+    return replace(result, team=team, best=best)
 
 
 def scalars(r: GenerationResult) -> dict[str, Any]:

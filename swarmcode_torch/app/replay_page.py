@@ -207,7 +207,7 @@ def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
                               scenario)
         eps[name] = ep
     f, b = panels["focal"]["score"], panels["baseline"]["score"]
-    gated = float(gate(torch.tensor([f]), torch.tensor([b]), cfg.p_marginal, cfg.gate_margin)[0])
+    gated = float(gate(torch.tensor([f]), torch.tensor([b]), cfg.p_marginal)[0])
     lay = eps["focal"].layout
     present = lay.p_present[0]
     cls = [i for i, c in enumerate(scenario.packages) for _ in range(c.count)]

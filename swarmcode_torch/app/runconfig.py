@@ -12,13 +12,14 @@ from typing import Any, Iterable
 
 import torch
 
-from ..coevo.config import SwarmCoDeConfig
+from ..coevo.config import SettingError, SwarmCoDeConfig
 from ..sim.hardware import Catalog, CatalogError, catalog_toml_lines, default_catalog, default_catalog_bytes, parse_catalog
 from ..sim.scenario import EFFECTORS, Scenario, load_scenario, parse_scenario
 from . import records
 from .files import (CONFIG_FILE, HARDWARE_COPY, SCENARIO_COPY, RunError, atomic_write_bytes,
                     check_nesting, read_file_bytes, read_text)
-from .migrations import migrate_config
+from .migrations import migrate_config, retired_value
+from .settings import setting_message
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -64,6 +65,9 @@ def write_config(run_dir: Path, cfg: SwarmCoDeConfig) -> None:
 def config_from_dict(d: Any, source: str) -> SwarmCoDeConfig:
     """A validated config from a parsed table (config.toml, a checkpoint's "config") of any
     version; RunError naming `source` and the key for anything malformed or out of range."""
+    problem = retired_value(d) if isinstance(d, dict) else None
+    if problem:
+        raise RunError(f"{source}: {problem}")
     try:
         cfg = SwarmCoDeConfig.from_dict(migrate_config(d))
         # a run made on a larger machine can still be inspected and replayed here; a resume
@@ -311,7 +315,11 @@ def check_config(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
                  option_names: dict[str, str] | None = None) -> None:
     """Everything a run's config must pass before anything is made: its settings' types and
     ranges, then the memory its sizes need (so that sizes far too large are told what they
-    would need), then the upper bounds that memory does not bound. ValueError, one line."""
-    cfg.validate(option_names, bounds=False)
-    check_memory(cfg, scenario, option_names)
-    cfg.check_bounds(option_names)
+    would need), then the upper bounds that memory does not bound. ValueError, one line, that
+    names a setting by its key or as `option_names` spells it (`settings.setting_message`)."""
+    try:
+        cfg.validate(bounds=False)
+        check_memory(cfg, scenario, option_names)
+        cfg.check_bounds()
+    except SettingError as e:
+        raise ValueError(setting_message(e, option_names)) from None

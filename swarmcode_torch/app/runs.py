@@ -3,7 +3,8 @@ job has its own module:
 
 - `files`: the run directory's files, atomic writes and appends, reads that never follow a link;
 - `locks`: one live process per run (or sweep) directory (`RunLock`);
-- `migrations`: a config written by any version read as this version's (`migrate_config`);
+- `migrations`: a config written by any version read as this version's (`migrate_config`), and
+  the retired settings a resume refuses (`check_runnable`);
 - `runconfig`: config.toml, the run's own scenario.toml and hardware.toml, and the checks a
   config passes before a run starts (settings, memory);
 - `checkpoints`: checkpoint.pt written, read back, loaded with the run and resumed;
@@ -26,7 +27,9 @@ from .files import (ATOMIC_FILES, BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, HAR
                     open_nofollow, os_error_text, prepare_run_dir, read_file_bytes, read_text,
                     refuse_links, repair_teams, run_dir_name, trim_teams)
 from .locks import RunLock
-from .migrations import LEGACY_DEFAULTS, LEGACY_EPISODE_TICKS, migrate_config
+from .migrations import (LEGACY_DEFAULTS, LEGACY_EPISODE_TICKS, RETIRED_SETTINGS, RETIRED_VALUES,
+                         check_runnable, drop_retired_settings, migrate_config, retired_setting,
+                         retired_value)
 from .runconfig import (CONFIG_REQUIRED, FALLBACK_MEMORY, check_config, check_memory,
                         config_differences, config_from_dict, config_to_toml, estimate_bytes,
                         hardware_bytes, memory_limit, read_config, run_catalog, run_scenario,
@@ -45,7 +48,9 @@ __all__ = ["CheckpointReporter", "check_copies", "copy_digests", "load_checkpoin
            "clean_temporary_files", "current_umask", "interrupt_point", "new_run_dir",
            "open_nofollow", "os_error_text", "prepare_run_dir", "read_file_bytes", "read_text",
            "refuse_links", "repair_teams", "run_dir_name", "trim_teams", "RunLock",
-           "LEGACY_DEFAULTS", "LEGACY_EPISODE_TICKS", "migrate_config", "CONFIG_REQUIRED",
+           "LEGACY_DEFAULTS", "LEGACY_EPISODE_TICKS", "migrate_config", "RETIRED_SETTINGS",
+           "RETIRED_VALUES", "check_runnable", "drop_retired_settings", "retired_setting",
+           "retired_value", "CONFIG_REQUIRED",
            "FALLBACK_MEMORY", "check_config", "check_memory", "config_differences",
            "config_from_dict", "config_to_toml", "estimate_bytes", "hardware_bytes",
            "memory_limit", "read_config", "run_catalog", "run_scenario", "run_scenario_source",

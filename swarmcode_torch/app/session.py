@@ -82,7 +82,6 @@ def check_start(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
     trip through TOML), then the memory the run needs and the settings' upper bounds
     (`runconfig.check_config`). ValueError (ScenarioError is one), one line, naming settings as
     `names` spells them. The scenario and the bytes a run directory keeps as scenario.toml."""
-    cfg.validate(names, bounds=False)
     if scenario is None:
         scen, data = read_scenario(cfg.scenario)
     else:
@@ -97,8 +96,9 @@ def build(cfg: SwarmCoDeConfig, checked: Scenario | None = None, scenario: Scena
     (named by its name: nothing reloads it during a run; its run directory keeps its TOML, which
     resume, replay and inspect read). `checked`: the scenario `check_start` read, which the run's
     must still be (ValueError otherwise)."""
-    ev = (Evolution(cfg, fitness=fitness) if scenario is None
-          else Evolution(replace(cfg, scenario=scenario.name), fitness=fitness, scenario=scenario))
+    ev = (Evolution(cfg, fitness=fitness, checked=True) if scenario is None
+          else Evolution(replace(cfg, scenario=scenario.name), fitness=fitness, scenario=scenario,
+                         checked=True))
     if checked is not None and ev.ctx.scenario != checked:
         raise ValueError(f"{cfg.scenario} changed while the run was starting; start it again")
     return ev

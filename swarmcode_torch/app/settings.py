@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..coevo.config import SETTING_TYPES
+from ..coevo.config import SETTING_TYPES, SettingError
 
 #: Config keys that `parse_settings` refuses because the command line has an option for them.
 OPTION_KEYS = frozenset({"scenario", "budget", "objective", "generations", "population",
@@ -19,7 +19,7 @@ API_KEYS = {"fitness_function": "a fitness function is given from Python: "
 
 def option_names(overrides: dict[str, str] | None = None) -> dict[str, str]:
     """Config key -> how the command line sets it (--population, --set delta), for
-    `SwarmCoDeConfig.validate` and `runs.check_memory`; `overrides` respells some (a sweep's
+    `setting_message` and `runs.check_memory`; `overrides` respells some (a sweep's
     --seeds)."""
     names = {k: ("--" + k.replace("_", "-") if k in OPTION_KEYS else f"--set {k}")
              for k in SETTING_TYPES}
@@ -27,9 +27,15 @@ def option_names(overrides: dict[str, str] | None = None) -> dict[str, str]:
     return names
 
 
+def setting_message(e: SettingError, names: dict[str, str] | None = None) -> str:
+    """The one-line message of an invalid setting, the key spelled as `names` spells it
+    (`option_names`: --population, --set delta), else as the key itself."""
+    return f"{(names or {}).get(e.key, e.key)} {e.problem}"
+
+
 def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None) -> dict[str, Any]:
     """["key=value", ...] -> {key: typed value} for the algorithm's config keys (e.g. delta=0.5,
-    p_tag_flip=0.0625, quota_basis=mean; `none` unsets a key that may be unset, such as
+    p_tag_flip=0.0625, w_tool=0.5; `none` unsets a key that may be unset, such as
     quota_size_exponent=none); ValueError with a one-line message for a malformed
     pair, an unknown key, a key that has its own option (named `option_names[key]`, default
     --key), or a value of the wrong type."""

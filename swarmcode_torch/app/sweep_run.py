@@ -69,9 +69,6 @@ def run_sweep(budgets: str, seeds: str, objective: str | None, scenario, generat
                                       population=population, swarm_size=swarm_size,
                                       trials=trials, ticks=ticks, device=device,
                                       compile=compile)
-        for b in budget_list:
-            for sd in seed_list:
-                with_overrides(base, budget=b, seed=sd).validate(option_names=names, bounds=False)
         scen, data = read_scenario(base.scenario)
         for b in budget_list:
             for sd in seed_list:

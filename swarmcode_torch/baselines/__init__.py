@@ -358,7 +358,7 @@ class SwarmCoDeRun(_Algorithm):
     """SwarmCoDe (`evolve.Evolution`) with the baselines' metrics and best-team bookkeeping.
 
     `dominance=False` is the ablation with uniform team composition. The best team is the best
-    focal team of the run (the same record as `GenerationResult.best`); its designs are looked up in the
+    focal team of the run (the team of `app.records`' best-team record); its designs are looked up in the
     population it was evaluated in, so that it can be re-scored exactly.
     """
 
@@ -381,15 +381,15 @@ class SwarmCoDeRun(_Algorithm):
         m = self.evolution.step()
         self.last_result = m
         self.episodes += self.episodes_per_generation
-        team = m.team
+        team = m.best_team
         gen = self.generation
         self.generation += 1
 
         def build() -> BestTeam:
-            return _team_of(genome, m.team_rows, team["fitness"], team["cost"], gen)
+            return _team_of(genome, m.team_rows, team.fitness, team.cost, gen)
 
-        self._offer(build, team["fitness"])
-        out = self._metrics(team["fitness"], team["species"], m.mean_fitness, m.seconds)
+        self._offer(build, team.fitness)
+        out = self._metrics(team.fitness, int(team.rows.numel()), m.mean_fitness, m.seconds)
         out["species/count"] = m.num_species
         return out
 

@@ -1,10 +1,12 @@
-"""Partner admission from the gate's own statistics (`partner_admission = "gate"`).
+"""Partner admission from the gate's own statistics (`partner_admission = "substitute"`).
 
 The paper's partner rule makes every species that the tags accept a partner of everyone, the
 moment it is founded. Two species that can stand in for each other (a niche's resident R and a
 new duplicate D) are then in each other's teams and refill each other's slots in each other's
 baselines, so the marginal gate credits both alike and neither is selected against. This rule
-breaks that tie with what evaluation measures, nothing else (no scenario, no capability):
+breaks that tie with what evaluation measures, nothing else (no scenario, no capability); every
+focal's baseline re-fills its slots from its nearest partner design
+(`speciation.design_distance`, `nearest_partner`):
 
 - **Probation.** A species founded after generation 0 is no one's partner until the moving
   average of its gated share (the fraction of its members whose focal team did not beat its
@@ -12,9 +14,9 @@ breaks that tie with what evaluation measures, nothing else (no scenario, no cap
   probation its own team still holds every partner, so a duplicate, whose robots the resident
   replaces at no loss, stays gated and is never admitted; a species that does what no partner
   does beats its baseline and is admitted.
-- **Demotion.** When two or more partner species have had a gated share above `clash_above`
-  for `clash_generations` generations in a row (two substitutes gating each other), the
-  lowest-ranked of them (the smallest, then the youngest) stops being a partner and is on
+- **Demotion.** A partner whose gated share has been above `clash_above` for
+  `clash_generations` generations in a row is a substitute of its nearest partner, and the
+  lower-ranked of the two (the smaller, then the younger) stops being a partner and is on
   probation again; at most one a generation.
 
 The state is kept by species id (`Admission`), saved in checkpoints.
@@ -30,11 +32,14 @@ from torch import Tensor
 
 @dataclass(frozen=True)
 class AdmissionParams:
-    """Thresholds of the rule (the values of the candidate in the project's research notes)."""
+    """Thresholds of the rule. A species whose robots its nearest partner can replace at no
+    loss is gated about half the time (its marginal contribution is zero up to noise), one that
+    does what no partner does far less often: a probationer is admitted only when clearly below
+    one half, and a partner gated half the time or more is a substitute of its nearest partner."""
 
-    admit_below: float = 0.4
+    admit_below: float = 0.3
     admit_generations: int = 3
-    clash_above: float = 0.6
+    clash_above: float = 0.5
     clash_generations: int = 2
     decay: float = 0.5             # weight of the previous value in the moving average
 
@@ -96,14 +101,8 @@ class Admission:
         return cls(*(d[k].to(device) for k in want))
 
 
-#: The thresholds of `partner_admission = "substitute"`, where every baseline re-fills the
-#: focal's slots from its nearest partner species (`baseline_refill = "nearest"`): a species
-#: whose robots that partner can replace at no loss is gated about half the time (its marginal
-#: contribution is zero up to noise), one that does what no partner does far less often. A
-#: probationer is admitted only when clearly below one half (0.3); a partner that is gated
-#: half the time or more is a substitute of its nearest partner, and the lower-ranked of the two
-#: is demoted.
-SUBSTITUTE = AdmissionParams(admit_below=0.3, clash_above=0.5)
+#: The thresholds of `partner_admission = "substitute"`.
+SUBSTITUTE = AdmissionParams()
 
 
 def nearest_partner(design_distance: Tensor, allowed: Tensor) -> Tensor:
@@ -118,15 +117,13 @@ def nearest_partner(design_distance: Tensor, allowed: Tensor) -> Tensor:
     return torch.where(torch.isfinite(d.min(1).values), best, -1)
 
 
-def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor,
-           params: AdmissionParams = AdmissionParams(),
-           nearest: Tensor | None = None) -> Admission:
+def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor, nearest: Tensor,
+           params: AdmissionParams = AdmissionParams()) -> Admission:
     """The admission after one evaluation: species [P] ids, proto_ids [K] (the species, in
-    order of founding), gated [P] bool (whose focal team did not beat its baseline).
-    `nearest` [K] long (`nearest_partner`, the partner each species' baseline was re-filled
-    from): a partner above `clash_above` for `clash_generations` is a substitute of its nearest
-    partner, and the lower-ranked of the two is demoted; without it, two or more partners above
-    it clash and the lowest-ranked of them is demoted."""
+    order of founding), gated [P] bool (whose focal team did not beat its baseline), nearest [K]
+    long (`nearest_partner`, the partner each species' baseline was re-filled from): a partner
+    above `clash_above` for `clash_generations` is a substitute of its nearest partner, and the
+    lower-ranked of the two is demoted."""
     k = proto_ids.numel()
     if k == 0:
         return adm
@@ -142,19 +139,12 @@ def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor,
     clashing = clash >= params.clash_generations
     demote = torch.zeros(k, dtype=torch.bool, device=species.device)
     rank = size * (proto_ids.max() + 1) - proto_ids          # higher: larger, then older
-    if nearest is not None:
-        pair = clashing & (nearest >= 0)
-        if bool(pair.any()):
-            other = nearest.clamp_min(0)
-            loser = torch.where(rank[other] < rank, other, torch.arange(k, device=rank.device))
-            low = torch.where(pair, rank[loser], torch.full_like(rank, int(rank.max()) + 1))
-            demote[loser[low.argmin()]] = True
-    elif int(clashing.sum()) >= 2:
-        # the lowest-ranked clashing species: the smallest, of those the youngest (highest id)
-        big = int(size.max()) + 1
-        key = torch.where(clashing, size * (proto_ids.max() + 1) - proto_ids,
-                          torch.full_like(size, big * (int(proto_ids.max()) + 2)))
-        demote[key.argmin()] = True
+    pair = clashing & (nearest >= 0)
+    if bool(pair.any()):
+        other = nearest.clamp_min(0)
+        loser = torch.where(rank[other] < rank, other, torch.arange(k, device=rank.device))
+        low = torch.where(pair, rank[loser], torch.full_like(rank, int(rank.max()) + 1))
+        demote[loser[low.argmin()]] = True
     new_partner = (partner | admit) & ~demote
     reset = admit | demote
     out = Admission(adm.partner.clone(), adm.gated.clone(), adm.calm.clone(), adm.clash.clone())

@@ -27,10 +27,10 @@ from .config import EvalConfig
 from .fitness import budget_penalty, gate, raw_fitness, team_cost
 from .population import Population
 from .population import genome_phenotype
-from ..sim.hardware import Catalog
+from ..sim.hardware import Catalog, Phenotype
 from ..sim.layout import Layout, make_layouts
 from .partners import (Swarms, assemble_swarms, choose_partners, elite_rows,
-                       niche_representatives, ranking_fitness, senior_partners)
+                       niche_representatives, ranking_fitness)
 from .selection import elite_count
 from ..sim.scenario import Scenario
 from ..sim.rollout import rollout
@@ -93,11 +93,12 @@ def _scores(score_fn: ScoreFn, m: dict, cost: Tensor, cfg: EvalConfig) -> Tensor
     return out
 
 
-def team_robots(genome: Population, teams: Tensor, catalog: Catalog | None = None) -> Robots:
+def team_robots(genome: Population, teams: Tensor, catalog: Catalog | None = None,
+                phenotype: Phenotype | None = None) -> Robots:
     """Per-robot constants of teams [E, S] of population rows (-1: an empty slot), built from
     `catalog` (the scenario's `hardware`; default: the built-in one); each robot runs its row's
-    program (row of `bt.build_tables(genome.bt)`)."""
-    ph = genome_phenotype(genome, catalog)
+    program (row of `bt.build_tables(genome.bt)`). `phenotype`: the genome's, if computed."""
+    ph = phenotype if phenotype is not None else genome_phenotype(genome, catalog)
     rows = teams.clamp_min(0)
     return Robots(*(t[rows] for t in (ph.radius, ph.mass, ph.force, ph.payload, ph.capacity,
                                         ph.efficiency, ph.effector)),
@@ -106,11 +107,12 @@ def team_robots(genome: Population, teams: Tensor, catalog: Catalog | None = Non
 
 def simulate_teams(teams: Tensor, genome: Population, tables: Tensor, layout_ids: Tensor,
                    layouts: Layout, params: WorldParams, ticks: int,
-                   step_fn: StepFn | None = None, catalog: Catalog | None = None) -> dict:
+                   step_fn: StepFn | None = None, catalog: Catalog | None = None,
+                   phenotype: Phenotype | None = None) -> dict:
     """Run teams [E, S] (population rows, -1 empty) in layouts[layout_ids], robots built from
-    `catalog` (`team_robots`); metrics [E] each."""
-    return rollout(layouts.index(layout_ids), team_robots(genome, teams, catalog), tables, params,
-                   ticks, step_fn)
+    `catalog` (`team_robots`; `phenotype`: the genome's, if computed); metrics [E] each."""
+    return rollout(layouts.index(layout_ids), team_robots(genome, teams, catalog, phenotype),
+                   tables, params, ticks, step_fn)
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,48 +150,51 @@ class SimBatch:
 def plan_evaluation(genome: Population, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
                     fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
                     generator: torch.Generator, allowed: Tensor | None = None,
-                    proto_distance: Tensor | None = None) -> EvalPlan:
+                    proto_distance: Tensor | None = None,
+                    phenotype: Phenotype | None = None) -> EvalPlan:
     """The driver's part of an evaluation, every random draw of it from the run's generator:
     partners by tag and selectivity, team slots by dominance, and the environments. Only the
     diagnostic `partners_per_niche = "one"` reads the scenario's package classes (`niche_partners`);
     the default reads genomes, species and fitness alone. `allowed` [K] bool: the species that
     may be partners at all (`admission.Admission.allowed`); None: every species.
-    `proto_distance` [K, K]: the genome distance between the species' prototypes, which
-    `baseline_refill = "nearest"` needs."""
+    `proto_distance` [K, K]: the design distance between the species' prototypes
+    (`speciation.design_distance`); given, a focal's baseline re-fills its slots from its
+    nearest partner species (`partner_admission = "substitute"`), else from any partner."""
     P = genome.size
     dev = genome.bt.device
     S, T = cfg.swarm_size, cfg.trials
     elites = elite_rows(fitness, has_fitness, species, proto_ids,
-                        lambda n: elite_count(n, cfg.max_elite), cfg.evaluated_partners)
+                        lambda n: elite_count(n, cfg.max_elite))
     if cfg.partners_per_niche == "one":
-        oracle = niche_partners(genome, species, proto_ids, elites, fitness, has_fitness, scenario)
+        oracle = niche_partners(genome, species, proto_ids, elites, fitness, has_fitness, scenario,
+                                phenotype)
         allowed = oracle if allowed is None else allowed & oracle
     partners = choose_partners(genome.tag, genome.selectivity, species, proto_ids,
                                genome.tag[proto_index], elites, generator, allowed)
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
-    refill = senior_partners(species, proto_ids) if cfg.baseline_refill == "senior" else None
     near = None
-    if proto_distance is not None or cfg.baseline_refill == "nearest":
-        if proto_distance is None:
-            raise ValueError('baseline_refill = "nearest" needs the prototypes\' distances')
+    if proto_distance is not None:
         pos = (species[:, None] == proto_ids[None, :]).long().argmax(1)      # [P] species index
         near = proto_distance.to(dev)[pos]                                    # [P, K]
     swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator,
-                             refill, near)
+                             near)
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)
     return EvalPlan(swarms, layouts, T)
 
 
 def niche_partners(genome: Population, species: Tensor, proto_ids: Tensor, elites: Tensor,
-                   fitness: Tensor, has_fitness: Tensor, scenario: Scenario) -> Tensor:
+                   fitness: Tensor, has_fitness: Tensor, scenario: Scenario,
+                   phenotype: Phenotype | None = None) -> Tensor:
     """[K] bool: the species that may be partners under `partners_per_niche = "one"`
-    (`partners.niche_representatives`), a species' capability being its fittest elite's."""
+    (`partners.niche_representatives`), a species' capability being its fittest elite's.
+    `phenotype`: the genome's, if computed."""
     k = proto_ids.numel()
     top = elites[:, 0] if elites.shape[1] else torch.full((k,), -1, dtype=torch.long,
                                                            device=species.device)
     has_elite, first = top >= 0, top.clamp_min(0)
-    can = capabilities(genome_phenotype(genome.index(first), scenario.hardware), scenario,
-                       WorldParams.for_scenario(scenario))
+    ph = (Phenotype(*(t[first] for t in phenotype)) if phenotype is not None
+          else genome_phenotype(genome.index(first), scenario.hardware))
+    can = capabilities(ph, scenario, WorldParams.for_scenario(scenario))
     sizes = (species[:, None] == proto_ids[None, :]).sum(0)
     best = ranking_fitness(fitness, has_fitness)[first].masked_fill(~has_elite, -torch.inf)
     return niche_representatives(can, sizes, best, has_elite)
@@ -213,11 +218,13 @@ def sim_batch(plan: EvalPlan, genome: Population, lo: int = 0, hi: int | None = 
 
 def simulate_batch(batch: SimBatch, params: WorldParams, ticks: int,
                    step_fn: StepFn | None = None, tables: Tensor | None = None,
-                   catalog: Catalog | None = None) -> tuple[dict, float]:
+                   catalog: Catalog | None = None,
+                   phenotype: Phenotype | None = None) -> tuple[dict, float]:
     """Run a batch's focal and baseline teams over their trials in one rollout: per-environment
     metrics [2 * B * trials] (every focal trial, then every baseline trial, evaluation-major)
     and the rollout's wall time (device synchronised). `tables`: the behavior-tree tables of
-    the batch's genome (default: built here); `catalog`: the scenario's hardware catalog."""
+    the batch's genome (default: built here); `catalog`: the scenario's hardware catalog;
+    `phenotype`: the batch genome's (default: computed here)."""
     T, B = batch.trials, batch.focal_team.shape[0]
     dev = batch.genome.bt.device
     teams = torch.cat([batch.focal_team, batch.baseline_team]).repeat_interleave(T, 0)
@@ -226,7 +233,7 @@ def simulate_batch(batch: SimBatch, params: WorldParams, ticks: int,
         tables = bt.build_tables(batch.genome.bt)
     t0 = _now(dev)
     m = simulate_teams(teams, batch.genome, tables, layout_ids, batch.layouts, params, ticks,
-                       step_fn, catalog)
+                       step_fn, catalog, phenotype)
     return m, _now(dev) - t0
 
 
@@ -240,20 +247,22 @@ def gather_metrics(parts: list[dict]) -> dict:
 
 
 def score_plan(plan: EvalPlan, genome: Population, m: dict, scenario: Scenario, cfg: EvalConfig,
-          sim_seconds: float = 0.0, score_fn: ScoreFn = team_scores) -> EvalResult:
+          sim_seconds: float = 0.0, score_fn: ScoreFn = team_scores,
+          phenotype: Phenotype | None = None) -> EvalResult:
     """Scores of a plan's evaluations from their per-environment metrics [2 * B * trials]:
     team cost, each team-episode's score (`score_fn`: F_raw times the budget penalty), the mean
-    over trials, the marginal gate."""
+    over trials, the marginal gate. `phenotype`: the genome's, if computed."""
     P, T = plan.size, plan.trials
     swarms = plan.swarms
     teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
-    robot_cost = genome_phenotype(genome, scenario.hardware).cost[teams.clamp_min(0)]
+    ph = phenotype if phenotype is not None else genome_phenotype(genome, scenario.hardware)
+    robot_cost = ph.cost[teams.clamp_min(0)]
     counts = torch.cat([swarms.focal_species_count, swarms.baseline_species_count]).repeat_interleave(T)
     cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
     scores = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1)
     focal, base = scores[0], scores[1]
     team_m = {k: v.view(2, P, T)[0].mean(-1) for k, v in m.items()}
-    return EvalResult(fitness=gate(focal, base, cfg.p_marginal, cfg.gate_margin), focal=focal,
+    return EvalResult(fitness=gate(focal, base, cfg.p_marginal), focal=focal,
                       baseline=base, team_cost=cost.view(2, P, T)[0, :, 0], swarms=swarms,
                       team_metrics=team_m, sim_seconds=sim_seconds)
 
@@ -263,23 +272,27 @@ def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index
              generator: torch.Generator, params: WorldParams | None = None,
              step_fn: StepFn | None = None, tables: Tensor | None = None,
              evaluator=None, score_fn: ScoreFn = team_scores,
-             allowed: Tensor | None = None, proto_distance: Tensor | None = None) -> EvalResult:
+             allowed: Tensor | None = None, proto_distance: Tensor | None = None,
+             phenotype: Phenotype | None = None) -> EvalResult:
     """Score every individual of the population by its marginal contribution to a team:
     `plan_evaluation` (teams and environments, drawn here), the simulation, `score`. The
     simulation runs here (`simulate_batch` of the whole plan), or, given an `evaluator`, where
     its `simulate(plan, genome)` runs it (`distributed.ShardedEvaluator`: shards of whole
     evaluations on Ray actors), which returns the same per-environment metrics. `score_plan`
     then scores them here, each team-episode by `score_fn`. `allowed` [K] bool: the species
-    that may be partners, `proto_distance` [K, K] the prototypes' distances (`plan_evaluation`)."""
+    that may be partners, `proto_distance` [K, K] the prototypes' distances (`plan_evaluation`).
+    `phenotype`: the genome's (`population.genome_phenotype`), computed here if not given."""
     params = params or WorldParams.for_scenario(scenario)
+    if phenotype is None:
+        phenotype = genome_phenotype(genome, scenario.hardware)
     plan = plan_evaluation(genome, species, proto_ids, proto_index, fitness, has_fitness,
-                           scenario, cfg, generator, allowed, proto_distance)
+                           scenario, cfg, generator, allowed, proto_distance, phenotype)
     if evaluator is None:
         m, sim_seconds = simulate_batch(sim_batch(plan, genome), params, cfg.ticks, step_fn,
-                                        tables, scenario.hardware)
+                                        tables, scenario.hardware, phenotype)
     else:
         m, sim_seconds = evaluator.simulate(plan, genome)
-    return score_plan(plan, genome, m, scenario, cfg, sim_seconds, score_fn)
+    return score_plan(plan, genome, m, scenario, cfg, sim_seconds, score_fn, phenotype)
 
 
 def _now(device: torch.device) -> float:

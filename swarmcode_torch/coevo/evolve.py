@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field, fields, replace
 from functools import partial
-from typing import Any
+from typing import Any, Callable
 
 import torch
 from torch import Tensor
@@ -21,12 +21,13 @@ from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeC
 from . import admission
 from .admission import Admission
 from .dynamics import Turnover, median, replay
-from .evaluation import ScoreFn, evaluate, score_fn_name, team_scores
+from .evaluation import EvalResult, ScoreFn, evaluate, score_fn_name, team_scores
 from .fitness import beats_baseline, ema
-from .population import GENE_BOUNDS, GENE_VALUES, Population, design_record, genome_phenotype
+from .population import GENE_BOUNDS, GENE_VALUES, Population, genome_phenotype
 from .reproduction import mutate_bt, reproduce
 from ..sim.scenario import Scenario, load_scenario
-from .speciation import design_distance, distance, speciate
+from .speciation import SpeciationResult, design_distance, distance, speciate
+from ..sim.hardware import Phenotype
 from ..sim.runtime import resolve_device, tick_function, tick_mode
 from ..sim.state import WorldParams
 
@@ -58,12 +59,13 @@ class EvolutionState:
     fitness: Tensor                # [P] smoothed fitness carried by elites
     has_fitness: Tensor            # [P] bool
     rng_state: Tensor              # the run generator's state
-    best: dict | None = None       # best team of the run so far
+    best: dict | None = None       # the application's record of the run's best team so far
+    #                                (`app.records.step` keeps it; saved in checkpoints)
     history: list = field(default_factory=list)  # per-generation composition records
     turnover: Turnover = field(default_factory=Turnover)  # species births and deaths (derived
     #                                                       from history; not saved)
     admission: Admission | None = None  # partner admission by species id (`partner_admission =
-    #                                     "gate"`); None: not used yet
+    #                                     "substitute"`); None: not used yet
 
 
 @dataclass
@@ -95,8 +97,9 @@ class Context:
 
 
 def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None,
-                 scenario: Scenario | None = None) -> Context:
-    """Validate the config, load the scenario and pick the device and tick function.
+                 scenario: Scenario | None = None, checked: bool = False) -> Context:
+    """Validate the config (unless `checked`: the caller has, as the application does once per
+    start), load the scenario and pick the device and tick function.
     `score_fn`: a user function that scores team-episodes instead of the built-in fitness (the
     config records its name as `fitness_function`); a config that names one needs it (ValueError).
     `scenario`: the Scenario to run, instead of loading `cfg.scenario` (which then only names it)."""
@@ -107,7 +110,8 @@ def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None,
     elif cfg.fitness_function is not None:
         raise ValueError(f"the run is scored by a custom fitness function "
                          f"({cfg.fitness_function}): give the function again")
-    cfg.validate()
+    if not checked:
+        cfg.validate()
     if scenario is None:
         scenario = load_scenario(cfg.scenario)
     device = resolve_device(cfg.device)
@@ -140,6 +144,25 @@ def init_state(ctx: Context) -> EvolutionState:
 
 
 @dataclass(frozen=True, eq=False)
+class BestTeam:
+    """This generation's best team, the focal team of the individual with the highest (gated)
+    fitness, on the host: each of its distinct population rows (sorted) with what the
+    generation computed of it. The application builds its report record from this
+    (`app.records.team_record`)."""
+
+    rows: Tensor                   # [R] population rows of the team's robots
+    genome: Population             # [R] their genes
+    phenotype: Phenotype           # [R] their phenotype (of the generation's one computation)
+    species: Tensor                # [R] their species
+    count: Tensor                  # [R] robots of each row in the team
+    baseline_count: Tensor         # [R] of each row in the baseline team it was scored against
+    focal: Tensor                  # [R] bool: the focal individual's row
+    metrics: dict                  # the team's metrics (means over trials), floats
+    fitness: float                 # the team's score (ungated)
+    cost: float                    # the team's cost
+
+
+@dataclass(frozen=True, eq=False)
 class GenerationResult:
     """What one generation measured (`generation` returns it; `app.records` turns it into
     TensorBoard tags, metrics.csv rows, summary.json and teams.jsonl)."""
@@ -151,12 +174,10 @@ class GenerationResult:
     founded: int                   # species founded this generation
     extinct: int                   # species gone since the previous generation
     species_median_age: float      # generations since founding, median over the population's species
-    team: dict                     # this generation's best team: its teams.jsonl record (the
-    #                                application adds each design's capability and the niches)
+    best_team: BestTeam            # this generation's best team
     team_rows: Tensor              # [S] population rows of that team's robots (-1: empty slot)
     team_median_age: float         # median age of the team's species
     focal_max: float               # highest focal team score (ungated)
-    best: dict                     # best team of the run so far (a `team` record)
     composition: dict              # species sizes in the population and in the team
     budget: float | None
     seconds: float                 # wall time of the generation
@@ -165,10 +186,64 @@ class GenerationResult:
     radius: Tensor                 # [P] genes of the evaluated population, on the CPU
     dominance: Tensor              # [P]
     selectivity: Tensor            # [P]
+    team: dict | None = None
+    """The application's report record of `best_team` (its teams.jsonl line); None here: the
+    algorithm builds no records (`app.records.step` fills it in)."""
+    best: dict | None = None
+    """The application's record of the best team of the run so far (`app.records.step`)."""
 
 
-def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, GenerationResult]:
-    """Advance one generation; the new state and what this generation measured."""
+# ------------------------------------------------------------------ observer hooks
+@dataclass(frozen=True, eq=False)
+class AfterSpeciation:
+    """What a generation has after its speciation (`Hooks.after_speciation`)."""
+
+    generation: int                # the generation (0-based)
+    state: EvolutionState          # the state it started from (its population: `state.genome`)
+    speciation: SpeciationResult   # the population's species and prototypes
+
+
+@dataclass(frozen=True, eq=False)
+class AfterEvaluation(AfterSpeciation):
+    """... and after its evaluation (`Hooks.after_evaluation`)."""
+
+    evaluation: EvalResult         # every individual's scores and teams
+    fitness: Tensor                # [P] the smoothed fitness reproduction selects by
+
+
+@dataclass(frozen=True, eq=False)
+class AfterReproduction(AfterEvaluation):
+    """... and after its reproduction (`Hooks.after_reproduction`)."""
+
+    next_state: EvolutionState     # the state of the next generation (its offspring, their
+    #                                species hints, the prototypes)
+    is_elite: Tensor               # [P] bool: the offspring copied unchanged
+    parent: Tensor                 # [P] each offspring's (first) parent, a row of state.genome
+
+
+@dataclass
+class Hooks:
+    """Observers of a generation, called in order after each of its three steps with what the
+    step has at that point: `after_speciation(AfterSpeciation)`,
+    `after_evaluation(AfterEvaluation)`, `after_reproduction(AfterReproduction)`, each once per
+    generation. What they receive is the algorithm's own state: read it, never change it.
+    Register one with `evolution.hooks.after_speciation.append(fn)`."""
+
+    after_speciation: list[Callable[[AfterSpeciation], None]] = field(default_factory=list)
+    after_evaluation: list[Callable[[AfterEvaluation], None]] = field(default_factory=list)
+    after_reproduction: list[Callable[[AfterReproduction], None]] = field(default_factory=list)
+
+
+def _call(hooks: list, event) -> None:
+    for fn in hooks:
+        fn(event)
+
+
+def generation(state: EvolutionState, ctx: Context,
+               hooks: Hooks | None = None) -> tuple[EvolutionState, GenerationResult]:
+    """Advance one generation; the new state and what this generation measured. `hooks`:
+    observers called after speciation, evaluation and reproduction (`Hooks`)."""
+    hooks = hooks or Hooks()
     t0 = time.perf_counter()
     cfg = ctx.cfg
     g = torch.Generator(device=ctx.device)
@@ -177,8 +252,8 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
 
     # 1. dynamic speciation
     sp = speciate(genome, state.species_hint, state.proto, state.proto_ids,
-                  state.next_species_id, ctx.speciation.delta, w=ctx.speciation.weights,
-                  merge=ctx.speciation.merge_species)
+                  state.next_species_id, ctx.speciation.delta, w=ctx.speciation.weights)
+    _call(hooks.after_speciation, AfterSpeciation(state.generation, state, sp))
 
     # which species may be partners (`admission`): the species of generation 0 and, on a run
     # resumed from a checkpoint without the state, the species it had, are partners
@@ -187,25 +262,24 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
         adm = state.admission or Admission.empty(ctx.device).grow(state.next_species_id, True)
         adm = adm.grow(sp.next_species_id, partner=state.generation == 0)
     allowed = None if adm is None else adm.allowed(sp.proto_ids)
-    near_refill = cfg.baseline_refill == "nearest" or cfg.partner_admission == "substitute"
     designs_d = (design_distance(genome.index(sp.proto_index), ctx.speciation.weights)
-                 if near_refill else None)
+                 if adm is not None else None)
+    # the population's phenotype, once a generation: evaluation and the best team read it
+    ph = genome_phenotype(genome, ctx.scenario.hardware)
 
     # 2. evaluation of every individual, all teams and trials in one batch
     t_eval = time.perf_counter()
     res = evaluate(genome, sp.species, sp.proto_ids, sp.proto_index, state.fitness,
                    state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn,
                    evaluator=ctx.evaluator, score_fn=ctx.score_fn, allowed=allowed,
-                   proto_distance=designs_d)
+                   proto_distance=designs_d, phenotype=ph)
     if adm is not None:
-        gated = ~beats_baseline(res.focal, res.baseline, ctx.eval_cfg.gate_margin)
-        if cfg.partner_admission == "substitute":
-            adm = admission.update(adm, sp.species, sp.proto_ids, gated, admission.SUBSTITUTE,
-                                   admission.nearest_partner(designs_d, allowed))
-        else:
-            adm = admission.update(adm, sp.species, sp.proto_ids, gated)
+        gated = ~beats_baseline(res.focal, res.baseline)
+        adm = admission.update(adm, sp.species, sp.proto_ids, gated,
+                               admission.nearest_partner(designs_d, allowed), admission.SUBSTITUTE)
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
+    _call(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
 
     # the best team of this generation: the team of the individual with the highest fitness
     # score (gated: a focal whose marginal contribution is not positive is penalised, so a strong
@@ -216,42 +290,30 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
     # the baseline team it was scored against: robots of each of the team's rows
     base_counts = (res.swarms.baseline_team[b][None, :] == rows[:, None]).sum(1)
     ids, sizes = torch.unique(sp.species, return_counts=True)
-    cost = genome_phenotype(genome, ctx.scenario.hardware).cost
-    # every value the records need, to the host in one transfer (each transfer is a device sync)
+    # every value the result needs, to the host in one transfer (each transfer is a device sync)
     sel = genome.index(rows)
     names = [f.name for f in fields(Population)]
-    h = _to_host([getattr(sel, n) for n in names] + [
-        sp.species[rows], cost[rows], counts, base_counts, rows == b,
+    n_ph = len(Phenotype._fields)
+    h = _to_host([getattr(sel, n) for n in names] + [t[rows] for t in ph] + [
+        rows, sp.species[rows], counts, base_counts, rows == b,
         torch.stack([v[b].float() for v in res.team_metrics.values()]), res.focal[b],
         res.team_cost[b], ids, sizes, fit.max(), fit.mean(), res.focal.max(),
         genome.radius.detach(), genome.dominance.detach(), genome.selectivity.detach()])
     host, h = Population(**dict(zip(names, h))), h[len(names):]
-    (team_species, team_cost, team_counts, team_base, team_focal, team_m, focal_b, team_cost_b, ids, sizes, fit_max,
-     fit_mean, focal_max, radius, dominance, selectivity) = h
-    # focal: the design of the focal individual; baseline_count: its robots in the baseline
-    # team (the focal's slots refilled by its partners), which the replay page shows
-    designs = [dict(design_record(host, i, s, c), count=n, focal=bool(f), baseline_count=nb)
-               for i, (s, c, n, nb, f) in enumerate(zip(
-                   team_species.tolist(), team_cost.tolist(), team_counts.tolist(),
-                   team_base.tolist(), team_focal.tolist()))]
-    designs.sort(key=lambda d: -d["count"])
-    tm = dict(zip(res.team_metrics, team_m.tolist()))
-    team_record = {
-        "generation": state.generation, "fitness": float(focal_b),
-        "cost": float(team_cost_b), "species": len(designs),
-        "deliveries_individual": tm["delivered_individual"],
-        "deliveries_collab": tm["delivered_collab"],
-        "deliveries": tm["delivered_individual"] + tm["delivered_collab"],
-        "energy_used": tm["energy_used"], "designs": designs,
-    }
-    best = state.best
-    if best is None or team_record["fitness"] > best["fitness"]:
-        best = team_record
+    host_ph, h = Phenotype(*h[:n_ph]), h[n_ph:]
+    (team_at, team_species, team_counts, team_base, team_focal, team_m, focal_b, team_cost_b,
+     ids, sizes, fit_max, fit_mean, focal_max, radius, dominance, selectivity) = h
+    best_team = BestTeam(rows=team_at, genome=host, phenotype=host_ph, species=team_species,
+                         count=team_counts, baseline_count=team_base, focal=team_focal,
+                         metrics=dict(zip(res.team_metrics, team_m.tolist())),
+                         fitness=float(focal_b), cost=float(team_cost_b))
 
+    # the team's species, most robots first (the first of equals: the lower row)
+    in_team = sorted(zip(team_species.tolist(), team_counts.tolist()), key=lambda sc: -sc[1])
     composition = {
         "generation": state.generation,
         "population": {int(i): int(n) for i, n in zip(ids.tolist(), sizes.tolist())},
-        "team": {str(d["species"]): d["count"] for d in designs},
+        "team": {str(s): n for s, n in in_team},
     }
     turnover = state.turnover.copy()
     founded, extinct = turnover.advance(state.generation, composition["population"])
@@ -265,17 +327,19 @@ def generation(state: EvolutionState, ctx: Context) -> tuple[EvolutionState, Gen
         proto=genome.index(sp.proto_index), proto_ids=sp.proto_ids,
         next_species_id=sp.next_species_id,
         fitness=torch.where(is_elite, fit[parent], 0.0), has_fitness=is_elite,
-        rng_state=g.get_state(), best=best, history=state.history + [composition],
+        rng_state=g.get_state(), best=state.best, history=state.history + [composition],
         turnover=turnover, admission=adm)
+    _call(hooks.after_reproduction, AfterReproduction(state.generation, state, sp, res, fit,
+                                                      new_state, is_elite, parent))
 
     result = GenerationResult(
         generation=state.generation, best_fitness=float(fit_max),
         mean_fitness=float(fit_mean), num_species=int(ids.numel()), founded=founded,
         extinct=extinct,
         species_median_age=median(turnover.ages(state.generation, composition["population"])),
-        team=team_record, team_rows=team,
+        best_team=best_team, team_rows=team,
         team_median_age=median(turnover.ages(state.generation, composition["team"])),
-        focal_max=float(focal_max), best=best, composition=composition,
+        focal_max=float(focal_max), composition=composition,
         budget=cfg.budget, seconds=time.perf_counter() - t0, eval_seconds=eval_seconds,
         sim_seconds=res.sim_seconds, radius=radius, dominance=dominance,
         selectivity=selectivity)
@@ -427,21 +491,26 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
 class Evolution:
     """A run: config, context and current state; `step()` runs one generation. `fitness`: a
     user `evaluation.ScoreFn` that scores team-episodes instead of the built-in fitness;
-    `scenario`: a Scenario object to run instead of loading `cfg.scenario` (`make_context`)."""
+    `scenario`: a Scenario object to run instead of loading `cfg.scenario` (`make_context`);
+    `checked`: the config has been validated (`SwarmCoDeConfig.validate`). `hooks`: observers
+    of each generation's steps (`Hooks`)."""
 
     def __init__(self, cfg: SwarmCoDeConfig, state: EvolutionState | None = None,
-                 fitness: ScoreFn | None = None, scenario: Scenario | None = None):
-        self.ctx = make_context(cfg, fitness, scenario)
+                 fitness: ScoreFn | None = None, scenario: Scenario | None = None,
+                 checked: bool = False):
+        self.ctx = make_context(cfg, fitness, scenario, checked)
         self.cfg = self.ctx.cfg
         self.state = state if state is not None else init_state(self.ctx)
+        self.hooks = Hooks()
 
     @classmethod
     def from_checkpoint(cls, d: dict, cfg: SwarmCoDeConfig, fitness: ScoreFn | None = None,
-                        scenario: Scenario | None = None) -> "Evolution":
+                        scenario: Scenario | None = None, checked: bool = False) -> "Evolution":
         ev = cls.__new__(cls)
-        ev.ctx = make_context(cfg, fitness, scenario)
+        ev.ctx = make_context(cfg, fitness, scenario, checked)
         ev.cfg = ev.ctx.cfg
         ev.state = load_state_dict(d, ev.ctx)
+        ev.hooks = Hooks()
         return ev
 
     @property
@@ -449,7 +518,7 @@ class Evolution:
         return self.state.generation >= self.cfg.generations
 
     def step(self) -> GenerationResult:
-        self.state, result = generation(self.state, self.ctx)
+        self.state, result = generation(self.state, self.ctx, self.hooks)
         return result
 
     def state_dict(self) -> dict:

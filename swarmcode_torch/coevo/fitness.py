@@ -58,19 +58,17 @@ def budget_penalty(cost: Tensor, budget: float | Tensor | None, lam: float = 0.0
     return torch.where(over > 0, pen, ones)
 
 
-def gate(f_focal: Tensor, f_baseline: Tensor, p_marginal: float = 0.25,
-         margin: float = 0.0) -> Tensor:
+def gate(f_focal: Tensor, f_baseline: Tensor, p_marginal: float = 0.25) -> Tensor:
     """[...] focal / baseline team fitness -> [...]: f_focal if its marginal contribution
-    f_focal - f_baseline is above -margin * |f_baseline| (margin 0: if it beats the baseline),
-    else f_focal * p_marginal."""
-    keep = beats_baseline(f_focal, f_baseline, margin)
+    f_focal - f_baseline is positive (it beats the baseline), else f_focal * p_marginal."""
+    keep = beats_baseline(f_focal, f_baseline)
     return torch.where(keep, f_focal, f_focal * p_marginal)
 
 
-def beats_baseline(f_focal: Tensor, f_baseline: Tensor, margin: float = 0.0) -> Tensor:
-    """[...] bool: the marginal contribution f_focal - f_baseline is above -margin * |f_baseline|
-    (the focal is not gated, `gate`)."""
-    return f_focal - f_baseline > -margin * f_baseline.abs()
+def beats_baseline(f_focal: Tensor, f_baseline: Tensor) -> Tensor:
+    """[...] bool: the marginal contribution f_focal - f_baseline is positive (the focal is not
+    gated, `gate`)."""
+    return f_focal - f_baseline > 0
 
 
 def ema(prev: Tensor, new: Tensor, has_prev: Tensor, alpha: float = 0.6) -> Tensor:

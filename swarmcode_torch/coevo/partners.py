@@ -86,33 +86,12 @@ def niche_representatives(capability: Tensor, sizes: Tensor, best: Tensor,
     return has_elite & ~beaten
 
 
-def senior_partners(species: Tensor, proto_ids: Tensor) -> Tensor:
-    """species [P] (each individual's species id), proto_ids [K] (ids in order of founding) ->
-    [P, K] bool: species k is senior to individual i's species: it has more members, or as many
-    and was founded earlier (a lower id). No species is senior to itself.
-
-    The baseline refill rule `baseline_refill = "senior"`: a focal's slots are re-filled only
-    from senior partners, so of two species that can stand in for each other the junior one is
-    compared against the senior and the senior one against a team without it. It reads only
-    the species' sizes and ages."""
-    member = species[:, None] == proto_ids[None, :]                      # [P, K]
-    size = member.sum(0)                                                 # [K]
-    own = torch.where(member.any(1), (member.long() * size[None, :]).sum(1),
-                      torch.zeros_like(species))                         # [P] own species' size
-    older = proto_ids[None, :] < species[:, None]
-    return (size[None, :] > own[:, None]) | ((size[None, :] == own[:, None]) & older)
-
-
 def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids: Tensor,
-               n_elite_fn: Callable[[Tensor], Tensor] = elite_count,
-               evaluated_only: bool = False) -> Tensor:
+               n_elite_fn: Callable[[Tensor], Tensor] = elite_count) -> Tensor:
     """fitness [P], has_fitness [P] bool, species [P], proto_ids [K] -> [K, M] long elite rows per species, best first, -1 padded.
 
     N_k = n_elite_fn(sizes [K] long) (capped by the size); individuals without fitness rank below
     those with it; ties by lowest row; individuals whose species is not in proto_ids are ignored.
-    evaluated_only: individuals without fitness are never elites (a species of unevaluated
-    individuals only, one founded this generation, has none), unless no individual of the
-    population has fitness (the first generation); N_k is then capped by the evaluated members.
     """
     p = fitness.numel()
     k = proto_ids.numel()
@@ -122,27 +101,22 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
     match = species[:, None] == proto_ids[None, :]
     pos = torch.where(match.any(1), match.to(torch.int32).argmax(1).long(),
                       torch.full((p,), k, dtype=torch.long, device=dev))  # k: not in any species
-    n_wanted = torch.as_tensor(n_elite_fn(group_sizes(pos, k + 1)[:k]), device=dev)
-    if evaluated_only and bool(has_fitness.any()):
-        pos = torch.where(has_fitness, pos, torch.full_like(pos, k))
-    f = ranking_fitness(fitness, has_fitness)
     sizes = group_sizes(pos, k + 1)
+    n_wanted = torch.as_tensor(n_elite_fn(sizes[:k]), device=dev)
+    f = ranking_fitness(fitness, has_fitness)
     order, rank = rank_within_groups(pos, f, sizes, first=has_fitness)
     return top_table(order, rank, pos, torch.minimum(n_wanted.long(), sizes[:k]))
 
 
 def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swarm_size: int,
-                    generator: torch.Generator, refill_from: Tensor | None = None,
-                    refill_distance: Tensor | None = None) -> Swarms:
+                    generator: torch.Generator, refill_distance: Tensor | None = None) -> Swarms:
     """focal [B] rows, partner_rows [B, K] (-1 none), dominance [P] -> Swarms of swarm_size S slots.
 
     Slot 0: the focal design; slots 1..: one per partner in the team (in species order; a uniform
     random subset of S - 1 if there are more partners); remaining slots: clones drawn from {focal,
     partners in the team} with probability proportional to dominance (uniform if all are 0).
     The baseline team re-fills every focal slot by dominance among the partners in the team
-    (-1 if there are none); where `refill_from` [B, K] bool is given, only among the partners in
-    the team that it allows (`senior_partners`), and the slots stay empty if it allows none;
-    where `refill_distance` [B, K] float is given, only from the partner in the team at the
+    (-1 if there are none); where `refill_distance` [B, K] float is given, only from the partner in the team at the
     least distance (the first of equals): the focal's slots are all given to its nearest
     partner species.
     """
@@ -178,7 +152,7 @@ def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swar
     focal_slot = empty & (draw == 0)
     focal_slot[:, 0] = True
 
-    refill = in_team if refill_from is None else in_team & refill_from.to(dev)
+    refill = in_team
     if refill_distance is not None and k > 0:
         d = torch.where(refill, refill_distance.to(dev).float(), torch.full((b, k), torch.inf,
                                                                             device=dev))

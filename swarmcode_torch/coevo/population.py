@@ -108,16 +108,11 @@ class Population:
         return Population(**{f.name: torch.cat([getattr(p, f.name) for p in parts])
                          for f in fields(Population)})
 
-    def hardware_vector(self, tiers: bool = False) -> torch.Tensor:
-        """[P, D] the hardware space of d_hw, each axis in [0, 1]: the two continuous operating
-        points (torque, battery; D = 2), the paper's "continuous hardware space"; with `tiers`
-        also the three tiers scaled to [0, 1] first (D = 5, the behaviour before the paper-text
-        fix). Radius and tool are excluded (they have their own terms)."""
-        points = [self.torque_point, self.battery_point]
-        if tiers:
-            t = float(NUM_TIERS - 1)
-            points = [self.chassis / t, self.battery / t, self.motor / t] + points
-        return torch.stack(points, dim=-1).float()
+    def hardware_vector(self) -> torch.Tensor:
+        """[P, 2] the hardware space of d_hw, each axis in [0, 1]: the two continuous operating
+        points (torque, battery), the paper's "continuous hardware space". Radius and tool are
+        excluded (they have their own terms)."""
+        return torch.stack([self.torque_point, self.battery_point], dim=-1).float()
 
 
 def genome_phenotype(genome: "Population", catalog: Catalog | None = None) -> Phenotype:

@@ -3,7 +3,7 @@ crossover and mutation of whole populations as batched tensor operations."""
 
 from __future__ import annotations
 
-from dataclasses import fields, replace
+from dataclasses import fields
 from typing import Callable
 
 import torch
@@ -19,14 +19,11 @@ DistanceFn = Callable[[Population, Population], Tensor]
 
 
 def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
-                     protect: int | None = None, min_share: float = 0.0,
-                     sizes: Tensor | None = None, inertia: float = 0.0) -> Tensor:
+                     protect: int | None = None, min_share: float = 0.0) -> Tensor:
     """[K] total adjusted fitness per species -> [K] long quotas summing to population_size.
 
     Proportional shares rounded by largest remainder (ties: lowest index); all-zero (or negative)
-    fitness gives equal shares. With `inertia` > 0 and the species' present `sizes` [K], each
-    share is (1 - inertia) x its fitness share + inertia x its share of the sizes (all-zero
-    fitness: the sizes' shares). A species whose share (population_size * its fraction of the
+    fitness gives equal shares. A species whose share (population_size * its fraction of the
     total) is below `min_share` gets 0 and the others share its slots (0, or no species reaching
     it: no threshold). `protect` (a species position) is guaranteed a quota >= 1, taken
     from the species with the largest quota (ties: lowest index). In `reproduce`, elites are
@@ -40,10 +37,6 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
     # no value is read on the host here (each would be a device sync): the branches are
     # torch.where over tensors, `protect` may be a 0-d tensor
     f = torch.nan_to_num(adjusted_fitness_sum.double(), nan=0.0).clamp(min=0.0)
-    if inertia > 0 and sizes is not None:       # blend the fitness share with the sizes now
-        n = sizes.double()
-        f = torch.where(f.sum() > 0, f / f.sum(), n / n.sum())
-        f = (1 - inertia) * f + inertia * n / n.sum()
     f = torch.where(f.sum() > 0, f, torch.ones_like(f))
     if min_share > 0:
         # a relative tolerance, so that an exact share of min_share is not lost to rounding
@@ -140,10 +133,7 @@ def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator
         raise ValueError(f"point_opcode_weights needs {NUM_OPCODES} entries")
     point = bt.clone()
     for _ in range(params.bt_point_count):
-        if params.bt_point_on_nodes:
-            slot = _random_node(point, generator)
-        else:
-            slot = torch.randint(0, l, (n, 1), generator=generator, device=dev)
+        slot = _random_node(point, generator)
         op = torch.multinomial(weights, n, replacement=True, generator=generator)
         point.scatter_(1, slot, op[:, None].to(bt.dtype))
     start = torch.randint(0, l, (n,), generator=generator, device=dev)
@@ -220,41 +210,20 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
     return Population(**out)
 
 
-def prototype_flips(child: Population, proto: Population, params: ReproductionParams,
-                    generator: torch.Generator) -> Population:
-    """Children [N], their species' prototypes [N] -> children [N], the effector flip as its own
-    event (`effector_flip = "prototype"`): each child's effector is resampled w.p. p_effector (None:
-    p_categorical) against its prototype's; where the new value differs, the child is replaced by
-    a copy of the prototype with that effector, which lies exactly w_tool from the prototype.
-    The flips are as frequent as `mutate`'s resampling makes them."""
-    n = child.size
-    dev = child.bt.device
-    p_eff = params.p_effector if params.p_effector is not None else params.p_categorical
-    hit = torch.rand(n, generator=generator, device=dev) < p_eff
-    new = torch.randint(0, GENE_VALUES["effector"], (n,), generator=generator, device=dev,
-                        dtype=proto.effector.dtype)
-    flip = hit & (new != proto.effector)
-    flipped = Population(**{f.name: getattr(proto, f.name) for f in fields(Population)
-                            if f.name != "effector"}, effector=new)
-    return flipped.where(flip, child)
-
-
 def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index: Tensor,
               proto_ids: Tensor, params: ReproductionParams, generator: torch.Generator,
               distance_fn: DistanceFn = distance) -> tuple[Population, Tensor, Tensor, Tensor]:
     """Population [P], fitness [P], species [P], prototypes [K] -> (children [P], child_species_hint [P], is_elite [P], parent_index [P]).
 
-    Quotas: proportional to each species' total fitness (`params.quota_basis` "sum") or mean fitness
-    ("mean", NEAT's fitness sharing), the species of the global best protected (>= 1). Elites (top
+    Quotas: proportional to each species' total fitness (`params.quota_size_exponent` None, the
+    paper's) or to its mean fitness x its size ** quota_size_exponent, the species of the global best protected (>= 1). Elites (top
     elite_count per species, capped by the quota) are copied unchanged and listed first (species by
     proto order, best first); the remaining quota is filled by offspring: p1 by in-species
     tournament, p2 by in-species tournament within `delta` of p1 (and != p1), up to mate_tries
     tries, else a global tournament (!= p1); crossover w.p. crossover_same / crossover_cross (same /
-    different species) else clone p1; then every offspring is mutated (with `effector_flip =
-    "prototype"`, its effector flip is `prototype_flips` on its species' prototype). Hints: the
+    different species) else clone p1; then every offspring is mutated. Hints: the
     elite's own species / p1's species; parent_index: the elite row / p1. `distance_fn(genome,
-    genome)` is called once ([P, P]); `proto_index` (the prototypes' rows) is used by the
-    prototype flips. Fitness must be finite for every individual.
+    genome)` is called once ([P, P]). Fitness must be finite for every individual.
     """
     p = genome.size
     dev = genome.bt.device
@@ -270,23 +239,15 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     if params.quota_size_exponent is not None:          # mean x size ** exponent
         n = sizes.clamp(min=1).double()
         adjusted = fsum / n * n.pow(params.quota_size_exponent)
-    elif params.quota_basis == "sum":
+    else:                                               # the paper's total
         adjusted = fsum
-    elif params.quota_basis == "mean":
-        adjusted = fsum / sizes.clamp(min=1)
-    elif params.quota_basis == "sqrt":                  # between the two: mean x sqrt(size)
-        adjusted = fsum / sizes.clamp(min=1).double().sqrt()
-    else:
-        raise ValueError(f"quota_basis must be 'sum', 'mean' or 'sqrt', "
-                         f"not {params.quota_basis!r}")
     quota = torch.zeros(k, dtype=torch.long, device=dev)
     nonempty = (sizes > 0).nonzero().squeeze(1)                           # empty species get 0
     if p:
         best_pos = pos[fit.argmax()]
         protect = (nonempty == best_pos).to(torch.int32).argmax()
         quota[nonempty] = offspring_quotas(adjusted[nonempty], p, protect=protect,
-                                           min_share=params.min_share, sizes=sizes[nonempty],
-                                           inertia=params.quota_inertia)
+                                           min_share=params.min_share)
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
 
     order, rank = rank_within_groups(pos, fit, sizes)       # by (species, fitness desc, row)
@@ -325,14 +286,7 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
     g1, g2 = genome.index(p1), genome.index(p2)
     child = crossover(g1, g2, generator).where(do_cross, g1)
-    if params.effector_flip == "prototype":
-        child = mutate(child, replace(params, p_effector=0.0), generator)
-        child = prototype_flips(child, genome.index(proto_index[pos[p1]]), params, generator)
-    elif params.effector_flip == "gene":
-        child = mutate(child, params, generator)
-    else:
-        raise ValueError(f"effector_flip must be 'gene' or 'prototype', "
-                         f"not {params.effector_flip!r}")
+    child = mutate(child, params, generator)
 
     children = Population.cat([genome.index(elite), child])
     hint = torch.cat([species[elite], species[p1]])

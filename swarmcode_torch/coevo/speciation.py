@@ -45,8 +45,8 @@ def distance_terms(a: Population, b: Population, w: DistanceWeights = DistanceWe
     """Genomes [Pa], [Pb] -> the weighted terms of D, each [Pa, Pb] float32, in the order of the sum:
     tag = w_tag (H/L)^gamma, hw = w_hw d_hw, bt = w_bt d_bt, tool = w_tool d_tool, size = w_size d_size.
 
-    H: tag Hamming distance, L: tag length; d_hw: Euclidean distance of `hardware_vector(w.hw_tiers)`
-    / sqrt(its dimension), the continuous operating points (and the tiers with `w.hw_tiers`);
+    H: tag Hamming distance, L: tag length; d_hw: Euclidean distance of `hardware_vector()`
+    / sqrt(its dimension), the two continuous operating points;
     d_bt: fraction of BT slots whose opcode differs; d_tool: effectors differ; d_size: |dr| / (R_MAX - R_MIN).
     """
     pa, pb = a.size, b.size
@@ -56,7 +56,7 @@ def distance_terms(a: Population, b: Population, w: DistanceWeights = DistanceWe
         d_tag = (hamming(a.tag, b.tag) / l_tag) ** w.gamma
     else:
         d_tag = torch.zeros(pa, pb, device=dev)
-    ha, hb = a.hardware_vector(w.hw_tiers), b.hardware_vector(w.hw_tiers)
+    ha, hb = a.hardware_vector(), b.hardware_vector()
     d_hw = torch.cdist(ha, hb, compute_mode="donot_use_mm_for_euclid_dist") / math.sqrt(ha.shape[1])
     l_bt = a.bt.shape[1]
     if l_bt > 0:
@@ -81,21 +81,18 @@ def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -
     """Genomes [K] -> [K, K] float32: the hardware terms of D between them (w_hw d_hw + w_tool
     d_tool + w_size d_size), how far apart their robots are as designs. The tag (a signal for
     partner choice, not a property of the robot) and the tree are left out: which partner's
-    robots are most like a species' robots (`baseline_refill = "nearest"`)."""
+    robots are most like a species' robots (`partner_admission = "substitute"`)."""
     t = distance_terms(proto, proto, w)
     return t["hw"] + t["tool"] + t["size"]
 
 
 def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | None,
              prev_proto_ids: Tensor, next_species_id: int, delta: float = SwarmCoDeConfig.delta,
-             w: DistanceWeights = DistanceWeights(), merge: bool = False) -> SpeciationResult:
+             w: DistanceWeights = DistanceWeights()) -> SpeciationResult:
     """Population [P], hint [P] long (-1 none), previous prototypes [Kp] + ids [Kp] -> SpeciationResult.
 
     (1) Each previous species with >= 1 member by `species_hint` keeps its id; its new prototype is
     the member closest to the old prototype (ties: lowest row); memberless species go extinct.
-    merge (not in the paper; an experiment): after (1), a surviving species whose new prototype
-    lies within delta of the prototype of an older surviving one (earlier in `prev_proto_ids`)
-    is dissolved, and its members are assigned in (2) like any other individual.
     (2) Every other individual, in row order, joins the closest current prototype if D <= delta,
     else founds a new species (id next_species_id, next_species_id + 1, ...). Ties between
     prototypes go to the earliest prototype in `proto_ids` order. Computed exactly in rounds
@@ -117,15 +114,6 @@ def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | 
         carried_rows, carried_ids = closest[alive], prev_ids[alive]
     else:
         carried_rows, carried_ids = long_empty, long_empty
-    if merge and carried_rows.numel() > 1:
-        # one pass over the K species, oldest first, on the host (one transfer, not K syncs)
-        close = (distance(genome.index(carried_rows), genome.index(carried_rows), w)
-                 <= delta).cpu()
-        keep = torch.ones(carried_rows.numel(), dtype=torch.bool)
-        for j in range(1, carried_rows.numel()):
-            keep[j] = not bool(close[j, :j][keep[:j]].any())
-        keep = keep.to(dev)
-        carried_rows, carried_ids = carried_rows[keep], carried_ids[keep]
     k = int(carried_rows.numel())
 
     assigned = torch.zeros(p, dtype=torch.bool, device=dev)
