@@ -232,9 +232,12 @@ def evolve(
     cpus_per_eval_worker: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1].")] = None,
     ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one].")] = None,
     threads: Annotated[Optional[int], typer.Option(help=THREADS_HELP)] = None,
+    wandb: Annotated[bool, typer.Option("--wandb", help="Also log to Weights & Biases (the scalars, the config, the replays; needs swarmcode-torch[wandb]; WANDB_MODE=offline for no network).")] = False,
+    wandb_project: Annotated[str, typer.Option(help="Weights & Biases project of --wandb.")] = "swarmcode-torch",
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
     logdir, resume = _path(logdir, "--logdir"), _path(resume, "--resume")
+    wandb_project = _wandb_option(wandb, wandb_project)
     _TERMINATED.clear()                    # this command's SIGTERM, not an earlier one's
     _set_threads(threads)
     shards = _eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
@@ -253,7 +256,7 @@ def evolve(
                 if ev is None:
                     return
                 _execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
-                         figure_every=figure_every, where=where)
+                         figure_every=figure_every, where=where, wandb_project=wandb_project)
                 if shards is not None:
                     _print_shard_traffic(ev.ctx.evaluator)
             console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
@@ -464,8 +467,9 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
 def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
              render_every: int = 0, saved: int | None = None,
              again: str | None = None, figure_every: int = 50,
-             where: _Where | None = None) -> None:
-    """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints.
+             where: _Where | None = None, wandb_project: str | None = None) -> None:
+    """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints
+    (and Weights & Biases with `wandb_project`).
     Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
     failed write (a full disk: OSError from the checkpoint, summary.json, teams.jsonl or
     TensorBoard) ends the run with a one-line error that names the last checkpointed generation
@@ -492,6 +496,10 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
             reporters += [CsvReporter(run_dir),
                           TensorBoardReporter(run_dir, figure_every=figure_every,
                                               render_every=render_every), checkpoints]
+            if wandb_project is not None:      # after the checkpoints: outside the step
+                from .reporting import WandbReporter
+
+                reporters.append(WandbReporter(wandb_project, run_dir, render_every))
             with _terminate_as_interrupt() as terminated:
                 run(ev, run_dir, reporters)
     except KeyboardInterrupt:
@@ -527,6 +535,19 @@ def _execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
              f"generation {checkpoints.saved} ({run_dir / 'checkpoint.pt'}); continue with: "
              f"{again}")
     progress.stop()
+
+
+def _wandb_option(on: bool, project: str) -> str | None:
+    """The W&B project of `evolve --wandb` (None: off); a one-line error without wandb."""
+    if not on:
+        return None
+    from .reporting import require_wandb
+
+    try:
+        require_wandb()
+    except ImportError as e:
+        fail(str(e))
+    return project
 
 
 def _close_writers(reporters) -> None:

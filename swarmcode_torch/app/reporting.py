@@ -366,3 +366,87 @@ def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[st
     except csv.Error as e:
         raise RunError(f"{path}: malformed CSV ({e})") from None
     return rows, columns
+
+
+#: What to install for `WandbReporter` (`evolve --wandb`).
+WANDB_INSTALL = "pip install 'swarmcode-torch[wandb]'"
+
+
+def require_wandb():
+    """The `wandb` module; ImportError with a one-line message naming the extra to install."""
+    try:
+        import wandb
+    except ImportError:
+        raise ImportError(f"Weights & Biases logging needs the wandb package: {WANDB_INSTALL}"
+                          ) from None
+    return wandb
+
+
+def _wandb_run_id(run_dir: Path) -> str:
+    """A W&B run id of a run directory: the same on every resume of it, so that its parts
+    continue one W&B run."""
+    import hashlib
+
+    return hashlib.sha256(str(Path(run_dir).resolve()).encode()).hexdigest()[:16]
+
+
+class WandbReporter:
+    """Logs a run to Weights & Biases: the config (every key of config.toml), every
+    generation's scalars under the TensorBoard tags (`records.SCALAR_TAGS` and the best team's,
+    `HPARAM_METRICS`) and gene histograms, a replay of the generation's best team every
+    `render_every` generations and one of the run's best team (`best/replay`) at its end (0:
+    never). Steps are generations. The W&B run is named after the run directory, and its id is
+    derived from it, so a resumed run continues its W&B run; `project`, `entity`, `mode`
+    ("online", "offline", or None: wandb's default and WANDB_MODE) and any other `wandb.init`
+    keyword (`init`) as wandb takes them. Needs the `wandb` package (`WANDB_INSTALL`), imported
+    when the reporter is made."""
+
+    def __init__(self, project: str = "swarmcode-torch", run_dir: Path | None = None,
+                 render_every: int = 50, entity: str | None = None, mode: str | None = None,
+                 **init):
+        self.wandb = require_wandb()
+        self.project, self.entity, self.mode = project, entity, mode
+        self.run_dir = Path(run_dir) if run_dir is not None else None
+        self.render_every = render_every
+        self.init = init
+        self.run = None
+
+    def on_start(self, ev: Evolution) -> None:
+        from .records import json_clean
+
+        init = {"project": self.project, "entity": self.entity, "mode": self.mode,
+                "config": json_clean(ev.cfg.to_dict())}
+        if self.run_dir is not None:
+            init.update(name=self.run_dir.name, id=_wandb_run_id(self.run_dir), resume="allow")
+        self.run = self.wandb.init(**{k: v for k, v in {**init, **self.init}.items()
+                                      if v is not None})
+
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        row = scalars(result)
+        log = {tag: float(row[tag]) if row[tag] is not None else math.nan for tag in SCALAR_TAGS}
+        log.update(best_scalars(result))
+        for tag, name in HISTOGRAMS.items():
+            log[tag] = self.wandb.Histogram(getattr(result, name).float().numpy())
+        if self.render_every and result.generation % self.render_every == 0:
+            log["team/replay"] = self.wandb.Image(
+                replay_strip(ev, result.team["designs"], seed=result.generation),
+                caption=f"generation {result.generation}: the generation's best team")
+        self.run.log(log, step=result.generation)
+
+    def on_end(self, ev: Evolution) -> None:
+        if self.run is None:
+            return
+        best = ev.state.best
+        if self.render_every and ev.state.history and best and best.get("designs"):
+            step = ev.state.history[-1]["generation"]
+            self.run.log({"best/replay": self.wandb.Image(
+                replay_strip(ev, best["designs"], seed=step),
+                caption=f"the run's best team (generation {best.get('generation')})")},
+                step=step)
+        self.close()
+
+    def close(self) -> None:
+        """Finish the W&B run (its files written; synced when online)."""
+        if self.run is not None:
+            self.run.finish()
+            self.run = None
