@@ -132,9 +132,9 @@ def test_tensorboard_gets_the_runs_hyperparameters(runs):
     exp = HParamsPluginData.FromString(content["_hparams_/experiment"]).experiment
     assert {m.name.tag for m in exp.metric_infos} == set(HPARAM_METRICS)
     best = result.best_team
-    assert acc.Scalars("hparams/best_fitness")[-1].value == pytest.approx(best["fitness"])
-    assert acc.Scalars("hparams/team_species")[-1].value == best["species"]
-    assert acc.Scalars("hparams/team_niches")[-1].value == best["niches"]
+    assert acc.Scalars("best/fitness")[-1].value == pytest.approx(best["fitness"])
+    assert acc.Scalars("best/species")[-1].value == best["species"]
+    assert acc.Scalars("best/niches")[-1].value == best["niches"]
 
 
 def test_in_memory_run_writes_nothing_and_matches_the_files(runs, tmp_path, monkeypatch):

@@ -177,10 +177,11 @@ def test_tensorboard_tags_read_back(tmp_path):
         assert tag in tags["scalars"], tag
         assert [e.step for e in acc.Scalars(tag)] == [0, 1, 2]
     assert acc.Scalars("team/budget")[0].value == 800.0
-    assert {"hist/radius", "hist/dominance", "hist/selectivity"} <= set(tags["histograms"])
+    assert {"traits/radius", "traits/dominance", "traits/selectivity"} <= set(tags["histograms"])
     assert "species/composition" in tags["images"]
     # one numbering: replays of generations 0, 2, 4 ... for render_every=2, at their own steps
     assert [e.step for e in acc.Images("team/replay")] == [0, 2]
+    assert [e.step for e in acc.Images("best/replay")] == [2]     # the run's best, at its end
     assert any("config" in t for t in tags["tensors"])
 
 

@@ -179,6 +179,14 @@ def _checked_fitness(fitness: ScoreFn | None) -> ScoreFn | None:
     return checked
 
 
+def _wandb_reporters(project: str | None, run_dir: Path | None, render_every: int) -> list:
+    """[a `WandbReporter` of `project` for `run_dir`], or [] for None; ImportError naming the
+    extra, before anything runs."""
+    from .reporting import WandbReporter
+
+    return [] if project is None else [WandbReporter(project, run_dir, render_every=render_every)]
+
+
 def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int = 50,
                    figure_every: int = 50) -> list:
     """The reporters that write a run directory, as `swarmcode-torch evolve` runs them:
@@ -202,7 +210,7 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
            render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
            callback: Callable[[GenerationResult], Any] | None = None,
            fitness: ScoreFn | None = None, threads: int | None = None,
-           **settings) -> RunResult:
+           wandb: str | None = None, **settings) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
     config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
@@ -227,6 +235,8 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
         `fitness_function`, summary.json's "fitness"), and `resume` needs it again.
     threads: torch's CPU threads for this process (`sim.runtime.set_threads`; default:
         OMP_NUM_THREADS if set, else the cores less the load average, at least 1).
+    wandb: a Weights & Biases project to log the run to as well (`reporting.WandbReporter`;
+        needs swarmcode-torch[wandb], ImportError saying so before anything runs).
 
     Raises ValueError (`ScenarioError` is one) for an invalid setting or scenario before any
     file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
@@ -234,6 +244,7 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     """
     _check_every(checkpoint_every, render_every, figure_every)
     reporters = _check_hooks(callback, reporters)
+    wandb_reporters = _wandb_reporters(wandb, None, render_every)
     fitness = _checked_fitness(fitness)
     set_threads(threads)
     scenario_obj = scenario if isinstance(scenario, Scenario) else None
@@ -247,9 +258,11 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     history = _History(callback)
     with ExitStack() as stack:
         start = session.start_new(stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness)
+        for r in wandb_reporters:               # named after the run directory, if there is one
+            r.run_dir = start.run_dir
         reps = [] if logdir is None else \
             file_reporters(start.run_dir, checkpoint_every, render_every, figure_every)
-        session.run(start.ev, start.run_dir, [*reps, history, *reporters])
+        session.run(start.ev, start.run_dir, [*reps, history, *reporters, *wandb_reporters])
     return _result(start.ev, start.run_dir, history.rows)
 
 
@@ -278,15 +291,17 @@ def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
 def resume(run_dir: str | os.PathLike, generations: int | None = None, device: str | None = None,
            *, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50,
            reporters: Iterable = (), callback: Callable[[dict], Any] | None = None,
-           fitness: ScoreFn | None = None, threads: int | None = None) -> RunResult:
+           fitness: ScoreFn | None = None, threads: int | None = None,
+           wandb: str | None = None) -> RunResult:
     """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
     to `generations` in all (default: the run's), on `device` (default: the run's);
     `fitness`: the run's own fitness function, for a run started with one (`evolve`). The
     result's history has every generation: those before the checkpoint from metrics.csv (when
     the run has one), then this part's. RunError (a ValueError) for a directory, config or
-    checkpoint that cannot be used. `threads`: as in `evolve`."""
+    checkpoint that cannot be used. `threads`, `wandb`: as in `evolve`."""
     _check_every(checkpoint_every, render_every, figure_every)
-    reporters = _check_hooks(callback, reporters)
+    reporters = _check_hooks(callback, reporters) + _wandb_reporters(wandb, Path(run_dir),
+                                                                     render_every)
     fitness = _checked_fitness(fitness)
     if generations is not None and (not isinstance(generations, int)
                                     or isinstance(generations, bool) or generations < 1):

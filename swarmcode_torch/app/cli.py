@@ -147,9 +147,12 @@ def evolve(
     cpus_per_eval_worker: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1].")] = None,
     ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one].")] = None,
     threads: Annotated[Optional[int], typer.Option(help=THREADS_HELP)] = None,
+    wandb: Annotated[bool, typer.Option("--wandb", help="Also log to Weights & Biases (the scalars, the config, the replays; needs swarmcode-torch[wandb]; WANDB_MODE=offline for no network).")] = False,
+    wandb_project: Annotated[str, typer.Option(help="Weights & Biases project of --wandb.")] = "swarmcode-torch",
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
     logdir, resume = check_path(logdir, "--logdir"), check_path(resume, "--resume")
+    wandb_project = _wandb_option(wandb, wandb_project)
     TERMINATED.clear()                    # this command's SIGTERM, not an earlier one's
     set_threads_option(threads)
     shards = eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
@@ -168,7 +171,7 @@ def evolve(
                 if ev is None:
                     return
                 execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
-                        figure_every=figure_every, where=where)
+                        figure_every=figure_every, where=where, wandb_project=wandb_project)
                 if shards is not None:
                     print_shard_traffic(ev.ctx.evaluator)
             console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
@@ -177,6 +180,19 @@ def evolve(
                           f"--logdir {run_dir.parent}", markup=False, highlight=False)
         except KeyboardInterrupt:
             stopped(where, bool(terminated))
+
+
+def _wandb_option(on: bool, project: str) -> str | None:
+    """The W&B project of `evolve --wandb` (None: off); a one-line error without wandb."""
+    if not on:
+        return None
+    from .reporting import require_wandb
+
+    try:
+        require_wandb()
+    except ImportError as e:
+        fail(str(e))
+    return project
 
 
 def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,

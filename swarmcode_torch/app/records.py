@@ -29,9 +29,10 @@ SCALAR_TAGS = (
     "team/energy_used", "team/focal_max", "perf/generation_seconds", "perf/eval_seconds", "perf/sim_seconds",
 )
 
-#: The gene histograms of a generation: tag -> GenerationResult field.
-HISTOGRAMS = {"hist/radius": "radius", "hist/dominance": "dominance",
-              "hist/selectivity": "selectivity"}
+#: The gene histograms of a generation: tag -> GenerationResult field. Named `traits/`: the
+#: groups of TensorBoard's Time Series sort by name, so they come after `species/` and `team/`.
+HISTOGRAMS = {"traits/radius": "radius", "traits/dominance": "dominance",
+              "traits/selectivity": "selectivity"}
 
 
 def design_capabilities(designs, scenario) -> list[list[int]]:

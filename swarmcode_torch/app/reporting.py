@@ -1,5 +1,6 @@
-"""Reporting: TensorBoard (scalars, histograms, the species-composition figure, the config and
-its hyperparameters) and metrics.csv (every scalar, one row per generation).
+"""Reporting: TensorBoard (scalars, histograms, the species-composition figure, replays, the
+Custom Scalars layout, the config and its hyperparameters), metrics.csv (every scalar, one row
+per generation) and, optional, Weights & Biases (the same scalars, the config, the replays).
 
 Matplotlib and TensorBoard are imported inside the functions that need them; figures are drawn
 on `matplotlib.figure.Figure` with the Agg canvas, never through pyplot or a backend switch."""
@@ -61,20 +62,87 @@ def figure_image(fig):
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
 
-#: TensorBoard HParams metrics of a run: tag -> key of the run's best team.
-HPARAM_METRICS = {"hparams/best_fitness": "fitness", "hparams/team_cost": "cost",
-                  "hparams/team_species": "species", "hparams/team_niches": "niches",
-                  "hparams/team_deliveries": "deliveries"}
+#: Scalars of the best team of the run so far (`GenerationResult.best`), logged every
+#: generation beside `records.SCALAR_TAGS`: tag -> key of the team record. They are also the
+#: metrics of TensorBoard's HParams tab (the last value of each run), so that no scalar is
+#: written only for it.
+HPARAM_METRICS = {"best/fitness": "fitness", "best/cost": "cost", "best/species": "species",
+                  "best/niches": "niches", "best/deliveries": "deliveries"}
+
+#: Config keys shown in TensorBoard's HParams tab for every run, beside the keys whose value
+#: differs from the run's preset: the first `HPARAM_FIRST` and the algorithm settings that
+#: differ from the preset are marked as those that differ, which the tab lists first and shows
+#: (its first five columns); the run's size after them.
+HPARAM_KEYS = ("preset", "scenario", "budget", "objective", "seed", "population", "swarm_size",
+               "generations")
+HPARAM_FIRST = ("preset", "scenario", "budget", "objective", "seed")
+#: Settings of a run's size and of where it computes (listed after the others).
+RUN_SIZE_KEYS = ("population", "swarm_size", "generations", "trials", "ticks", "device",
+                 "compile")
+
+#: TensorBoard's Custom Scalars tab: category -> chart title -> the tags drawn together.
+CUSTOM_SCALARS = {
+    "species and niches": {
+        "species: population, generation's team, best team":
+            ["species/count", "team/species", "best/species"],
+        "niches: generation's team, best team": ["team/niches", "best/niches"],
+        "species founded and extinct": ["species/founded", "species/extinct"],
+        "median species age: population, team": ["species/median_age", "team/median_age"],
+    },
+    "fitness, cost and budget": {
+        "fitness: population best and mean, generation's team, best team":
+            ["fitness/best", "fitness/mean", "team/fitness", "best/fitness"],
+        "team cost and budget ($)": ["team/cost", "team/budget", "best/cost"],
+        "deliveries: generation's team, best team":
+            ["team/deliveries", "team/deliveries_individual", "team/deliveries_collab",
+             "best/deliveries"],
+    },
+    "time": {
+        "seconds per generation": ["perf/generation_seconds", "perf/eval_seconds",
+                                   "perf/sim_seconds"],
+    },
+}
+
+
+def best_scalars(result: GenerationResult) -> dict[str, float]:
+    """The run's best team so far as scalars (`HPARAM_METRICS`); NaN for a missing value."""
+    best = result.best or {}
+    return {tag: float(best[key]) if best.get(key) is not None else math.nan
+            for tag, key in HPARAM_METRICS.items()}
+
+
+def custom_scalars_layout() -> dict:
+    """`CUSTOM_SCALARS` as `SummaryWriter.add_custom_scalars` takes it: each chart a multiline
+    chart whose tags are anchored regular expressions (each names one tag exactly)."""
+    import re
+
+    return {cat: {title: ["Multiline", [f"^{re.escape(t)}$" for t in tags]]
+                  for title, tags in charts.items()} for cat, charts in CUSTOM_SCALARS.items()}
+
+
+def _hparam_value(v):
+    return v if isinstance(v, (str, bool)) else float(v)
 
 
 def hparams(ev: Evolution) -> tuple[dict, dict]:
-    """The run's hyperparameters (its config keys; unset ones left out) and its final metrics
-    (`HPARAM_METRICS` from the best team so far), for TensorBoard's HParams tab."""
-    hp = {k: v for k, v in ev.cfg.to_dict().items() if v is not None}
-    best = ev.state.best or {}
-    metrics = {tag: float(best[key]) if best.get(key) is not None else math.nan
-               for tag, key in HPARAM_METRICS.items()}
-    return hp, metrics
+    """The run's hyperparameters for TensorBoard's HParams tab: `HPARAM_KEYS` (the robots per
+    team as the run uses them) and every other config key whose value differs from the run's
+    preset; unset ones are left out. Returns ({key: value}, {key: listed first}): first are
+    `HPARAM_FIRST` and the algorithm settings that differ from the preset, not the run's size
+    (`RUN_SIZE_KEYS`)."""
+    from ..coevo.config import PRESETS, preset_config
+
+    cfg = ev.cfg.to_dict()
+    base = preset_config(ev.cfg.preset if ev.cfg.preset in PRESETS else "default").to_dict()
+    differs = {k: cfg[k] != base.get(k) for k in cfg}
+    keys = [k for k in HPARAM_KEYS if k in cfg] + [k for k in cfg
+                                                   if differs[k] and k not in HPARAM_KEYS]
+    hp = {}
+    for k in keys:
+        v = ev.ctx.eval_cfg.swarm_size if k == "swarm_size" and cfg[k] is None else cfg[k]
+        if v is not None:
+            hp[k] = _hparam_value(v)
+    return hp, {k: k in HPARAM_FIRST or (differs[k] and k not in RUN_SIZE_KEYS) for k in hp}
 
 
 def config_markdown(ev: Evolution) -> str:
@@ -97,12 +165,51 @@ def replay_strip(ev: Evolution, designs: list[dict], seed: int, frames: int = 3,
     return np.concatenate([frame_image(ep, int(i), dpi=dpi) for i in picks], axis=1)
 
 
+def hparams_summaries(ev: Evolution) -> list:
+    """The summaries of TensorBoard's HParams plugin for one run: the experiment (its
+    hyperparameters, those that differ from the preset first, and `HPARAM_METRICS` as its
+    metrics) and the session's start (the run's values)."""
+    from tensorboard.compat.proto.summary_pb2 import Summary
+    from tensorboard.plugins.hparams import api_pb2, metadata, plugin_data_pb2
+
+    hp, differs = hparams(ev)
+    kind = {str: api_pb2.DATA_TYPE_STRING, bool: api_pb2.DATA_TYPE_BOOL,
+            float: api_pb2.DATA_TYPE_FLOAT64}
+    # a key of every run that this run leaves unset (no budget) is a column all the same: the
+    # tab takes its columns from one run's experiment
+    unset = {k: "" if k == "preset" else 0.0 for k in HPARAM_KEYS
+             if k not in hp and k in ev.cfg.to_dict()}
+    infos = [api_pb2.HParamInfo(name=k, type=kind[type(v)],
+                                differs=differs.get(k, k in HPARAM_FIRST))
+             for k, v in {**hp, **unset}.items()]
+    metrics = [api_pb2.MetricInfo(name=api_pb2.MetricName(tag=t), display_name=f"best {k}")
+               for t, k in HPARAM_METRICS.items()]
+    start = plugin_data_pb2.SessionStartInfo()
+    for k, v in hp.items():
+        if isinstance(v, str):
+            start.hparams[k].string_value = v
+        elif isinstance(v, bool):
+            start.hparams[k].bool_value = v
+        else:
+            start.hparams[k].number_value = v
+    out = []
+    for tag, data in ((metadata.EXPERIMENT_TAG, plugin_data_pb2.HParamsPluginData(
+            experiment=api_pb2.Experiment(hparam_infos=infos, metric_infos=metrics))),
+                      (metadata.SESSION_START_INFO_TAG,
+                       plugin_data_pb2.HParamsPluginData(session_start_info=start))):
+        out.append(Summary(value=[Summary.Value(
+            tag=tag, metadata=metadata.create_summary_metadata(data))]))
+    return out
+
+
 class TensorBoardReporter:
-    """Writes every generation's scalars and histograms; the composition figure every
-    `figure_every` generations and at the end; a replay of the generation's best team every
-    `render_every` generations (0: never). At the end of a run (or of each resumed part) the
-    config as hyperparameters and the best team's fitness, cost, species, niches and deliveries
-    as their metrics (`hparams/*`), so that TensorBoard's HParams tab compares runs."""
+    """Writes every generation's scalars (`records.SCALAR_TAGS` and the run's best team so
+    far, `HPARAM_METRICS`) and gene histograms; the composition figure every `figure_every`
+    generations and at the end; a replay of the generation's best team every `render_every`
+    generations and one of the run's best team (`best/replay`) at its last generation (0:
+    never). At the start of a run (or of each resumed part) the config as text, the Custom
+    Scalars layout (`CUSTOM_SCALARS`) and the hyperparameters (`hparams`) with the best team's
+    scalars as their metrics, so that TensorBoard's HParams tab compares runs."""
 
     def __init__(self, run_dir: Path, figure_every: int = 50, render_every: int = 0):
         # the figure redraws the whole history with matplotlib: on a 2-core VM, a 300-generation
@@ -122,6 +229,10 @@ class TensorBoardReporter:
         gen = ev.state.generation
         self.writer = SummaryWriter(log_dir=str(self.run_dir), purge_step=gen if gen else None)
         self.writer.add_text("config", config_markdown(ev), gen)
+        self.writer.add_custom_scalars(custom_scalars_layout())
+        file_writer = self.writer._get_file_writer()
+        for s in hparams_summaries(ev):
+            file_writer.add_summary(s, gen)
 
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
         step = result.generation
@@ -129,6 +240,8 @@ class TensorBoardReporter:
         for tag in SCALAR_TAGS:
             v = row[tag]
             self.writer.add_scalar(tag, float(v) if v is not None else math.nan, step)
+        for tag, v in best_scalars(result).items():
+            self.writer.add_scalar(tag, v, step)
         for tag, name in HISTOGRAMS.items():
             self.writer.add_histogram(tag, getattr(result, name), step)
         if step % self.figure_every == 0:
@@ -151,25 +264,16 @@ class TensorBoardReporter:
             step = ev.state.history[-1]["generation"]
             if self._figure_step != step:       # the last generation's figure, once
                 self._figure(ev, step)
-            self._hparams(ev, step)
+            best = ev.state.best
+            if self.render_every and best and best.get("designs"):
+                img = replay_strip(ev, best["designs"], seed=step)
+                self.writer.add_image("best/replay", img, step, dataformats="HWC")
         self.close()
 
     def close(self) -> None:
         """Flush and close the event file (its writer thread ends)."""
         if self.writer is not None:
             self.writer.close()
-
-    def _hparams(self, ev: Evolution, step: int) -> None:
-        # SummaryWriter.add_hparams would write into a new sub-run; these summaries go into the
-        # run's own events, beside the metrics' scalars, so each run is one row of the HParams tab
-        from torch.utils.tensorboard.summary import hparams as hparams_summaries
-
-        hp, metrics = hparams(ev)
-        writer = self.writer._get_file_writer()
-        for s in hparams_summaries(hp, metrics):
-            writer.add_summary(s, step)
-        for tag, v in metrics.items():
-            self.writer.add_scalar(tag, v, step)
 
 
 class CsvReporter:
@@ -262,3 +366,87 @@ def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[st
     except csv.Error as e:
         raise RunError(f"{path}: malformed CSV ({e})") from None
     return rows, columns
+
+
+#: What to install for `WandbReporter` (`evolve --wandb`).
+WANDB_INSTALL = "pip install 'swarmcode-torch[wandb]'"
+
+
+def require_wandb():
+    """The `wandb` module; ImportError with a one-line message naming the extra to install."""
+    try:
+        import wandb
+    except ImportError:
+        raise ImportError(f"Weights & Biases logging needs the wandb package: {WANDB_INSTALL}"
+                          ) from None
+    return wandb
+
+
+def _wandb_run_id(run_dir: Path) -> str:
+    """A W&B run id of a run directory: the same on every resume of it, so that its parts
+    continue one W&B run."""
+    import hashlib
+
+    return hashlib.sha256(str(Path(run_dir).resolve()).encode()).hexdigest()[:16]
+
+
+class WandbReporter:
+    """Logs a run to Weights & Biases: the config (every key of config.toml), every
+    generation's scalars under the TensorBoard tags (`records.SCALAR_TAGS` and the best team's,
+    `HPARAM_METRICS`) and gene histograms, a replay of the generation's best team every
+    `render_every` generations and one of the run's best team (`best/replay`) at its end (0:
+    never). Steps are generations. The W&B run is named after the run directory, and its id is
+    derived from it, so a resumed run continues its W&B run; `project`, `entity`, `mode`
+    ("online", "offline", or None: wandb's default and WANDB_MODE) and any other `wandb.init`
+    keyword (`init`) as wandb takes them. Needs the `wandb` package (`WANDB_INSTALL`), imported
+    when the reporter is made."""
+
+    def __init__(self, project: str = "swarmcode-torch", run_dir: Path | None = None,
+                 render_every: int = 50, entity: str | None = None, mode: str | None = None,
+                 **init):
+        self.wandb = require_wandb()
+        self.project, self.entity, self.mode = project, entity, mode
+        self.run_dir = Path(run_dir) if run_dir is not None else None
+        self.render_every = render_every
+        self.init = init
+        self.run = None
+
+    def on_start(self, ev: Evolution) -> None:
+        from .records import json_clean
+
+        init = {"project": self.project, "entity": self.entity, "mode": self.mode,
+                "config": json_clean(ev.cfg.to_dict())}
+        if self.run_dir is not None:
+            init.update(name=self.run_dir.name, id=_wandb_run_id(self.run_dir), resume="allow")
+        self.run = self.wandb.init(**{k: v for k, v in {**init, **self.init}.items()
+                                      if v is not None})
+
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        row = scalars(result)
+        log = {tag: float(row[tag]) if row[tag] is not None else math.nan for tag in SCALAR_TAGS}
+        log.update(best_scalars(result))
+        for tag, name in HISTOGRAMS.items():
+            log[tag] = self.wandb.Histogram(getattr(result, name).float().numpy())
+        if self.render_every and result.generation % self.render_every == 0:
+            log["team/replay"] = self.wandb.Image(
+                replay_strip(ev, result.team["designs"], seed=result.generation),
+                caption=f"generation {result.generation}: the generation's best team")
+        self.run.log(log, step=result.generation)
+
+    def on_end(self, ev: Evolution) -> None:
+        if self.run is None:
+            return
+        best = ev.state.best
+        if self.render_every and ev.state.history and best and best.get("designs"):
+            step = ev.state.history[-1]["generation"]
+            self.run.log({"best/replay": self.wandb.Image(
+                replay_strip(ev, best["designs"], seed=step),
+                caption=f"the run's best team (generation {best.get('generation')})")},
+                step=step)
+        self.close()
+
+    def close(self) -> None:
+        """Finish the W&B run (its files written; synced when online)."""
+        if self.run is not None:
+            self.run.finish()
+            self.run = None

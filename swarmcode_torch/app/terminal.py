@@ -220,8 +220,9 @@ def print_shard_traffic(evaluator) -> None:
 def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
              render_every: int = 0, saved: int | None = None,
              again: str | None = None, figure_every: int = 50,
-             where: Where | None = None) -> None:
-    """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints.
+             where: Where | None = None, wandb_project: str | None = None) -> None:
+    """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints
+    (and Weights & Biases with `wandb_project`).
     Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
     failed write (a full disk: OSError from the checkpoint, summary.json, teams.jsonl or
     TensorBoard) ends the run with a one-line error that names the last checkpointed generation
@@ -235,6 +236,11 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     writers = session.file_reporters(run_dir, checkpoint_every, render_every, figure_every,
                                      saved=saved)
     checkpoints = writers[-1]
+    extra: list = []
+    if wandb_project is not None:            # after the checkpoints: outside the step
+        from .reporting import WandbReporter
+
+        extra.append(WandbReporter(wandb_project, run_dir, render_every))
     if where is not None:
         where.run_dir, where.checkpoints, where.again = run_dir, checkpoints, again
     reporters: list = []
@@ -242,7 +248,7 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     progress = None
     try:
         progress = ProgressReporter(ev.cfg.generations, ev.state.generation, log_every)
-        reporters = [progress, *writers]
+        reporters = [progress, *writers, *extra]
         with quiet_thread_os_errors():
             with terminate_as_interrupt() as terminated:
                 session.run(ev, run_dir, reporters)
