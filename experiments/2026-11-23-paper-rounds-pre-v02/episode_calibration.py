@@ -1,5 +1,5 @@
-# Usage: python docs/results/episode_calibration.py   (reads docs/results/*/summary.json; CPU, about a minute)
-"""Deliveries of each run's best team (from docs/results summaries) over 48 fresh environments,
+# Usage: python experiments/2026-11-23-paper-rounds-pre-v02/episode_calibration.py   (reads experiments/2026-11-23-paper-rounds-pre-v02/*/summary.json; CPU, about a minute)
+"""Deliveries of each run's best team (from experiments/2026-11-23-paper-rounds-pre-v02 summaries) over 48 fresh environments,
 at several episode lengths: where do good teams sit against the paper's 4-12 range?"""
 import json, glob, torch
 from dataclasses import replace
@@ -11,7 +11,7 @@ from swarmcode_torch.sim.scenario import load_scenario
 from swarmcode_torch.sim.state import WorldParams
 torch.set_num_threads(2)
 E = 48
-for path in sorted(glob.glob("docs/results/niche/*-seed0/summary.json")) + ["docs/results/budget_sweep/budget-4000_seed-0/summary.json"]:
+for path in sorted(glob.glob("experiments/2026-11-23-paper-rounds-pre-v02/first-round-h100/niche/*-seed0/summary.json")) + ["experiments/2026-11-23-paper-rounds-pre-v02/first-round-h100/budget_sweep/budget-4000_seed-0/summary.json"]:
     s = json.load(open(path))
     scen = load_scenario(s["scenario"])
     genome, team = team_genome(s["designs"])

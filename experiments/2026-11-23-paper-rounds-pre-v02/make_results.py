@@ -1,12 +1,12 @@
 """Turn the raw run directories of the paper experiments into the compact files and figures that
 docs/RESULTS.md shows.
 
-    python docs/results/make_results.py RAW_ROOT [--only niche] [--out DIR]
+    python experiments/2026-11-23-paper-rounds-pre-v02/make_results.py RAW_ROOT [--only niche] [--out DIR]
 
 RAW_ROOT holds `niche/`, `budget/` (a `swarmcode-torch sweep --out` directory), `roi/` and
 `swarm200/`, each with run directories as `evolve` writes them (summary.json, teams.jsonl,
 config.toml, checkpoint.pt); with `--only niche`, only `niche/`. For each run this writes,
-under <DIR, default docs/results>/<experiment>/<run>/:
+under <DIR, default experiments/2026-11-23-paper-rounds-pre-v02/first-round-h100>/<experiment>/<run>/:
 config.toml, summary.json, history.json (species composition per generation) and
 generations.csv (the best team of every generation); plus figures and the budget sweep's
 table.md / table.csv / budget.png, and prints the tables that RESULTS.md quotes.
@@ -144,7 +144,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("raw", type=Path, help="directory holding niche/ (budget/, roi/, swarm200/)")
     ap.add_argument("--only", choices=["all", "niche"], default="all")
-    ap.add_argument("--out", type=Path, default=HERE, help="where the compact files go")
+    ap.add_argument("--out", type=Path, default=HERE / "first-round-h100", help="where the compact files go")
     args = ap.parse_args()
     raw, out = args.raw, args.out
     niche = [compact(d, out / "niche" / run_label(d), figure=run_label(d).endswith("seed0"))

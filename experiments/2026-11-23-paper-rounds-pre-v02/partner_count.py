@@ -1,6 +1,6 @@
 """How does the number of partner species change a team's score, in one evolved population?
 
-    python docs/results/partner_count.py RUN_DIR [--ticks T] [--repeats R]
+    python experiments/2026-11-23-paper-rounds-pre-v02/partner_count.py RUN_DIR [--ticks T] [--repeats R]
 
 Loads the population of RUN_DIR's checkpoint (any device; evaluated on the CPU), and evaluates it
 as `evolve` does, several times, with every individual's selectivity replaced so that exactly

@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Run (or continue) the paper experiments of docs/RESULTS.md side by side on one GPU.
 #
-#   bash docs/results/run_experiments.sh ROOT SECONDS [--resume]
+#   bash experiments/2026-11-23-paper-rounds-pre-v02/run_experiments.sh ROOT SECONDS [--resume]
 #
 # ROOT gets niche/, budget/, roi/, swarm200/ and logs/. Every run is stopped with SIGINT after
 # SECONDS (it writes its checkpoint first) unless it finishes sooner; run the script again with
 # --resume to continue every run in ROOT towards its 500 generations (swarm200: 50). To continue
-# the committed runs: mkdir -p ROOT && tar xzf docs/results/runs.tar.gz -C ROOT, then --resume.
+# the committed runs: mkdir -p ROOT && tar xzf experiments/2026-11-23-paper-rounds-pre-v02/first-round-h100/runs.tar.gz -C ROOT, then --resume.
 # EXTRA_OPTS (environment) is added to every new run's options, e.g.
 # EXTRA_OPTS='--set cuda_graphs=true'. At the end ROOT/runs-small.tar.gz holds what make_results.py needs (no TensorBoard events).
 set -u

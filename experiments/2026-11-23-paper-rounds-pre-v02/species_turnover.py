@@ -1,7 +1,7 @@
 """Where do a run's species come from, how long do they live, and which of them are in the teams?
 
-    python docs/results/species_turnover.py RUN_DIR [RUN_DIR ...]
-    python docs/results/species_turnover.py --founders SCENARIO [--generations N] [--seed S]
+    python experiments/2026-11-23-paper-rounds-pre-v02/species_turnover.py RUN_DIR [RUN_DIR ...]
+    python experiments/2026-11-23-paper-rounds-pre-v02/species_turnover.py --founders SCENARIO [--generations N] [--seed S]
                                             [--ticks T] [--set KEY=VALUE ...]
 
 The first form reads each run's checkpoint (its per-generation species history) and prints:

@@ -1,9 +1,9 @@
-"""One line per operator and scenario from the branch tables of docs/results/cpu/v02/niche_loss
+"""One line per operator and scenario from the branch tables of experiments/2026-12-01-settling-speciation-v02/niche_loss
 (written by `branch_table.py --json`): over the seeds that were branched, the mean best-team
 species of the branches and of their controls, the generations a niche short summed over the
 seeds, and the mean change of the best-team score against the control.
 
-    python docs/results/branch_overview.py [TABLE.json ...]
+    python experiments/2026-12-01-settling-speciation-v02/branch_overview.py [TABLE.json ...]
 
 Without arguments, the tables of the operators in docs/RESULTS.md ("How a niche is lost").
 """

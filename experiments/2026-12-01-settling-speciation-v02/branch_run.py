@@ -2,12 +2,12 @@
 the same population: generations before the branch are the original run's, after it only the
 changed settings (and the random streams they move) differ.
 
-    python docs/results/branch_run.py SRC_RUN SNAPSHOT DST [--set KEY=VALUE ...] [--reseed S]
+    python experiments/2026-12-01-settling-speciation-v02/branch_run.py SRC_RUN SNAPSHOT DST [--set KEY=VALUE ...] [--reseed S]
     swarmcode-torch evolve --resume DST --generations N
 
 DST gets SRC_RUN's scenario.toml and hardware.toml, SNAPSHOT (a checkpoint file in SRC_RUN:
 its checkpoint.pt, or a copy of it kept at an earlier generation, such as the snap_100.pt files
-of the runs in docs/results/cpu/v02/runs.tar.gz) as its checkpoint.pt, and the teams.jsonl
+of the runs in experiments/2026-12-01-settling-speciation-v02/runs.tar.gz) as its checkpoint.pt, and the teams.jsonl
 records of the generations before it; the settings are changed in config.toml
 and in the checkpoint's saved config alike, so that `--resume` accepts the branch and the
 branch records what it ran with. `--reseed S` replaces the run's random stream by a fresh one

@@ -1,7 +1,7 @@
 """The table of a branch experiment: each branch beside its control (the run it was branched
 from), medians over the generations after the branch.
 
-    python docs/results/branch_table.py LABEL=CONTROL,BRANCH[@FROM] [...] [--to 300] [--json OUT]
+    python experiments/2026-12-01-settling-speciation-v02/branch_table.py LABEL=CONTROL,BRANCH[@FROM] [...] [--to 300] [--json OUT]
 
 For each pair, over generations FROM (default 100) to before --to: the medians that
 `swarmcode-torch dynamics --window FROM:TO` prints (best-team and population species, niches,

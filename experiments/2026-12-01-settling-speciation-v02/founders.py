@@ -1,7 +1,7 @@
 """Who founds the species of a run: continue a checkpoint (or snapshot) for some generations and
 classify every founder by what separates it from its parent species' prototype.
 
-    python docs/results/founders.py CHECKPOINT GENERATIONS [--json OUT]
+    python experiments/2026-12-01-settling-speciation-v02/founders.py CHECKPOINT GENERATIONS [--json OUT]
 
 The run continues eagerly (no torch.compile) from CHECKPOINT with its saved config; every new
 species of every generation is recorded: the generation, its parent species (the founder's

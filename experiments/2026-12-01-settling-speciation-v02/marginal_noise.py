@@ -1,7 +1,7 @@
 """How noisy a focal's marginal contribution is: evaluate one population twice, with two random
 streams, and compare each individual's relative marginal (F_focal - F_baseline) / |F_baseline|.
 
-    python docs/results/marginal_noise.py CHECKPOINT [--json OUT]
+    python experiments/2026-12-01-settling-speciation-v02/marginal_noise.py CHECKPOINT [--json OUT]
 
 CHECKPOINT is a run's checkpoint.pt or a snapshot of it (snap_100.pt ...); the population is
 speciated as the next generation would be and evaluated with the run's saved config (trials,

@@ -1,6 +1,6 @@
 """Where a run's best team lost a niche, and what the species of that niche did before.
 
-    python docs/results/niche_losses.py RUN[@FROM] [RUN[@FROM] ...] [--before 15]
+    python experiments/2026-12-01-settling-speciation-v02/niche_losses.py RUN[@FROM] [RUN[@FROM] ...] [--before 15]
 
 For every generation (from FROM on) at which a capability (a niche: the set of the scenario's
 package classes a design can lift, as teams.jsonl records it) leaves the best team and does not

@@ -5,7 +5,7 @@ holds every species of the population where every species is a partner, `partner
 niche it does not, so the count is not valid there) and each species' size in the population
 (the run's history).
 
-    python docs/results/shared_niches.py RUN_DIR FROM TO [--json OUT]
+    python experiments/2026-12-01-settling-speciation-v02/shared_niches.py RUN_DIR FROM TO [--json OUT]
 
 Prints, over generations FROM to before TO: the niche-generations held by one species and by
 more than one, the median size of a species alone in its niche, and in a shared niche the

@@ -3,7 +3,7 @@
 prototype), the share of its members whose focal team did not beat its baseline (gated: their
 fitness is multiplied by p_marginal), their mean fitness and their offspring quota.
 
-    python docs/results/sisters.py CHECKPOINT GENERATIONS [--set KEY=VALUE ...] [--trials N]
+    python experiments/2026-12-01-settling-speciation-v02/sisters.py CHECKPOINT GENERATIONS [--set KEY=VALUE ...] [--trials N]
         [--json OUT]
 
 The run continues with its saved config (compiled as it was, so that a continuation of an

@@ -1,6 +1,6 @@
 """How far do a run's individuals lie from their species' prototype?
 
-    python docs/results/species_spread.py RUN_DIR [RUN_DIR ...] [--checkpoint FILE]
+    python experiments/2026-12-01-settling-speciation-v02/species_spread.py RUN_DIR [RUN_DIR ...] [--checkpoint FILE]
 
 Reads each run's checkpoint: the population waiting to be speciated (the children of the last
 finished generation, with the species they inherited) and the prototypes of that generation.

@@ -1,6 +1,6 @@
 """How many effector flips would found a species, in a run's final population.
 
-    python docs/results/flip_share.py RUN [RUN ...] [--json OUT]
+    python experiments/2026-12-02-effector-rate-budget-v05/flip_share.py RUN [RUN ...] [--json OUT]
 
 The final population of each run is speciated as the next generation would be (its saved
 prototypes carried over); then every individual's effector is flipped, nothing else, and the

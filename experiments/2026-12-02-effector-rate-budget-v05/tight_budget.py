@@ -1,6 +1,6 @@
 """What a second species is worth at a budget: a run's best teams against one-effector copies.
 
-    python docs/results/tight_budget.py RUN_DIR [RUN_DIR ...] [--window 50] [--every 5]
+    python experiments/2026-12-02-effector-rate-budget-v05/tight_budget.py RUN_DIR [RUN_DIR ...] [--window 50] [--every 5]
         [--envs 32] [--seed 7] [--json OUT]
 
 For every `--every`-th generation of the last `--window` of a budget run (teams.jsonl: the best
@@ -19,7 +19,7 @@ budget necessitates a homogeneous generalist swarm" for the teams the run evolve
 one-effector copies run trees evolved for a mixed team, so they bound the best one-effector
 team from below.
 
-    python docs/results/tight_budget.py --paper
+    python experiments/2026-12-02-effector-rate-budget-v05/tight_budget.py --paper
 
 applies the same arithmetic to the paper's own Table III: each row's team, from its deliveries
 and energy, under the paper's F_raw (`fitness.raw_fitness`, the paper's weights) and penalty

@@ -1,6 +1,6 @@
 """Team cost against the budget, window by window, for budget runs.
 
-    python docs/results/budget_cost.py RUN_DIR [RUN_DIR ...] [--window 50] [--json OUT]
+    python experiments/tools/budget_cost.py RUN_DIR [RUN_DIR ...] [--window 50] [--json OUT]
 
 For each run (its teams.jsonl: the best team of every generation) and each window of
 `--window` generations: the median team cost, the share of generations whose team is over the

@@ -1,6 +1,6 @@
-"""The compact, committed form of a run directory: what docs/results/cpu/v04/ and v05/ hold.
+"""The compact, committed form of a run directory: what experiments/2026-12-02-one-partner-per-niche-v04/ and v05/ hold.
 
-    python docs/results/compact_run.py RUN OUT [--from 0]
+    python experiments/tools/compact_run.py RUN OUT [--from 0]
 
 OUT gets the run's config.toml and summary.json, dynamics.json (`app.analysis.run_dynamics`
 over windows of 100 generations from --from, and the last 50) and composition.png (the

@@ -1,6 +1,6 @@
 """Before/after table of species dynamics for groups of run directories.
 
-    python docs/results/speciation_table.py LABEL=RUN_DIR[,RUN_DIR...] [LABEL=...] [--last 50]
+    python experiments/tools/speciation_table.py LABEL=RUN_DIR[,RUN_DIR...] [LABEL=...] [--last 50]
                                             [--founding-from 100] [--json OUT]
 
 Each group is one setting of one scenario (e.g. `four-niche before=a,b,c`), its runs one seed
