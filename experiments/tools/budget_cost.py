@@ -24,7 +24,7 @@ from pathlib import Path
 import torch
 
 from swarmcode_torch.app.analysis import run_dynamics
-from swarmcode_torch.app.runs import read_config, read_teams
+from swarmcode_torch.app.runs import RunError, read_config, read_summary, read_teams
 from swarmcode_torch.coevo.dynamics import mean_std
 from swarmcode_torch.coevo.fitness import budget_penalty
 
@@ -44,6 +44,8 @@ def windows(run: Path, width: int) -> dict:
     if budget is None:
         raise SystemExit(f"error: {run} has no budget")
     rows = list(read_teams(run).values())
+    if not rows:
+        raise RunError(f"{run} has no best-team records (teams.jsonl)")
     out = []
     end = max(r["generation"] for r in rows) + 1
     for lo in range(0, end, width):
@@ -63,7 +65,7 @@ def windows(run: Path, width: int) -> dict:
                     "score": median([r["fitness"] for r in w]),
                     "collab": median([r["deliveries_collab"] for r in w]),
                     "over": part(over), "within": part(within)})
-    summary = json.loads((run / "summary.json").read_text())
+    summary = read_summary(run)
     tail = run_dynamics(run, [(end - width, end)])[0]
     best = {k: summary[k] for k in ("best_fitness", "team_cost", "deliveries",
                                     "deliveries_individual", "deliveries_collab", "num_species",
@@ -100,13 +102,16 @@ def by_budget(result: list[dict]) -> list[str]:
     return rows
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", type=Path)
     ap.add_argument("--window", type=int, default=50)
     ap.add_argument("--json", type=Path)
-    a = ap.parse_args()
-    result = [windows(r, a.window) for r in a.runs]
+    a = ap.parse_args(argv)
+    try:
+        result = [windows(r, a.window) for r in a.runs]
+    except RunError as e:
+        raise SystemExit(f"error: {e}") from None
     for res in result:
         print(f"{res['run']} (budget {res['budget']:.0f}, lam {res['lam']})")
         print("| generations | median cost | over budget | score | collab | over: n, score, "

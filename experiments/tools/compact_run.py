@@ -1,4 +1,4 @@
-"""The compact, committed form of a run directory: what experiments/2026-12-02-one-partner-per-niche-v04/ and v05/ hold.
+"""The compact, committed form of a run directory: what the study folders of experiments/ hold.
 
     python experiments/tools/compact_run.py RUN OUT [--from 0]
 
@@ -21,28 +21,39 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from swarmcode_torch.app.analysis import run_dynamics  # noqa: E402
 from swarmcode_torch.app.reporting import composition_figure  # noqa: E402
-from swarmcode_torch.app.runs import load_checkpoint  # noqa: E402
+from swarmcode_torch.app.runs import (RunError, load_checkpoint, read_config,  # noqa: E402
+                                      read_summary)
 
 
-def main() -> None:
+def compact(run: Path, out: Path, start: int = 0) -> list[dict]:
+    """Write the compact form of `run` into `out`; return the rows of dynamics.json."""
+    read_config(run)                       # a run directory, checked, before anything is written
+    read_summary(run)
+    ck = load_checkpoint(run)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in ("config.toml", "summary.json"):
+        shutil.copy(run / name, out / name)
+    end = int(ck["generation"])
+    wins = [(lo, min(lo + 100, end)) for lo in range(start, end, 100)] + [(end - 50, end)]
+    rows = [{"generations": hi - lo, "from": lo, "to": hi, **r}
+            for (lo, hi), r in zip(wins, run_dynamics(run, wins))]
+    (out / "dynamics.json").write_text(json.dumps(rows, indent=1))
+    fig = composition_figure(ck["history"])
+    fig.savefig(out / "composition.png", dpi=60)
+    plt.close(fig)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("run", type=Path)
     ap.add_argument("out", type=Path)
     ap.add_argument("--from", dest="start", type=int, default=0)
-    a = ap.parse_args()
-    a.out.mkdir(parents=True, exist_ok=True)
-    for name in ("config.toml", "summary.json"):
-        shutil.copy(a.run / name, a.out / name)
-    ck = load_checkpoint(a.run)
-    end = int(ck["generation"])
-    wins = [(lo, min(lo + 100, end)) for lo in range(a.start, end, 100)] + [(end - 50, end)]
-    rows = run_dynamics(a.run, wins)
-    (a.out / "dynamics.json").write_text(json.dumps(
-        [{"generations": hi - lo, "from": lo, "to": hi, **r} for (lo, hi), r in zip(wins, rows)],
-        indent=1))
-    fig = composition_figure(ck["history"])
-    fig.savefig(a.out / "composition.png", dpi=60)
-    plt.close(fig)
+    a = ap.parse_args(argv)
+    try:
+        compact(a.run, a.out, a.start)
+    except RunError as e:
+        raise SystemExit(f"error: {e}") from None
 
 
 if __name__ == "__main__":

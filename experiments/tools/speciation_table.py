@@ -21,7 +21,7 @@ from pathlib import Path
 
 from swarmcode_torch.app.analysis import run_dynamics
 from swarmcode_torch.coevo.dynamics import mean_std as mean_std_of
-from swarmcode_torch.app.runs import load_checkpoint
+from swarmcode_torch.app.runs import RunError, load_checkpoint
 
 #: (key, header, format of one run's value); mean and std take one more decimal
 COLUMNS = (("team_species", "team sp", "{:.1f}"), ("population_species", "pop sp", "{:.1f}"),
@@ -56,7 +56,7 @@ def cell(values: list[float], fmt: str) -> str:
         "-" if v is None or math.isnan(v) else fmt.format(v) for v in values) + ")"
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("groups", nargs="*", help="LABEL=RUN_DIR[,RUN_DIR...], or @FILE:LABEL[=SHOWN] "
                                                "(as --stored, in this place in the table)")
@@ -66,7 +66,7 @@ def main() -> None:
     ap.add_argument("--stored", action="append", default=[], metavar="FILE:LABEL[=SHOWN]",
                     help="a group's rows from an earlier --json output (runs whose checkpoints "
                          "are not kept), shown as SHOWN")
-    a = ap.parse_args()
+    a = ap.parse_args(argv)
     out = {}
     print("| group | runs | " + " | ".join(c[1] for c in COLUMNS) + " |")
     print("|---|---|" + "---|" * len(COLUMNS))
@@ -75,7 +75,10 @@ def main() -> None:
         if g.startswith("@"):         # @FILE:LABEL[=SHOWN], as --stored, in its place
             path, _, labels = g[1:].partition(":")
             label, _, shown = labels.partition("=")
-            groups.append((shown or label, json.loads(Path(path).read_text())[label]))
+            try:
+                groups.append((shown or label, json.loads(Path(path).read_text())[label]))
+            except (OSError, ValueError, KeyError) as e:
+                raise SystemExit(f"error: {g}: no group {label!r} in {path} ({e!r:.80})") from None
         else:
             groups.append((g, None))
     for g, stored in groups:
@@ -83,7 +86,10 @@ def main() -> None:
             label, rows = g, stored
         else:
             label, _, dirs = g.partition("=")
-            rows = [run_row(Path(d), a.last, a.founding_from) for d in dirs.split(",") if d]
+            try:
+                rows = [run_row(Path(d), a.last, a.founding_from) for d in dirs.split(",") if d]
+            except RunError as e:
+                raise SystemExit(f"error: {e}") from None
         out[label] = rows
         cells = [cell([r[k] for r in rows], fmt) for k, _, fmt in COLUMNS]
         print(f"| {label} | {len(rows)} | " + " | ".join(cells) + " |")
