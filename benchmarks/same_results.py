@@ -76,6 +76,10 @@ def _common_keys(x: dict, y: dict, prefix: str = "") -> tuple[dict, dict]:
             {k: v for k, v in y.items() if k not in drop})
 
 
+#: summary.json records added since 0.6 (not results): compared only when both trees write them.
+ADDED_SUMMARY = {"stop"}   # why the run stopped (generations, max_time, patience)
+
+
 def setting_value(text: str):
     """A --set value as the baselines' config takes it: none, a TOML-style number or boolean,
     else the string."""
@@ -166,14 +170,20 @@ def compare(a: Path, b: Path) -> int:
             "checkpoint.pt": _checkpoint,
         }
         for what, read in checks.items():
-            if y is None:
+            va, vb = read(x), read(y) if y is not None else None
+            if what == "summary.json" and vb is not None:
+                for key in ADDED_SUMMARY:     # a record one of the two versions does not write
+                    if (key in va) != (key in vb):
+                        va.pop(key, None)
+                        vb.pop(key, None)
+            if vb is None:
                 same = False
             elif what == "config.toml":
-                same = operator.eq(*_common_keys(read(x), read(y)))
+                same = operator.eq(*_common_keys(va, vb))
             elif what == "checkpoint.pt":
-                same = operator.eq(*_common_keys(read(x), read(y), ".config."))
+                same = operator.eq(*_common_keys(va, vb, ".config."))
             else:
-                same = read(x) == read(y)
+                same = va == vb
             different += not same
             print(f"{name:12s} {what:20s} {'identical' if same else 'DIFFERENT'}")
     same = json.loads((a / "baselines.json").read_text()) == \

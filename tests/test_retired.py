@@ -5,7 +5,9 @@ import pytest
 import torch
 
 import swarmcode_torch as sc
-from swarmcode_torch.app import runconfig, runs
+import tomli_w
+
+from swarmcode_torch.app import runs
 from swarmcode_torch.app.runs import RunError, read_config
 
 
@@ -21,8 +23,7 @@ def _record(run_dir, **settings):
     path = run_dir / runs.CONFIG_FILE
     lines = [ln for ln in path.read_text().splitlines()
              if ln.split(" = ")[0] not in settings]
-    path.write_text("\n".join(lines + [f"{k} = {runconfig._toml_value(v)}"
-                                       for k, v in settings.items()]) + "\n")
+    path.write_text("\n".join(lines) + "\n" + tomli_w.dumps(settings))
     ck = run_dir / runs.CHECKPOINT_FILE
     d = torch.load(ck, weights_only=True)
     d["config"].update(settings)

@@ -68,6 +68,9 @@ class RunResult:
     best_team: dict | None
     scenario: Scenario | None = None
     evolution: Evolution | None = field(default=None, repr=False)
+    stopped: str | None = None
+    """Why the run stopped before its last generation: "max_time" or "patience" (`evolve`'s
+    bounds; `resume` continues it), None when it did not."""
 
     @property
     def generations(self) -> int:
@@ -197,26 +200,44 @@ def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int 
     return session.file_reporters(run_dir, checkpoint_every, render_every, figure_every)
 
 
-def _result(ev: Evolution, run_dir: Path | None, history: list[dict]) -> RunResult:
+def _result(ev: Evolution, run_dir: Path | None, history: list[dict],
+            bounds: "session.Bounds | None" = None) -> RunResult:
     best = ev.state.best
     return RunResult(config=ev.cfg, run_dir=run_dir, history=history,
                      species=list(ev.state.history), best_team=dict(best) if best else None,
-                     scenario=ev.ctx.scenario, evolution=ev)
+                     scenario=ev.ctx.scenario, evolution=ev,
+                     stopped=bounds.reason if bounds is not None else None)
+
+
+def _bounds(max_time, patience, snapshot_every) -> "session.Bounds | None":
+    """The run's `session.Bounds` (None without max_time and patience); ValueError otherwise."""
+    if not isinstance(snapshot_every, int) or isinstance(snapshot_every, bool) or \
+            snapshot_every < 0:
+        raise ValueError(f"snapshot_every must be an integer >= 0 (0: no snapshots), got "
+                         f"{snapshot_every!r:.40}")
+    if max_time is None and patience is None:
+        return None
+    return session.Bounds(max_time=max_time, patience=patience)
 
 
 # ------------------------------------------------------------------ evolve, resume, load
-def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike | Scenario | None = None,
+def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
+           scenario: str | os.PathLike | Scenario | None = None,
            logdir: str | os.PathLike | None = "runs", checkpoint_every: int = 10,
            render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
            callback: Callable[[GenerationResult], Any] | None = None,
            fitness: ScoreFn | None = None, threads: int | None = None,
+           from_run: str | os.PathLike | None = None, snapshot_every: int = 0,
+           max_time: float | str | None = None, patience: int | None = None,
            wandb: str | None = None, **settings) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
     config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
         experiment with the default preset; `preset="paper"` for the paper's algorithm with
-        nothing beyond it); `settings` replace its keys: `generations=20, population=30, seed=0,
-        budget=4000.0, delta=0.5, ...` (any key of SwarmCoDeConfig / a run's config.toml).
+        nothing beyond it), or the path of a settings file in the format of a run's config.toml
+        (`swarmcode-torch evolve --config FILE`); `settings` replace its keys: `generations=20,
+        population=30, seed=0, budget=4000.0, delta=0.5, ...` (any key of SwarmCoDeConfig / a
+        run's config.toml).
     scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
     logdir: where the run directory is created (named `<scenario>__<seed>__<time>`, as by the
         CLI); None: run in memory, write no file.
@@ -237,6 +258,16 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
         OMP_NUM_THREADS if set, else the cores less the load average, at least 1).
     wandb: a Weights & Biases project to log the run to as well (`reporting.WandbReporter`;
         needs swarmcode-torch[wandb], ImportError saying so before anything runs).
+    from_run: "RUN" or "RUN@GENERATION": start a new run from that run's snapshot of GENERATION
+        (or its latest checkpoint), as `swarmcode-torch evolve --from`: `settings` change the
+        parent's config (its scenario, population, tag_length and bt_length stay), the new run
+        records its parent (config.toml's [parent], summary.json's "parent"); `logdir` defaults
+        to the parent's folder. A parent scored by a `fitness` function needs it again.
+    snapshot_every: keep a copy of the checkpoint every N generations in the run directory's
+        snapshots/ (0: none), to branch from with `from_run`.
+    max_time, patience: stop cleanly (checkpoint written, `resume` continues it) after the
+        generation that ends past `max_time` (seconds, or "90m", "2h", ...), or when the best
+        team has not improved for `patience` generations; `RunResult.stopped` says which.
 
     Raises ValueError (`ScenarioError` is one) for an invalid setting or scenario before any
     file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
@@ -246,7 +277,15 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     reporters = _check_hooks(callback, reporters)
     wandb_reporters = _wandb_reporters(wandb, None, render_every)
     fitness = _checked_fitness(fitness)
+    bounds = _bounds(max_time, patience, snapshot_every)
     set_threads(threads)
+    if from_run is not None:
+        return _branch(config, scenario, logdir, from_run, settings, fitness, reporters, callback,
+                       bounds, checkpoint_every, render_every, figure_every, snapshot_every,
+                       wandb_reporters)
+    if isinstance(config, (str, os.PathLike)):
+        from .runconfig import read_config_file
+        config = read_config_file(Path(config))
     scenario_obj = scenario if isinstance(scenario, Scenario) else None
     if scenario is not None and scenario_obj is None:
         settings["scenario"] = scenario
@@ -261,9 +300,43 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
         for r in wandb_reporters:               # named after the run directory, if there is one
             r.run_dir = start.run_dir
         reps = [] if logdir is None else \
-            file_reporters(start.run_dir, checkpoint_every, render_every, figure_every)
-        session.run(start.ev, start.run_dir, [*reps, history, *reporters, *wandb_reporters])
-    return _result(start.ev, start.run_dir, history.rows)
+            session.file_reporters(start.run_dir, checkpoint_every, render_every, figure_every,
+                                   snapshot_every=snapshot_every)
+        session.run(start.ev, start.run_dir, [*reps, history, *reporters, *wandb_reporters],
+                    bounds=bounds)
+    return _result(start.ev, start.run_dir, history.rows, bounds)
+
+
+def _branch(config, scenario, logdir, from_run, settings, fitness, reporters, callback, bounds,
+            checkpoint_every, render_every, figure_every, snapshot_every,
+            wandb_reporters=()) -> RunResult:
+    """`evolve(from_run=...)`: a new run from a run's snapshot (`session.start_branch`)."""
+    from .checkpoints import load_branch, parse_run_ref
+
+    if config is not None:
+        raise ValueError("config and from_run cannot be used together: a branch starts from its "
+                         "parent's config (give the changes as settings)")
+    if isinstance(scenario, Scenario):
+        raise ValueError("a branch runs on its parent's scenario; scenario cannot change")
+    if scenario is not None:
+        settings["scenario"] = scenario
+    run, generation = parse_run_ref(os.fspath(from_run))
+    branch = load_branch(run, generation)
+    cfg = make_config(branch.config, **settings)
+    if logdir == "runs":                    # the default: beside the parent
+        logdir = branch.run_dir.parent
+    make_dir = None if logdir is None else (lambda ev: new_run_dir(Path(logdir), cfg))
+    history = _History(callback)
+    with ExitStack() as stack:
+        start = session.start_branch(stack, branch, cfg, make_dir, fitness=fitness)
+        for r in wandb_reporters:
+            r.run_dir = start.run_dir
+        reps = [] if logdir is None else \
+            session.file_reporters(start.run_dir, checkpoint_every, render_every, figure_every,
+                                   snapshot_every=snapshot_every)
+        session.run(start.ev, start.run_dir, [*reps, history, *reporters, *wandb_reporters],
+                    bounds=bounds)
+    return _result(start.ev, start.run_dir, history.rows, bounds)
 
 
 def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
@@ -292,17 +365,20 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
            *, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50,
            reporters: Iterable = (), callback: Callable[[dict], Any] | None = None,
            fitness: ScoreFn | None = None, threads: int | None = None,
-           wandb: str | None = None) -> RunResult:
+           snapshot_every: int = 0, max_time: float | str | None = None,
+           patience: int | None = None, wandb: str | None = None) -> RunResult:
     """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
     to `generations` in all (default: the run's), on `device` (default: the run's);
     `fitness`: the run's own fitness function, for a run started with one (`evolve`). The
     result's history has every generation: those before the checkpoint from metrics.csv (when
     the run has one), then this part's. RunError (a ValueError) for a directory, config or
-    checkpoint that cannot be used. `threads`, `wandb`: as in `evolve`."""
+    checkpoint that cannot be used. `threads`, `snapshot_every`, `max_time`, `patience`,
+    `wandb`: as in `evolve` (`max_time` counts from this call)."""
     _check_every(checkpoint_every, render_every, figure_every)
     reporters = _check_hooks(callback, reporters) + _wandb_reporters(wandb, Path(run_dir),
                                                                      render_every)
     fitness = _checked_fitness(fitness)
+    bounds = _bounds(max_time, patience, snapshot_every)
     if generations is not None and (not isinstance(generations, int)
                                     or isinstance(generations, bool) or generations < 1):
         raise ValueError(f"generations must be an integer >= 1 (the total to extend the run "
@@ -319,9 +395,10 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
         if ev.done:                         # nothing to run: no file changes (as the CLI)
             return _result(ev, run_dir, earlier)
         history = _History(callback)
-        reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
-        session.run(ev, run_dir, [*reps, history, *reporters])
-    return _result(ev, run_dir, earlier + history.rows)
+        reps = session.file_reporters(run_dir, checkpoint_every, render_every, figure_every,
+                                      snapshot_every=snapshot_every)
+        session.run(ev, run_dir, [*reps, history, *reporters], bounds=bounds)
+    return _result(ev, run_dir, earlier + history.rows, bounds)
 
 
 def load(run_dir: str | os.PathLike) -> RunResult:

@@ -8,6 +8,8 @@ import hashlib
 import io
 import os
 import pickle
+import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -16,7 +18,7 @@ from ..coevo.config import SwarmCoDeConfig, with_overrides
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.scenario import Scenario
 from .files import (CHECKPOINT_FILE, CONFIG_FILE, HARDWARE_COPY, METRICS_FILE, SCENARIO_COPY,
-                    RunError, atomic_write_bytes, open_nofollow, read_file_bytes, refuse_links)
+                    SNAPSHOT_DIR, RunError, atomic_write_bytes, open_nofollow, read_file_bytes, refuse_links)
 from .migrations import check_runnable
 from .runconfig import check_config, config_differences, config_from_dict, read_config, run_scenario
 
@@ -47,12 +49,49 @@ def check_copies(run_dir: Path, d: dict) -> None:
                            "its own copy: restore it, or start a new run")
 
 
-def save_checkpoint(run_dir: Path, ev: Evolution) -> Path:
+def save_checkpoint(run_dir: Path, ev: Evolution, path: Path | None = None) -> Path:
+    """The checkpoint of `ev`'s state, with the digests of the run's copies, written atomically
+    to `path` (default: the run's checkpoint.pt; a snapshot's path, `snapshot_path`)."""
     buf = io.BytesIO()
     torch.save({**ev.state_dict(), "run_files": copy_digests(run_dir)}, buf)
-    path = Path(run_dir) / CHECKPOINT_FILE
+    path = Path(run_dir) / CHECKPOINT_FILE if path is None else Path(path)
     atomic_write_bytes(path, buf.getvalue())
     return path
+
+
+# ------------------------------------------------------------------ snapshots
+_SNAPSHOT_NAME = re.compile(r"^generation-(\d{6,})\.pt$")
+
+
+def snapshot_path(run_dir: Path, generation: int) -> Path:
+    """Where a run keeps its snapshot of `generation`: snapshots/generation-000100.pt."""
+    return Path(run_dir) / SNAPSHOT_DIR / f"generation-{generation:06d}.pt"
+
+
+def snapshot_folder(run_dir: Path, make: bool = False) -> Path:
+    """The run's snapshots folder (made when `make`); RunError when it is a link or not a
+    folder (a run reads and writes only its own files)."""
+    folder = Path(run_dir) / SNAPSHOT_DIR
+    if folder.is_symlink():
+        raise RunError(f"{folder} is a symbolic link; a run's snapshots must be its own")
+    if folder.exists() and not folder.is_dir():
+        raise RunError(f"{folder} is not a folder")
+    if make:
+        folder.mkdir(exist_ok=True)
+    return folder
+
+
+def list_snapshots(run_dir: Path) -> dict[int, Path]:
+    """generation -> the run's snapshot file of it, oldest first ({} without snapshots)."""
+    folder = snapshot_folder(run_dir)
+    if not folder.is_dir():
+        return {}
+    found = {}
+    for entry in os.scandir(folder):
+        m = _SNAPSHOT_NAME.match(entry.name)
+        if m:
+            found[int(m.group(1))] = Path(entry.path)
+    return dict(sorted(found.items()))
 
 
 #: What a checkpoint may hold at the top level, and the type of each entry.
@@ -151,18 +190,119 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
         raise RunError(f"checkpoint in {run_dir} is incompatible ({type(e).__name__}: {e})") from None
 
 
+@dataclass
+class Branch:
+    """What a new run branched from another starts from (`load_branch`): the parent's run
+    directory, the generation and file of its snapshot, the parent's config, the checkpoint's
+    contents, its scenario and the bytes of its scenario.toml and hardware.toml copies (None for
+    a run made before runs kept them)."""
+
+    run_dir: Path
+    generation: int
+    path: Path
+    config: SwarmCoDeConfig
+    checkpoint: dict
+    scenario: Scenario
+    scenario_bytes: bytes | None
+    hardware_bytes: bytes | None
+
+    @property
+    def parent(self) -> dict:
+        """The [parent] table of the new run's config.toml and its summary.json's "parent"."""
+        return {"run": str(self.run_dir.absolute()), "generation": self.generation,
+                "checkpoint": self.path.relative_to(self.run_dir).as_posix()}
+
+
+def parse_run_ref(text: str) -> tuple[Path, int | None]:
+    """RUN[@GENERATION] -> (RUN, GENERATION or None): the part after the last "@" is a
+    generation when it is a number (a run directory's name may hold an "@" too); ValueError
+    for "RUN@" followed by something that is no generation >= 0."""
+    head, sep, tail = text.rpartition("@")
+    if not sep or not head:
+        return Path(text), None
+    if tail.isdigit() and tail.isascii():
+        return Path(head), int(tail)
+    if tail.strip("-").isdigit() or not tail:
+        raise ValueError(f"{text}: the generation after @ must be an integer >= 0, got {tail!r}")
+    return Path(text), None
+
+
+def load_branch(run_dir: Path, generation: int | None = None) -> Branch:
+    """The snapshot a new run branches from: the run's snapshot of `generation`
+    (snapshots/generation-NNNNNN.pt, or checkpoint.pt when it holds that generation), or its
+    latest checkpoint (`generation` None), checked as `load_run` checks a resume (the run's
+    config, its copies, no links). RunError, one line: no run there, no such generation (the
+    message lists those there are), a link, a damaged file."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise RunError(f"{run_dir} is not a run directory (no such directory)")
+    refuse_links(run_dir)
+    cfg = read_config(run_dir)
+    latest = run_dir / CHECKPOINT_FILE
+    if generation is None:
+        if not latest.is_file() and not latest.is_symlink():
+            raise RunError(f"{run_dir} has no {CHECKPOINT_FILE} to branch from")
+        path = latest
+        d = read_checkpoint(path)
+    else:
+        snaps = list_snapshots(run_dir)
+        d = None
+        if generation in snaps:
+            path = snaps[generation]
+        else:
+            path = latest
+            held = None
+            if latest.is_file() and not latest.is_symlink():
+                d = read_checkpoint(latest)
+                held = d["generation"]
+            if held != generation:
+                have = ", ".join(map(str, snaps)) or "none"
+                extra = f"; its {CHECKPOINT_FILE} holds generation {held}" if held is not None \
+                    else ""
+                raise RunError(f"{run_dir} has no snapshot of generation {generation} "
+                               f"(snapshots of generations: {have}{extra})")
+        if d is None:
+            d = read_checkpoint(path)
+        if d["generation"] != generation:
+            raise RunError(f"{path} holds generation {d['generation']}, not {generation}")
+    scenario = run_scenario(run_dir, cfg)
+    check_copies(run_dir, d)
+    saved = config_from_dict(d["config"], f"{path} (its config)")
+    diff = config_differences(cfg, saved, scenario)
+    if diff:
+        raise RunError(f"{run_dir / CONFIG_FILE} does not match the config saved in {path} "
+                       f"(differing keys: {', '.join(diff)})")
+
+    def copy(name: str) -> bytes | None:
+        p = run_dir / name
+        if not p.is_file() and not p.is_symlink():
+            return None
+        try:
+            return read_file_bytes(p)
+        except OSError as e:
+            raise RunError(f"{p} cannot be read ({e.strerror or type(e).__name__})") from None
+
+    return Branch(run_dir, d["generation"], path, cfg, d, scenario, copy(SCENARIO_COPY),
+                  copy(HARDWARE_COPY))
+
+
 class CheckpointReporter:
     """Writes checkpoint.pt at the start of a new run (generation 0, so that a run stopped
     before its first periodic checkpoint can still be resumed), every `every` generations and
     after the last one (as part of that generation's step: `run` writes the records of a
-    generation, then its checkpoint, with signals held). `saved` is the generation of the
+    generation, then its checkpoint, with signals held); with `snapshot_every` N > 0 it also
+    keeps a copy of the checkpoint of every N-th generation (`snapshot_path`:
+    snapshots/generation-000100.pt), written the same way. `saved` is the generation of the
     checkpoint on disk (None: none yet)."""
 
-    def __init__(self, run_dir: Path, every: int):
+    def __init__(self, run_dir: Path, every: int, snapshot_every: int = 0):
         self.run_dir, self.every = Path(run_dir), max(1, every)
+        self.snapshot_every = max(0, snapshot_every)
         self.saved: int | None = None
 
     def on_start(self, ev: Evolution) -> None:
+        if self.snapshot_every:
+            snapshot_folder(self.run_dir, make=True)
         path = self.run_dir / CHECKPOINT_FILE
         if path.exists() or path.is_symlink():
             self.saved = ev.state.generation        # resumed from it
@@ -179,7 +319,10 @@ class CheckpointReporter:
             self._save(ev)
 
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
-        if ev.state.generation % self.every == 0 or ev.done:
+        g = ev.state.generation
+        if self.snapshot_every and g % self.snapshot_every == 0:
+            save_checkpoint(self.run_dir, ev, snapshot_path(self.run_dir, g))
+        if g % self.every == 0 or ev.done:
             self._save(ev)
 
     def on_end(self, ev: Evolution) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import sys
 from contextlib import ExitStack
+from dataclasses import replace
 from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
@@ -19,9 +20,11 @@ from rich.markup import escape
 from typer.core import TyperGroup
 from rich.table import Table
 
+from ..coevo.config import with_overrides
 from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 from . import session
+from .settings import parse_settings
 from .signals import TERMINATED, terminate_as_interrupt
 from .terminal import (THREADS_HELP, Where, attach_shards, check_path, console, err,
                        eval_shards_option, execute, fail, os_fail, print_shard_traffic, print_team,
@@ -147,13 +150,28 @@ def evolve(
     cpus_per_eval_worker: Annotated[Optional[float], typer.Option(help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1].")] = None,
     ray_address: Annotated[Optional[str], typer.Option(help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one].")] = None,
     threads: Annotated[Optional[int], typer.Option(help=THREADS_HELP)] = None,
+    config: Annotated[Optional[str], typer.Option("--config", metavar="FILE", help="Start a new run from this settings file, in the format of a run's config.toml (a run's own will do); --preset, the options and --set go on top.")] = None,
+    print_config: Annotated[bool, typer.Option("--print-config", help="Print the resolved config as TOML (with --config, --from, the options and --set applied) and exit without running.")] = False,
+    from_run: Annotated[Optional[str], typer.Option("--from", metavar="RUN[@GENERATION]", help="Start a new run from this run's snapshot of GENERATION (--snapshot-every), or its latest checkpoint, with the options and --set changed; it is recorded as the new run's parent. The scenario, population, tag_length and bt_length stay the parent's [default --logdir: the parent's].")] = None,
+    snapshot_every: Annotated[int, typer.Option(help="Keep a copy of the checkpoint every N generations in RUN_DIR/snapshots/ (0: none), to branch from with --from RUN@GENERATION.")] = 0,
+    max_time: Annotated[Optional[str], typer.Option(metavar="DURATION", help="Stop cleanly with a checkpoint (resumable) after the generation that ends past this time: 3600 (seconds), 90m, 2h, 1h30m.")] = None,
+    patience: Annotated[Optional[int], typer.Option(metavar="K", help="Stop cleanly with a checkpoint (resumable) when the best team has not improved for K generations.")] = None,
     wandb: Annotated[bool, typer.Option("--wandb", help="Also log to Weights & Biases (the scalars, the config, the replays; needs swarmcode-torch[wandb]; WANDB_MODE=offline for no network).")] = False,
     wandb_project: Annotated[str, typer.Option(help="Weights & Biases project of --wandb.")] = "swarmcode-torch",
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
     logdir, resume = check_path(logdir, "--logdir"), check_path(resume, "--resume")
+    config_file = check_path(config, "--config")
     wandb_project = _wandb_option(wandb, wandb_project)
     TERMINATED.clear()                    # this command's SIGTERM, not an earlier one's
+    bounds = _bounds_option(max_time, patience, snapshot_every)
+    if print_config:
+        _print_config(config_file, from_run, resume, preset, settings, generations=generations,
+                      device=device, scenario=scenario, budget=budget,
+                      objective=_objective(objective), population=population,
+                      swarm_size=swarm_size, trials=trials, ticks=ticks, seed=seed,
+                      compile=compile)
+        return
     set_threads_option(threads)
     shards = eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
     where = Where()
@@ -167,14 +185,21 @@ def evolve(
                     trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
                     logdir=logdir, checkpoint_every=checkpoint_every, log_every=log_every,
                     render_every=render_every, resume=resume, settings=settings, attach=attach,
-                    figure_every=figure_every, where=where, preset=preset)
+                    figure_every=figure_every, where=where, preset=preset,
+                    config_file=config_file, from_run=from_run)
                 if ev is None:
                     return
                 execute(ev, run_dir, checkpoint_every, log_every, render_every, saved=saved,
-                        figure_every=figure_every, where=where, wandb_project=wandb_project)
+                        figure_every=figure_every, where=where, snapshot_every=snapshot_every,
+                        bounds=bounds, wandb_project=wandb_project)
                 if shards is not None:
                     print_shard_traffic(ev.ctx.evaluator)
-            console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
+            if bounds is not None and bounds.reason is not None:
+                console.print(_bound_line(bounds, ev, run_dir), markup=False, highlight=False,
+                              soft_wrap=True)
+            else:
+                console.print(f"Done: {ev.state.generation} generations in "
+                              f"{escape(str(run_dir))}")
             print_team(run_dir)
             console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard "
                           f"--logdir {run_dir.parent}", markup=False, highlight=False)
@@ -195,10 +220,92 @@ def _wandb_option(on: bool, project: str) -> str | None:
     return project
 
 
+def _bounds_option(max_time: str | None, patience: int | None, snapshot_every: int):
+    """The run's `session.Bounds` (None without --max-time and --patience); one-line errors."""
+    if snapshot_every < 0:
+        fail(f"--snapshot-every must be >= 0 (0: no snapshots), got {snapshot_every}")
+    if max_time is None and patience is None:
+        return None
+    if patience is not None and patience < 1:
+        fail(f"--patience must be >= 1 (generations without a better best team), got {patience}")
+    try:
+        return session.Bounds(max_time=max_time, patience=patience)
+    except ValueError as e:
+        fail(f"--{e}".replace("--max_time", "--max-time"))
+
+
+def _bound_line(bounds, ev, run_dir: Path) -> str:
+    """What a run stopped by --max-time or --patience prints."""
+    g = ev.state.generation
+    if bounds.reason == "patience":
+        why = (f"the best team (generation {ev.state.best['generation']}) has not improved for "
+               f"{bounds.patience} generations (--patience {bounds.patience})")
+    else:
+        why = f"--max-time reached ({bounds.elapsed:.1f}s of {bounds.max_time:g}s)"
+    return (f"Stopped after {g} generations: {why}; checkpoint of generation {g} is in "
+            f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}")
+
+
+def _new_config(config_file: Path | None, from_run: str | None, preset, settings, **given):
+    """(the config of a new run: --config FILE or the preset, or the --from run's, with
+    --preset, the options and --set on top; the `checkpoints.Branch` of --from, or None)."""
+    from .checkpoints import load_branch, parse_run_ref
+    from .runconfig import read_config_file
+    from .settings import option_names
+
+    branch = None
+    if from_run is not None:
+        if config_file is not None:
+            fail("--config and --from cannot be used together: a branch starts from its "
+                 "parent's config (give the changes as options and --set)")
+        run, generation = parse_run_ref(from_run)
+        check_path(str(run), "--from")
+        branch = load_branch(run, generation)
+        if branch.config.fitness_function is not None:
+            fail(f"{run} was scored by a custom fitness function "
+                 f"({branch.config.fitness_function}): branch it from Python, "
+                 "swarmcode_torch.evolve(from_run=..., fitness=fn)")
+        base = branch.config
+    elif config_file is not None:
+        base = read_config_file(config_file)
+        if base.fitness_function is not None:
+            fail(f"{config_file}: fitness_function: a fitness function is given from Python "
+                 "(swarmcode_torch.evolve(config=FILE, fitness=fn))")
+    else:
+        return session.resolve_config(preset, settings, **given), None
+    if preset is not None:
+        base = session.make_config(base, preset=preset)
+    names = option_names()
+    return replace(with_overrides(base, **given), **parse_settings(settings or [], names)), branch
+
+
+def _print_config(config_file, from_run, resume, preset, settings, **given) -> None:
+    """--print-config: the resolved config of a new run (checked), as TOML, on stdout."""
+    from .files import RunError
+    from .runconfig import config_to_toml
+    from .settings import option_names
+
+    if resume is not None:
+        fail("--print-config is for a new run; a resumed run's config is its config.toml")
+    try:
+        cfg, branch = _new_config(config_file, from_run, preset, settings, **given)
+        if branch is None:
+            session.check_start(cfg, names=option_names())
+        else:
+            session.check_branch(branch, cfg, option_names())
+            cfg.validate(option_names())
+    except (ScenarioError, RunError, ValueError) as e:
+        fail(str(e))
+    except OSError as e:
+        os_fail(e, "cannot read the config")
+    sys.stdout.write(config_to_toml(cfg, parent=branch.parent if branch else None))
+    sys.stdout.flush()
+
+
 def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
                   swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
                   log_every, render_every, resume, settings, attach=None, figure_every=50,
-                  where: Where, preset=None):
+                  where: Where, preset=None, config_file=None, from_run=None):
     """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
     The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
@@ -219,6 +326,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
             extra = [k.replace("_", "-") for k, v in given.items() if v is not None]
             extra += ["set"] if settings else []
             extra += ["preset"] if preset is not None else []
+            extra += ["config"] if config_file is not None else []
+            extra += ["from"] if from_run is not None else []
             if extra:
                 fail(f"--resume uses the run's saved config; only --generations and --device may "
                      f"change (got --{', --'.join(extra)})")
@@ -247,9 +356,10 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
             console.print(f"Resuming [bold]{escape(str(resume))}[/] at generation "
                           f"{ev.state.generation} of {ev.cfg.generations}")
             return ev, resume, start.saved
-        cfg = session.resolve_config(preset, settings, generations=generations, device=device,
-                                     **given)
-        logdir = logdir if logdir is not None else Path("runs")
+        cfg, branch = _new_config(config_file, from_run, preset, settings,
+                                  generations=generations, device=device, **given)
+        if logdir is None:      # a branch goes beside its parent
+            logdir = branch.run_dir.parent if branch is not None else Path("runs")
 
         def check_logdir() -> None:        # after the config's checks, before the Evolution
             if logdir.exists() and not logdir.is_dir():
@@ -261,9 +371,15 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
             except OSError as e:
                 os_fail(e, f"--logdir {logdir}: cannot make a run directory")
 
-        start = session.start_new(stack, cfg, make_dir, names=option_names(),
-                                  before_build=check_logdir, attach=attach,
-                                  on_dir=lambda run_dir: setattr(where, "run_dir", run_dir))
+        on_dir = lambda run_dir: setattr(where, "run_dir", run_dir)  # noqa: E731
+        if branch is not None:
+            start = session.start_branch(stack, branch, cfg, make_dir, names=option_names(),
+                                         before_build=check_logdir, attach=attach, on_dir=on_dir)
+            console.print(f"Branching from {escape(str(branch.path))} (generation "
+                          f"{branch.generation})", highlight=False)
+        else:
+            start = session.start_new(stack, cfg, make_dir, names=option_names(),
+                                      before_build=check_logdir, attach=attach, on_dir=on_dir)
         ev, run_dir = start.ev, start.run_dir
         console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
                       f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
@@ -315,6 +431,7 @@ def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A ru
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
     designs = print_team(run_dir)
+    _print_lineage(run_dir)
     caps = _capabilities(run_dir, designs)
     for i, d in enumerate(designs):
         console.print(f"[bold]species {d['species']}[/] ({d['count']} robots, {d['effector']}):")
@@ -327,6 +444,23 @@ def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A ru
         from ..coevo.dynamics import niche_count
         console.print(f"{niche_count(caps[1])} niches (distinct capabilities) in "
                       f"{len({d['species'] for d in designs})} species", highlight=False)
+
+
+def _print_lineage(run_dir: Path) -> None:
+    """inspect: the run a branched run started from, and why a run stopped early."""
+    from .runconfig import read_parent
+    from .summary import read_summary
+
+    parent = read_parent(run_dir)
+    if parent is not None:
+        console.print(f"Branched from {parent.get('run')} at generation "
+                      f"{parent.get('generation')} ({parent.get('checkpoint')})", markup=False,
+                      highlight=False, soft_wrap=True)
+    stop = read_summary(run_dir).get("stop")
+    if isinstance(stop, dict) and stop.get("reason") in ("max_time", "patience"):
+        console.print(f"Stopped early by {stop['reason']} at generation {stop.get('generation')}"
+                      "; it can be continued with evolve --resume", markup=False,
+                      highlight=False)
 
 
 def _capabilities(run_dir: Path, designs: list[dict]):

@@ -30,6 +30,7 @@ LOCK_FILE = "run.lock"                  # held by the live run: "pid=... host=..
 SWEEP_LOCK_FILE = "sweep.lock"          # held by a live sweep in its --out directory
 METRICS_FILE = "metrics.csv"            # every scalar of every generation (reporting.CsvReporter)
 REPLAY_FILE = "team.gif"                # the default output of `replay`
+SNAPSHOT_DIR = "snapshots"              # snapshots/generation-000100.pt (--snapshot-every)
 #: A sweep's outputs in its --out directory (sweep.write_outputs).
 TABLE_MD, TABLE_CSV, BUDGET_PLOT = "table.md", "table.csv", "budget.png"
 #: Files of a run directory written with `atomic_write_bytes`; a temporary `.NAME.xxxxxxxx` of
@@ -150,10 +151,11 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 _TEMP_NAME = re.compile(r"^\.(?P<target>.+)\.[A-Za-z0-9_]{8}$")
 
 
-def clean_temporary_files(run_dir: Path) -> list[Path]:
+def clean_temporary_files(run_dir: Path, targets: re.Pattern | None = None) -> list[Path]:
     """Remove the temporary files that killed `atomic_write_bytes` calls left in `run_dir` (for
-    a file of `ATOMIC_FILES` or one that exists); returns what was removed. Call it only while
-    holding the directory's lock, so that no live write loses its temporary file."""
+    a file of `ATOMIC_FILES`, one whose name `targets` matches, or one that exists); returns what
+    was removed. Call it only while holding the directory's lock, so that no live write loses
+    its temporary file."""
     run_dir = Path(run_dir)
     removed = []
     try:
@@ -165,7 +167,8 @@ def clean_temporary_files(run_dir: Path) -> list[Path]:
         if not m or not entry.is_file(follow_symlinks=False):
             continue
         target = m.group("target")
-        if target in ATOMIC_FILES or (run_dir / target).exists():
+        if target in ATOMIC_FILES or (targets is not None and targets.match(target)) or \
+                (run_dir / target).exists():
             try:
                 os.unlink(entry.path)
                 removed.append(Path(entry.path))
@@ -253,6 +256,9 @@ def prepare_run_dir(run_dir: Path) -> None:
     """Before a run starts or resumes in `run_dir` (holding its lock): remove the temporary
     files of killed writes and set aside a cut-off last line of teams.jsonl."""
     clean_temporary_files(run_dir)
+    snapshots = Path(run_dir) / SNAPSHOT_DIR
+    if snapshots.is_dir() and not snapshots.is_symlink():
+        clean_temporary_files(snapshots, re.compile(r"^generation-\d+\.pt$"))
     repair_teams(run_dir)
 
 

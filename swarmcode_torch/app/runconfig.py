@@ -4,12 +4,12 @@ run starts (its settings, then the memory it needs)."""
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from pathlib import Path
 from typing import Any, Iterable
 
+import tomli_w
 import torch
 
 from ..coevo.config import SettingError, SwarmCoDeConfig
@@ -31,35 +31,40 @@ FALLBACK_MEMORY = 64 * 2 ** 30
 
 
 # ------------------------------------------------------------------ config.toml
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    return json.dumps(str(v))
+def config_table(cfg: SwarmCoDeConfig) -> dict[str, Any]:
+    """The keys config.toml holds: every set key of `cfg`; TOML has no null, so a key unset where
+    its default is set (quota_size_exponent) is "none", which reading a config turns back into
+    None."""
+    defaults = SwarmCoDeConfig().to_dict()
+    return {k: (v if v is not None else "none") for k, v in cfg.to_dict().items()
+            if v is not None or defaults.get(k) is not None}
 
 
-def config_to_toml(cfg: SwarmCoDeConfig, software: dict | None = None) -> str:
-    """config.toml: every set key of `cfg`; `software` (`records.software`), what wrote it, goes
-    into a comment line (a config file holds settings only)."""
+def config_to_toml(cfg: SwarmCoDeConfig, software: dict | None = None,
+                   parent: dict | None = None) -> str:
+    """config.toml: every set key of `cfg` (`config_table`), written by tomli-w; `software`
+    (`records.software`), what wrote it, goes into a comment line (a config file holds settings
+    only); `parent`, the run and generation a branched run started from, into a [parent]
+    table (`read_parent`)."""
     lines = ["# swarmcode-torch run configuration (re-run with: swarmcode-torch evolve --resume DIR)"]
     if software:
         lines.append("# written by " + ", ".join(f"{k} {v}" for k, v in software.items()
                                                   if v is not None))
-    defaults = SwarmCoDeConfig().to_dict()
-    for k, v in cfg.to_dict().items():
-        if v is not None:
-            lines.append(f"{k} = {_toml_value(v)}")
-        elif defaults.get(k) is not None:
-            # TOML has no null: a key unset where its default is set (quota_size_exponent)
-            # is written "none", which reading a config turns back into None
-            lines.append(f'{k} = "none"')
-    return "\n".join(lines) + "\n"
+    table: dict[str, Any] = config_table(cfg)
+    if parent:
+        table[PARENT_TABLE] = dict(parent)
+    return "\n".join(lines) + "\n" + tomli_w.dumps(table)
 
 
-def write_config(run_dir: Path, cfg: SwarmCoDeConfig) -> None:
+#: The table of config.toml that names the run (and generation) a branched run started from.
+PARENT_TABLE = "parent"
+
+
+def write_config(run_dir: Path, cfg: SwarmCoDeConfig, parent: dict | None = None) -> None:
+    """config.toml of `run_dir`, written atomically; `parent`: the [parent] table of a branched
+    run (`config_to_toml`)."""
     atomic_write_bytes(Path(run_dir) / CONFIG_FILE,
-                       config_to_toml(cfg, records.software(cfg.device)).encode())
+                       config_to_toml(cfg, records.software(cfg.device), parent).encode())
 
 
 def config_from_dict(d: Any, source: str) -> SwarmCoDeConfig:
@@ -78,19 +83,39 @@ def config_from_dict(d: Any, source: str) -> SwarmCoDeConfig:
     return cfg
 
 
-def read_config(run_dir: Path) -> SwarmCoDeConfig:
-    """The config of a run directory, every value checked (`SwarmCoDeConfig.validate`)."""
-    path = Path(run_dir) / CONFIG_FILE
-    if not path.is_file():
-        raise RunError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
+def _read_toml(path: Path) -> dict:
+    """A TOML file of settings (config.toml, a --config file), read with tomllib (no code in it
+    can run), without following a link and up to `MAX_TEXT_BYTES`; RunError naming the file."""
     text = read_text(path)
     check_nesting(text, str(path))
     try:
-        d = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise RunError(f"{path}: malformed config ({e})") from None
     except RecursionError:
         raise RunError(f"{path}: nested too deeply") from None
+
+
+def _split_parent(d: dict, path: Path) -> tuple[dict, dict | None]:
+    """(the settings of a config table, its [parent] table or None); RunError for a parent
+    that is not a table."""
+    if PARENT_TABLE not in d:
+        return d, None
+    d = dict(d)
+    parent = d.pop(PARENT_TABLE)
+    if not isinstance(parent, dict):
+        raise RunError(f"{path}: [{PARENT_TABLE}] must be a table (run, generation), got "
+                       f"{parent!r:.60}")
+    return d, parent
+
+
+def read_config(run_dir: Path) -> SwarmCoDeConfig:
+    """The config of a run directory, every value checked (`SwarmCoDeConfig.validate`); its
+    [parent] table, if any, is not a setting (`read_parent`)."""
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.is_file():
+        raise RunError(f"{run_dir} is not a run directory (no {CONFIG_FILE})")
+    d, _ = _split_parent(_read_toml(path), path)
     missing = [k for k in CONFIG_REQUIRED if k not in d]
     if missing:
         # an empty or cut config would read as the defaults: another run than the one made
@@ -99,46 +124,78 @@ def read_config(run_dir: Path) -> SwarmCoDeConfig:
     return config_from_dict(d, str(path))
 
 
+def read_parent(run_dir: Path) -> dict | None:
+    """The [parent] table of a run's config.toml ({"run": its directory, "generation": the
+    generation it branched at, "checkpoint": the file it started from}), None for a run that
+    was not branched from another (or has no readable config.toml)."""
+    path = Path(run_dir) / CONFIG_FILE
+    if not path.is_file() or path.is_symlink():
+        return None
+    try:
+        return _split_parent(_read_toml(path), path)[1]
+    except RunError:
+        return None
+
+
+def read_config_file(path: Path, base: SwarmCoDeConfig | None = None) -> SwarmCoDeConfig:
+    """The config of a settings file in config.toml's format (`evolve --config FILE`; a run's own
+    config.toml will do: its [parent] table is ignored): its keys over `base` (default: the
+    preset the file names, else the default preset), not yet checked (`check_start` does).
+    RunError, one line, naming the file and the key for an unknown key or a malformed value."""
+    from ..coevo.config import PRESETS, preset_config
+
+    path = Path(path)
+    if path.is_symlink():
+        raise RunError(f"{path} is a symbolic link; give the config file itself")
+    if not path.is_file():
+        raise RunError(f"{path} is not a file (no such config file)")
+    d, _ = _split_parent(_read_toml(path), path)
+    known = set(SwarmCoDeConfig().to_dict())
+    for k, v in d.items():
+        if k not in known:
+            raise RunError(f"{path}: unknown key {k!r} (a config file holds the keys of a run's "
+                           f"{CONFIG_FILE})")
+        if isinstance(v, (dict, list)):
+            raise RunError(f"{path}: {k}: expected a single value, got {v!r:.60}")
+    d = {k: (None if v == "none" else v) for k, v in d.items()}
+    if base is None:
+        preset = d.get("preset")
+        base = preset_config(preset) if preset in PRESETS else SwarmCoDeConfig()
+    try:
+        return SwarmCoDeConfig.from_dict({**base.to_dict(), **d})
+    except (TypeError, ValueError) as e:
+        raise RunError(f"{path}: malformed config ({e})") from None
+
+
 #: Keys every config.toml a run has written holds (each version wrote them all).
 CONFIG_REQUIRED = ("scenario", "generations", "population", "seed")
 
 
 # ------------------------------------------------------------------ a Scenario object as TOML
-def _toml(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml(x) for x in v) + "]"
-    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
-
-
 def scenario_to_toml(s: Scenario) -> str:
-    """A scenario TOML file that loads back (`load_scenario`) as a scenario equal to `s`."""
+    """A scenario TOML file (written by tomli-w) that loads back (`load_scenario`) as a scenario
+    equal to `s`."""
     names = {v: k for k, v in EFFECTORS.items()}
-    lines = [f"name = {_toml(s.name)}", f"description = {_toml(s.description)}",
-             f"arena = {_toml(float(s.arena))}", f"base_radius = {_toml(float(s.base_radius))}",
-             f"num_robots = {_toml(int(s.num_robots))}",
-             f"episode_ticks = {_toml(int(s.episode_ticks))}",
-             f"species_overhead = {_toml(float(s.species_overhead))}", "", "[obstacles]",
-             f"count = {_toml(int(s.obstacle_count))}",
-             f"radius = {_toml([float(x) for x in s.obstacle_radius])}"]
+    packages = []
     for p in s.packages:
-        lines += ["", "[[packages]]", f"kind = {_toml(p.kind)}"]
-        if p.kind == "individual":
-            lines.append(f"effector = {_toml(names[p.grips[0]])}")
-        else:
-            lines.append(f"grips = {_toml([names[g] for g in p.grips])}")
-        lines += [f"count = {_toml(int(p.count))}",
-                  f"distance = {_toml([float(x) for x in p.distance])}",
-                  f"mass = {_toml([float(x) for x in p.mass])}",
-                  f"radius_band = {_toml([float(x) for x in p.radius_band])}",
-                  f"size = {_toml(float(p.size))}",
-                  f"distance_weighting = {_toml(bool(p.distance_weighting))}"]
+        grips = ({"effector": names[p.grips[0]]} if p.kind == "individual"
+                 else {"grips": [names[g] for g in p.grips]})
+        packages.append({"kind": p.kind, **grips, "count": int(p.count),
+                         "distance": [float(x) for x in p.distance],
+                         "mass": [float(x) for x in p.mass],
+                         "radius_band": [float(x) for x in p.radius_band],
+                         "size": float(p.size), "distance_weighting": bool(p.distance_weighting)})
+    table: dict[str, Any] = {
+        "name": s.name, "description": s.description, "arena": float(s.arena),
+        "base_radius": float(s.base_radius), "num_robots": int(s.num_robots),
+        "episode_ticks": int(s.episode_ticks), "species_overhead": float(s.species_overhead),
+        "obstacles": {"count": int(s.obstacle_count),
+                      "radius": [float(x) for x in s.obstacle_radius]},
+        "packages": packages}
+    text = tomli_w.dumps(table)
     if s.hardware != default_catalog():                 # its own catalog, inline
-        lines += catalog_toml_lines(s.hardware, prefix="hardware.")
-    return "\n".join(lines) + "\n"
+        text += "\n".join(catalog_toml_lines(s.hardware, prefix="hardware.")) + "\n"
+    return text
 
 
 def scenario_data(s: Scenario) -> bytes:

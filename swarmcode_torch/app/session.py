@@ -16,7 +16,10 @@ The front ends add only what is theirs: the command line its options, messages a
 
 from __future__ import annotations
 
+import math
 import os
+import re
+import time
 from contextlib import ExitStack, nullcontext
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
@@ -27,9 +30,11 @@ from ..coevo.evaluation import ScoreFn
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.scenario import Scenario, read_scenario
 from . import checkpoints, files, records
-from .checkpoints import CheckpointReporter, load_run, resume
+from .checkpoints import Branch, CheckpointReporter, load_run, resume
+from .files import HARDWARE_COPY, SCENARIO_COPY, RunError, atomic_write_bytes
 from .locks import RunLock
-from .runconfig import check_config, scenario_data, write_config, write_run_files
+from .runconfig import (check_config, config_differences, hardware_bytes, read_parent,
+                        scenario_data, write_config, write_run_files)
 from .settings import parse_settings
 from .signals import deferred_signals, interrupt_of
 from .summary import SummaryReporter
@@ -167,28 +172,170 @@ def start_resume(stack: ExitStack, run_dir: Path, *, generations: int | None = N
         return Start(ev, run_dir, saved)
     if attach is not None:
         attach(ev)
-    write_config(run_dir, ev.cfg)
+    write_config(run_dir, ev.cfg, read_parent(run_dir))   # a branched run stays one
     return Start(ev, run_dir, ev.state.generation)
+
+
+#: The settings a branch keeps from its parent: the snapshot's tensors are of its population,
+#: tag_length and bt_length, and its species, fitness and best team were found on its scenario
+#: (which the branch runs from the parent's own scenario.toml and hardware.toml copies).
+BRANCH_FIXED = ("scenario", "population", "tag_length", "bt_length")
+
+
+def check_branch(branch: Branch, cfg: SwarmCoDeConfig, names: dict[str, str] | None = None) -> None:
+    """ValueError, one line, for a branch config `cfg` that changes a setting of `BRANCH_FIXED`
+    or has no generation left to run after the snapshot's."""
+    names = names or {}
+    diff = set(config_differences(branch.config, cfg, branch.scenario, ignore=()))
+    fixed = [k for k in BRANCH_FIXED if k in diff]
+    if fixed:
+        k = fixed[0]
+        raise ValueError(f"{names.get(k, k)} cannot change when branching from {branch.run_dir} "
+                         f"(it is {getattr(branch.config, k)!r}; the snapshot's population, "
+                         f"species and fitness are of it): start a new run instead")
+    if cfg.generations <= branch.generation:
+        raise ValueError(f"{names.get('generations', 'generations')} must be more than the "
+                         f"snapshot's {branch.generation} generations to branch, got "
+                         f"{cfg.generations}")
+
+
+def start_branch(stack: ExitStack, branch: Branch, cfg: SwarmCoDeConfig,
+                 make_dir: Callable[[Evolution], Path] | None, *, fitness: ScoreFn | None = None,
+                 names: dict[str, str] | None = None,
+                 before_build: Callable[[], None] | None = None,
+                 attach: Callable[[Evolution], None] | None = None,
+                 on_dir: Callable[[Path], None] | None = None) -> Start:
+    """A new run that starts from `branch` (`checkpoints.load_branch`: a run's snapshot) with the
+    config `cfg` (the parent's with changed settings; `check_branch`, then `check_config`): its
+    first generation continues the snapshot's state, with `cfg`'s settings. A changed seed
+    restarts the random generator from it (the same seed continues the parent's stream). Its
+    directory (`make_dir(ev)`; None: in memory) gets config.toml with a [parent] table
+    (`Branch.parent`) and the parent's own scenario.toml and hardware.toml."""
+    check_branch(branch, cfg, names)
+    check_config(cfg, branch.scenario, names)
+    if before_build is not None:
+        before_build()
+    try:
+        ev = Evolution.from_checkpoint(branch.checkpoint, cfg, fitness, branch.scenario)
+    except ValueError as e:
+        raise RunError(f"{branch.path} cannot start the branch: {e}") from None
+    if cfg.seed != branch.config.seed:
+        from ..coevo.evolve import new_generator
+        ev.state.rng_state = new_generator(ev.ctx).get_state()
+    if attach is not None:
+        attach(ev)
+    if make_dir is None:
+        return Start(ev, None)
+    run_dir = make_dir(ev)
+    stack.enter_context(RunLock(run_dir))
+    if on_dir is not None:
+        on_dir(run_dir)
+    write_config(run_dir, ev.cfg, branch.parent)
+    atomic_write_bytes(run_dir / SCENARIO_COPY, branch.scenario_bytes
+                       if branch.scenario_bytes is not None else scenario_data(branch.scenario))
+    atomic_write_bytes(run_dir / HARDWARE_COPY, branch.hardware_bytes
+                       if branch.hardware_bytes is not None
+                       else hardware_bytes(branch.scenario.hardware))
+    return Start(ev, run_dir)
 
 
 # ------------------------------------------------------------------ running
 def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int = 50,
-                   figure_every: int = 50, saved: int | None = None) -> list:
+                   figure_every: int = 50, saved: int | None = None,
+                   snapshot_every: int = 0) -> list:
     """The reporters that write a run directory: summary.json and teams.jsonl, metrics.csv,
     TensorBoard events (a replay image every `render_every` generations, 0: never; the
     composition figure every `figure_every`) and, last, checkpoint.pt every `checkpoint_every`
-    generations and at the end (`saved`: the generation the file holds when the run starts)."""
+    generations and at the end (`saved`: the generation the file holds when the run starts),
+    and a snapshot of it every `snapshot_every` generations (0: none)."""
     from .reporting import CsvReporter, TensorBoardReporter
 
-    checkpoint = CheckpointReporter(run_dir, checkpoint_every)
+    checkpoint = CheckpointReporter(run_dir, checkpoint_every, snapshot_every)
     checkpoint.saved = saved
     return [SummaryReporter(run_dir), CsvReporter(run_dir),
             TensorBoardReporter(run_dir, figure_every=figure_every, render_every=render_every),
             checkpoint]
 
 
+def clock() -> float:
+    """The clock --max-time reads (seconds, monotonic); tests replace it."""
+    return time.monotonic()
+
+
+_DURATION = re.compile(r"(\d+(?:\.\d*)?|\.\d+)\s*([dhms]?)")
+_UNIT = {"d": 86400, "h": 3600, "m": 60, "s": 1, "": 1}
+
+
+def parse_duration(value: str | float | int, name: str = "max_time") -> float:
+    """Seconds of a duration: a number (seconds), or text such as 3600, 90m, 2h, 1h30m, 45s,
+    1.5h, 2d; ValueError, one line naming `name`, for anything else or a duration that is not
+    > 0."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        seconds = float(value)
+    elif isinstance(value, str):
+        text = value.strip().lower()
+        parts = _DURATION.findall(text)
+        if not text or "".join(n + u for n, u in parts) != text.replace(" ", "") or (
+                len(parts) > 1 and any(u == "" for _, u in parts)):
+            raise ValueError(f"{name} must be a duration such as 3600 (seconds), 90m, 2h or "
+                             f"1h30m, got {value!r:.40}")
+        seconds = sum(float(n) * _UNIT[u] for n, u in parts)
+    else:
+        raise ValueError(f"{name} must be a duration such as 3600 (seconds), 90m or 2h, got "
+                         f"{value!r:.40}")
+    if not (seconds > 0 and math.isfinite(seconds)):
+        raise ValueError(f"{name} must be a duration > 0, got {value!r:.40}")
+    return seconds
+
+
+@dataclass
+class Bounds:
+    """Where a run stops before its last generation, both optional: `max_time` seconds of the
+    run loop (`clock`; checked after each generation, so the generation that crosses it ends
+    first) and `patience`, generations without a better best team (the run's best team, found
+    at its "generation", not improved in the last `patience` generations). After the run,
+    `reason` says which stopped it ("max_time", "patience"; None: neither) and `elapsed` how
+    long the loop ran."""
+
+    max_time: float | None = None
+    patience: int | None = None
+    reason: str | None = None
+    elapsed: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.patience is not None and (not isinstance(self.patience, int)
+                                          or isinstance(self.patience, bool)
+                                          or self.patience < 1):
+            raise ValueError(f"patience must be an integer >= 1, got {self.patience!r:.40}")
+        if self.max_time is not None:
+            self.max_time = parse_duration(self.max_time)
+
+    def reached(self, ev: Evolution, elapsed: float) -> str | None:
+        """The bound `ev`'s state, `elapsed` seconds into the run, has reached (None: none; a
+        run at its last generation has reached none: it ends)."""
+        if ev.done:
+            return None
+        if self.patience is not None and ev.state.best is not None:
+            last = ev.state.generation - 1
+            if last - int(ev.state.best["generation"]) >= self.patience:
+                return "patience"
+        if self.max_time is not None and elapsed >= self.max_time:
+            return "max_time"
+        return None
+
+    def record(self, ev: Evolution) -> dict:
+        """summary.json's "stop" of a run this stopped."""
+        out: dict = {"reason": self.reason, "generation": ev.state.generation}
+        if self.reason == "patience":
+            out.update(patience=self.patience, best_generation=int(ev.state.best["generation"]))
+        else:
+            out.update(max_time_seconds=self.max_time, elapsed_seconds=round(self.elapsed, 3))
+        return out
+
+
 def run(ev: Evolution, run_dir: Path | None, reporters: Iterable[Reporter],
-        on_interrupt: Callable[[Path], None] | None = None) -> Evolution:
+        on_interrupt: Callable[[Path], None] | None = None,
+        bounds: Bounds | None = None) -> Evolution:
     """Run generations until the configured total.
 
     Each generation is one step that Ctrl-C or SIGTERM cannot split (`deferred_signals`): the
@@ -200,7 +347,12 @@ def run(ev: Evolution, run_dir: Path | None, reporters: Iterable[Reporter],
     recorded is dropped: a resume computes it again, identically), its checkpoint written if the
     file does not hold it yet, and KeyboardInterrupt re-raised; the `CheckpointReporter`'s
     `saved` then names the generation the file holds. `run_dir` None: a run in memory, which
-    writes nothing, holds no signal and is interrupted where it stands."""
+    writes nothing, holds no signal and is interrupted where it stands.
+
+    `bounds` (`Bounds`): a run that reaches one stops cleanly after the generation that reached
+    it, as it ends: its checkpoint written (resume continues it as if it had not stopped), the
+    "stop" of summary.json recorded (reporters with an `on_stop(ev, record)`), every reporter's
+    on_end called; `bounds.reason` says why."""
     reporters = list(reporters)
     on_disk = run_dir is not None
     hold = deferred_signals if on_disk else nullcontext
@@ -209,6 +361,7 @@ def run(ev: Evolution, run_dir: Path | None, reporters: Iterable[Reporter],
     cut = marks[-1] + 1 if marks else len(reporters)
     step_reporters, after = reporters[:cut], reporters[cut:]
     recorded = ev.state                    # the last state whose records are all written
+    t0 = clock()
     try:
         with hold():
             for r in reporters:
@@ -221,8 +374,21 @@ def run(ev: Evolution, run_dir: Path | None, reporters: Iterable[Reporter],
                 for r in step_reporters:
                     r.on_generation(ev, result)
                 recorded = ev.state
+                reason = None
+                if bounds is not None:
+                    bounds.elapsed = clock() - t0
+                    reason = bounds.reached(ev, bounds.elapsed)
+                if reason is not None:
+                    bounds.reason = reason
+                    if saver is not None:
+                        saver.save_state(ev)
+                    for r in reporters:
+                        if callable(getattr(r, "on_stop", None)):
+                            r.on_stop(ev, bounds.record(ev))
             for r in after:
                 r.on_generation(ev, result)
+            if reason is not None:
+                break
         for r in reporters:
             r.on_end(ev)
     except BaseException as e:

@@ -25,14 +25,33 @@ class SummaryReporter:
         self.run_dir = Path(run_dir)
         self.path = self.run_dir / SUMMARY_FILE
         self.teams = self.run_dir / TEAMS_FILE
+        self.parent: dict | None = None
+        self.last: dict | None = None
 
     def on_start(self, ev: Evolution) -> None:
+        from .runconfig import read_parent
+
         prepare_run_dir(self.run_dir)       # no leftover temporary files, no cut-off line
         trim_teams(self.run_dir, ev.state.generation)
+        self.parent = read_parent(self.run_dir)
+
+    def _write(self) -> None:
+        atomic_write_bytes(self.path, json.dumps(self.last, indent=2).encode())
 
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
         append_line(self.teams, json.dumps(records.team_line(result)))
-        atomic_write_bytes(self.path, json.dumps(records.summary(ev, result), indent=2).encode())
+        self.last = records.summary(ev, result)
+        if self.parent is not None:          # a run branched from another (`evolve --from`)
+            self.last["parent"] = self.parent
+        if ev.done:
+            self.last["stop"] = {"reason": "generations", "generation": ev.state.generation}
+        self._write()
+
+    def on_stop(self, ev: Evolution, record: dict) -> None:
+        """A bound stopped the run (`session.Bounds`): summary.json says which ("stop")."""
+        if self.last is not None:
+            self.last["stop"] = records.json_clean(record)
+            self._write()
 
     def on_end(self, ev: Evolution) -> None:
         pass

@@ -220,7 +220,8 @@ def print_shard_traffic(evaluator) -> None:
 def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
              render_every: int = 0, saved: int | None = None,
              again: str | None = None, figure_every: int = 50,
-             where: Where | None = None, wandb_project: str | None = None) -> None:
+             where: Where | None = None, wandb_project: str | None = None,
+             snapshot_every: int = 0, bounds: "session.Bounds | None" = None) -> None:
     """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints
     (and Weights & Biases with `wandb_project`).
     Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
@@ -228,13 +229,14 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     TensorBoard) ends the run with a one-line error that names the last checkpointed generation
     and how to continue (exit 2); the checkpoint on disk is the last complete one. `saved` is the
     generation of the checkpoint the run resumed from; `again` is the command to continue with
-    (default: swarmcode-torch evolve --resume RUN_DIR)."""
+    (default: swarmcode-torch evolve --resume RUN_DIR); `snapshot_every`, `bounds`: as
+    `session.file_reporters` and `session.run` take them."""
     from .distributed import ShardError
     from .files import RunError, os_error_text
 
     again = again or f"swarmcode-torch evolve --resume {run_dir}"
     writers = session.file_reporters(run_dir, checkpoint_every, render_every, figure_every,
-                                     saved=saved)
+                                     saved=saved, snapshot_every=snapshot_every)
     checkpoints = writers[-1]
     extra: list = []
     if wandb_project is not None:            # after the checkpoints: outside the step
@@ -251,7 +253,7 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
         reporters = [progress, *writers, *extra]
         with quiet_thread_os_errors():
             with terminate_as_interrupt() as terminated:
-                session.run(ev, run_dir, reporters)
+                session.run(ev, run_dir, reporters, bounds=bounds)
     except KeyboardInterrupt:
         with deferred_signals(deliver=False):      # the writers close whole (TensorBoard's thread)
             if progress is not None:

@@ -178,13 +178,15 @@ def catalog_tables(cat: Catalog) -> dict[str, dict]:
 
 def catalog_toml_lines(cat: Catalog, prefix: str = "") -> list[str]:
     """The TOML lines of a catalog's tables ([base], ... or, with `prefix` "hardware.",
-    [hardware.base], ... for a scenario's inline catalog); they parse back to `cat`."""
-    lines: list[str] = []
-    for section, table in catalog_tables(cat).items():
-        lines += ["", f"[{prefix}{section}]"]
-        lines += [f"{k} = {[float(x) for x in v] if isinstance(v, list) else float(v)!r}"
-                  for k, v in table.items()]
-    return lines
+    [hardware.base], ... for a scenario's inline catalog), written by tomli-w; they parse back
+    to `cat`."""
+    import tomli_w
+
+    tables: dict = {s: {k: [float(x) for x in v] if isinstance(v, list) else float(v)
+                        for k, v in t.items()} for s, t in catalog_tables(cat).items()}
+    for part in reversed([p for p in prefix.split(".") if p]):
+        tables = {part: tables}
+    return [""] + tomli_w.dumps(tables).splitlines()
 
 
 def default_catalog_bytes() -> bytes:
