@@ -74,6 +74,25 @@ def test_substitute_rule_demotes_the_lower_ranked_of_a_species_and_its_nearest_p
     assert seen == [[True] * 3, [True, True, False], [True, True, False]]
 
 
+def test_a_gated_partner_whose_nearest_partner_is_another_design_is_not_a_substitute():
+    """Demotion needs the nearest partner's design within δ (`near`): the species gated at or
+    above one half is demoted when its nearest partner is near, never when it is far (a niche
+    holder whose job does not pay yet, as early in a run)."""
+    from swarmcode_torch.coevo.admission import SUBSTITUTE, nearest_partner
+
+    dd = torch.tensor([[0.0, 0.9], [0.9, 0.0]])          # two far designs
+    nearest = nearest_partner(dd, torch.tensor([True, True]))
+    ids = torch.tensor([0, 1])
+    species = torch.tensor([0, 0, 0, 1, 1])              # 0 the larger, 1 gated every time
+    gated = torch.tensor([False, False, False, True, True])
+    for near, want in ((torch.tensor([False, False]), [True, True]),
+                       (torch.tensor([True, True]), [True, False])):
+        adm = Admission.empty().grow(2, True)
+        for _ in range(SUBSTITUTE.clash_generations + 1):
+            adm = update(adm, species, ids, gated, nearest, SUBSTITUTE, near=near)
+        assert adm.partner.tolist() == want, near
+
+
 def test_a_checkpoint_with_a_damaged_admission_state_is_refused():
     from dataclasses import replace
 

@@ -15,9 +15,13 @@ focal's baseline re-fills its slots from its nearest partner design
   replaces at no loss, stays gated and is never admitted; a species that does what no partner
   does beats its baseline and is admitted.
 - **Demotion.** A partner whose gated share has been above `clash_above` for
-  `clash_generations` generations in a row is a substitute of its nearest partner, and the
-  lower-ranked of the two (the smaller, then the younger) stops being a partner and is on
-  probation again; at most one a generation.
+  `clash_generations` generations in a row is a substitute of its nearest partner when that
+  partner's design is within the speciation threshold δ of its own (the hardware terms of D:
+  the two would be one species but for their tags and trees), and the lower-ranked of the two
+  (the smaller, then the younger) stops being a partner and is on probation again; at most one
+  a generation. A partner gated as often whose nearest partner is a different design is not a
+  substitute: it does a job no partner does that does not pay yet (early in a run most
+  species are gated half the time), and demoting it would lose its niche.
 
 The state is kept by species id (`Admission`), saved in checkpoints.
 """
@@ -118,12 +122,13 @@ def nearest_partner(design_distance: Tensor, allowed: Tensor) -> Tensor:
 
 
 def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor, nearest: Tensor,
-           params: AdmissionParams = AdmissionParams()) -> Admission:
+           params: AdmissionParams = AdmissionParams(), near: Tensor | None = None) -> Admission:
     """The admission after one evaluation: species [P] ids, proto_ids [K] (the species, in
     order of founding), gated [P] bool (whose focal team did not beat its baseline), nearest [K]
-    long (`nearest_partner`, the partner each species' baseline was re-filled from): a partner
-    above `clash_above` for `clash_generations` is a substitute of its nearest partner, and the
-    lower-ranked of the two is demoted."""
+    long (`nearest_partner`, the partner each species' baseline was re-filled from), near [K]
+    bool (its design is within δ of that partner's; None: every pair is near): a partner above
+    `clash_above` for `clash_generations` whose nearest partner is near is a substitute of it,
+    and the lower-ranked of the two is demoted."""
     k = proto_ids.numel()
     if k == 0:
         return adm
@@ -140,6 +145,8 @@ def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor, ne
     demote = torch.zeros(k, dtype=torch.bool, device=species.device)
     rank = size * (proto_ids.max() + 1) - proto_ids          # higher: larger, then older
     pair = clashing & (nearest >= 0)
+    if near is not None:
+        pair = pair & near
     if bool(pair.any()):
         other = nearest.clamp_min(0)
         loser = torch.where(rank[other] < rank, other, torch.arange(k, device=rank.device))

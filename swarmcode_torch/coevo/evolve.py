@@ -275,8 +275,11 @@ def generation(state: EvolutionState, ctx: Context,
                    proto_distance=designs_d, phenotype=ph)
     if adm is not None:
         gated = ~beats_baseline(res.focal, res.baseline)
-        adm = admission.update(adm, sp.species, sp.proto_ids, gated,
-                               admission.nearest_partner(designs_d, allowed), admission.SUBSTITUTE)
+        nearest = admission.nearest_partner(designs_d, allowed)
+        # a substitute pair: the nearest partner's design within δ of the species' own
+        near = designs_d.gather(1, nearest.clamp_min(0)[:, None]).squeeze(1) <= ctx.speciation.delta
+        adm = admission.update(adm, sp.species, sp.proto_ids, gated, nearest,
+                               admission.SUBSTITUTE, near=near)
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
     _call(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
