@@ -290,3 +290,37 @@ def test_sigterm_writes_the_last_finished_generation(tmp_path):
     assert 1 <= gen < 100000
     r = invoke("evolve", "--resume", run, "--generations", gen + 1)
     assert r.exit_code == 0, r.output
+
+
+def _entry_point_command() -> list[str]:
+    """The `swarmcode-torch` script as pyproject.toml declares it, run by this interpreter (the
+    installed script may belong to another checkout)."""
+    import sys
+    import tomllib
+
+    spec = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    module, func = spec["project"]["scripts"]["swarmcode-torch"].split(":")
+    return [sys.executable, "-c", f"import sys; sys.argv[0] = 'swarmcode-torch'; "
+                                  f"from {module} import {func}; {func}()"]
+
+
+@pytest.mark.parametrize("entry", ["script", "module"])
+def test_no_arguments_print_the_top_level_help_as_click_does(entry):
+    # with no command: the help --help prints, on stderr, exit 2 (click's no-args convention)
+    import subprocess
+    import sys
+
+    cmd = _entry_point_command() if entry == "script" else [sys.executable, "-m", "swarmcode_torch"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    helped = subprocess.run([*cmd, "--help"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and helped.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr and r.stdout == ""
+    assert r.stderr.strip() == helped.stdout.strip()
+    for command in ("evolve", "sweep", "inspect", "replay", "dynamics", "scenarios"):
+        assert f"  {command} " in r.stderr
+
+
+def test_no_arguments_print_the_help_through_the_runner():
+    r = runner.invoke(app, [])
+    assert r.exit_code == 2
+    assert "Usage:" in r.stderr and "Commands:" in r.stderr and "evolve" in r.stderr

@@ -44,9 +44,9 @@ class _OneLineErrors(TyperGroup):
                     sys.exit(1)
                 raise
             if type(e).__name__ == "NoArgsIsHelpError":
-                from typer import rich_utils
-
-                rich_utils.rich_format_error(e)
+                # no command given: the help that --help prints, on stderr with exit 2, as
+                # click does for a group called without arguments (a usage error)
+                e.show()
                 sys.exit(e.exit_code)
             ctx = getattr(e, "ctx", None)
             hint = f" (see: {ctx.command_path} --help)" if ctx is not None else ""
