@@ -171,10 +171,14 @@ def evolve(
                         figure_every=figure_every, where=where)
                 if shards is not None:
                     print_shard_traffic(ev.ctx.evaluator)
-            console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}")
+            console.print(f"Done: {ev.state.generation} generations in {escape(str(run_dir))}",
+                          soft_wrap=True)
             print_team(run_dir)
-            console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard "
-                          f"--logdir {run_dir.parent}", markup=False, highlight=False)
+            # commands and paths are never wrapped (soft_wrap): each stays one line to copy
+            console.print(f"Inspect: swarmcode-torch inspect {run_dir}", markup=False,
+                          highlight=False, soft_wrap=True)
+            console.print(f"Watch: tensorboard --logdir {run_dir.parent}", markup=False,
+                          highlight=False, soft_wrap=True)
         except KeyboardInterrupt:
             stopped(where, bool(terminated))
 
@@ -229,7 +233,7 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
                 return None, resume, None
             ev = start.ev
             console.print(f"Resuming [bold]{escape(str(resume))}[/] at generation "
-                          f"{ev.state.generation} of {ev.cfg.generations}")
+                          f"{ev.state.generation} of {ev.cfg.generations}", soft_wrap=True)
             return ev, resume, start.saved
         cfg = session.resolve_config(preset, settings, generations=generations, device=device,
                                      **given)
@@ -251,7 +255,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
         ev, run_dir = start.ev, start.run_dir
         console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
                       f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
-                      f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})")
+                      f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})",
+                      soft_wrap=True)
         return ev, run_dir, None
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
@@ -413,7 +418,8 @@ def replay(
     console.print(f"Wrote {path}: {'the focal team: ' if html else ''}"
                   f"{m['delivered_individual']:.0f} individual and "
                   f"{m['delivered_collab']:.0f} collaborative deliveries, "
-                  f"{m['energy_used']:.1f}% energy used", markup=False, highlight=False)
+                  f"{m['energy_used']:.1f}% energy used", markup=False, highlight=False,
+                  soft_wrap=True)
 
 
 def main() -> None:

@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                            TimeRemainingColumn)
-from rich.table import Table
+from rich.table import Column, Table
 
 from . import session
 from .signals import TERMINATED, deferred_signals, terminate_as_interrupt
@@ -72,17 +72,43 @@ def os_fail(e: OSError, doing: str) -> None:
     fail(f"{doing}: {os_error_text(e)}")
 
 
-class ProgressReporter:
-    """Rich progress bar on a terminal; a plain line every few generations otherwise."""
+#: Below this many columns the progress line drops its bar and elapsed time.
+NARROW = 60
 
-    def __init__(self, total: int, start: int, every: int):
-        self.tty = sys.stdout.isatty()
+
+class _FittedProgress(Progress):
+    """A progress line that fits the window: the essential fields first (done count, time
+    left), then the bar and elapsed time when there is room, then the generation's figures, cut
+    with an ellipsis at the right edge. The columns are chosen at each refresh, so a resized
+    window keeps the count and the time left in view."""
+
+    def __init__(self, console: Console):
+        self.wide = [TextColumn("done"), MofNCompleteColumn(), TextColumn("left"),
+                     TimeRemainingColumn(), BarColumn(bar_width=20), TimeElapsedColumn()]
+        self.narrow = self.wide[:4]
+        text = TextColumn("{task.description}",
+                          table_column=Column(no_wrap=True, overflow="ellipsis", ratio=1))
+        self.wide.append(text)
+        self.narrow.append(text)
+        super().__init__(*self.wide, console=console, expand=True)
+
+    def make_tasks_table(self, tasks):
+        live = getattr(self, "live", None)         # None while Progress is being made
+        if live is not None:
+            self.columns = tuple(self.wide if live.console.width >= NARROW else self.narrow)
+        return super().make_tasks_table(tasks)
+
+
+class ProgressReporter:
+    """Rich progress line on a terminal (`out`, default the command line's console); a plain
+    line every few generations otherwise."""
+
+    def __init__(self, total: int, start: int, every: int, out: Console | None = None):
+        self.tty = sys.stdout.isatty() if out is None else out.is_terminal
         self.every = every
         self.bar = None
         if self.tty:
-            self.bar = Progress(TextColumn("done"), MofNCompleteColumn(), BarColumn(),
-                                TextColumn("{task.description}"), TimeElapsedColumn(),
-                                TextColumn("left"), TimeRemainingColumn(), console=console)
+            self.bar = _FittedProgress(out if out is not None else console)
             self.task = self.bar.add_task("", total=total, completed=start)
 
     def on_start(self, ev) -> None:
@@ -202,7 +228,7 @@ def attach_shards(stack: ExitStack, ev, workers: int, cpus: float, address: str 
         fail(str(e))
     where = sorted(set(evaluator.where))
     console.print(f"Evaluation: {workers} shards on Ray actors ({escape('; '.join(where))})",
-                  highlight=False)
+                  highlight=False, soft_wrap=True)
 
 
 def print_shard_traffic(evaluator) -> None:
