@@ -21,7 +21,9 @@ import functools
 import math
 import os
 import re
-from contextlib import ExitStack
+import sys
+import time
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -113,6 +115,85 @@ class _History:
         pass
 
 
+def _interactive(stream) -> bool:
+    """Whether `stream` is shown as it is written: a terminal, or a notebook's output (a Jupyter
+    kernel's stream, which is no terminal but redraws a line on a carriage return)."""
+    if type(stream).__module__.split(".")[0] == "ipykernel":
+        return True
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):       # no isatty, or a closed stream
+        return False
+
+
+def _clock(seconds: float) -> str:
+    s = int(round(seconds))
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+class _Progress:
+    """Reporter: the progress of a run on stdout, one compact line per generation (done count,
+    time left, best fitness, species, the generation's best team, seconds per generation). On a
+    terminal or in a notebook the line is redrawn in place and ended when the run ends;
+    elsewhere (a log) each generation prints its own line."""
+
+    def __init__(self):
+        self.stream = None
+        self.inplace = False
+        self.width = 0
+
+    def on_start(self, ev: Evolution) -> None:
+        self.stream = sys.stdout
+        self.inplace = _interactive(self.stream)
+        self.start, self.first, self.width = time.monotonic(), ev.state.generation, 0
+
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        done, total = ev.state.generation, ev.cfg.generations
+        ran = done - self.first
+        left = (time.monotonic() - self.start) / ran * (total - done) if ran > 0 else None
+        team = result.team
+        line = (f"done {done}/{total}  left {'?' if left is None else _clock(left)}  best "
+                f"{result.best['fitness']:.1f}  species {result.num_species}  team "
+                f"{team['species']} sp, {team['niches']} niches, ${team['cost']:.0f}  "
+                f"{result.seconds:.2f}s/gen")
+        if self.inplace:
+            self.stream.write("\r" + line.ljust(self.width))
+            self.width = max(self.width, len(line))
+        else:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def on_end(self, ev: Evolution) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """End the line redrawn in place (at the end of a run, or when it stops)."""
+        if self.inplace and self.width:
+            self.stream.write("\n")
+            self.stream.flush()
+            self.width = 0
+
+
+def _progress(progress: bool | None) -> "_Progress | None":
+    """The progress reporter of `progress`: None (the default) shows it on a terminal or in a
+    notebook, True always, False never."""
+    if progress is not None and not isinstance(progress, bool):
+        raise TypeError(f"progress must be True, False or None, got {progress!r:.40}")
+    if progress is False or (progress is None and not _interactive(sys.stdout)):
+        return None
+    return _Progress()
+
+
+@contextmanager
+def _closing(shown: "_Progress | None"):
+    """The progress line ended however the run ends (a Ctrl-C, an error)."""
+    try:
+        yield
+    finally:
+        if shown is not None:
+            shown.close()
+
+
 def _check_every(checkpoint_every: int, render_every: int, figure_every: int) -> None:
     for name, v in (("checkpoint_every", checkpoint_every), ("render_every", render_every),
                     ("figure_every", figure_every)):
@@ -202,7 +283,7 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
            render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
            callback: Callable[[GenerationResult], Any] | None = None,
            fitness: ScoreFn | None = None, threads: int | None = None,
-           **settings) -> RunResult:
+           progress: bool | None = None, **settings) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
     config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
@@ -227,6 +308,10 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
         `fitness_function`, summary.json's "fitness"), and `resume` needs it again.
     threads: torch's CPU threads for this process (`sim.runtime.set_threads`; default:
         OMP_NUM_THREADS if set, else the cores less the load average, at least 1).
+    progress: print the run's progress on stdout, a compact line per generation (done count,
+        time left, best fitness, species; redrawn in place on a terminal or in a notebook).
+        None (the default): on a terminal or in a notebook, not when stdout is a file or a
+        pipe; True: always; False: never.
 
     Raises ValueError (`ScenarioError` is one) for an invalid setting or scenario before any
     file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
@@ -235,6 +320,7 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
     _check_every(checkpoint_every, render_every, figure_every)
     reporters = _check_hooks(callback, reporters)
     fitness = _checked_fitness(fitness)
+    shown = _progress(progress)
     set_threads(threads)
     scenario_obj = scenario if isinstance(scenario, Scenario) else None
     if scenario is not None and scenario_obj is None:
@@ -249,7 +335,9 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
         start = session.start_new(stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness)
         reps = [] if logdir is None else \
             file_reporters(start.run_dir, checkpoint_every, render_every, figure_every)
-        session.run(start.ev, start.run_dir, [*reps, history, *reporters])
+        with _closing(shown):
+            session.run(start.ev, start.run_dir,
+                        [*reps, history, *([shown] if shown else []), *reporters])
     return _result(start.ev, start.run_dir, history.rows)
 
 
@@ -277,17 +365,21 @@ def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
 
 def resume(run_dir: str | os.PathLike, generations: int | None = None, device: str | None = None,
            *, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50,
-           reporters: Iterable = (), callback: Callable[[dict], Any] | None = None,
-           fitness: ScoreFn | None = None, threads: int | None = None) -> RunResult:
+           reporters: Iterable = (),
+           callback: Callable[[GenerationResult], Any] | None = None,
+           fitness: ScoreFn | None = None, threads: int | None = None,
+           progress: bool | None = None) -> RunResult:
     """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
     to `generations` in all (default: the run's), on `device` (default: the run's);
     `fitness`: the run's own fitness function, for a run started with one (`evolve`). The
     result's history has every generation: those before the checkpoint from metrics.csv (when
     the run has one), then this part's. RunError (a ValueError) for a directory, config or
-    checkpoint that cannot be used. `threads`: as in `evolve`."""
+    checkpoint that cannot be used. `reporters`, `callback` (called with each generation's
+    `GenerationResult`), `threads` and `progress`: as in `evolve`."""
     _check_every(checkpoint_every, render_every, figure_every)
     reporters = _check_hooks(callback, reporters)
     fitness = _checked_fitness(fitness)
+    shown = _progress(progress)
     if generations is not None and (not isinstance(generations, int)
                                     or isinstance(generations, bool) or generations < 1):
         raise ValueError(f"generations must be an integer >= 1 (the total to extend the run "
@@ -305,7 +397,8 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
             return _result(ev, run_dir, earlier)
         history = _History(callback)
         reps = file_reporters(run_dir, checkpoint_every, render_every, figure_every)
-        session.run(ev, run_dir, [*reps, history, *reporters])
+        with _closing(shown):
+            session.run(ev, run_dir, [*reps, history, *([shown] if shown else []), *reporters])
     return _result(ev, run_dir, earlier + history.rows)
 
 
