@@ -284,7 +284,7 @@ def test_sigterm_writes_the_last_finished_generation(tmp_path):
     finally:
         proc.kill()
     assert proc.returncode == 143, errs
-    assert "Terminated: checkpoint of generation" in errs and "Traceback" not in errs
+    assert "Terminated: checkpoint after generation" in errs and "Traceback" not in errs
     run = only_run(tmp_path)
     gen = torch.load(run / "checkpoint.pt", weights_only=True)["generation"]
     assert 1 <= gen < 100000

@@ -153,10 +153,28 @@ class Where:
         return self.checkpoints.saved if self.checkpoints is not None else self.saved
 
 
+def checkpoint_words(saved: int) -> str:
+    """The checkpoint of a run that has finished `saved` generations (the checkpoint file's
+    "generation" count), named as summary.json, teams.jsonl and TensorBoard number generations:
+    from 0, so that its last finished generation is summary.json's "generation"."""
+    if saved == 0:
+        return "checkpoint before generation 0 (no generation finished yet)"
+    done = "generation 0 finished" if saved == 1 else f"generations 0-{saved - 1} finished"
+    return f"checkpoint after generation {saved - 1} ({done})"
+
+
+def last_checkpoint(saved: int | None) -> str:
+    """'the last checkpoint ...' of a failed run (`checkpoint_words`), or that there is none."""
+    if saved is None:
+        return "no checkpoint was written yet"
+    return f"the last {checkpoint_words(saved)}"
+
+
 def stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | None,
                resuming: bool = False) -> str:
-    """The line an interrupted run prints: the generation its checkpoint file really holds, or
-    that there is none."""
+    """The line an interrupted run prints: the checkpoint its file really holds
+    (`checkpoint_words`: the last finished generation, numbered as in summary.json), or that
+    there is none."""
     if run_dir is None:
         return f"{how}: no run directory was made"
     if saved is None:
@@ -164,11 +182,8 @@ def stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | No
             return f"{how} before the run resumed; {run_dir} is unchanged"
         return (f"{how}: no checkpoint was written yet, so {run_dir} holds no generation to "
                 "continue from; start the run again")
-    done = "no generation finished yet" if saved == 0 else \
-        f"generations 0-{saved - 1} recorded"
     again = again or f"swarmcode-torch evolve --resume {run_dir}"
-    return (f"{how}: checkpoint of generation {saved} is in {run_dir} ({done}); continue "
-            f"with: {again}")
+    return f"{how}: {checkpoint_words(saved)} is in {run_dir}; continue with: {again}"
 
 
 def stopped(where: Where, terminated: bool) -> None:
@@ -286,7 +301,7 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
         if progress is not None:
             progress.stop()
         close_writers(reporters)
-        fail(f"{e}; the last checkpoint is of generation {checkpoints.saved}")
+        fail(f"{e}; {last_checkpoint(checkpoints.saved)}")
     except OSError as e:
         progress.stop()
         close_writers(reporters)
@@ -295,15 +310,14 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
         if checkpoints.saved is None:
             fail(f"{what}; no checkpoint was written yet: free space or fix the cause, then start "
                  "the run again")
-        fail(f"{what}; the last checkpoint is of generation {checkpoints.saved} "
+        fail(f"{what}; {last_checkpoint(checkpoints.saved)} "
              f"({run_dir / 'checkpoint.pt'}); free space or fix the cause, then continue with: "
              f"{again}")
     except ShardError as e:
         progress.stop()
         close_writers(reporters)
-        fail(f"{e} after {ev.state.generation} generations; the last checkpoint is of "
-             f"generation {checkpoints.saved} ({run_dir / 'checkpoint.pt'}); continue with: "
-             f"{again}")
+        fail(f"{e} after {ev.state.generation} generations; {last_checkpoint(checkpoints.saved)} "
+             f"({run_dir / 'checkpoint.pt'}); continue with: {again}")
     progress.stop()
 
 
