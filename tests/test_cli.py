@@ -1,6 +1,7 @@
 """The command line: evolve, resume, inspect, scenarios, and every kind of bad input."""
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -324,3 +325,15 @@ def test_no_arguments_print_the_help_through_the_runner():
     r = runner.invoke(app, [])
     assert r.exit_code == 2
     assert "Usage:" in r.stderr and "Commands:" in r.stderr and "evolve" in r.stderr
+
+
+def test_evolve_help_shows_the_defaults_of_scenario_and_generations():
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+
+    default = SwarmCoDeConfig()
+    r = runner.invoke(app, ["evolve", "--help"])
+    assert r.exit_code == 0
+    text = " ".join(r.output.split())              # help wrapped over lines, joined
+    helps = dict(re.findall(r"(--[a-z-]+) <\w+> (.*?)(?= --[a-z])", text))
+    assert f"[default: {default.scenario}]" in helps["--scenario"], helps["--scenario"]
+    assert f"[default: {default.generations};" in helps["--generations"], helps["--generations"]

@@ -19,6 +19,7 @@ from rich.markup import escape
 from typer.core import TyperGroup
 from rich.table import Table
 
+from ..coevo.config import SwarmCoDeConfig
 from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 from . import session
@@ -61,6 +62,10 @@ class _OneLineErrors(TyperGroup):
 app = typer.Typer(add_completion=True, no_args_is_help=True, cls=_OneLineErrors, rich_markup_mode=None,
                   help="SwarmCoDe: co-design the behavior trees and hardware of robot swarms.")
 # off a terminal (logs, pipes) Rich would wrap at 80 columns; tables need a little more
+
+
+#: The defaults --help shows for the options that leave them to the run's config.
+_DEFAULT = SwarmCoDeConfig()
 
 
 class Objective(str, Enum):
@@ -124,10 +129,10 @@ def scenarios() -> None:
 
 @app.command()
 def evolve(
-    scenario: Annotated[Optional[str], typer.Option(help="Built-in scenario name or a scenario .toml file.")] = None,
+    scenario: Annotated[Optional[str], typer.Option(help=f"Built-in scenario name or a scenario .toml file [default: {_DEFAULT.scenario}].")] = None,
     budget: Annotated[Optional[float], typer.Option(help="Fabrication budget in $ (default: none, no penalty).")] = None,
     objective: Annotated[Optional[Objective], typer.Option(help="fitness, or roi: fitness / team cost [default: fitness].")] = None,
-    generations: Annotated[Optional[int], typer.Option(help="Total generations (with --resume: extend to this many).")] = None,
+    generations: Annotated[Optional[int], typer.Option(help=f"Total generations [default: {_DEFAULT.generations}; with --resume: the run's, or extend to this many].")] = None,
     population: Annotated[Optional[int], typer.Option(help="Individuals in the population [default: 100].")] = None,
     swarm_size: Annotated[Optional[int], typer.Option(help="Robots per team [default: the scenario's].")] = None,
     trials: Annotated[Optional[int], typer.Option(help="Random environments per team evaluation [default: 3].")] = None,
@@ -269,8 +274,8 @@ def sweep(
     budgets: Annotated[str, typer.Option(help="Comma-separated budgets in $.")] = "2500,3000,4000,5000,6000,8000",
     seeds: Annotated[str, typer.Option(help="Comma-separated seeds; one run per budget and seed.")] = "0",
     objective: Annotated[Optional[Objective], typer.Option(help="fitness, or roi: fitness / team cost [default: fitness].")] = None,
-    scenario: Annotated[Optional[str], typer.Option(help="Scenario [default: budget].")] = None,
-    generations: Annotated[Optional[int], typer.Option(help="Generations per run [default: 500].")] = None,
+    scenario: Annotated[Optional[str], typer.Option(help=f"Scenario [default: {_DEFAULT.scenario}].")] = None,
+    generations: Annotated[Optional[int], typer.Option(help=f"Generations per run [default: {_DEFAULT.generations}].")] = None,
     population: Annotated[Optional[int], typer.Option(help="Population [default: 100].")] = None,
     swarm_size: Annotated[Optional[int], typer.Option(help="Robots per team [default: the scenario's].")] = None,
     trials: Annotated[Optional[int], typer.Option(help="Environments per evaluation [default: 3].")] = None,
