@@ -82,8 +82,8 @@ class RunResult:
             import pandas as pd
         except ImportError:
             raise ImportError("RunResult.to_pandas() needs pandas: pip install pandas (or "
-                              "pip install 'swarmcode-torch[pandas]'); RunResult.history holds "
-                              "the same records as a list of dicts") from None
+                              "pip install -e '.[pandas]' in the source tree); RunResult.history "
+                              "holds the same records as a list of dicts") from None
         return pd.DataFrame(self.history).set_index("generation")
 
     def __repr__(self) -> str:
@@ -291,8 +291,8 @@ def evolve(config: SwarmCoDeConfig | None = None, *, scenario: str | os.PathLike
         nothing beyond it); `settings` replace its keys: `generations=20, population=30, seed=0,
         budget=4000.0, delta=0.5, ...` (any key of SwarmCoDeConfig / a run's config.toml).
     scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
-    logdir: where the run directory is created (named `<scenario>__<seed>__<time>`, as by the
-        CLI); None: run in memory, write no file.
+    logdir: where the run directory is created (named as by the CLI,
+        `SCENARIO[__bBUDGET][__OBJECTIVE]__SEED__TIME`); None: run in memory, write no file.
     checkpoint_every, render_every, figure_every: as `swarmcode-torch evolve`'s options
         (generations between checkpoints, TensorBoard replay images (0: never), composition
         figures).
