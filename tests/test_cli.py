@@ -222,6 +222,19 @@ def test_sweep_writes_table_iii_and_resumes(tmp_path):
     assert (out / "table.csv").read_text().count("\n") == 3 and (out / "budget.png").is_file()
     r = invoke(*args)
     assert r.exit_code == 0 and r.output.count("already done") == 2
+    # inspect on the sweep directory: its table, where it is, and its runs
+    r = invoke("inspect", out)
+    assert r.exit_code == 0, r.output
+    lines = r.output.splitlines()
+    assert lines[:len(table)] == table
+    assert f"Table: {out / 'table.md'}, {out / 'table.csv'}" in lines
+    assert "  budget-1500_seed-0: 1/1 generations" in lines
+    assert "  budget-3000_seed-0: 1/1 generations" in lines
+    assert f"Inspect a run: swarmcode-torch inspect {out / 'budget-1500_seed-0'}" in lines
+    (out / "table.md").unlink()                     # a sweep that has not finished
+    r = invoke("inspect", out)
+    assert r.exit_code == 0 and "without a table yet" in r.output, r.output
+    assert "  budget-3000_seed-0: 1/1 generations" in r.output.splitlines()
     assert_clean_error(invoke("sweep", "--budgets", "10,abc"), "--budgets")
     assert_clean_error(invoke("sweep", "--budgets", "-1", "--out", tmp_path / "x"), "--budget")
 

@@ -303,11 +303,14 @@ def sweep(
               threads)
 
 @app.command()
-def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")]) -> None:
-    """Show the best team of a run: robots per design, hardware, cost and behavior trees."""
+def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory (or a sweep directory: its table and runs).")]) -> None:
+    """Show the best team of a run: robots per design, hardware, cost and behavior trees. Given
+    a sweep directory, show its table and list its runs."""
     run_dir = check_path(run_dir, "RUN_DIR")
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
+    if _inspect_sweep(run_dir):
+        return
     designs = print_team(run_dir)
     caps = _capabilities(run_dir, designs)
     for i, d in enumerate(designs):
@@ -321,6 +324,38 @@ def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A ru
         from ..coevo.dynamics import niche_count
         console.print(f"{niche_count(caps[1])} niches (distinct capabilities) in "
                       f"{len({d['species'] for d in designs})} species", highlight=False)
+
+
+def _inspect_sweep(path: Path) -> bool:
+    """Print the table and the runs of a sweep directory; False when `path` is none."""
+    from .files import TABLE_CSV, TABLE_MD, RunError
+    from .sweep import sweep_contents
+
+    try:
+        sweep = sweep_contents(path)
+    except RunError as e:
+        fail(str(e))
+    except OSError as e:
+        os_fail(e, f"{path} cannot be read")
+    if sweep is None:
+        return False
+    if sweep.table is not None:
+        console.print(sweep.table, markup=False, highlight=False, soft_wrap=True)
+        console.print(f"Table: {path / TABLE_MD}, {path / TABLE_CSV}", markup=False,
+                      highlight=False, soft_wrap=True)
+    else:
+        console.print(f"{path} is a sweep without a table yet: run its sweep command again with "
+                      f"--out {path} to finish it and write the table", markup=False,
+                      highlight=False, soft_wrap=True)
+    console.print(f"Runs ({len(sweep.runs)}):", highlight=False)
+    for name, done, total in sweep.runs:
+        state = ("no generation recorded" if done is None else
+                 f"{done}/{total} generations" if total is not None else f"{done} generations")
+        console.print(f"  {name}: {state}", markup=False, highlight=False, soft_wrap=True)
+    if sweep.runs:
+        console.print(f"Inspect a run: swarmcode-torch inspect {path / sweep.runs[0][0]}",
+                      markup=False, highlight=False, soft_wrap=True)
+    return True
 
 
 def _capabilities(run_dir: Path, designs: list[dict]):

@@ -13,8 +13,8 @@ from ..coevo.config import SwarmCoDeConfig
 from ..coevo.dynamics import mean_std
 from ..sim.scenario import Scenario
 from .checkpoints import load_checkpoint, load_run
-from .files import (BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, TABLE_CSV, TABLE_MD,
-                    RunError, atomic_write_bytes)
+from .files import (BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, SUMMARY_FILE,
+                    TABLE_CSV, TABLE_MD, RunError, atomic_write_bytes, read_text)
 from .runconfig import config_differences, read_config, run_scenario
 from .summary import read_summary
 
@@ -73,6 +73,41 @@ def plan_run(out: Path, cfg: SwarmCoDeConfig, scenario: Scenario) -> PlannedRun:
         return planned("new")
     done = load_checkpoint(run_dir)["generation"]
     return planned("done" if done >= cfg.generations else "resume", done)
+
+
+@dataclass(frozen=True)
+class SweepContents:
+    """A sweep directory as it stands: its table (table.md's text; None before the sweep has
+    written one) and its runs, each (name, generations recorded, generations asked for; None
+    where its summary.json is missing or cannot be read)."""
+
+    table: str | None
+    runs: list[tuple[str, int | None, int | None]]
+
+
+def sweep_contents(path: Path) -> SweepContents | None:
+    """The table and runs of the sweep directory `path`; None when it is no sweep directory (a
+    run directory, or a directory with neither a table nor runs). RunError for a table that
+    cannot be read."""
+    path = Path(path)
+    if (path / CONFIG_FILE).exists() or (path / SUMMARY_FILE).exists():
+        return None                                    # a run directory
+    runs = []
+    for d in sorted(p for p in path.iterdir() if p.is_dir() and not p.is_symlink()):
+        if not (d / CONFIG_FILE).is_file():
+            continue
+        try:
+            s = read_summary(d, figures=False)
+            done = s.get("generation")
+            total = s.get("generations")
+            runs.append((d.name, done + 1 if isinstance(done, int) else None,
+                         total if isinstance(total, int) else None))
+        except RunError:
+            runs.append((d.name, None, None))
+    has_table = (path / TABLE_MD).is_file()
+    if not runs and not has_table:
+        return None
+    return SweepContents(read_text(path / TABLE_MD) if has_table else None, runs)
 
 
 def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
