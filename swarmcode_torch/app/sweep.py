@@ -164,23 +164,26 @@ def csv_text(rows: list[dict]) -> str:
 
 
 def plot(rows: list[dict], path: Path) -> None:
-    """Best fitness and number of species against budget (errorbars: std over seeds), drawn on a
-    `matplotlib.figure.Figure` (no pyplot, no backend change) and written as a PNG."""
+    """Best fitness and number of species against budget (errorbars: std over seeds), in two
+    panels that share the budget axis (on twin axes one line could hide the other), drawn on a
+    `matplotlib.figure.Figure` (no pyplot, no backend change) and written as a PNG. The species
+    panel has integer ticks: it counts species."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     rows = [r for r in rows if r["budget"] is not None and r["best_fitness"] is not None
             and r["num_species"] is not None]
     x = [r["budget"] for r in rows]
-    fig = Figure(figsize=(6, 3.6))
-    ax1 = fig.subplots()
-    ax1.errorbar(x, [r["best_fitness"] for r in rows], [r["best_fitness_std"] for r in rows],
-                 marker="o", color="tab:blue", capsize=3)
-    ax1.set_xlabel("budget ($)")
-    ax1.set_ylabel("best fitness", color="tab:blue")
-    ax2 = ax1.twinx()
-    ax2.errorbar(x, [r["num_species"] for r in rows], [r["num_species_std"] for r in rows],
-                 marker="s", color="tab:orange", capsize=3)
-    ax2.set_ylabel("species in the best team", color="tab:orange")
+    fig = Figure(figsize=(6, 5))
+    fit_ax, species_ax = fig.subplots(2, 1, sharex=True)
+    fit_ax.errorbar(x, [r["best_fitness"] for r in rows], [r["best_fitness_std"] for r in rows],
+                    marker="o", color="tab:blue", capsize=3)
+    fit_ax.set_ylabel("best fitness")
+    species_ax.errorbar(x, [r["num_species"] for r in rows], [r["num_species_std"] for r in rows],
+                        marker="s", color="tab:orange", capsize=3)
+    species_ax.set_ylabel("species in the best team")
+    species_ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    species_ax.set_xlabel("budget ($)")
     fig.tight_layout()
     fig.savefig(path, dpi=120, format="png")
 
