@@ -1,6 +1,7 @@
 """The command line: evolve, resume, inspect, scenarios, and every kind of bad input."""
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -221,6 +222,19 @@ def test_sweep_writes_table_iii_and_resumes(tmp_path):
     assert (out / "table.csv").read_text().count("\n") == 3 and (out / "budget.png").is_file()
     r = invoke(*args)
     assert r.exit_code == 0 and r.output.count("already done") == 2
+    # inspect on the sweep directory: its table, where it is, and its runs
+    r = invoke("inspect", out)
+    assert r.exit_code == 0, r.output
+    lines = r.output.splitlines()
+    assert lines[:len(table)] == table
+    assert f"Table: {out / 'table.md'}, {out / 'table.csv'}" in lines
+    assert "  budget-1500_seed-0: 1/1 generations" in lines
+    assert "  budget-3000_seed-0: 1/1 generations" in lines
+    assert f"Inspect a run: swarmcode-torch inspect {out / 'budget-1500_seed-0'}" in lines
+    (out / "table.md").unlink()                     # a sweep that has not finished
+    r = invoke("inspect", out)
+    assert r.exit_code == 0 and "without a table yet" in r.output, r.output
+    assert "  budget-3000_seed-0: 1/1 generations" in r.output.splitlines()
     assert_clean_error(invoke("sweep", "--budgets", "10,abc"), "--budgets")
     assert_clean_error(invoke("sweep", "--budgets", "-1", "--out", tmp_path / "x"), "--budget")
 
@@ -284,9 +298,55 @@ def test_sigterm_writes_the_last_finished_generation(tmp_path):
     finally:
         proc.kill()
     assert proc.returncode == 143, errs
-    assert "Terminated: checkpoint of generation" in errs and "Traceback" not in errs
+    assert "Terminated: checkpoint after generation" in errs and "Traceback" not in errs
     run = only_run(tmp_path)
     gen = torch.load(run / "checkpoint.pt", weights_only=True)["generation"]
     assert 1 <= gen < 100000
     r = invoke("evolve", "--resume", run, "--generations", gen + 1)
     assert r.exit_code == 0, r.output
+
+
+def _entry_point_command() -> list[str]:
+    """The `swarmcode-torch` script as pyproject.toml declares it, run by this interpreter (the
+    installed script may belong to another checkout)."""
+    import sys
+    import tomllib
+
+    spec = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    module, func = spec["project"]["scripts"]["swarmcode-torch"].split(":")
+    return [sys.executable, "-c", f"import sys; sys.argv[0] = 'swarmcode-torch'; "
+                                  f"from {module} import {func}; {func}()"]
+
+
+@pytest.mark.parametrize("entry", ["script", "module"])
+def test_no_arguments_print_the_top_level_help_as_click_does(entry):
+    # with no command: the help --help prints, on stderr, exit 2 (click's no-args convention)
+    import subprocess
+    import sys
+
+    cmd = _entry_point_command() if entry == "script" else [sys.executable, "-m", "swarmcode_torch"]
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    helped = subprocess.run([*cmd, "--help"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and helped.returncode == 0, r.stderr
+    assert "Traceback" not in r.stderr and r.stdout == ""
+    assert r.stderr.strip() == helped.stdout.strip()
+    for command in ("evolve", "sweep", "inspect", "replay", "dynamics", "scenarios"):
+        assert f"  {command} " in r.stderr
+
+
+def test_no_arguments_print_the_help_through_the_runner():
+    r = runner.invoke(app, [])
+    assert r.exit_code == 2
+    assert "Usage:" in r.stderr and "Commands:" in r.stderr and "evolve" in r.stderr
+
+
+def test_evolve_help_shows_the_defaults_of_scenario_and_generations():
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+
+    default = SwarmCoDeConfig()
+    r = runner.invoke(app, ["evolve", "--help"])
+    assert r.exit_code == 0
+    text = " ".join(r.output.split())              # help wrapped over lines, joined
+    helps = dict(re.findall(r"(--[a-z-]+) <\w+> (.*?)(?= --[a-z])", text))
+    assert f"[default: {default.scenario}]" in helps["--scenario"], helps["--scenario"]
+    assert f"[default: {default.generations};" in helps["--generations"], helps["--generations"]

@@ -119,3 +119,29 @@ def test_examples_custom_fitness_by_weights_sets_the_table_iv_keys(tmp_path, mon
     (run_dir,) = [d for d in tmp_path.iterdir() if d.is_dir()]
     config = (run_dir / "config.toml").read_text()
     assert "w_pickup = 0.0" in config and "w_closeness = 0.0" in config
+
+
+def test_resume_with_another_fitness_function_is_refused_and_changes_nothing(tmp_path):
+    first = sc.evolve(generations=1, logdir=tmp_path, checkpoint_every=1, render_every=0,
+                      fitness=deliveries, **TINY)
+    run = first.run_dir
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    with pytest.raises(RunError) as e:
+        sc.resume(run, generations=2, render_every=0, fitness=doubled)
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert "test_custom_fitness.deliveries" in msg and "test_custom_fitness.doubled" in msg
+    after = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    assert after == before                          # config.toml still names deliveries
+    assert sc.resume(run, generations=2, render_every=0, fitness=deliveries).generations == 2
+
+
+def test_a_function_run_as_a_script_is_the_same_function_imported():
+    from swarmcode_torch.app.checkpoints import same_function
+
+    assert same_function("mymod.score", "mymod.score")
+    assert same_function("__main__.score", "mymod.score")
+    assert same_function("mymod.score", "__main__.score")
+    assert not same_function("mymod.score", "mymod.other")
+    assert not same_function("__main__.score", "mymod.other")
+    assert not same_function("__main__.score", "__main__.other")

@@ -35,7 +35,7 @@ runner = CliRunner()
 SIZE = ["--scenario", "one-niche", "--population", "7", "--swarm-size", "3", "--trials", "1",
         "--ticks", "6", "--no-compile", "--device", "cpu"]
 SWEEP = ["sweep", *SIZE, "--generations", "2", "--budgets", "300,600"]
-RAY_EXTRA = 'pip install "swarmcode-torch[ray]"'
+RAY_EXTRA = 'pip install -e ".[ray]" in the source tree'
 
 
 def invoke(*args):

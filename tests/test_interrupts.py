@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 import signal
 from pathlib import Path
 
@@ -52,6 +53,17 @@ class StopAt:
         if self.how == "kill":
             raise Killed(what)
         signal.raise_signal(signal.SIGINT if self.how == "int" else signal.SIGTERM)
+
+
+def _named_checkpoint(line: str) -> int:
+    """The last finished generation a stop message names (-1: before generation 0)."""
+    if "checkpoint before generation 0 (no generation finished yet) is in" in line:
+        return -1
+    m = re.search(r"checkpoint after generation (\d+) \(generations? 0(?:-(\d+))? finished\) is in",
+                  line)
+    assert m, line
+    assert int(m.group(2) or 0) == int(m.group(1)), line
+    return int(m.group(1))
 
 
 def _rows(path: Path) -> list[dict]:
@@ -133,7 +145,9 @@ def _interrupted_then_resumed(tmp_path: Path, straight, seed: int, every: int, n
         assert len(line) == 1, r.output
         if (run / "checkpoint.pt").exists():
             held = load_checkpoint(run)["generation"]
-            assert f"checkpoint of generation {held} is in" in line[0], r.output
+            assert _named_checkpoint(line[0]) == held - 1, r.output
+            if held:      # the message numbers generations as summary.json does
+                assert json.loads((run / "summary.json").read_text())["generation"] == held - 1
         else:
             assert "no checkpoint was written yet" in line[0], r.output
     if not (run / "checkpoint.pt").exists():        # stopped before generation 0 was saved
@@ -201,7 +215,8 @@ def test_a_signal_in_the_end_of_run_work_names_the_checkpoint_the_file_holds(tmp
     (run,) = list(tmp_path.iterdir())
     assert r.exit_code == (130 if how == "int" else 143), r.output
     assert load_checkpoint(run)["generation"] == 3
-    assert "checkpoint of generation 3 is in" in r.stderr, r.output
+    assert "checkpoint after generation 2 (generations 0-2 finished) is in" in r.stderr, r.output
+    assert json.loads((run / "summary.json").read_text())["generation"] == 2
     teams = [json.loads(x)["generation"] for x in (run / "teams.jsonl").read_text().splitlines()]
     assert teams == [0, 1, 2]
 
@@ -220,3 +235,30 @@ def test_deferred_signals_hold_ctrl_c_until_the_step_is_done():
         signal.raise_signal(signal.SIGINT)
     assert held == [signal.SIGINT]
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+@pytest.mark.parametrize("how,nth", [("int", 7), ("term", 4), ("int", 6)])
+def test_the_stop_message_names_the_generation_summary_json_holds(tmp_path, how, nth):
+    # Ctrl-C or SIGTERM at a fixed write step: the message numbers the checkpoint's last
+    # generation as summary.json (and teams.jsonl) do, from 0
+    stop = StopAt(nth, how)
+    mp = pytest.MonkeyPatch()
+    mp.setattr(files_module, "interrupt_point", stop)
+    try:
+        r = invoke("evolve", *BASE, "--seed", 0, "--generations", GENERATIONS,
+                   "--checkpoint-every", 1, "--logdir", tmp_path)
+    finally:
+        mp.undo()
+    assert stop.fired and r.exit_code == (130 if how == "int" else 143), r.output
+    (run,) = list(tmp_path.iterdir())
+    held = load_checkpoint(run)["generation"]
+    named = _named_checkpoint(r.stderr)
+    assert named == held - 1
+    summary = run / "summary.json"
+    if held == 0:
+        assert not summary.exists()
+    else:
+        last = json.loads(summary.read_text())["generation"]
+        assert named == last >= 0
+        teams = [json.loads(x)["generation"] for x in (run / "teams.jsonl").read_text().splitlines()]
+        assert teams[-1] == last

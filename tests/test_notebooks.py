@@ -37,9 +37,16 @@ def test_every_notebook_declares_its_figures():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
-def test_notebook_runs(path):
+def test_notebook_runs(path, tmp_path, monkeypatch):
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")
+    # the kernel's temporary folder (TMPDIR, which its `tempfile` reads): empty at the end
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    # the sweep notebook makes its own small sweep (in a temporary folder) when given none
+    monkeypatch.setenv("SWARMCODE_SWEEP", str(tmp_path / "no-sweep"))
+    monkeypatch.delenv("SWARMCODE_RUN", raising=False)
     nb = nbformat.read(path, as_version=4)
     nbclient.NotebookClient(nb, timeout=600, kernel_name="python3",
                             resources={"metadata": {"path": str(path.parent)}}).execute()
@@ -51,3 +58,13 @@ def test_notebook_runs(path):
         for c in cells:
             shown = [o for o in c.get("outputs", []) if mime in o.get("data", {})]
             assert shown, f"{path.name}: no {mime} output in the cell\n{c.source}"
+    made = [c for c in nb.cells if c.cell_type == "code"
+            and "TemporaryDirectory(" in c.source]
+    assert made, f"{path.name} makes no temporary folder"
+    left = sorted(p.name for p in tmp.iterdir() if p.name.startswith("swarmcode-"))
+    assert not left, f"{path.name} left {left} behind"
+    for c in nb.cells:                # a run made in a notebook shows its progress
+        if c.cell_type == "code" and "sc.evolve(" in c.source:
+            text = "".join(o.get("text", "") for o in c.get("outputs", [])
+                           if o.get("output_type") == "stream")
+            assert "done " in text and " left " in text, f"{path.name}: no progress\n{text}"

@@ -247,7 +247,9 @@ class _DiskFull:
 
 
 def _full_disk_line(r, run: Path, generation: int):
-    one_line_error(r, "No space left on device", f"last checkpoint is of generation {generation}",
+    last = (f"last checkpoint after generation {generation - 1} " if generation
+            else "last checkpoint before generation 0 ")
+    one_line_error(r, "No space left on device", last,
                    f"swarmcode-torch evolve --resume {run}", stdout_ok=True)
     assert load_checkpoint(run)["generation"] == generation        # the previous one, intact
     assert not list(run.glob(".checkpoint.pt.*")) and not list(run.glob(".summary.json.*"))

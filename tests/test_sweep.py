@@ -33,3 +33,34 @@ def test_rows_average_seeds_per_budget(tmp_path):
     md = markdown(rows)
     assert "| 3000 | 150.0 ± 70.7 |" in md
     assert csv_text(rows).splitlines()[0].startswith("budget,seeds,best_fitness,best_fitness_std")
+
+
+def test_budget_plot_shows_fitness_and_species_apart_with_integer_species_ticks(tmp_path,
+                                                                                monkeypatch):
+    # fitness and species that would coincide exactly on twin axes (same shape, same limits)
+    from matplotlib.figure import Figure
+
+    from swarmcode_torch.app.sweep import plot
+
+    rows = [dict(budget=b, best_fitness=float(s), best_fitness_std=0.0, num_species=s,
+                 num_species_std=0.0) for b, s in ((2500.0, 1), (4000.0, 2), (6000.0, 3))]
+    drawn = []
+    real = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig",
+                        lambda self, *a, **k: (drawn.append(self), real(self, *a, **k))[1])
+    plot(rows, tmp_path / "budget.png")
+    (fig,) = drawn
+    assert (tmp_path / "budget.png").stat().st_size > 0
+    fig.canvas.draw()
+    axes = fig.get_axes()
+    assert len(axes) == 2
+    boxes = [ax.get_position() for ax in axes]
+    assert not boxes[0].overlaps(boxes[1]), boxes            # two panels, not twin axes
+    assert axes[0].get_shared_x_axes().joined(axes[0], axes[1])   # one budget axis
+    ys = [[list(line.get_ydata()) for line in ax.get_lines() if len(line.get_ydata()) == 3]
+          for ax in axes]
+    assert [1.0, 2.0, 3.0] in ys[0] and [1, 2, 3] in ys[1]    # each panel has its own line
+    assert "fitness" in axes[0].get_ylabel() and "species" in axes[1].get_ylabel()
+    lo, hi = axes[1].get_ylim()
+    ticks = [t for t in axes[1].get_yticks() if lo <= t <= hi]
+    assert ticks and all(float(t).is_integer() for t in ticks), ticks

@@ -21,7 +21,9 @@ import functools
 import math
 import os
 import re
-from contextlib import ExitStack
+import sys
+import time
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -83,8 +85,8 @@ class RunResult:
             import pandas as pd
         except ImportError:
             raise ImportError("RunResult.to_pandas() needs pandas: pip install pandas (or "
-                              "pip install 'swarmcode-torch[pandas]'); RunResult.history holds "
-                              "the same records as a list of dicts") from None
+                              "pip install -e '.[pandas]' in the source tree); RunResult.history "
+                              "holds the same records as a list of dicts") from None
         return pd.DataFrame(self.history).set_index("generation")
 
     def __repr__(self) -> str:
@@ -114,6 +116,85 @@ class _History:
 
     def on_end(self, ev: Evolution) -> None:
         pass
+
+
+def _interactive(stream) -> bool:
+    """Whether `stream` is shown as it is written: a terminal, or a notebook's output (a Jupyter
+    kernel's stream, which is no terminal but redraws a line on a carriage return)."""
+    if type(stream).__module__.split(".")[0] == "ipykernel":
+        return True
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):       # no isatty, or a closed stream
+        return False
+
+
+def _clock(seconds: float) -> str:
+    s = int(round(seconds))
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+class _Progress:
+    """Reporter: the progress of a run on stdout, one compact line per generation (done count,
+    time left, best fitness, species, the generation's best team, seconds per generation). On a
+    terminal or in a notebook the line is redrawn in place and ended when the run ends;
+    elsewhere (a log) each generation prints its own line."""
+
+    def __init__(self):
+        self.stream = None
+        self.inplace = False
+        self.width = 0
+
+    def on_start(self, ev: Evolution) -> None:
+        self.stream = sys.stdout
+        self.inplace = _interactive(self.stream)
+        self.start, self.first, self.width = time.monotonic(), ev.state.generation, 0
+
+    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        done, total = ev.state.generation, ev.cfg.generations
+        ran = done - self.first
+        left = (time.monotonic() - self.start) / ran * (total - done) if ran > 0 else None
+        team = result.team
+        line = (f"done {done}/{total}  left {'?' if left is None else _clock(left)}  best "
+                f"{result.best['fitness']:.1f}  species {result.num_species}  team "
+                f"{team['species']} sp, {team['niches']} niches, ${team['cost']:.0f}  "
+                f"{result.seconds:.2f}s/gen")
+        if self.inplace:
+            self.stream.write("\r" + line.ljust(self.width))
+            self.width = max(self.width, len(line))
+        else:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def on_end(self, ev: Evolution) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """End the line redrawn in place (at the end of a run, or when it stops)."""
+        if self.inplace and self.width:
+            self.stream.write("\n")
+            self.stream.flush()
+            self.width = 0
+
+
+def _progress(progress: bool | None) -> "_Progress | None":
+    """The progress reporter of `progress`: None (the default) shows it on a terminal or in a
+    notebook, True always, False never."""
+    if progress is not None and not isinstance(progress, bool):
+        raise TypeError(f"progress must be True, False or None, got {progress!r:.40}")
+    if progress is False or (progress is None and not _interactive(sys.stdout)):
+        return None
+    return _Progress()
+
+
+@contextmanager
+def _closing(shown: "_Progress | None"):
+    """The progress line ended however the run ends (a Ctrl-C, an error)."""
+    try:
+        yield
+    finally:
+        if shown is not None:
+            shown.close()
 
 
 def _check_every(checkpoint_every: int, render_every: int, figure_every: int) -> None:
@@ -229,7 +310,7 @@ def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
            fitness: ScoreFn | None = None, threads: int | None = None,
            from_run: str | os.PathLike | None = None, snapshot_every: int = 0,
            max_time: float | str | None = None, patience: int | None = None,
-           wandb: str | None = None, **settings) -> RunResult:
+           wandb: str | None = None, progress: bool | None = None, **settings) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
     config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
@@ -239,8 +320,8 @@ def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
         population=30, seed=0, budget=4000.0, delta=0.5, ...` (any key of SwarmCoDeConfig / a
         run's config.toml).
     scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
-    logdir: where the run directory is created (named `<scenario>__<seed>__<time>`, as by the
-        CLI); None: run in memory, write no file.
+    logdir: where the run directory is created (named as by the CLI,
+        `SCENARIO[__bBUDGET][__OBJECTIVE]__SEED__TIME`); None: run in memory, write no file.
     checkpoint_every, render_every, figure_every: as `swarmcode-torch evolve`'s options
         (generations between checkpoints, TensorBoard replay images (0: never), composition
         figures).
@@ -257,7 +338,8 @@ def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
     threads: torch's CPU threads for this process (`sim.runtime.set_threads`; default:
         OMP_NUM_THREADS if set, else the cores less the load average, at least 1).
     wandb: a Weights & Biases project to log the run to as well (`reporting.WandbReporter`;
-        needs swarmcode-torch[wandb], ImportError saying so before anything runs).
+        needs the wandb extra, `pip install -e ".[wandb]"`; ImportError saying so before anything
+        runs).
     from_run: "RUN" or "RUN@GENERATION": start a new run from that run's snapshot of GENERATION
         (or its latest checkpoint), as `swarmcode-torch evolve --from`: `settings` change the
         parent's config (its scenario, population, tag_length and bt_length stay), the new run
@@ -268,6 +350,10 @@ def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
     max_time, patience: stop cleanly (checkpoint written, `resume` continues it) after the
         generation that ends past `max_time` (seconds, or "90m", "2h", ...), or when the best
         team has not improved for `patience` generations; `RunResult.stopped` says which.
+    progress: print the run's progress on stdout, a compact line per generation (done count,
+        time left, best fitness, species; redrawn in place on a terminal or in a notebook).
+        None (the default): on a terminal or in a notebook, not when stdout is a file or a
+        pipe; True: always; False: never.
 
     Raises ValueError (`ScenarioError` is one) for an invalid setting or scenario before any
     file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
@@ -278,11 +364,13 @@ def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
     wandb_reporters = _wandb_reporters(wandb, None, render_every)
     fitness = _checked_fitness(fitness)
     bounds = _bounds(max_time, patience, snapshot_every)
+    shown = _progress(progress)
     set_threads(threads)
+    reporters = [*([shown] if shown else []), *reporters, *wandb_reporters]
     if from_run is not None:
         return _branch(config, scenario, logdir, from_run, settings, fitness, reporters, callback,
                        bounds, checkpoint_every, render_every, figure_every, snapshot_every,
-                       wandb_reporters)
+                       wandb_reporters, shown)
     if isinstance(config, (str, os.PathLike)):
         from .runconfig import read_config_file
         config = read_config_file(Path(config))
@@ -302,14 +390,14 @@ def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
         reps = [] if logdir is None else \
             session.file_reporters(start.run_dir, checkpoint_every, render_every, figure_every,
                                    snapshot_every=snapshot_every)
-        session.run(start.ev, start.run_dir, [*reps, history, *reporters, *wandb_reporters],
-                    bounds=bounds)
+        with _closing(shown):
+            session.run(start.ev, start.run_dir, [*reps, history, *reporters], bounds=bounds)
     return _result(start.ev, start.run_dir, history.rows, bounds)
 
 
 def _branch(config, scenario, logdir, from_run, settings, fitness, reporters, callback, bounds,
             checkpoint_every, render_every, figure_every, snapshot_every,
-            wandb_reporters=()) -> RunResult:
+            wandb_reporters=(), shown=None) -> RunResult:
     """`evolve(from_run=...)`: a new run from a run's snapshot (`session.start_branch`)."""
     from .checkpoints import load_branch, parse_run_ref
 
@@ -334,8 +422,8 @@ def _branch(config, scenario, logdir, from_run, settings, fitness, reporters, ca
         reps = [] if logdir is None else \
             session.file_reporters(start.run_dir, checkpoint_every, render_every, figure_every,
                                    snapshot_every=snapshot_every)
-        session.run(start.ev, start.run_dir, [*reps, history, *reporters, *wandb_reporters],
-                    bounds=bounds)
+        with _closing(shown):
+            session.run(start.ev, start.run_dir, [*reps, history, *reporters], bounds=bounds)
     return _result(start.ev, start.run_dir, history.rows, bounds)
 
 
@@ -363,22 +451,26 @@ def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
 
 def resume(run_dir: str | os.PathLike, generations: int | None = None, device: str | None = None,
            *, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50,
-           reporters: Iterable = (), callback: Callable[[dict], Any] | None = None,
+           reporters: Iterable = (),
+           callback: Callable[[GenerationResult], Any] | None = None,
            fitness: ScoreFn | None = None, threads: int | None = None,
            snapshot_every: int = 0, max_time: float | str | None = None,
-           patience: int | None = None, wandb: str | None = None) -> RunResult:
+           patience: int | None = None, wandb: str | None = None,
+           progress: bool | None = None) -> RunResult:
     """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
     to `generations` in all (default: the run's), on `device` (default: the run's);
     `fitness`: the run's own fitness function, for a run started with one (`evolve`). The
     result's history has every generation: those before the checkpoint from metrics.csv (when
     the run has one), then this part's. RunError (a ValueError) for a directory, config or
-    checkpoint that cannot be used. `threads`, `snapshot_every`, `max_time`, `patience`,
-    `wandb`: as in `evolve` (`max_time` counts from this call)."""
+    checkpoint that cannot be used. `reporters`, `callback` (called with each generation's
+    `GenerationResult`), `threads`, `snapshot_every`, `max_time`, `patience`, `wandb` and
+    `progress`: as in `evolve` (`max_time` counts from this call)."""
     _check_every(checkpoint_every, render_every, figure_every)
     reporters = _check_hooks(callback, reporters) + _wandb_reporters(wandb, Path(run_dir),
                                                                      render_every)
     fitness = _checked_fitness(fitness)
     bounds = _bounds(max_time, patience, snapshot_every)
+    shown = _progress(progress)
     if generations is not None and (not isinstance(generations, int)
                                     or isinstance(generations, bool) or generations < 1):
         raise ValueError(f"generations must be an integer >= 1 (the total to extend the run "
@@ -397,7 +489,9 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
         history = _History(callback)
         reps = session.file_reporters(run_dir, checkpoint_every, render_every, figure_every,
                                       snapshot_every=snapshot_every)
-        session.run(ev, run_dir, [*reps, history, *reporters], bounds=bounds)
+        with _closing(shown):
+            session.run(ev, run_dir, [*reps, history, *([shown] if shown else []), *reporters],
+                        bounds=bounds)
     return _result(ev, run_dir, earlier + history.rows, bounds)
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import torch
 
 from ..coevo.config import SwarmCoDeConfig, with_overrides
+from ..coevo.evaluation import score_fn_name
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.scenario import Scenario
 from .files import (CHECKPOINT_FILE, CONFIG_FILE, HARDWARE_COPY, METRICS_FILE, SCENARIO_COPY,
@@ -162,6 +163,19 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     return cfg, d, scenario
 
 
+def same_function(recorded: str, given: str) -> bool:
+    """Whether a user fitness function named `given` ("module.qualname", `score_fn_name`) is the
+    one a run recorded: the same name, or the same qualified name where one of the two ran as a
+    script or notebook (module `__main__`) and the other was imported."""
+    if recorded == given:
+        return True
+    main = "__main__."
+    for a, b in ((recorded, given), (given, recorded)):
+        if a.startswith(main) and not b.startswith(main) and b.endswith("." + a[len(main):]):
+            return True
+    return False
+
+
 def resume(run_dir: Path, generations: int | None = None, device: str | None = None,
            loaded: tuple[SwarmCoDeConfig, dict, Scenario] | None = None,
            fitness=None) -> Evolution:
@@ -179,6 +193,12 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
     if cfg.fitness_function is None and fitness is not None:
         raise RunError(f"{run_dir} was scored by the built-in fitness; a resume cannot change "
                        "its fitness function (start a new run with fitness=fn)")
+    if cfg.fitness_function is not None and not same_function(cfg.fitness_function,
+                                                               score_fn_name(fitness)):
+        raise RunError(f"{run_dir} was scored by {cfg.fitness_function}, not by "
+                       f"{score_fn_name(fitness)}: a resume cannot change its fitness function "
+                       f"(resume it with {cfg.fitness_function}, or start a new run with "
+                       "fitness=fn)")
     check_runnable(d["config"], str(run_dir / CHECKPOINT_FILE))
     cfg = with_overrides(cfg, generations=generations, device=device)
     check_config(cfg, scenario)

@@ -20,7 +20,7 @@ from rich.markup import escape
 from typer.core import TyperGroup
 from rich.table import Table
 
-from ..coevo.config import with_overrides
+from ..coevo.config import SwarmCoDeConfig, with_overrides
 from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 from . import session
@@ -47,9 +47,9 @@ class _OneLineErrors(TyperGroup):
                     sys.exit(1)
                 raise
             if type(e).__name__ == "NoArgsIsHelpError":
-                from typer import rich_utils
-
-                rich_utils.rich_format_error(e)
+                # no command given: the help that --help prints, on stderr with exit 2, as
+                # click does for a group called without arguments (a usage error)
+                e.show()
                 sys.exit(e.exit_code)
             ctx = getattr(e, "ctx", None)
             hint = f" (see: {ctx.command_path} --help)" if ctx is not None else ""
@@ -64,6 +64,10 @@ class _OneLineErrors(TyperGroup):
 app = typer.Typer(add_completion=True, no_args_is_help=True, cls=_OneLineErrors, rich_markup_mode=None,
                   help="SwarmCoDe: co-design the behavior trees and hardware of robot swarms.")
 # off a terminal (logs, pipes) Rich would wrap at 80 columns; tables need a little more
+
+
+#: The defaults --help shows for the options that leave them to the run's config.
+_DEFAULT = SwarmCoDeConfig()
 
 
 class Objective(str, Enum):
@@ -127,10 +131,10 @@ def scenarios() -> None:
 
 @app.command()
 def evolve(
-    scenario: Annotated[Optional[str], typer.Option(help="Built-in scenario name or a scenario .toml file.")] = None,
+    scenario: Annotated[Optional[str], typer.Option(help=f"Built-in scenario name or a scenario .toml file [default: {_DEFAULT.scenario}].")] = None,
     budget: Annotated[Optional[float], typer.Option(help="Fabrication budget in $ (default: none, no penalty).")] = None,
     objective: Annotated[Optional[Objective], typer.Option(help="fitness, or roi: fitness / team cost [default: fitness].")] = None,
-    generations: Annotated[Optional[int], typer.Option(help="Total generations (with --resume: extend to this many).")] = None,
+    generations: Annotated[Optional[int], typer.Option(help=f"Total generations [default: {_DEFAULT.generations}; with --resume: the run's, or extend to this many].")] = None,
     population: Annotated[Optional[int], typer.Option(help="Individuals in the population [default: 100].")] = None,
     swarm_size: Annotated[Optional[int], typer.Option(help="Robots per team [default: the scenario's].")] = None,
     trials: Annotated[Optional[int], typer.Option(help="Random environments per team evaluation [default: 3].")] = None,
@@ -156,7 +160,7 @@ def evolve(
     snapshot_every: Annotated[int, typer.Option(help="Keep a copy of the checkpoint every N generations in RUN_DIR/snapshots/ (0: none), to branch from with --from RUN@GENERATION.")] = 0,
     max_time: Annotated[Optional[str], typer.Option(metavar="DURATION", help="Stop cleanly with a checkpoint (resumable) after the generation that ends past this time: 3600 (seconds), 90m, 2h, 1h30m.")] = None,
     patience: Annotated[Optional[int], typer.Option(metavar="K", help="Stop cleanly with a checkpoint (resumable) when the best team has not improved for K generations.")] = None,
-    wandb: Annotated[bool, typer.Option("--wandb", help="Also log to Weights & Biases (the scalars, the config, the replays; needs swarmcode-torch[wandb]; WANDB_MODE=offline for no network).")] = False,
+    wandb: Annotated[bool, typer.Option("--wandb", help="Also log to Weights & Biases (the scalars, the config, the replays; needs the wandb extra: pip install -e '.[wandb]'; WANDB_MODE=offline for no network).")] = False,
     wandb_project: Annotated[str, typer.Option(help="Weights & Biases project of --wandb.")] = "swarmcode-torch",
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
@@ -199,10 +203,13 @@ def evolve(
                               soft_wrap=True)
             else:
                 console.print(f"Done: {ev.state.generation} generations in "
-                              f"{escape(str(run_dir))}")
+                              f"{escape(str(run_dir))}", soft_wrap=True)
             print_team(run_dir)
-            console.print(f"Inspect: swarmcode-torch inspect {run_dir}   Watch: tensorboard "
-                          f"--logdir {run_dir.parent}", markup=False, highlight=False)
+            # commands and paths are never wrapped (soft_wrap): each stays one line to copy
+            console.print(f"Inspect: swarmcode-torch inspect {run_dir}", markup=False,
+                          highlight=False, soft_wrap=True)
+            console.print(f"Watch: tensorboard --logdir {run_dir.parent}", markup=False,
+                          highlight=False, soft_wrap=True)
         except KeyboardInterrupt:
             stopped(where, bool(terminated))
 
@@ -354,7 +361,7 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
                 return None, resume, None
             ev = start.ev
             console.print(f"Resuming [bold]{escape(str(resume))}[/] at generation "
-                          f"{ev.state.generation} of {ev.cfg.generations}")
+                          f"{ev.state.generation} of {ev.cfg.generations}", soft_wrap=True)
             return ev, resume, start.saved
         cfg, branch = _new_config(config_file, from_run, preset, settings,
                                   generations=generations, device=device, **given)
@@ -383,7 +390,8 @@ def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations,
         ev, run_dir = start.ev, start.run_dir
         console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
                       f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
-                      f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})")
+                      f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})",
+                      soft_wrap=True)
         return ev, run_dir, None
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
@@ -396,8 +404,8 @@ def sweep(
     budgets: Annotated[str, typer.Option(help="Comma-separated budgets in $.")] = "2500,3000,4000,5000,6000,8000",
     seeds: Annotated[str, typer.Option(help="Comma-separated seeds; one run per budget and seed.")] = "0",
     objective: Annotated[Optional[Objective], typer.Option(help="fitness, or roi: fitness / team cost [default: fitness].")] = None,
-    scenario: Annotated[Optional[str], typer.Option(help="Scenario [default: budget].")] = None,
-    generations: Annotated[Optional[int], typer.Option(help="Generations per run [default: 500].")] = None,
+    scenario: Annotated[Optional[str], typer.Option(help=f"Scenario [default: {_DEFAULT.scenario}].")] = None,
+    generations: Annotated[Optional[int], typer.Option(help=f"Generations per run [default: {_DEFAULT.generations}].")] = None,
     population: Annotated[Optional[int], typer.Option(help="Population [default: 100].")] = None,
     swarm_size: Annotated[Optional[int], typer.Option(help="Robots per team [default: the scenario's].")] = None,
     trials: Annotated[Optional[int], typer.Option(help="Environments per evaluation [default: 3].")] = None,
@@ -425,11 +433,14 @@ def sweep(
               threads)
 
 @app.command()
-def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")]) -> None:
-    """Show the best team of a run: robots per design, hardware, cost and behavior trees."""
+def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory (or a sweep directory: its table and runs).")]) -> None:
+    """Show the best team of a run: robots per design, hardware, cost and behavior trees. Given
+    a sweep directory, show its table and list its runs."""
     run_dir = check_path(run_dir, "RUN_DIR")
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
+    if _inspect_sweep(run_dir):
+        return
     designs = print_team(run_dir)
     _print_lineage(run_dir)
     caps = _capabilities(run_dir, designs)
@@ -461,6 +472,38 @@ def _print_lineage(run_dir: Path) -> None:
         console.print(f"Stopped early by {stop['reason']} at generation {stop.get('generation')}"
                       "; it can be continued with evolve --resume", markup=False,
                       highlight=False)
+
+
+def _inspect_sweep(path: Path) -> bool:
+    """Print the table and the runs of a sweep directory; False when `path` is none."""
+    from .files import TABLE_CSV, TABLE_MD, RunError
+    from .sweep import sweep_contents
+
+    try:
+        sweep = sweep_contents(path)
+    except RunError as e:
+        fail(str(e))
+    except OSError as e:
+        os_fail(e, f"{path} cannot be read")
+    if sweep is None:
+        return False
+    if sweep.table is not None:
+        console.print(sweep.table, markup=False, highlight=False, soft_wrap=True)
+        console.print(f"Table: {path / TABLE_MD}, {path / TABLE_CSV}", markup=False,
+                      highlight=False, soft_wrap=True)
+    else:
+        console.print(f"{path} is a sweep without a table yet: run its sweep command again with "
+                      f"--out {path} to finish it and write the table", markup=False,
+                      highlight=False, soft_wrap=True)
+    console.print(f"Runs ({len(sweep.runs)}):", highlight=False)
+    for name, done, total in sweep.runs:
+        state = ("no generation recorded" if done is None else
+                 f"{done}/{total} generations" if total is not None else f"{done} generations")
+        console.print(f"  {name}: {state}", markup=False, highlight=False, soft_wrap=True)
+    if sweep.runs:
+        console.print(f"Inspect a run: swarmcode-torch inspect {path / sweep.runs[0][0]}",
+                      markup=False, highlight=False, soft_wrap=True)
+    return True
 
 
 def _capabilities(run_dir: Path, designs: list[dict]):
@@ -563,7 +606,8 @@ def replay(
     console.print(f"Wrote {path}: {'the focal team: ' if html else ''}"
                   f"{m['delivered_individual']:.0f} individual and "
                   f"{m['delivered_collab']:.0f} collaborative deliveries, "
-                  f"{m['energy_used']:.1f}% energy used", markup=False, highlight=False)
+                  f"{m['energy_used']:.1f}% energy used", markup=False, highlight=False,
+                  soft_wrap=True)
 
 
 def main() -> None:

@@ -1,6 +1,6 @@
 """Ray: the runs of a sweep as Ray tasks, and each generation's evaluation in shards on Ray actors.
 
-Ray is optional (`pip install "swarmcode-torch[ray]"`) and imported only when one of these is
+Ray is optional (`pip install -e ".[ray]"` in the source tree) and imported only when one of these is
 used, never when the package is imported. docs/DISTRIBUTED.md shows local, multi-node and Slurm
 clusters.
 
@@ -34,7 +34,7 @@ from ..sim.layout import Layout
 from ..sim.runtime import CompiledStep, CudaGraphTicks, tick_function
 from ..sim.state import WorldParams
 
-RAY_INSTALL = 'pip install "swarmcode-torch[ray]"'
+RAY_INSTALL = 'pip install -e ".[ray]" in the source tree (or pip install "ray>=2.9")'
 #: Seconds to wait for the evaluation actors to start (the cluster may be busy).
 ACTOR_START_TIMEOUT = 600.0
 #: Seconds that interrupted tasks get to write their checkpoints before the driver leaves.

@@ -369,7 +369,7 @@ def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[st
 
 
 #: What to install for `WandbReporter` (`evolve --wandb`).
-WANDB_INSTALL = "pip install 'swarmcode-torch[wandb]'"
+WANDB_INSTALL = 'pip install -e ".[wandb]" in the source tree'
 
 
 def require_wandb():

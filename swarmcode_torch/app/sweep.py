@@ -13,8 +13,8 @@ from ..coevo.config import SwarmCoDeConfig
 from ..coevo.dynamics import mean_std
 from ..sim.scenario import Scenario
 from .checkpoints import load_checkpoint, load_run
-from .files import (BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, TABLE_CSV, TABLE_MD,
-                    RunError, atomic_write_bytes)
+from .files import (BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, SUMMARY_FILE,
+                    TABLE_CSV, TABLE_MD, RunError, atomic_write_bytes, read_text)
 from .runconfig import config_differences, read_config, run_scenario
 from .summary import read_summary
 
@@ -75,6 +75,41 @@ def plan_run(out: Path, cfg: SwarmCoDeConfig, scenario: Scenario) -> PlannedRun:
     return planned("done" if done >= cfg.generations else "resume", done)
 
 
+@dataclass(frozen=True)
+class SweepContents:
+    """A sweep directory as it stands: its table (table.md's text; None before the sweep has
+    written one) and its runs, each (name, generations recorded, generations asked for; None
+    where its summary.json is missing or cannot be read)."""
+
+    table: str | None
+    runs: list[tuple[str, int | None, int | None]]
+
+
+def sweep_contents(path: Path) -> SweepContents | None:
+    """The table and runs of the sweep directory `path`; None when it is no sweep directory (a
+    run directory, or a directory with neither a table nor runs). RunError for a table that
+    cannot be read."""
+    path = Path(path)
+    if (path / CONFIG_FILE).exists() or (path / SUMMARY_FILE).exists():
+        return None                                    # a run directory
+    runs = []
+    for d in sorted(p for p in path.iterdir() if p.is_dir() and not p.is_symlink()):
+        if not (d / CONFIG_FILE).is_file():
+            continue
+        try:
+            s = read_summary(d, figures=False)
+            done = s.get("generation")
+            total = s.get("generations")
+            runs.append((d.name, done + 1 if isinstance(done, int) else None,
+                         total if isinstance(total, int) else None))
+        except RunError:
+            runs.append((d.name, None, None))
+    has_table = (path / TABLE_MD).is_file()
+    if not runs and not has_table:
+        return None
+    return SweepContents(read_text(path / TABLE_MD) if has_table else None, runs)
+
+
 def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
     """One row per budget: each column's mean over seeds and its sample standard deviation
     (`<col>_std`, 0 for one seed; `dynamics.mean_std`)."""
@@ -129,23 +164,26 @@ def csv_text(rows: list[dict]) -> str:
 
 
 def plot(rows: list[dict], path: Path) -> None:
-    """Best fitness and number of species against budget (errorbars: std over seeds), drawn on a
-    `matplotlib.figure.Figure` (no pyplot, no backend change) and written as a PNG."""
+    """Best fitness and number of species against budget (errorbars: std over seeds), in two
+    panels that share the budget axis (on twin axes one line could hide the other), drawn on a
+    `matplotlib.figure.Figure` (no pyplot, no backend change) and written as a PNG. The species
+    panel has integer ticks: it counts species."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     rows = [r for r in rows if r["budget"] is not None and r["best_fitness"] is not None
             and r["num_species"] is not None]
     x = [r["budget"] for r in rows]
-    fig = Figure(figsize=(6, 3.6))
-    ax1 = fig.subplots()
-    ax1.errorbar(x, [r["best_fitness"] for r in rows], [r["best_fitness_std"] for r in rows],
-                 marker="o", color="tab:blue", capsize=3)
-    ax1.set_xlabel("budget ($)")
-    ax1.set_ylabel("best fitness", color="tab:blue")
-    ax2 = ax1.twinx()
-    ax2.errorbar(x, [r["num_species"] for r in rows], [r["num_species_std"] for r in rows],
-                 marker="s", color="tab:orange", capsize=3)
-    ax2.set_ylabel("species in the best team", color="tab:orange")
+    fig = Figure(figsize=(6, 5))
+    fit_ax, species_ax = fig.subplots(2, 1, sharex=True)
+    fit_ax.errorbar(x, [r["best_fitness"] for r in rows], [r["best_fitness_std"] for r in rows],
+                    marker="o", color="tab:blue", capsize=3)
+    fit_ax.set_ylabel("best fitness")
+    species_ax.errorbar(x, [r["num_species"] for r in rows], [r["num_species_std"] for r in rows],
+                        marker="s", color="tab:orange", capsize=3)
+    species_ax.set_ylabel("species in the best team")
+    species_ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    species_ax.set_xlabel("budget ($)")
     fig.tight_layout()
     fig.savefig(path, dpi=120, format="png")
 

@@ -115,7 +115,8 @@ def run_sweep(budgets: str, seeds: str, objective: str | None, scenario, generat
         except OSError as e:
             os_fail(e, f"--out {out}: cannot write the table")
     console.print((out / TABLE_MD).read_text(), highlight=False, markup=False)
-    console.print("Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False)
+    console.print("Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False,
+                  soft_wrap=True)
     if failed:
         names = ", ".join(name for name, _ in failed)
         fail(f"{len(failed)} of {len(plans)} runs failed ({names}); the table has the "
@@ -187,7 +188,7 @@ def sweep_on_ray(plans, data: bytes, checkpoint_every: int, log_every: int, agai
         except KeyboardInterrupt:
             how = "Terminated" if terminated else "Interrupted"
             err.print(f"{how}: the running runs were stopped after writing their checkpoints; "
-                      f"continue with: {again}", markup=False, highlight=False)
+                      f"continue with: {again}", markup=False, highlight=False, soft_wrap=True)
             raise typer.Exit(code=143 if terminated else 130)
     failed_at = {id(p): e for p, e in zip(todo, errors) if e is not None}
     finished = [p[:3] for p in plans if id(p) not in failed_at]
@@ -252,5 +253,5 @@ def run_sweep_run(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every:
         except OSError as e:
             os_fail(e, f"{run_dir}: cannot start the run")
         console.print(f"[bold]{escape(run_dir.name)}[/]: generation {ev.state.generation} -> "
-                      f"{cfg.generations}")
+                      f"{cfg.generations}", soft_wrap=True)
         execute(ev, run_dir, checkpoint_every, log_every, saved=saved, again=again)

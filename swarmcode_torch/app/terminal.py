@@ -16,7 +16,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                            TimeRemainingColumn)
-from rich.table import Table
+from rich.table import Column, Table
 
 from . import session
 from .signals import TERMINATED, deferred_signals, terminate_as_interrupt
@@ -72,17 +72,43 @@ def os_fail(e: OSError, doing: str) -> None:
     fail(f"{doing}: {os_error_text(e)}")
 
 
-class ProgressReporter:
-    """Rich progress bar on a terminal; a plain line every few generations otherwise."""
+#: Below this many columns the progress line drops its bar and elapsed time.
+NARROW = 60
 
-    def __init__(self, total: int, start: int, every: int):
-        self.tty = sys.stdout.isatty()
+
+class _FittedProgress(Progress):
+    """A progress line that fits the window: the essential fields first (done count, time
+    left), then the bar and elapsed time when there is room, then the generation's figures, cut
+    with an ellipsis at the right edge. The columns are chosen at each refresh, so a resized
+    window keeps the count and the time left in view."""
+
+    def __init__(self, console: Console):
+        self.wide = [TextColumn("done"), MofNCompleteColumn(), TextColumn("left"),
+                     TimeRemainingColumn(), BarColumn(bar_width=20), TimeElapsedColumn()]
+        self.narrow = self.wide[:4]
+        text = TextColumn("{task.description}",
+                          table_column=Column(no_wrap=True, overflow="ellipsis", ratio=1))
+        self.wide.append(text)
+        self.narrow.append(text)
+        super().__init__(*self.wide, console=console, expand=True)
+
+    def make_tasks_table(self, tasks):
+        live = getattr(self, "live", None)         # None while Progress is being made
+        if live is not None:
+            self.columns = tuple(self.wide if live.console.width >= NARROW else self.narrow)
+        return super().make_tasks_table(tasks)
+
+
+class ProgressReporter:
+    """Rich progress line on a terminal (`out`, default the command line's console); a plain
+    line every few generations otherwise."""
+
+    def __init__(self, total: int, start: int, every: int, out: Console | None = None):
+        self.tty = sys.stdout.isatty() if out is None else out.is_terminal
         self.every = every
         self.bar = None
         if self.tty:
-            self.bar = Progress(TextColumn("done"), MofNCompleteColumn(), BarColumn(),
-                                TextColumn("{task.description}"), TimeElapsedColumn(),
-                                TextColumn("left"), TimeRemainingColumn(), console=console)
+            self.bar = _FittedProgress(out if out is not None else console)
             self.task = self.bar.add_task("", total=total, completed=start)
 
     def on_start(self, ev) -> None:
@@ -127,10 +153,28 @@ class Where:
         return self.checkpoints.saved if self.checkpoints is not None else self.saved
 
 
+def checkpoint_words(saved: int) -> str:
+    """The checkpoint of a run that has finished `saved` generations (the checkpoint file's
+    "generation" count), named as summary.json, teams.jsonl and TensorBoard number generations:
+    from 0, so that its last finished generation is summary.json's "generation"."""
+    if saved == 0:
+        return "checkpoint before generation 0 (no generation finished yet)"
+    done = "generation 0 finished" if saved == 1 else f"generations 0-{saved - 1} finished"
+    return f"checkpoint after generation {saved - 1} ({done})"
+
+
+def last_checkpoint(saved: int | None) -> str:
+    """'the last checkpoint ...' of a failed run (`checkpoint_words`), or that there is none."""
+    if saved is None:
+        return "no checkpoint was written yet"
+    return f"the last {checkpoint_words(saved)}"
+
+
 def stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | None,
                resuming: bool = False) -> str:
-    """The line an interrupted run prints: the generation its checkpoint file really holds, or
-    that there is none."""
+    """The line an interrupted run prints: the checkpoint its file really holds
+    (`checkpoint_words`: the last finished generation, numbered as in summary.json), or that
+    there is none."""
     if run_dir is None:
         return f"{how}: no run directory was made"
     if saved is None:
@@ -138,11 +182,8 @@ def stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | No
             return f"{how} before the run resumed; {run_dir} is unchanged"
         return (f"{how}: no checkpoint was written yet, so {run_dir} holds no generation to "
                 "continue from; start the run again")
-    done = "no generation finished yet" if saved == 0 else \
-        f"generations 0-{saved - 1} recorded"
     again = again or f"swarmcode-torch evolve --resume {run_dir}"
-    return (f"{how}: checkpoint of generation {saved} is in {run_dir} ({done}); continue "
-            f"with: {again}")
+    return f"{how}: {checkpoint_words(saved)} is in {run_dir}; continue with: {again}"
 
 
 def stopped(where: Where, terminated: bool) -> None:
@@ -202,7 +243,7 @@ def attach_shards(stack: ExitStack, ev, workers: int, cpus: float, address: str 
         fail(str(e))
     where = sorted(set(evaluator.where))
     console.print(f"Evaluation: {workers} shards on Ray actors ({escape('; '.join(where))})",
-                  highlight=False)
+                  highlight=False, soft_wrap=True)
 
 
 def print_shard_traffic(evaluator) -> None:
@@ -268,7 +309,7 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
         if progress is not None:
             progress.stop()
         close_writers(reporters)
-        fail(f"{e}; the last checkpoint is of generation {checkpoints.saved}")
+        fail(f"{e}; {last_checkpoint(checkpoints.saved)}")
     except OSError as e:
         progress.stop()
         close_writers(reporters)
@@ -277,15 +318,14 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
         if checkpoints.saved is None:
             fail(f"{what}; no checkpoint was written yet: free space or fix the cause, then start "
                  "the run again")
-        fail(f"{what}; the last checkpoint is of generation {checkpoints.saved} "
+        fail(f"{what}; {last_checkpoint(checkpoints.saved)} "
              f"({run_dir / 'checkpoint.pt'}); free space or fix the cause, then continue with: "
              f"{again}")
     except ShardError as e:
         progress.stop()
         close_writers(reporters)
-        fail(f"{e} after {ev.state.generation} generations; the last checkpoint is of "
-             f"generation {checkpoints.saved} ({run_dir / 'checkpoint.pt'}); continue with: "
-             f"{again}")
+        fail(f"{e} after {ev.state.generation} generations; {last_checkpoint(checkpoints.saved)} "
+             f"({run_dir / 'checkpoint.pt'}); continue with: {again}")
     progress.stop()
 
 
