@@ -1,6 +1,7 @@
 """The `swarmcode-torch` command line: its commands and options, parsed, and what they print.
 
-The work is done elsewhere: a run starts and runs through `session` (with `terminal.execute`),
+The work is done elsewhere: `evolve_start` turns evolve's options into a started run, which
+runs through `session` (with `terminal.execute`); `inspect_view` prints what inspect adds;
 a sweep through `sweep_run`, the analyses in `analysis`."""
 
 from __future__ import annotations
@@ -8,9 +9,7 @@ from __future__ import annotations
 import json
 import sys
 from contextlib import ExitStack
-from dataclasses import replace
 from enum import Enum
-from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
@@ -20,11 +19,11 @@ from rich.markup import escape
 from typer.core import TyperGroup
 from rich.table import Table
 
-from ..coevo.config import SwarmCoDeConfig, with_overrides
+from ..coevo.config import SwarmCoDeConfig
 from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
-from . import session
-from .settings import parse_settings
+from . import evolve_start
+from .inspect_view import capabilities, inspect_sweep, print_lineage
 from .signals import TERMINATED, terminate_as_interrupt
 from .terminal import (THREADS_HELP, Where, attach_shards, check_path, console, err,
                        eval_shards_option, execute, fail, os_fail, print_shard_traffic, print_team,
@@ -166,11 +165,11 @@ def evolve(
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
     logdir, resume = check_path(logdir, "--logdir"), check_path(resume, "--resume")
     config_file = check_path(config, "--config")
-    wandb_project = _wandb_option(wandb, wandb_project)
+    wandb_project = evolve_start.wandb_option(wandb, wandb_project)
     TERMINATED.clear()                    # this command's SIGTERM, not an earlier one's
-    bounds = _bounds_option(max_time, patience, snapshot_every)
+    bounds = evolve_start.bounds_option(max_time, patience, snapshot_every)
     if print_config:
-        _print_config(config_file, from_run, resume, preset, settings, generations=generations,
+        evolve_start.print_config(config_file, from_run, resume, preset, settings, generations=generations,
                       device=device, scenario=scenario, budget=budget,
                       objective=_objective(objective), population=population,
                       swarm_size=swarm_size, trials=trials, ticks=ticks, seed=seed,
@@ -183,7 +182,7 @@ def evolve(
         try:
             with ExitStack() as stack:
                 attach = None if shards is None else (lambda ev: attach_shards(stack, ev, *shards))
-                ev, run_dir, saved = _start_evolve(
+                ev, run_dir, saved = evolve_start.start_evolve(
                     stack, scenario=scenario, budget=budget, objective=_objective(objective),
                     generations=generations, population=population, swarm_size=swarm_size,
                     trials=trials, ticks=ticks, seed=seed, device=device, compile=compile,
@@ -199,7 +198,7 @@ def evolve(
                 if shards is not None:
                     print_shard_traffic(ev.ctx.evaluator)
             if bounds is not None and bounds.reason is not None:
-                console.print(_bound_line(bounds, ev, run_dir), markup=False, highlight=False,
+                console.print(evolve_start.bound_line(bounds, ev, run_dir), markup=False, highlight=False,
                               soft_wrap=True)
             else:
                 console.print(f"Done: {ev.state.generation} generations in "
@@ -212,191 +211,6 @@ def evolve(
                           highlight=False, soft_wrap=True)
         except KeyboardInterrupt:
             stopped(where, bool(terminated))
-
-
-def _wandb_option(on: bool, project: str) -> str | None:
-    """The W&B project of `evolve --wandb` (None: off); a one-line error without wandb."""
-    if not on:
-        return None
-    from .reporting import require_wandb
-
-    try:
-        require_wandb()
-    except ImportError as e:
-        fail(str(e))
-    return project
-
-
-def _bounds_option(max_time: str | None, patience: int | None, snapshot_every: int):
-    """The run's `session.Bounds` (None without --max-time and --patience); one-line errors."""
-    if snapshot_every < 0:
-        fail(f"--snapshot-every must be >= 0 (0: no snapshots), got {snapshot_every}")
-    if max_time is None and patience is None:
-        return None
-    if patience is not None and patience < 1:
-        fail(f"--patience must be >= 1 (generations without a better best team), got {patience}")
-    try:
-        return session.Bounds(max_time=max_time, patience=patience)
-    except ValueError as e:
-        fail(f"--{e}".replace("--max_time", "--max-time"))
-
-
-def _bound_line(bounds, ev, run_dir: Path) -> str:
-    """What a run stopped by --max-time or --patience prints."""
-    g = ev.state.generation
-    if bounds.reason == "patience":
-        why = (f"the best team (generation {ev.state.best['generation']}) has not improved for "
-               f"{bounds.patience} generations (--patience {bounds.patience})")
-    else:
-        why = f"--max-time reached ({bounds.elapsed:.1f}s of {bounds.max_time:g}s)"
-    return (f"Stopped after {g} generations: {why}; checkpoint of generation {g} is in "
-            f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}")
-
-
-def _new_config(config_file: Path | None, from_run: str | None, preset, settings, **given):
-    """(the config of a new run: --config FILE or the preset, or the --from run's, with
-    --preset, the options and --set on top; the `checkpoints.Branch` of --from, or None)."""
-    from .checkpoints import load_branch, parse_run_ref
-    from .runconfig import read_config_file
-    from .settings import option_names
-
-    branch = None
-    if from_run is not None:
-        if config_file is not None:
-            fail("--config and --from cannot be used together: a branch starts from its "
-                 "parent's config (give the changes as options and --set)")
-        run, generation = parse_run_ref(from_run)
-        check_path(str(run), "--from")
-        branch = load_branch(run, generation)
-        if branch.config.fitness_function is not None:
-            fail(f"{run} was scored by a custom fitness function "
-                 f"({branch.config.fitness_function}): branch it from Python, "
-                 "swarmcode_torch.evolve(from_run=..., fitness=fn)")
-        base = branch.config
-    elif config_file is not None:
-        base = read_config_file(config_file)
-        if base.fitness_function is not None:
-            fail(f"{config_file}: fitness_function: a fitness function is given from Python "
-                 "(swarmcode_torch.evolve(config=FILE, fitness=fn))")
-    else:
-        return session.resolve_config(preset, settings, **given), None
-    if preset is not None:
-        base = session.make_config(base, preset=preset)
-    names = option_names()
-    return replace(with_overrides(base, **given), **parse_settings(settings or [], names)), branch
-
-
-def _print_config(config_file, from_run, resume, preset, settings, **given) -> None:
-    """--print-config: the resolved config of a new run (checked), as TOML, on stdout."""
-    from .files import RunError
-    from .runconfig import config_to_toml
-    from .settings import option_names
-
-    if resume is not None:
-        fail("--print-config is for a new run; a resumed run's config is its config.toml")
-    try:
-        cfg, branch = _new_config(config_file, from_run, preset, settings, **given)
-        if branch is None:
-            session.check_start(cfg, names=option_names())
-        else:
-            session.check_branch(branch, cfg, option_names())
-            cfg.validate(option_names())
-    except (ScenarioError, RunError, ValueError) as e:
-        fail(str(e))
-    except OSError as e:
-        os_fail(e, "cannot read the config")
-    sys.stdout.write(config_to_toml(cfg, parent=branch.parent if branch else None))
-    sys.stdout.flush()
-
-
-def _start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
-                  swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
-                  log_every, render_every, resume, settings, attach=None, figure_every=50,
-                  where: Where, preset=None, config_file=None, from_run=None):
-    """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
-    directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
-    The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
-    once the Evolution exists and before any file is written (evaluation shards)."""
-    from .files import RunError, new_run_dir
-    from .settings import option_names
-
-    if checkpoint_every < 1 or log_every < 1 or figure_every < 1 or render_every < 0:
-        fail("--checkpoint-every, --log-every and --figure-every must be >= 1, "
-             "--render-every >= 0")
-    given = dict(scenario=scenario, budget=budget, objective=objective, population=population,
-                 swarm_size=swarm_size, trials=trials, ticks=ticks, seed=seed, compile=compile)
-    try:
-        if resume is not None:
-            if generations is not None and generations < 1:
-                fail(f"--generations must be >= 1 (the total to extend the run to), got "
-                     f"{generations}")
-            extra = [k.replace("_", "-") for k, v in given.items() if v is not None]
-            extra += ["set"] if settings else []
-            extra += ["preset"] if preset is not None else []
-            extra += ["config"] if config_file is not None else []
-            extra += ["from"] if from_run is not None else []
-            if extra:
-                fail(f"--resume uses the run's saved config; only --generations and --device may "
-                     f"change (got --{', --'.join(extra)})")
-            if logdir is not None:
-                fail(f"--logdir cannot be used with --resume: the run continues in its own "
-                     f"directory ({resume})")
-            if not resume.is_dir():
-                fail(f"--resume {resume} is not a run directory (no such directory)")
-
-            def locked(run_dir: Path) -> None:
-                where.run_dir, where.resuming = run_dir, True
-
-            def loaded(saved: int) -> None:
-                where.saved = saved
-
-            start = session.start_resume(stack, resume, generations=generations, device=device,
-                                         stop_if_done=True, on_locked=locked, on_loaded=loaded,
-                                         attach=attach)
-            if start.ev is None:
-                console.print(f"{resume} already has {start.saved} generations"
-                              f"{'' if generations is None else f' (asked for {generations})'}; "
-                              "nothing to do, no file changed", markup=False, highlight=False,
-                              soft_wrap=True)
-                return None, resume, None
-            ev = start.ev
-            console.print(f"Resuming [bold]{escape(str(resume))}[/] at generation "
-                          f"{ev.state.generation} of {ev.cfg.generations}", soft_wrap=True)
-            return ev, resume, start.saved
-        cfg, branch = _new_config(config_file, from_run, preset, settings,
-                                  generations=generations, device=device, **given)
-        if logdir is None:      # a branch goes beside its parent
-            logdir = branch.run_dir.parent if branch is not None else Path("runs")
-
-        def check_logdir() -> None:        # after the config's checks, before the Evolution
-            if logdir.exists() and not logdir.is_dir():
-                fail(f"--logdir {logdir} is not a directory")
-
-        def make_dir(ev) -> Path:
-            try:
-                return new_run_dir(logdir, cfg)
-            except OSError as e:
-                os_fail(e, f"--logdir {logdir}: cannot make a run directory")
-
-        on_dir = lambda run_dir: setattr(where, "run_dir", run_dir)  # noqa: E731
-        if branch is not None:
-            start = session.start_branch(stack, branch, cfg, make_dir, names=option_names(),
-                                         before_build=check_logdir, attach=attach, on_dir=on_dir)
-            console.print(f"Branching from {escape(str(branch.path))} (generation "
-                          f"{branch.generation})", highlight=False)
-        else:
-            start = session.start_new(stack, cfg, make_dir, names=option_names(),
-                                      before_build=check_logdir, attach=attach, on_dir=on_dir)
-        ev, run_dir = start.ev, start.run_dir
-        console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
-                      f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
-                      f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})",
-                      soft_wrap=True)
-        return ev, run_dir, None
-    except (ScenarioError, RunError, ValueError) as e:
-        fail(str(e))
-    except OSError as e:
-        os_fail(e, "cannot start the run")
 
 
 @app.command()
@@ -439,11 +253,11 @@ def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A ru
     run_dir = check_path(run_dir, "RUN_DIR")
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
-    if _inspect_sweep(run_dir):
+    if inspect_sweep(run_dir):
         return
     designs = print_team(run_dir)
-    _print_lineage(run_dir)
-    caps = _capabilities(run_dir, designs)
+    print_lineage(run_dir)
+    caps = capabilities(run_dir, designs)
     for i, d in enumerate(designs):
         console.print(f"[bold]species {d['species']}[/] ({d['count']} robots, {d['effector']}):")
         if caps is not None:
@@ -455,67 +269,6 @@ def inspect(run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A ru
         from ..coevo.dynamics import niche_count
         console.print(f"{niche_count(caps[1])} niches (distinct capabilities) in "
                       f"{len({d['species'] for d in designs})} species", highlight=False)
-
-
-def _print_lineage(run_dir: Path) -> None:
-    """inspect: the run a branched run started from, and why a run stopped early."""
-    from .runconfig import read_parent
-    from .summary import read_summary
-
-    parent = read_parent(run_dir)
-    if parent is not None:
-        console.print(f"Branched from {parent.get('run')} at generation "
-                      f"{parent.get('generation')} ({parent.get('checkpoint')})", markup=False,
-                      highlight=False, soft_wrap=True)
-    stop = read_summary(run_dir).get("stop")
-    if isinstance(stop, dict) and stop.get("reason") in ("max_time", "patience"):
-        console.print(f"Stopped early by {stop['reason']} at generation {stop.get('generation')}"
-                      "; it can be continued with evolve --resume", markup=False,
-                      highlight=False)
-
-
-def _inspect_sweep(path: Path) -> bool:
-    """Print the table and the runs of a sweep directory; False when `path` is none."""
-    from .files import TABLE_CSV, TABLE_MD, RunError
-    from .sweep import sweep_contents
-
-    try:
-        sweep = sweep_contents(path)
-    except RunError as e:
-        fail(str(e))
-    except OSError as e:
-        os_fail(e, f"{path} cannot be read")
-    if sweep is None:
-        return False
-    if sweep.table is not None:
-        console.print(sweep.table, markup=False, highlight=False, soft_wrap=True)
-        console.print(f"Table: {path / TABLE_MD}, {path / TABLE_CSV}", markup=False,
-                      highlight=False, soft_wrap=True)
-    else:
-        console.print(f"{path} is a sweep without a table yet: run its sweep command again with "
-                      f"--out {path} to finish it and write the table", markup=False,
-                      highlight=False, soft_wrap=True)
-    console.print(f"Runs ({len(sweep.runs)}):", highlight=False)
-    for name, done, total in sweep.runs:
-        state = ("no generation recorded" if done is None else
-                 f"{done}/{total} generations" if total is not None else f"{done} generations")
-        console.print(f"  {name}: {state}", markup=False, highlight=False, soft_wrap=True)
-    if sweep.runs:
-        console.print(f"Inspect a run: swarmcode-torch inspect {path / sweep.runs[0][0]}",
-                      markup=False, highlight=False, soft_wrap=True)
-    return True
-
-
-def _capabilities(run_dir: Path, designs: list[dict]):
-    """(package class labels, per design the classes it lifts), or None without a scenario."""
-    from .analysis import design_capabilities
-    from .runs import RunError, read_config, run_scenario
-
-    try:
-        scenario = run_scenario(run_dir, read_config(run_dir))
-        return [c.label for c in scenario.packages], design_capabilities(designs, scenario)
-    except (RunError, ValueError):
-        return None
 
 
 @app.command()
