@@ -248,7 +248,8 @@ class SwarmCoDeConfig:
         for k, v in d.items():
             if v is not None and not isinstance(v, (bool, int, float, str)):
                 raise ValueError(f"{k}: expected a single value, got {v!r}")
-        return cls(**{k: (None if v == "none" else v) for k, v in d.items()})
+        values: dict[str, Any] = {k: (None if v == "none" else v) for k, v in d.items()}
+        return cls(**values)
 
     def evaluation(self, num_robots: int, episode_ticks: int) -> "EvalConfig":
         """How teams are scored, with the scenario's team size and episode length where the

@@ -100,8 +100,9 @@ def team_robots(genome: Population, teams: Tensor, catalog: Catalog | None = Non
     program (row of `bt.build_tables(genome.bt)`). `phenotype`: the genome's, if computed."""
     ph = phenotype if phenotype is not None else genome_phenotype(genome, catalog)
     rows = teams.clamp_min(0)
-    return Robots(*(t[rows] for t in (ph.radius, ph.mass, ph.force, ph.payload, ph.capacity,
-                                        ph.efficiency, ph.effector)),
+    return Robots(radius=ph.radius[rows], mass=ph.mass[rows], force=ph.force[rows],
+                  payload=ph.payload[rows], capacity=ph.capacity[rows],
+                  efficiency=ph.efficiency[rows], effector=ph.effector[rows],
                   present=teams >= 0, program=rows)
 
 
@@ -111,7 +112,7 @@ def simulate_teams(teams: Tensor, genome: Population, tables: Tensor, layout_ids
                    phenotype: Phenotype | None = None) -> dict:
     """Run teams [E, S] (population rows, -1 empty) in layouts[layout_ids], robots built from
     `catalog` (`team_robots`; `phenotype`: the genome's, if computed); metrics [E] each."""
-    return rollout(layouts.index(layout_ids), team_robots(genome, teams, catalog, phenotype),
+    return rollout(layouts.select(layout_ids), team_robots(genome, teams, catalog, phenotype),
                    tables, params, ticks, step_fn)
 
 
@@ -213,7 +214,7 @@ def sim_batch(plan: EvalPlan, genome: Population, lo: int = 0, hi: int | None = 
     local = [torch.where(t >= 0, torch.searchsorted(rows, t.clamp_min(0)), -1)
              for t in (focal, base)]
     envs = torch.arange(lo * T, hi * T, device=plan.layouts.seed.device)
-    return SimBatch(genome.index(rows), local[0], local[1], plan.layouts.index(envs), T)
+    return SimBatch(genome.index(rows), local[0], local[1], plan.layouts.select(envs), T)
 
 
 def simulate_batch(batch: SimBatch, params: WorldParams, ticks: int,

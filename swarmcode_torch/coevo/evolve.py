@@ -274,6 +274,7 @@ def generation(state: EvolutionState, ctx: Context,
                    evaluator=ctx.evaluator, score_fn=ctx.score_fn, allowed=allowed,
                    proto_distance=designs_d, phenotype=ph)
     if adm is not None:
+        assert designs_d is not None and allowed is not None    # both set with `adm`
         gated = ~beats_baseline(res.focal, res.baseline)
         adm = admission.update(adm, sp.species, sp.proto_ids, gated,
                                admission.nearest_partner(designs_d, allowed), admission.SUBSTITUTE)
@@ -310,7 +311,7 @@ def generation(state: EvolutionState, ctx: Context,
 
     # the team's species, most robots first (the first of equals: the lower row)
     in_team = sorted(zip(team_species.tolist(), team_counts.tolist()), key=lambda sc: -sc[1])
-    composition = {
+    composition: dict[str, Any] = {
         "generation": state.generation,
         "population": {int(i): int(n) for i, n in zip(ids.tolist(), sizes.tolist())},
         "team": {str(s): n for s, n in in_team},
@@ -404,12 +405,12 @@ def _check_population(d, cfg: SwarmCoDeConfig, what: str, rows: int | None) -> i
                 raise ValueError(f"{what}: {name} holds values outside 0..{hi - 1} "
                                  f"({int(t.min())}..{int(t.max())})")
         else:
-            lo, hi = GENE_BOUNDS[name]
+            low, high = GENE_BOUNDS[name]
             if not t.dtype.is_floating_point:
                 raise ValueError(f"{what}: {name} has dtype {t.dtype}, expected a float")
-            if t.numel() and not (bool(torch.isfinite(t).all()) and float(t.min()) >= lo - 1e-6
-                                  and float(t.max()) <= hi + 1e-6):
-                raise ValueError(f"{what}: {name} holds values outside [{lo}, {hi}] (or NaN)")
+            if t.numel() and not (bool(torch.isfinite(t).all()) and float(t.min()) >= low - 1e-6
+                                  and float(t.max()) <= high + 1e-6):
+                raise ValueError(f"{what}: {name} holds values outside [{low}, {high}] (or NaN)")
     return n
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Sequence
+from typing import Any, Sequence
 
 import torch
 
@@ -146,7 +146,7 @@ def from_designs(designs: Sequence[dict], tag_length: int = 16) -> tuple[Populat
     """
     if not designs:
         raise ValueError("no designs: a team needs at least one robot design")
-    rows = []
+    rows: list[dict[str, Any]] = []
     for i, d in enumerate(designs):
         try:
             eff = d["effector"]
@@ -173,14 +173,20 @@ def from_designs(designs: Sequence[dict], tag_length: int = 16) -> tuple[Populat
                             dtype=torch.long)
     if ((programs < 0) | (programs >= NUM_OPCODES)).any():
         raise ValueError(f"design bt lists must hold opcodes 0..{NUM_OPCODES - 1}")
-    f = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.float)  # noqa: E731
-    i = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.long)  # noqa: E731
+
+    def floats(k: str) -> torch.Tensor:
+        return torch.tensor([r[k] for r in rows], dtype=torch.float)
+
+    def longs(k: str) -> torch.Tensor:
+        return torch.tensor([r[k] for r in rows], dtype=torch.long)
+
     genome = Population(
-        tag=torch.zeros(len(rows), tag_length, dtype=torch.bool), selectivity=f("selectivity"),
-        dominance=f("dominance"), bt=programs, radius=f("radius"), chassis=i("chassis"),
-        battery=i("battery"), motor=i("motor"), torque_point=f("torque_point"),
-        battery_point=f("battery_point"), effector=i("effector"))
-    counts = i("count")
+        tag=torch.zeros(len(rows), tag_length, dtype=torch.bool),
+        selectivity=floats("selectivity"), dominance=floats("dominance"), bt=programs,
+        radius=floats("radius"), chassis=longs("chassis"), battery=longs("battery"),
+        motor=longs("motor"), torque_point=floats("torque_point"),
+        battery_point=floats("battery_point"), effector=longs("effector"))
+    counts = longs("count")
     if int(counts.sum()) == 0:
         raise ValueError("the designs' counts add up to no robot")
     return genome, counts

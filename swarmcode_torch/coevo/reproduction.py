@@ -19,7 +19,7 @@ DistanceFn = Callable[[Population, Population], Tensor]
 
 
 def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
-                     protect: int | None = None, min_share: float = 0.0) -> Tensor:
+                     protect: int | Tensor | None = None, min_share: float = 0.0) -> Tensor:
     """[K] total adjusted fitness per species -> [K] long quotas summing to population_size.
 
     Proportional shares rounded by largest remainder (ties: lowest index); all-zero (or negative)

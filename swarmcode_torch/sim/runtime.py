@@ -5,7 +5,7 @@ them for a run (`tick_function`, `tick_mode`), and the device of a run (`resolve
 from __future__ import annotations
 
 import os
-from typing import Callable
+from typing import Any, Callable
 
 import torch
 
@@ -22,9 +22,9 @@ class CompiledStep:
     """`torch.compile(step)`, falling back to eager `step` (with a warning) when the first call
     cannot compile, e.g. on a machine without the C++ compiler that inductor's CPU backend needs."""
 
-    def __init__(self, **compile_kwargs):
+    def __init__(self, **compile_kwargs: Any) -> None:
         self.compiled = torch.compile(step, dynamic=False, **compile_kwargs)
-        self.fn = None
+        self.fn: Callable | None = None     # the compiled or, once compiling failed, eager tick
         self.error: Exception | None = None
 
     def __call__(self, *args):
@@ -67,7 +67,7 @@ class CudaGraphTicks:
         # the eager tick makes small host-to-device copies, which a capture does not allow
         self.step_fn = step_fn if step_fn is not None else CompiledStep()
         self.k = ticks_per_graph
-        self.key = None
+        self.key: tuple | None = None   # the shapes and params of the captured graph
         self.graph: torch.cuda.CUDAGraph | None = None
         # required: a tick that fails to compile is an error; otherwise the ticks run one by one
         # with the step's eager fallback
@@ -126,6 +126,7 @@ class CudaGraphTicks:
             return state
         for a, b in zip(self._tensors(self.state, self.inputs), self._tensors(state, inputs)):
             a.copy_(b)
+        assert self.graph is not None       # captured above or by an earlier call
         for _ in range(ticks // self.k):
             self.graph.replay()
         out = State(*(t.clone() for t in self.state))
@@ -182,7 +183,7 @@ def tick_mode(step_fn: Callable, compiled: bool) -> str:
     if isinstance(step_fn, FusedTicks):
         return "fused"
     graphs = isinstance(step_fn, CudaGraphTicks)
-    compiled_step = step_fn.step_fn if graphs else step_fn
+    compiled_step = step_fn.step_fn if isinstance(step_fn, CudaGraphTicks) else step_fn
     if isinstance(compiled_step, CompiledStep) and compiled_step.error is not None:
         return "eager (compiling failed)"
     if graphs:

@@ -238,6 +238,7 @@ def _scenario_from_dict(d: dict, source: str, folder: Path | None = None,
             raise ScenarioError(f"{w}count: must be >= 0, got {count}")
         dist = _range(p, "distance", w)
         mass = _range(p, "mass", w)
+        grips: tuple[int, ...]
         if kind == "individual":
             grips = (_effector(_get(p, "effector", w, str), f"{w}effector"),)
             band = _range(p, "radius_band", w, default=(0.0, 10.0))
