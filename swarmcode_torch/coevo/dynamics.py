@@ -11,8 +11,8 @@ analysis of a run directory (`swarmcode-torch dynamics`) share them.
 from __future__ import annotations
 
 import statistics
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
 
 
 @dataclass
@@ -27,7 +27,7 @@ class Turnover:
     born: dict[int, int] = field(default_factory=dict)
     died: dict[int, int] = field(default_factory=dict)
 
-    def copy(self) -> "Turnover":
+    def copy(self) -> Turnover:
         return Turnover(self.alive, dict(self.born), dict(self.died))
 
     def advance(self, generation: int, population: Iterable) -> tuple[int, int]:

@@ -16,25 +16,30 @@ per-environment metrics, in the driver).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import torch
 from torch import Tensor
 
 from ..sim import bt
-from .config import EvalConfig
-from .fitness import budget_penalty, gate, raw_fitness, team_cost
-from .population import Population
-from .population import genome_phenotype
 from ..sim.hardware import Catalog, Phenotype
 from ..sim.layout import Layout, make_layouts
-from .partners import (Swarms, assemble_swarms, choose_partners, elite_rows,
-                       niche_representatives, ranking_fitness)
-from .selection import elite_count
-from ..sim.scenario import Scenario
 from ..sim.rollout import rollout
+from ..sim.scenario import Scenario
 from ..sim.state import Robots, WorldParams, capabilities
+from .config import EvalConfig
+from .fitness import budget_penalty, gate, raw_fitness, team_cost
+from .partners import (
+    Swarms,
+    assemble_swarms,
+    choose_partners,
+    elite_rows,
+    niche_representatives,
+    ranking_fitness,
+)
+from .population import Population, genome_phenotype
+from .selection import elite_count
 
 StepFn = Callable
 
@@ -142,7 +147,7 @@ class SimBatch:
     layouts: Layout        # [B * trials], as in EvalPlan
     trials: int
 
-    def to(self, device: torch.device | str) -> "SimBatch":
+    def to(self, device: torch.device | str) -> SimBatch:
         return SimBatch(self.genome.to(device), self.focal_team.to(device),
                         self.baseline_team.to(device),
                         Layout(*(t.to(device) for t in self.layouts)), self.trials)
@@ -258,7 +263,8 @@ def score_plan(plan: EvalPlan, genome: Population, m: dict, scenario: Scenario, 
     teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
     ph = phenotype if phenotype is not None else genome_phenotype(genome, scenario.hardware)
     robot_cost = ph.cost[teams.clamp_min(0)]
-    counts = torch.cat([swarms.focal_species_count, swarms.baseline_species_count]).repeat_interleave(T)
+    counts = torch.cat([swarms.focal_species_count,
+                        swarms.baseline_species_count]).repeat_interleave(T)
     cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
     scores = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1)
     focal, base = scores[0], scores[1]

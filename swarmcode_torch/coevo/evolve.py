@@ -9,27 +9,28 @@ imports a CLI or logging library.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from functools import partial
-from typing import Any, Callable
+from typing import Any
 
 import torch
 from torch import Tensor
 
 from ..sim import bt
-from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
+from ..sim.hardware import Phenotype
+from ..sim.runtime import resolve_device, tick_function, tick_mode
+from ..sim.scenario import Scenario, load_scenario
+from ..sim.state import WorldParams
 from . import admission
 from .admission import Admission
+from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
 from .dynamics import Turnover, median, replay
 from .evaluation import EvalResult, ScoreFn, evaluate, score_fn_name, team_scores
 from .fitness import beats_baseline, ema
 from .population import GENE_BOUNDS, GENE_VALUES, Population, genome_phenotype
 from .reproduction import mutate_bt, reproduce
-from ..sim.scenario import Scenario, load_scenario
 from .speciation import SpeciationResult, design_distance, distance, speciate
-from ..sim.hardware import Phenotype
-from ..sim.runtime import resolve_device, tick_function, tick_mode
-from ..sim.state import WorldParams
 
 CHECKPOINT_VERSION = 1
 
@@ -102,7 +103,8 @@ def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None,
     start), load the scenario and pick the device and tick function.
     `score_fn`: a user function that scores team-episodes instead of the built-in fitness (the
     config records its name as `fitness_function`); a config that names one needs it (ValueError).
-    `scenario`: the Scenario to run, instead of loading `cfg.scenario` (which then only names it)."""
+    `scenario`: the Scenario to run, instead of loading `cfg.scenario` (which then only names
+    it)."""
     if score_fn is not None:
         if not callable(score_fn):
             raise TypeError(f"the fitness function must be callable, got {type(score_fn).__name__}")
@@ -173,7 +175,7 @@ class GenerationResult:
     num_species: int               # species in the population
     founded: int                   # species founded this generation
     extinct: int                   # species gone since the previous generation
-    species_median_age: float      # generations since founding, median over the population's species
+    species_median_age: float      # generations since founding, median over the species
     best_team: BestTeam            # this generation's best team
     team_rows: Tensor              # [S] population rows of that team's robots (-1: empty slot)
     team_median_age: float         # median age of the team's species
@@ -506,7 +508,7 @@ class Evolution:
 
     @classmethod
     def from_checkpoint(cls, d: dict, cfg: SwarmCoDeConfig, fitness: ScoreFn | None = None,
-                        scenario: Scenario | None = None, checked: bool = False) -> "Evolution":
+                        scenario: Scenario | None = None, checked: bool = False) -> Evolution:
         ev = cls.__new__(cls)
         ev.ctx = make_context(cfg, fitness, scenario, checked)
         ev.cfg = ev.ctx.cfg

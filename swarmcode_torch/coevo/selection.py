@@ -16,8 +16,10 @@ from .config import SwarmCoDeConfig
 def elite_count(species_size: Tensor, max_elite: int = ...) -> Tensor: ...
 @overload
 def elite_count(species_size: int, max_elite: int = ...) -> int: ...
-def elite_count(species_size: Tensor | int, max_elite: int = SwarmCoDeConfig.max_elite) -> Tensor | int:
-    """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite, size // 5 + 1)); max_elite is the paper's E."""
+def elite_count(species_size: Tensor | int,
+                max_elite: int = SwarmCoDeConfig.max_elite) -> Tensor | int:
+    """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite,
+    size // 5 + 1)); max_elite is the paper's E."""
     if isinstance(species_size, Tensor):
         return torch.clamp(torch.clamp(species_size // 5 + 1, max=max_elite), min=1)
     return max(1, min(max_elite, int(species_size) // 5 + 1))

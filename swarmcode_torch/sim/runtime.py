@@ -5,13 +5,14 @@ them for a run (`tick_function`, `tick_mode`), and the device of a run (`resolve
 from __future__ import annotations
 
 import os
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import torch
 
+from .fused import FusedTicks, tick_choice
 from .layout import Layout
 from .state import Robots, State, TickInputs, WorldParams
-from .fused import FusedTicks, tick_choice
 from .step import step
 
 # compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
