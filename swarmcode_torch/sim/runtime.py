@@ -66,7 +66,9 @@ class CudaGraphTicks:
         if ticks_per_graph < 1:
             raise ValueError("ticks_per_graph must be >= 1")
         # the eager tick makes small host-to-device copies, which a capture does not allow
-        self.step_fn = step_fn if step_fn is not None else CompiledStep()
+        if step_fn is None:
+            step_fn = CompiledStep()
+        self.step_fn: Callable = step_fn
         self.k = ticks_per_graph
         self.key: tuple | None = None   # the shapes and params of the captured graph
         self.graph: torch.cuda.CUDAGraph | None = None
@@ -170,7 +172,9 @@ def tick_function(device: torch.device, compile: bool | None = None,
         device.type == "cuda" or generations >= COMPILE_MIN_GENERATIONS)
     if cuda_graphs and (device.type != "cuda" or not use_compile):
         raise ValueError("cuda_graphs needs device cuda and the compiled tick (compile)")
-    step_fn = CompiledStep() if use_compile else step
+    step_fn: Callable = step
+    if use_compile:
+        step_fn = CompiledStep()
     graphs = cuda_graphs if cuda_graphs is not None else (
         device.type == "cuda" and use_compile)
     if graphs:  # unset (auto): a tick that fails to compile runs eagerly, as without graphs
@@ -184,7 +188,9 @@ def tick_mode(step_fn: Callable, compiled: bool) -> str:
     if isinstance(step_fn, FusedTicks):
         return "fused"
     graphs = isinstance(step_fn, CudaGraphTicks)
-    compiled_step = step_fn.step_fn if isinstance(step_fn, CudaGraphTicks) else step_fn
+    compiled_step = step_fn
+    if isinstance(step_fn, CudaGraphTicks):
+        compiled_step = step_fn.step_fn
     if isinstance(compiled_step, CompiledStep) and compiled_step.error is not None:
         return "eager (compiling failed)"
     if graphs:
