@@ -62,14 +62,16 @@ def test_wheel_imports_from_its_own_site_packages(installed):
             "files = resources.files('swarmcode_torch'); "
             "print(json.dumps([sc.__file__, sc.__version__, md.version('swarmcode-torch'), "
             "files.joinpath('data/hardware.toml').is_file(), "
+            "files.joinpath('py.typed').is_file(), "
             "sorted(f.name for f in files.joinpath('scenarios').iterdir())]))")
-    path, version, dist_version, hardware, scenarios = json.loads(
+    path, version, dist_version, hardware, typed, scenarios = json.loads(
         sh(python, "-c", code, cwd=work))
     site = (tmp / "venv").resolve()
     assert Path(path).resolve().is_relative_to(site), path      # not the editable /work tree
     assert not Path(path).resolve().is_relative_to(ROOT)
     assert version == dist_version
     assert hardware
+    assert typed                                # PEP 561: type checkers read its annotations
     assert {"one-niche.toml", "budget.toml", "four-niche.toml"} <= set(scenarios)
 
 

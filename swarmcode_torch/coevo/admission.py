@@ -61,13 +61,13 @@ class Admission:
     clash: Tensor
 
     @classmethod
-    def empty(cls, device: torch.device | str = "cpu") -> "Admission":
+    def empty(cls, device: torch.device | str = "cpu") -> Admission:
         return cls(torch.zeros(0, dtype=torch.bool, device=device),
                    torch.zeros(0, device=device),
                    torch.zeros(0, dtype=torch.long, device=device),
                    torch.zeros(0, dtype=torch.long, device=device))
 
-    def grow(self, n: int, partner: bool) -> "Admission":
+    def grow(self, n: int, partner: bool) -> Admission:
         """Room for species ids below n; ids new to it start as partners if `partner` (the
         species of generation 0), else on probation."""
         m = self.partner.numel()
@@ -89,7 +89,7 @@ class Admission:
                 "calm": self.calm.cpu(), "clash": self.clash.cpu()}
 
     @classmethod
-    def from_state_dict(cls, d: dict, device: torch.device | str = "cpu") -> "Admission":
+    def from_state_dict(cls, d: dict, device: torch.device | str = "cpu") -> Admission:
         """ValueError unless d holds four 1-D tensors of one length and the right dtypes."""
         want = {"partner": torch.bool, "gated": torch.float32, "calm": torch.long,
                 "clash": torch.long}

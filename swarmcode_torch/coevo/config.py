@@ -19,6 +19,7 @@ import typing
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+
 class SettingError(ValueError):
     """An invalid setting: `key` names it, `problem` says what is wrong ("must be >= 1, got 0");
     the message is the two together. The application respells the key as its options do."""
@@ -73,7 +74,8 @@ class SwarmCoDeConfig:
     lam: float = 0.001
     """Budget penalty decay."""
     max_elite: int = 3
-    """The cap of a species' elite count max(1, min(max_elite, floor(size / 5) + 1)) (the paper's E)."""
+    """The cap of a species' elite count max(1, min(max_elite, floor(size / 5) + 1)) (the
+    paper's E)."""
     dominance: bool = True
     """Sample team slots by the dominance genes; False: uniformly (an ablation)."""
     quota_size_exponent: float | None = 0.75
@@ -235,7 +237,7 @@ class SwarmCoDeConfig:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "SwarmCoDeConfig":
+    def from_dict(cls, d: dict[str, Any]) -> SwarmCoDeConfig:
         """The config of a table of this version's keys ("none" is None); ValueError for an
         unknown key or a value that is not a single value. Not checked (`validate`); a table
         written by an older version goes through `app.runs.migrate_config` first."""
@@ -248,30 +250,31 @@ class SwarmCoDeConfig:
         for k, v in d.items():
             if v is not None and not isinstance(v, (bool, int, float, str)):
                 raise ValueError(f"{k}: expected a single value, got {v!r}")
-        return cls(**{k: (None if v == "none" else v) for k, v in d.items()})
+        values: dict[str, Any] = {k: (None if v == "none" else v) for k, v in d.items()}
+        return cls(**values)
 
-    def evaluation(self, num_robots: int, episode_ticks: int) -> "EvalConfig":
+    def evaluation(self, num_robots: int, episode_ticks: int) -> EvalConfig:
         """How teams are scored, with the scenario's team size and episode length where the
         run leaves them unset."""
         return _part(EvalConfig, self, swarm_size=self.swarm_size or num_robots,
                      ticks=self.ticks or episode_ticks, weights=self.fitness_weights)
 
     @property
-    def fitness_weights(self) -> "FitnessWeights":
+    def fitness_weights(self) -> FitnessWeights:
         """The raw-fitness weights of the run (`w_delivery`, ..., `fitness_floor`)."""
         return FitnessWeights(**{f: float(getattr(self, key)) for f, key in FITNESS_KEYS.items()})
 
     @property
-    def distance_weights(self) -> "DistanceWeights":
+    def distance_weights(self) -> DistanceWeights:
         """The weights of the speciation distance D (`w_tag`, ..., `gamma`)."""
         return DistanceWeights(**{k: float(getattr(self, k)) for k in DISTANCE_KEYS})
 
     @property
-    def speciation(self) -> "SpeciationParams":
+    def speciation(self) -> SpeciationParams:
         return _part(SpeciationParams, self, weights=self.distance_weights)
 
     @property
-    def reproduction(self) -> "ReproductionParams":
+    def reproduction(self) -> ReproductionParams:
         return _part(ReproductionParams, self)
 
 
@@ -293,7 +296,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def preset_config(name: str = "default", **settings: Any) -> "SwarmCoDeConfig":
+def preset_config(name: str = "default", **settings: Any) -> SwarmCoDeConfig:
     """The config of preset `name` (`PRESETS`) with `settings` (config keys) on top; ValueError
     naming the presets for an unknown name."""
     if name not in PRESETS:

@@ -11,8 +11,8 @@ analysis of a run directory (`swarmcode-torch dynamics`) share them.
 from __future__ import annotations
 
 import statistics
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
 
 
 @dataclass
@@ -27,7 +27,7 @@ class Turnover:
     born: dict[int, int] = field(default_factory=dict)
     died: dict[int, int] = field(default_factory=dict)
 
-    def copy(self) -> "Turnover":
+    def copy(self) -> Turnover:
         return Turnover(self.alive, dict(self.born), dict(self.died))
 
     def advance(self, generation: int, population: Iterable) -> tuple[int, int]:
@@ -99,7 +99,8 @@ def window_stats(rows: Sequence[dict], t: Turnover, start: int, end: int,
     last = rows[-1]["generation"] if rows else start
     lasting = sum(1 for sp, b in t.born.items()
                   if start <= b < end and t.died.get(sp, last + 1) - b >= 2)
-    niches = [team_niches[r["generation"]] for r in win if r["generation"] in (team_niches or {})]
+    niche_of = team_niches or {}
+    niches = [niche_of[r["generation"]] for r in win if r["generation"] in niche_of]
     return {
         "generations": n, "from": start, "to": end,
         "team_species": median([r["team_species"] for r in win]),

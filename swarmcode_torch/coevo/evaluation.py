@@ -16,25 +16,30 @@ per-environment metrics, in the driver).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import torch
 from torch import Tensor
 
 from ..sim import bt
-from .config import EvalConfig
-from .fitness import budget_penalty, gate, raw_fitness, team_cost
-from .population import Population
-from .population import genome_phenotype
 from ..sim.hardware import Catalog, Phenotype
 from ..sim.layout import Layout, make_layouts
-from .partners import (Swarms, assemble_swarms, choose_partners, elite_rows,
-                       niche_representatives, ranking_fitness)
-from .selection import elite_count
-from ..sim.scenario import Scenario
 from ..sim.rollout import rollout
+from ..sim.scenario import Scenario
 from ..sim.state import Robots, WorldParams, capabilities
+from .config import EvalConfig
+from .fitness import budget_penalty, gate, raw_fitness, team_cost
+from .partners import (
+    Swarms,
+    assemble_swarms,
+    choose_partners,
+    elite_rows,
+    niche_representatives,
+    ranking_fitness,
+)
+from .population import Population, genome_phenotype
+from .selection import elite_count
 
 StepFn = Callable
 
@@ -100,8 +105,9 @@ def team_robots(genome: Population, teams: Tensor, catalog: Catalog | None = Non
     program (row of `bt.build_tables(genome.bt)`). `phenotype`: the genome's, if computed."""
     ph = phenotype if phenotype is not None else genome_phenotype(genome, catalog)
     rows = teams.clamp_min(0)
-    return Robots(*(t[rows] for t in (ph.radius, ph.mass, ph.force, ph.payload, ph.capacity,
-                                        ph.efficiency, ph.effector)),
+    return Robots(radius=ph.radius[rows], mass=ph.mass[rows], force=ph.force[rows],
+                  payload=ph.payload[rows], capacity=ph.capacity[rows],
+                  efficiency=ph.efficiency[rows], effector=ph.effector[rows],
                   present=teams >= 0, program=rows)
 
 
@@ -111,7 +117,7 @@ def simulate_teams(teams: Tensor, genome: Population, tables: Tensor, layout_ids
                    phenotype: Phenotype | None = None) -> dict:
     """Run teams [E, S] (population rows, -1 empty) in layouts[layout_ids], robots built from
     `catalog` (`team_robots`; `phenotype`: the genome's, if computed); metrics [E] each."""
-    return rollout(layouts.index(layout_ids), team_robots(genome, teams, catalog, phenotype),
+    return rollout(layouts.select(layout_ids), team_robots(genome, teams, catalog, phenotype),
                    tables, params, ticks, step_fn)
 
 
@@ -141,7 +147,7 @@ class SimBatch:
     layouts: Layout        # [B * trials], as in EvalPlan
     trials: int
 
-    def to(self, device: torch.device | str) -> "SimBatch":
+    def to(self, device: torch.device | str) -> SimBatch:
         return SimBatch(self.genome.to(device), self.focal_team.to(device),
                         self.baseline_team.to(device),
                         Layout(*(t.to(device) for t in self.layouts)), self.trials)
@@ -213,7 +219,7 @@ def sim_batch(plan: EvalPlan, genome: Population, lo: int = 0, hi: int | None = 
     local = [torch.where(t >= 0, torch.searchsorted(rows, t.clamp_min(0)), -1)
              for t in (focal, base)]
     envs = torch.arange(lo * T, hi * T, device=plan.layouts.seed.device)
-    return SimBatch(genome.index(rows), local[0], local[1], plan.layouts.index(envs), T)
+    return SimBatch(genome.index(rows), local[0], local[1], plan.layouts.select(envs), T)
 
 
 def simulate_batch(batch: SimBatch, params: WorldParams, ticks: int,
@@ -257,7 +263,8 @@ def score_plan(plan: EvalPlan, genome: Population, m: dict, scenario: Scenario, 
     teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
     ph = phenotype if phenotype is not None else genome_phenotype(genome, scenario.hardware)
     robot_cost = ph.cost[teams.clamp_min(0)]
-    counts = torch.cat([swarms.focal_species_count, swarms.baseline_species_count]).repeat_interleave(T)
+    counts = torch.cat([swarms.focal_species_count,
+                        swarms.baseline_species_count]).repeat_interleave(T)
     cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
     scores = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1)
     focal, base = scores[0], scores[1]

@@ -9,27 +9,28 @@ imports a CLI or logging library.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from functools import partial
-from typing import Any, Callable
+from typing import Any
 
 import torch
 from torch import Tensor
 
 from ..sim import bt
-from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
+from ..sim.hardware import Phenotype
+from ..sim.runtime import resolve_device, tick_function, tick_mode
+from ..sim.scenario import Scenario, load_scenario
+from ..sim.state import WorldParams
 from . import admission
 from .admission import Admission
+from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
 from .dynamics import Turnover, median, replay
 from .evaluation import EvalResult, ScoreFn, evaluate, score_fn_name, team_scores
 from .fitness import beats_baseline, ema
 from .population import GENE_BOUNDS, GENE_VALUES, Population, genome_phenotype
 from .reproduction import mutate_bt, reproduce
-from ..sim.scenario import Scenario, load_scenario
 from .speciation import SpeciationResult, design_distance, distance, speciate
-from ..sim.hardware import Phenotype
-from ..sim.runtime import resolve_device, tick_function, tick_mode
-from ..sim.state import WorldParams
 
 CHECKPOINT_VERSION = 1
 
@@ -102,7 +103,8 @@ def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None,
     start), load the scenario and pick the device and tick function.
     `score_fn`: a user function that scores team-episodes instead of the built-in fitness (the
     config records its name as `fitness_function`); a config that names one needs it (ValueError).
-    `scenario`: the Scenario to run, instead of loading `cfg.scenario` (which then only names it)."""
+    `scenario`: the Scenario to run, instead of loading `cfg.scenario` (which then only names
+    it)."""
     if score_fn is not None:
         if not callable(score_fn):
             raise TypeError(f"the fitness function must be callable, got {type(score_fn).__name__}")
@@ -173,7 +175,7 @@ class GenerationResult:
     num_species: int               # species in the population
     founded: int                   # species founded this generation
     extinct: int                   # species gone since the previous generation
-    species_median_age: float      # generations since founding, median over the population's species
+    species_median_age: float      # generations since founding, median over the species
     best_team: BestTeam            # this generation's best team
     team_rows: Tensor              # [S] population rows of that team's robots (-1: empty slot)
     team_median_age: float         # median age of the team's species
@@ -274,6 +276,7 @@ def generation(state: EvolutionState, ctx: Context,
                    evaluator=ctx.evaluator, score_fn=ctx.score_fn, allowed=allowed,
                    proto_distance=designs_d, phenotype=ph)
     if adm is not None:
+        assert designs_d is not None and allowed is not None    # both set with `adm`
         gated = ~beats_baseline(res.focal, res.baseline)
         nearest = admission.nearest_partner(designs_d, allowed)
         # a substitute pair: the nearest partner's design within δ of the species' own
@@ -313,7 +316,7 @@ def generation(state: EvolutionState, ctx: Context,
 
     # the team's species, most robots first (the first of equals: the lower row)
     in_team = sorted(zip(team_species.tolist(), team_counts.tolist()), key=lambda sc: -sc[1])
-    composition = {
+    composition: dict[str, Any] = {
         "generation": state.generation,
         "population": {int(i): int(n) for i, n in zip(ids.tolist(), sizes.tolist())},
         "team": {str(s): n for s, n in in_team},
@@ -407,12 +410,12 @@ def _check_population(d, cfg: SwarmCoDeConfig, what: str, rows: int | None) -> i
                 raise ValueError(f"{what}: {name} holds values outside 0..{hi - 1} "
                                  f"({int(t.min())}..{int(t.max())})")
         else:
-            lo, hi = GENE_BOUNDS[name]
+            low, high = GENE_BOUNDS[name]
             if not t.dtype.is_floating_point:
                 raise ValueError(f"{what}: {name} has dtype {t.dtype}, expected a float")
-            if t.numel() and not (bool(torch.isfinite(t).all()) and float(t.min()) >= lo - 1e-6
-                                  and float(t.max()) <= hi + 1e-6):
-                raise ValueError(f"{what}: {name} holds values outside [{lo}, {hi}] (or NaN)")
+            if t.numel() and not (bool(torch.isfinite(t).all()) and float(t.min()) >= low - 1e-6
+                                  and float(t.max()) <= high + 1e-6):
+                raise ValueError(f"{what}: {name} holds values outside [{low}, {high}] (or NaN)")
     return n
 
 
@@ -508,7 +511,7 @@ class Evolution:
 
     @classmethod
     def from_checkpoint(cls, d: dict, cfg: SwarmCoDeConfig, fitness: ScoreFn | None = None,
-                        scenario: Scenario | None = None, checked: bool = False) -> "Evolution":
+                        scenario: Scenario | None = None, checked: bool = False) -> Evolution:
         ev = cls.__new__(cls)
         ev.ctx = make_context(cfg, fitness, scenario, checked)
         ev.cfg = ev.ctx.cfg

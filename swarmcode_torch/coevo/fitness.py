@@ -17,7 +17,8 @@ METRIC_KEYS = (
 )
 
 
-def raw_fitness_terms(m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()) -> dict[str, Tensor]:
+def raw_fitness_terms(m: dict[str, Tensor],
+                      w: FitnessWeights = FitnessWeights()) -> dict[str, Tensor]:
     """The terms of F_raw, each [...]: "delivery", "collab", "pickup", "energy", "proximity",
     "closeness" (weighted), "activity" (the inactive factor: 1, or w.inactive_factor for a team
     that picked nothing up); `raw_fitness` = max(w.floor, sum of the terms * activity)."""
@@ -48,7 +49,8 @@ def raw_fitness(m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()) -> T
 
 def budget_penalty(cost: Tensor, budget: float | Tensor | None, lam: float = 0.001,
                    floor: float = 0.05) -> Tensor:
-    """[...] team cost -> [...] factor: max(floor, exp(-lam (cost - budget))) over budget, else 1."""
+    """[...] team cost -> [...] factor: max(floor, exp(-lam (cost - budget))) over budget,
+    else 1."""
     cost = torch.as_tensor(cost).float()
     ones = torch.ones_like(cost)
     if budget is None:
@@ -72,12 +74,14 @@ def beats_baseline(f_focal: Tensor, f_baseline: Tensor) -> Tensor:
 
 
 def ema(prev: Tensor, new: Tensor, has_prev: Tensor, alpha: float = 0.6) -> Tensor:
-    """[...] -> [...]: alpha*prev + (1-alpha)*new where has_prev, else new; alpha is the decay (weight of the OLD value)."""
+    """[...] -> [...]: alpha*prev + (1-alpha)*new where has_prev, else new; alpha is the decay
+    (weight of the OLD value)."""
     return torch.where(has_prev, alpha * prev + (1.0 - alpha) * new, new)
 
 
 def team_cost(robot_cost: Tensor, robot_present: Tensor, species_count: Tensor,
               overhead: float) -> Tensor:
-    """[..., N] robot cost, [..., N] bool present, [...] species count -> [...] sum of present costs + overhead*count."""
+    """[..., N] robot cost, [..., N] bool present, [...] species count -> [...] sum of present
+    costs + overhead*count."""
     hw = torch.where(robot_present, robot_cost, torch.zeros_like(robot_cost)).sum(-1)
     return hw + overhead * species_count.to(hw.dtype)

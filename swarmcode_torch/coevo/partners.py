@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import torch
 from torch import Tensor
@@ -32,10 +32,12 @@ class Swarms:
 def choose_partners(tag: Tensor, selectivity: Tensor, species: Tensor, proto_ids: Tensor,
                     proto_tag: Tensor, elite_index: Tensor, generator: torch.Generator,
                     allowed: Tensor | None = None) -> Tensor:
-    """tag [P, L] bool, selectivity [P], species [P], proto_ids [K], proto_tag [K, L], elite_index [K, M] -> partner_rows [P, K] long.
+    """tag [P, L] bool, selectivity [P], species [P], proto_ids [K], proto_tag [K, L],
+    elite_index [K, M] -> partner_rows [P, K] long.
 
-    Species k is a partner of i iff it is not i's species, has >= 1 elite, and H(tag_i, proto_tag_k)/L
-    < selectivity_i (strict), and `allowed[k]` where that [K] bool mask is given
+    Species k is a partner of i iff it is not i's species, has >= 1 elite, and
+    H(tag_i, proto_tag_k)/L < selectivity_i (strict), and `allowed[k]` where that [K] bool mask is
+    given
     (`niche_representatives`); partner_rows[i, k] is one of k's elites drawn uniformly, else -1.
     The random draws do not depend on `allowed`.
     """
@@ -80,15 +82,16 @@ def niche_representatives(capability: Tensor, sizes: Tensor, best: Tensor,
     same &= capability.any(-1)[:, None]
     idx = torch.arange(k, device=sizes.device)
     size, fit = sizes[:, None], best[:, None]
-    beats = (size.T > size) | ((size.T == size) & ((fit.T > fit) | ((fit.T == fit)
-                                                                    & (idx[None, :] < idx[:, None]))))
+    earlier = idx[None, :] < idx[:, None]                               # [k, j]: j comes first
+    beats = (size.T > size) | ((size.T == size) & ((fit.T > fit) | ((fit.T == fit) & earlier)))
     beaten = (same & beats & has_elite[None, :]).any(1)                 # [k, j]: j beats k
     return has_elite & ~beaten
 
 
 def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids: Tensor,
                n_elite_fn: Callable[[Tensor], Tensor] = elite_count) -> Tensor:
-    """fitness [P], has_fitness [P] bool, species [P], proto_ids [K] -> [K, M] long elite rows per species, best first, -1 padded.
+    """fitness [P], has_fitness [P] bool, species [P], proto_ids [K] -> [K, M] long elite rows
+    per species, best first, -1 padded.
 
     N_k = n_elite_fn(sizes [K] long) (capped by the size); individuals without fitness rank below
     those with it; ties by lowest row; individuals whose species is not in proto_ids are ignored.
@@ -116,9 +119,9 @@ def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swar
     random subset of S - 1 if there are more partners); remaining slots: clones drawn from {focal,
     partners in the team} with probability proportional to dominance (uniform if all are 0).
     The baseline team re-fills every focal slot by dominance among the partners in the team
-    (-1 if there are none); where `refill_distance` [B, K] float is given, only from the partner in the team at the
-    least distance (the first of equals): the focal's slots are all given to its nearest
-    partner species.
+    (-1 if there are none); where `refill_distance` [B, K] float is given, only from the partner
+    in the team at the least distance (the first of equals): the focal's slots are all given to
+    its nearest partner species.
     """
     b, k = partner_rows.shape
     s = int(swarm_size)

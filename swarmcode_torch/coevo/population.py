@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
-from typing import Sequence
+from typing import Any
 
 import torch
 
@@ -21,7 +22,8 @@ GENE_VALUES: dict[str, int] = {"chassis": NUM_TIERS, "battery": NUM_TIERS, "moto
                                "effector": 2}
 #: The social genes (mutated with social_sigma; the other continuous genes with hw_sigma).
 SOCIAL_GENES: tuple[str, ...] = ("selectivity", "dominance")
-#: Gene groups inherited together in uniform crossover (tier + operating point of one part move together).
+#: Gene groups inherited together in uniform crossover (tier + operating point of one part move
+#: together).
 CROSSOVER_GROUPS: tuple[tuple[str, ...], ...] = (
     ("selectivity",), ("dominance",), ("radius",), ("chassis",),
     ("battery", "battery_point"), ("motor", "torque_point"), ("effector",),
@@ -50,7 +52,7 @@ class Population:
 
     @classmethod
     def random(cls, n: int, tag_length: int, bt: torch.Tensor | int, generator: torch.Generator,
-               device: torch.device | str = "cpu") -> "Population":
+               device: torch.device | str = "cpu") -> Population:
         """n random genomes, drawn field by field in field order: tag bits w.p. 1/2, continuous
         genes uniform in GENE_BOUNDS, categorical ones uniform in 0..GENE_VALUES - 1; `bt` the
         [n, L] programs, or a length L for uniformly random opcodes."""
@@ -73,28 +75,28 @@ class Population:
     def size(self) -> int:
         return int(self.selectivity.shape[0])
 
-    def index(self, idx: torch.Tensor | slice) -> "Population":
+    def index(self, idx: torch.Tensor | slice) -> Population:
         """Rows `idx` of every field (a new Population)."""
         return Population(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
 
-    def to(self, device: torch.device | str) -> "Population":
+    def to(self, device: torch.device | str) -> Population:
         return Population(**{f.name: getattr(self, f.name).to(device) for f in fields(self)})
 
-    def clone(self) -> "Population":
+    def clone(self) -> Population:
         return Population(**{f.name: getattr(self, f.name).clone() for f in fields(self)})
 
     def state_dict(self) -> dict[str, torch.Tensor]:
         return {f.name: getattr(self, f.name).detach().cpu() for f in fields(self)}
 
     @classmethod
-    def from_state_dict(cls, d: dict[str, torch.Tensor]) -> "Population":
+    def from_state_dict(cls, d: dict[str, torch.Tensor]) -> Population:
         names = [f.name for f in fields(cls)]
         missing = [n for n in names if n not in d]
         if missing:
             raise ValueError(f"genome is missing fields: {', '.join(missing)}")
         return cls(**{n: d[n] for n in names})
 
-    def where(self, mask: torch.Tensor, other: "Population") -> "Population":
+    def where(self, mask: torch.Tensor, other: Population) -> Population:
         """[N] bool, `other` [N] -> Population [N]: this population's rows where mask, else
         other's."""
         out = {}
@@ -104,7 +106,7 @@ class Population:
         return Population(**out)
 
     @staticmethod
-    def cat(parts: list["Population"]) -> "Population":
+    def cat(parts: list[Population]) -> Population:
         return Population(**{f.name: torch.cat([getattr(p, f.name) for p in parts])
                          for f in fields(Population)})
 
@@ -115,7 +117,7 @@ class Population:
         return torch.stack([self.torque_point, self.battery_point], dim=-1).float()
 
 
-def genome_phenotype(genome: "Population", catalog: Catalog | None = None) -> Phenotype:
+def genome_phenotype(genome: Population, catalog: Catalog | None = None) -> Phenotype:
     """Phenotype of every individual of a population (`Population`)."""
     return phenotype(genome.radius, genome.chassis, genome.battery, genome.motor,
                      genome.torque_point, genome.battery_point, genome.effector, catalog)
@@ -146,7 +148,7 @@ def from_designs(designs: Sequence[dict], tag_length: int = 16) -> tuple[Populat
     """
     if not designs:
         raise ValueError("no designs: a team needs at least one robot design")
-    rows = []
+    rows: list[dict[str, Any]] = []
     for i, d in enumerate(designs):
         try:
             eff = d["effector"]
@@ -173,14 +175,20 @@ def from_designs(designs: Sequence[dict], tag_length: int = 16) -> tuple[Populat
                             dtype=torch.long)
     if ((programs < 0) | (programs >= NUM_OPCODES)).any():
         raise ValueError(f"design bt lists must hold opcodes 0..{NUM_OPCODES - 1}")
-    f = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.float)  # noqa: E731
-    i = lambda k: torch.tensor([r[k] for r in rows], dtype=torch.long)  # noqa: E731
+
+    def floats(k: str) -> torch.Tensor:
+        return torch.tensor([r[k] for r in rows], dtype=torch.float)
+
+    def longs(k: str) -> torch.Tensor:
+        return torch.tensor([r[k] for r in rows], dtype=torch.long)
+
     genome = Population(
-        tag=torch.zeros(len(rows), tag_length, dtype=torch.bool), selectivity=f("selectivity"),
-        dominance=f("dominance"), bt=programs, radius=f("radius"), chassis=i("chassis"),
-        battery=i("battery"), motor=i("motor"), torque_point=f("torque_point"),
-        battery_point=f("battery_point"), effector=i("effector"))
-    counts = i("count")
+        tag=torch.zeros(len(rows), tag_length, dtype=torch.bool),
+        selectivity=floats("selectivity"), dominance=floats("dominance"), bt=programs,
+        radius=floats("radius"), chassis=longs("chassis"), battery=longs("battery"),
+        motor=longs("motor"), torque_point=floats("torque_point"),
+        battery_point=floats("battery_point"), effector=longs("effector"))
+    counts = longs("count")
     if int(counts.sum()) == 0:
         raise ValueError("the designs' counts add up to no robot")
     return genome, counts

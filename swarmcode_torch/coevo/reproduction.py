@@ -3,8 +3,8 @@ crossover and mutation of whole populations as batched tensor operations."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import fields
-from typing import Callable
 
 import torch
 from torch import Tensor
@@ -19,7 +19,7 @@ DistanceFn = Callable[[Population, Population], Tensor]
 
 
 def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
-                     protect: int | None = None, min_share: float = 0.0) -> Tensor:
+                     protect: int | Tensor | None = None, min_share: float = 0.0) -> Tensor:
     """[K] total adjusted fitness per species -> [K] long quotas summing to population_size.
 
     Proportional shares rounded by largest remainder (ties: lowest index); all-zero (or negative)
@@ -90,7 +90,8 @@ def replace_subtree(bt: Tensor, start: Tensor, subtree: Tensor, subtree_len: Ten
 
 def random_subtrees(n: int, params: ReproductionParams, generator: torch.Generator,
                     device: torch.device | str = "cpu") -> tuple[Tensor, Tensor]:
-    """-> ([n, max_leaves + 2] long subtrees NOP-padded, [n] long lengths): a leaf, or SEQ/SEL + 1..max leaves + END."""
+    """-> ([n, max_leaves + 2] long subtrees NOP-padded, [n] long lengths): a leaf, or SEQ/SEL +
+    1..max leaves + END."""
     ml = params.subtree_max_leaves
     s_max = ml + 2
     leaf_ops = torch.tensor(LEAF_OPS, dtype=torch.long, device=device)
@@ -121,7 +122,8 @@ def _random_node(bt: Tensor, generator: torch.Generator) -> Tensor:
 
 
 def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator) -> Tensor:
-    """[N, L] opcodes -> [N, L] opcodes after one point (may redraw the same opcode) or subtree-replacement event per row, w.p. bt_mutation_rate."""
+    """[N, L] opcodes -> [N, L] opcodes after one point (may redraw the same opcode) or
+    subtree-replacement event per row, w.p. bt_mutation_rate."""
     n, l = bt.shape
     if n == 0 or l == 0:
         return bt.clone()
@@ -147,7 +149,8 @@ def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator
 # Whole-genome operators
 
 def crossover(a: Population, b: Population, generator: torch.Generator) -> Population:
-    """Parents [N], [N] -> child [N]: uniform per gene group, uniform per tag bit, one-point BT crossover at the same cut in 1..L-1."""
+    """Parents [N], [N] -> child [N]: uniform per gene group, uniform per tag bit, one-point BT
+    crossover at the same cut in 1..L-1."""
     n = a.size
     dev = a.bt.device
     out: dict[str, Tensor] = {}
@@ -184,7 +187,8 @@ def _resample(x: Tensor, n_values: int, p: float, generator: torch.Generator) ->
 
 
 def mutate(g: Population, params: ReproductionParams, generator: torch.Generator) -> Population:
-    """Population [N] -> mutated Population [N] (BT, continuous and categorical hardware, tag bits, selectivity, dominance).
+    """Population [N] -> mutated Population [N] (BT, continuous and categorical hardware, tag
+    bits, selectivity, dominance).
 
     Genes are drawn in field order: tag bits flip w.p. p_tag_flip (None: 1 / L_tag), the BT by
     `mutate_bt`, continuous genes by `_gauss_clip` in their GENE_BOUNDS (social_sigma for
@@ -213,17 +217,19 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
 def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index: Tensor,
               proto_ids: Tensor, params: ReproductionParams, generator: torch.Generator,
               distance_fn: DistanceFn = distance) -> tuple[Population, Tensor, Tensor, Tensor]:
-    """Population [P], fitness [P], species [P], prototypes [K] -> (children [P], child_species_hint [P], is_elite [P], parent_index [P]).
+    """Population [P], fitness [P], species [P], prototypes [K] -> (children [P],
+    child_species_hint [P], is_elite [P], parent_index [P]).
 
     Quotas: proportional to each species' total fitness (`params.quota_size_exponent` None, the
-    paper's) or to its mean fitness x its size ** quota_size_exponent, the species of the global best protected (>= 1). Elites (top
-    elite_count per species, capped by the quota) are copied unchanged and listed first (species by
-    proto order, best first); the remaining quota is filled by offspring: p1 by in-species
-    tournament, p2 by in-species tournament within `delta` of p1 (and != p1), up to mate_tries
-    tries, else a global tournament (!= p1); crossover w.p. crossover_same / crossover_cross (same /
-    different species) else clone p1; then every offspring is mutated. Hints: the
-    elite's own species / p1's species; parent_index: the elite row / p1. `distance_fn(genome,
-    genome)` is called once ([P, P]). Fitness must be finite for every individual.
+    paper's) or to its mean fitness x its size ** quota_size_exponent, the species of the global
+    best protected (>= 1). Elites (top elite_count per species, capped by the quota) are copied
+    unchanged and listed first (species by proto order, best first); the remaining quota is filled
+    by offspring: p1 by in-species tournament, p2 by in-species tournament within `delta` of p1 (and
+    != p1), up to mate_tries tries, else a global tournament (!= p1); crossover w.p. crossover_same
+    / crossover_cross (same / different species) else clone p1; then every offspring is mutated.
+    Hints: the elite's own species / p1's species; parent_index: the elite row / p1.
+    `distance_fn(genome, genome)` is called once ([P, P]). Fitness must be finite for every
+    individual.
     """
     p = genome.size
     dev = genome.bt.device

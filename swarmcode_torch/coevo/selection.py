@@ -4,14 +4,22 @@ baselines' fixed-group reproduction; and the elite count of a species of a given
 
 from __future__ import annotations
 
+from typing import overload
+
 import torch
 from torch import Tensor
 
 from .config import SwarmCoDeConfig
 
 
-def elite_count(species_size: Tensor | int, max_elite: int = SwarmCoDeConfig.max_elite) -> Tensor | int:
-    """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite, size // 5 + 1)); max_elite is the paper's E."""
+@overload
+def elite_count(species_size: Tensor, max_elite: int = ...) -> Tensor: ...
+@overload
+def elite_count(species_size: int, max_elite: int = ...) -> int: ...
+def elite_count(species_size: Tensor | int,
+                max_elite: int = SwarmCoDeConfig.max_elite) -> Tensor | int:
+    """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite,
+    size // 5 + 1)); max_elite is the paper's E."""
     if isinstance(species_size, Tensor):
         return torch.clamp(torch.clamp(species_size // 5 + 1, max=max_elite), min=1)
     return max(1, min(max_elite, int(species_size) // 5 + 1))

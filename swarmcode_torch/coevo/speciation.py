@@ -12,7 +12,6 @@ from ..sim.bt import NUM_OPCODES
 from .config import DistanceWeights, SwarmCoDeConfig
 from .population import R_MAX, R_MIN, Population
 
-
 #: speciate precomputes the full [P, P] distance matrix when P * P is at most this.
 _FULL_MATRIX_MAX = 1 << 24
 
@@ -41,13 +40,16 @@ def _one_hot_bt(bt: Tensor) -> Tensor:
     return oh.flatten(1)
 
 
-def distance_terms(a: Population, b: Population, w: DistanceWeights = DistanceWeights()) -> dict[str, Tensor]:
-    """Genomes [Pa], [Pb] -> the weighted terms of D, each [Pa, Pb] float32, in the order of the sum:
-    tag = w_tag (H/L)^gamma, hw = w_hw d_hw, bt = w_bt d_bt, tool = w_tool d_tool, size = w_size d_size.
+def distance_terms(a: Population, b: Population,
+                   w: DistanceWeights = DistanceWeights()) -> dict[str, Tensor]:
+    """Genomes [Pa], [Pb] -> the weighted terms of D, each [Pa, Pb] float32, in the order of the
+    sum: tag = w_tag (H/L)^gamma, hw = w_hw d_hw, bt = w_bt d_bt, tool = w_tool d_tool,
+    size = w_size d_size.
 
     H: tag Hamming distance, L: tag length; d_hw: Euclidean distance of `hardware_vector()`
     / sqrt(its dimension), the two continuous operating points;
-    d_bt: fraction of BT slots whose opcode differs; d_tool: effectors differ; d_size: |dr| / (R_MAX - R_MIN).
+    d_bt: fraction of BT slots whose opcode differs; d_tool: effectors differ;
+    d_size: |dr| / (R_MAX - R_MIN).
     """
     pa, pb = a.size, b.size
     dev = a.bt.device
@@ -71,8 +73,8 @@ def distance_terms(a: Population, b: Population, w: DistanceWeights = DistanceWe
 
 
 def distance(a: Population, b: Population, w: DistanceWeights = DistanceWeights()) -> Tensor:
-    """Genomes [Pa], [Pb] -> [Pa, Pb] float32 D = w_tag (H/L)^gamma + w_hw d_hw + w_bt d_bt + w_tool d_tool + w_size d_size
-    (the sum of `distance_terms`)."""
+    """Genomes [Pa], [Pb] -> [Pa, Pb] float32 D = w_tag (H/L)^gamma + w_hw d_hw + w_bt d_bt
+    + w_tool d_tool + w_size d_size (the sum of `distance_terms`)."""
     t = distance_terms(a, b, w)
     return t["tag"] + t["hw"] + t["bt"] + t["tool"] + t["size"]
 
@@ -89,7 +91,8 @@ def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -
 def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | None,
              prev_proto_ids: Tensor, next_species_id: int, delta: float = SwarmCoDeConfig.delta,
              w: DistanceWeights = DistanceWeights()) -> SpeciationResult:
-    """Population [P], hint [P] long (-1 none), previous prototypes [Kp] + ids [Kp] -> SpeciationResult.
+    """Population [P], hint [P] long (-1 none), previous prototypes [Kp] + ids [Kp] ->
+    SpeciationResult.
 
     (1) Each previous species with >= 1 member by `species_hint` keeps its id; its new prototype is
     the member closest to the old prototype (ties: lowest row); memberless species go extinct.

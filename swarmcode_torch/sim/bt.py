@@ -20,7 +20,7 @@ the children of an implicit root SEQ. Every array of opcodes 0..13 is a valid pr
 from __future__ import annotations
 
 import math
-from typing import Sequence, Union
+from collections.abc import Sequence
 
 import torch
 
@@ -73,7 +73,8 @@ _CODE_SHIFT = 16      # build_tables' internal transition words: next state << 1
 
 
 def _default(block_type: torch.Tensor) -> torch.Tensor:
-    """[...] -> [...]: a block's status when no child short-circuits it (SEQ: SUCCESS, SEL: FAILURE)."""
+    """[...] -> [...]: a block's status when no child short-circuits it (SEQ: SUCCESS, SEL:
+    FAILURE)."""
     return torch.where(block_type == SEL, FAILURE, SUCCESS)
 
 
@@ -92,7 +93,8 @@ def _gather1(t: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
     return t.gather(1, idx.unsqueeze(1)).squeeze(1)
 
 
-def _set1(t: torch.Tensor, idx: torch.Tensor, value: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+def _set1(t: torch.Tensor, idx: torch.Tensor, value: torch.Tensor,
+          mask: torch.Tensor) -> torch.Tensor:
     """t [B, N] -> copy with t[b, idx[b]] = value[b] where mask[b]."""
     value = torch.where(mask, value, _gather1(t, idx))
     return t.scatter(1, idx.unsqueeze(1), value.unsqueeze(1))
@@ -130,7 +132,8 @@ def compute_jumps(opcodes: torch.Tensor) -> torch.Tensor:
 
 def interpret(opcodes: torch.Tensor, jumps: torch.Tensor, leaf_status: torch.Tensor
               ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """opcodes, jumps [..., L], leaf_status [..., 14] -> action [...], fired [..., 14] bool, status [...].
+    """opcodes, jumps [..., L], leaf_status [..., 14] -> action [...], fired [..., 14] bool,
+    status [...].
 
     A stack machine run for a fixed 2L+1 steps (enough for any program), all updates masked.
     Each step either resolves a child's status against the innermost open block (short-circuit:
@@ -205,13 +208,13 @@ def _node_name(op: int) -> str:
 # Pure-Python reference (for tests)
 # ---------------------------------------------------------------------------------------------
 
-Node = Union[int, tuple[int, list["Node"]]]  # a leaf opcode, or (SEQ|SEL, children)
+Node = int | tuple[int, list["Node"]]  # a leaf opcode, or (SEQ|SEL, children)
 
 
 def parse(program: Sequence[int]) -> list[Node]:
     """Pre-order opcode list -> the implicit root's children (NOP skipped, stray END ignored):
     `parse_slots` without the slots."""
-    def strip(nodes: list["SlotNode"]) -> list[Node]:
+    def strip(nodes: list[SlotNode]) -> list[Node]:
         return [(op, strip(children)) if op in CONTROL_OPS else op
                 for _, op, children in nodes]
     return strip(parse_slots(program))
@@ -240,7 +243,8 @@ def _eval(node: Node, leaf_status: Sequence[int], fired: set[int]) -> tuple[int,
 
 def interpret_reference(program: Sequence[int], leaf_status: Sequence[int]
                         ) -> tuple[int, set[int], int]:
-    """One program (list of opcodes), leaf_status (14 ints) -> (action, fired actions, root status)."""
+    """One program (list of opcodes), leaf_status (14 ints) -> (action, fired actions, root
+    status)."""
     fired: set[int] = set()
     status, action = _eval((SEQ, parse(program)), leaf_status, fired)
     return action, fired, status
@@ -279,7 +283,8 @@ def combo_statuses(device: torch.device | str | None = None) -> torch.Tensor:
 
 
 def _continuations(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """ops [P, L] -> start [P], cont [P, L, 2]: the first leaf / the leaf after leaf i on SUCCESS, FAILURE.
+    """ops [P, L] -> start [P], cont [P, L, 2]: the first leaf / the leaf after leaf i on SUCCESS,
+    FAILURE.
 
     Codes: 0..L-1 = visit that leaf slot next; L + s = the tick ends with root status s.
     A forward pass records each slot's depth and enclosing block types; a backward pass keeps,
@@ -321,7 +326,8 @@ def _continuations(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = True
                  ) -> torch.Tensor:
-    """ops [P, L], col_status [14 * NC] (status of opcode o under combo c at o*NC+c) -> int32 [P, NC]."""
+    """ops [P, L], col_status [14 * NC] (status of opcode o under combo c at o*NC+c) -> int32
+    [P, NC]."""
     P, L = ops.shape
     NC = NUM_COMBOS
     dev = ops.device
@@ -330,11 +336,13 @@ def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = Tr
     NS = 2 * L + 2
     base = (torch.arange(P, device=dev) * NS).unsqueeze(1)
     slot = torch.arange(L, device=dev)
-    fire = torch.where(_is_action(ops), 1 << (_FIRED_SHIFT + (ops - ACT_MOVE_TO_PACK).clamp(min=0)), 0)
+    fire = torch.where(_is_action(ops),
+                       1 << (_FIRED_SHIFT + (ops - ACT_MOVE_TO_PACK).clamp(min=0)), 0)
     nxt = torch.cat([cont, (L + 2 + slot).expand(P, L).unsqueeze(-1)], -1)  # [P, L, 3]
     word = ((base.unsqueeze(-1) + nxt) << _CODE_SHIFT)
     word[:, :, SUCCESS] |= fire
-    term = ((base + torch.arange(L, NS, device=dev)) << _CODE_SHIFT).unsqueeze(-1).expand(P, NS - L, 3)
+    term = ((base + torch.arange(L, NS, device=dev)) << _CODE_SHIFT).unsqueeze(-1).expand(
+        P, NS - L, 3)
     trans = torch.cat([word, term], 1).reshape(-1)  # [P * NS * 3], terminal states loop
     colx = torch.cat([ops, torch.full((P, NS - L), NOP, device=dev)], 1) * NC
     colx = colx.reshape(-1)  # [P * NS], combo-table column of each state's opcode
@@ -429,7 +437,8 @@ def unpack(packed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tens
 
 def lookup(tables: torch.Tensor, prog_idx: torch.Tensor, leaf_status: torch.Tensor
            ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """tables [P, NUM_COMBOS], prog_idx [...], leaf_status [..., 14] -> action [...], fired [..., 14], status [...]."""
+    """tables [P, NUM_COMBOS], prog_idx [...], leaf_status [..., 14] -> action [...],
+    fired [..., 14], status [...]."""
     flat = prog_idx.long() * tables.shape[-1] + combo_index(leaf_status)
     return unpack(torch.take(tables, flat))
 

@@ -144,7 +144,8 @@ def _static_contacts(pos, vel, radius, o_pos, o_radius, o_present, params: World
     diff = pos[:, :, None, :] - o_pos[:, None, :, :]
     d = diff.norm(dim=-1)
     n = diff / d.clamp_min(1e-6)[..., None]
-    overlap = torch.where(o_present[:, None, :], (radius[:, :, None] + o_radius[:, None, :] - d).clamp_min(0), 0.0)
+    overlap = torch.where(o_present[:, None, :],
+                          (radius[:, :, None] + o_radius[:, None, :] - d).clamp_min(0), 0.0)
     pos = pos + (n * overlap[..., None]).sum(2)
     vn = (vel[:, :, None, :] * n).sum(-1)
     hit = (overlap > 0) & (vn < 0)

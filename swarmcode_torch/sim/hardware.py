@@ -7,9 +7,8 @@ function is elementwise over any batch shape.
 
 from __future__ import annotations
 
-import re
-
 import math
+import re
 import sys
 from dataclasses import dataclass
 from functools import lru_cache
@@ -232,7 +231,8 @@ def phenotype(radius: torch.Tensor, chassis: torch.Tensor, battery: torch.Tensor
     payload = _tier(cat.chassis_strength, chassis, r) * area
     chassis_cost = _tier(cat.chassis_cost_per_area, chassis, r) * area
 
-    force = _tier(cat.motor_force, motor, r) * (cat.motor_force_floor + (1 - cat.motor_force_floor) * u_m)
+    force = _tier(cat.motor_force, motor, r) * (cat.motor_force_floor
+                                                + (1 - cat.motor_force_floor) * u_m)
     efficiency = _tier(cat.motor_efficiency, motor, r)
     motor_scale = 0.5 + 0.5 * u_m
     motor_mass = _tier(cat.motor_mass, motor, r) * motor_scale

@@ -35,7 +35,7 @@ class Layout(NamedTuple):
     start: torch.Tensor       # [E, N, 2] robot start positions
     seed: torch.Tensor        # [E] long, seeds the in-episode hash random numbers
 
-    def index(self, idx: torch.Tensor) -> "Layout":
+    def select(self, idx: torch.Tensor) -> Layout:
         """Environments `idx` (e.g. the same layout repeated for focal and baseline trials)."""
         return Layout(*(t[idx] for t in self))
 

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 
 from .layout import Layout
 from .runtime import CudaGraphTicks
 from .sense import sense
-from .state import DELIVERED, Robots, State, TickInputs, WorldParams, compatible, random_keys, \
-    reset
+from .state import DELIVERED, Robots, State, TickInputs, WorldParams, compatible, random_keys, reset
 from .step import step
 
 

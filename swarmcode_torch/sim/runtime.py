@@ -5,13 +5,14 @@ them for a run (`tick_function`, `tick_mode`), and the device of a run (`resolve
 from __future__ import annotations
 
 import os
-from typing import Callable
+from collections.abc import Callable
+from typing import Any
 
 import torch
 
+from .fused import FusedTicks, tick_choice
 from .layout import Layout
 from .state import Robots, State, TickInputs, WorldParams
-from .fused import FusedTicks, tick_choice
 from .step import step
 
 # compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
@@ -22,9 +23,9 @@ class CompiledStep:
     """`torch.compile(step)`, falling back to eager `step` (with a warning) when the first call
     cannot compile, e.g. on a machine without the C++ compiler that inductor's CPU backend needs."""
 
-    def __init__(self, **compile_kwargs):
+    def __init__(self, **compile_kwargs: Any) -> None:
         self.compiled = torch.compile(step, dynamic=False, **compile_kwargs)
-        self.fn = None
+        self.fn: Callable | None = None     # the compiled or, once compiling failed, eager tick
         self.error: Exception | None = None
 
     def __call__(self, *args):
@@ -65,9 +66,11 @@ class CudaGraphTicks:
         if ticks_per_graph < 1:
             raise ValueError("ticks_per_graph must be >= 1")
         # the eager tick makes small host-to-device copies, which a capture does not allow
-        self.step_fn = step_fn if step_fn is not None else CompiledStep()
+        if step_fn is None:
+            step_fn = CompiledStep()
+        self.step_fn: Callable = step_fn
         self.k = ticks_per_graph
-        self.key = None
+        self.key: tuple | None = None   # the shapes and params of the captured graph
         self.graph: torch.cuda.CUDAGraph | None = None
         # required: a tick that fails to compile is an error; otherwise the ticks run one by one
         # with the step's eager fallback
@@ -126,6 +129,7 @@ class CudaGraphTicks:
             return state
         for a, b in zip(self._tensors(self.state, self.inputs), self._tensors(state, inputs)):
             a.copy_(b)
+        assert self.graph is not None       # captured above or by an earlier call
         for _ in range(ticks // self.k):
             self.graph.replay()
         out = State(*(t.clone() for t in self.state))
@@ -168,7 +172,9 @@ def tick_function(device: torch.device, compile: bool | None = None,
         device.type == "cuda" or generations >= COMPILE_MIN_GENERATIONS)
     if cuda_graphs and (device.type != "cuda" or not use_compile):
         raise ValueError("cuda_graphs needs device cuda and the compiled tick (compile)")
-    step_fn = CompiledStep() if use_compile else step
+    step_fn: Callable = step
+    if use_compile:
+        step_fn = CompiledStep()
     graphs = cuda_graphs if cuda_graphs is not None else (
         device.type == "cuda" and use_compile)
     if graphs:  # unset (auto): a tick that fails to compile runs eagerly, as without graphs
@@ -182,7 +188,9 @@ def tick_mode(step_fn: Callable, compiled: bool) -> str:
     if isinstance(step_fn, FusedTicks):
         return "fused"
     graphs = isinstance(step_fn, CudaGraphTicks)
-    compiled_step = step_fn.step_fn if graphs else step_fn
+    compiled_step = step_fn
+    if isinstance(step_fn, CudaGraphTicks):
+        compiled_step = step_fn.step_fn
     if isinstance(compiled_step, CompiledStep) and compiled_step.error is not None:
         return "eager (compiling failed)"
     if graphs:

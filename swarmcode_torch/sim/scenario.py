@@ -10,8 +10,17 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from .hardware import (MAX_NESTING, R_MAX, R_MIN, Catalog, CatalogError, catalog_from_dict,
-                       default_catalog, nesting_depth, parse_catalog)
+from .hardware import (
+    MAX_NESTING,
+    R_MAX,
+    R_MIN,
+    Catalog,
+    CatalogError,
+    catalog_from_dict,
+    default_catalog,
+    nesting_depth,
+    parse_catalog,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -60,7 +69,8 @@ class PackageClass:
         """e.g. 'pincher 16-24 kg, r 0.32-0.5 m' or 'collab suction+pincher 30-40 kg'."""
         names = {v: k for k, v in EFFECTORS.items()}
         eff = "+".join(names[e] for e in self.grips)
-        text = f"{'collab ' if self.kind == 'collab' else ''}{eff} {self.mass[0]:g}-{self.mass[1]:g} kg"
+        collab = "collab " if self.kind == "collab" else ""
+        text = f"{collab}{eff} {self.mass[0]:g}-{self.mass[1]:g} kg"
         if self.radius_band != (0.0, 10.0):
             text += f", r {self.radius_band[0]:g}-{self.radius_band[1]:g} m"
         return text
@@ -238,6 +248,7 @@ def _scenario_from_dict(d: dict, source: str, folder: Path | None = None,
             raise ScenarioError(f"{w}count: must be >= 0, got {count}")
         dist = _range(p, "distance", w)
         mass = _range(p, "mass", w)
+        grips: tuple[int, ...]
         if kind == "individual":
             grips = (_effector(_get(p, "effector", w, str), f"{w}effector"),)
             band = _range(p, "radius_band", w, default=(0.0, 10.0))
@@ -402,7 +413,8 @@ def read_scenario(name_or_path: str, hardware: Catalog | None = None) -> tuple[S
         raise ScenarioError(f"scenario: a name or path of {len(name_or_path)} characters "
                             f"{name_or_path[:40]!r}... (at most {MAX_PATH}, no NUL)")
     if name_or_path in builtin_names():
-        data = resources.files("swarmcode_torch").joinpath(f"scenarios/{name_or_path}.toml").read_bytes()
+        data = resources.files("swarmcode_torch").joinpath(
+            f"scenarios/{name_or_path}.toml").read_bytes()
         return parse_scenario(data, name_or_path, None, hardware), data
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():

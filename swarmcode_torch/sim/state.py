@@ -41,11 +41,12 @@ class WorldParams:
     anchor_mass: float = 1e6     # collision mass of a robot waiting at a grip (it does not yield)
     rest_speed: float = 0.01     # static friction: slower than this (m/s), a body comes to rest
     broad_phase_min_robots: int = 500  # robot-robot contacts from a cell list at N >= this
-    cell_size: float = 1.1       # broad-phase cell side (m): >= the largest contact distance 2 R_max
+    cell_size: float = 1.1       # broad-phase cell side (m): >= the largest contact distance,
+                                 # 2 R_max
     cell_capacity: int = 32      # robots per cell the broad phase looks at (see cell_overflow)
 
     @staticmethod
-    def for_scenario(s: Scenario, **kw) -> "WorldParams":
+    def for_scenario(s: Scenario, **kw) -> WorldParams:
         return WorldParams(arena=s.arena, base_radius=s.base_radius, **kw)
 
 
@@ -63,7 +64,7 @@ class Robots(NamedTuple):
     program: torch.Tensor     # long, row of the behavior-tree table each robot runs
 
     @staticmethod
-    def from_phenotype(ph: Phenotype, present: torch.Tensor, program: torch.Tensor) -> "Robots":
+    def from_phenotype(ph: Phenotype, present: torch.Tensor, program: torch.Tensor) -> Robots:
         return Robots(ph.radius, ph.mass, ph.force, ph.payload, ph.capacity, ph.efficiency,
                       ph.effector, present, program)
 

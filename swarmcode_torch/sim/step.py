@@ -88,8 +88,8 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     target = state.pos
     target = torch.where((action == bt.ACT_MOVE_TO_PACK)[..., None] & (s.best_d < _INF)[..., None],
                          _gather(s.gpos, s.best), target)
-    target = torch.where((action == bt.ACT_MOVE_TO_RANDOM_PACK)[..., None] & (s.rand_d < _INF)[..., None],
-                         _gather(s.gpos, s.rand), target)
+    target = torch.where((action == bt.ACT_MOVE_TO_RANDOM_PACK)[..., None]
+                         & (s.rand_d < _INF)[..., None], _gather(s.gpos, s.rand), target)
     target = torch.where((action == bt.ACT_MOVE_TO_BASE)[..., None], base.expand(E, N, 2), target)
     target = torch.where((action == bt.ACT_RANDOM_WALK)[..., None], state.waypoint, target)
 
@@ -114,7 +114,8 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     f_pkg = _scatter_sum(f_cmd, pidx, Q)
     m_pkg = layout.p_mass + _scatter_sum(robots.mass, pidx, Q)
     p_vel = torch.where(lifted[..., None],
-                        _cap(state.p_vel + params.dt * (f_pkg / m_pkg[..., None] - params.drag * state.p_vel),
+                        _cap(state.p_vel
+                             + params.dt * (f_pkg / m_pkg[..., None] - params.drag * state.p_vel),
                              params.v_cap, params.rest_speed), 0.0)
     p_pos = state.p_pos + params.dt * p_vel
     g_off = _gather(layout.g_offset.reshape(E, H, 2), holding * G + grip)
@@ -145,7 +146,8 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     slow = (pos - state.pos).norm(dim=-1) < params.stuck_speed * params.dt
     stuck = torch.where(trying & slow, state.stuck + 1, 0)
     t = state.t + 1
-    redraw = ((state.waypoint - pos).norm(dim=-1) <= params.reach) | (t % params.waypoint_period == 0)
+    redraw = (((state.waypoint - pos).norm(dim=-1) <= params.reach)
+              | (t % params.waypoint_period == 0))
     waypoint = torch.where(redraw[..., None], _waypoints(state.wp_key, t, params), state.waypoint)
 
     # contiguous, like reset()'s holder: a strided view here would make a compiled step (which
