@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
+NOTEBOOKS = sorted((Path(__file__).parents[2] / "notebooks").glob("*.ipynb"))
 
 #: tag -> (mime type its cell must output); and per notebook, how many cells carry each tag
 IMAGE_TAGS = {"png": "image/png", "gif": "image/gif"}

@@ -144,7 +144,7 @@ from swarmcode_torch.app.runs import (LOCK_FILE, RunLock, clean_temporary_files,
 
 FAST = ["--render-every", "0", "--no-compile", "--device", "cpu"]
 RFAST = ["--render-every", "0", "--device", "cpu"]             # what --resume may be given
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _teams(run: Path) -> list[dict]:

@@ -21,7 +21,7 @@ from swarmcode_torch.app.reporting import (HPARAM_METRICS, METRICS_FILE, SCALAR_
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.sim.scenario import builtin_names, load_scenario
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
 SETTINGS = dict(scenario="one-niche", population=4, swarm_size=3, trials=1, ticks=6, seed=3,
                 budget=900.0, device="cpu", compile=False)
