@@ -178,40 +178,40 @@ def test_repair_teams_without_any_newline_and_with_a_long_tail(tmp_path):
 _WRITER = """
 import sys
 from pathlib import Path
-from swarmcode_torch.app.runs import atomic_write_bytes
-target, i = Path(sys.argv[1]), 0
-while True:
-    i += 1
-    atomic_write_bytes(target, bytes([i % 251]) * (8 << 20))
+from swarmcode_torch.app import files
+target, whole_write = Path(sys.argv[1]), files._write_all
+files.atomic_write_bytes(target, bytes([1]) * (8 << 20))        # the old version, whole
+
+
+def half_then_wait(fd, data):
+    whole_write(fd, data[: len(data) // 2])
+    print("mid-write", flush=True)                               # the kill lands here
+    sys.stdin.read()
+
+
+files._write_all = half_then_wait
+files.atomic_write_bytes(target, bytes([2]) * (8 << 20))
 """
 
 
 def test_a_killed_atomic_write_leaves_the_old_file_whole_and_cleanup_removes_its_temp(tmp_path):
-    leftovers = []
-    for attempt in range(5):                       # until a kill lands mid-write (almost always)
-        d = tmp_path / f"attempt{attempt}"
-        d.mkdir()
-        target = d / "checkpoint.pt"
-        proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(target)], cwd=REPO)
-        try:
-            deadline = time.monotonic() + 120
-            while not target.exists():
-                assert proc.poll() is None and time.monotonic() < deadline
-                time.sleep(0.05)
-            time.sleep(0.3 + 0.1 * attempt)
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=60)
-        finally:
-            proc.kill()
-        assert proc.returncode == -signal.SIGKILL
-        data = target.read_bytes()
-        assert len(data) == 8 << 20 and data == data[:1] * len(data)   # a whole version
-        leftovers = list(d.glob(".checkpoint.pt.*"))
-        if leftovers:
-            break
-    assert leftovers, "no kill landed during a write"
+    # the writer stops half-way through its second write and says so: the kill lands there
+    d = tmp_path
+    target = d / "checkpoint.pt"
+    proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(target)], cwd=REPO,
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline() == "mid-write\n"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+    assert target.read_bytes() == bytes([1]) * (8 << 20)           # the old version, whole
+    (leftover,) = d.glob(".checkpoint.pt.*")
+    assert leftover.read_bytes() == bytes([2]) * (4 << 20)         # the half-written new one
     (d / ".hidden").write_text("not ours")                # other hidden files are left alone
-    assert sorted(clean_temporary_files(d)) == sorted(leftovers)
+    assert clean_temporary_files(d) == [leftover]
     assert not list(d.glob(".checkpoint.pt.*")) and (d / ".hidden").exists()
     assert (d / "checkpoint.pt").stat().st_size == 8 << 20
 
