@@ -24,6 +24,7 @@ def lint(cwd: Path, pythonpath: Path) -> subprocess.CompletedProcess:
                           text=True, timeout=300)
 
 
+@pytest.mark.subprocess
 @needs_lint
 def test_the_package_keeps_its_layers():
     r = lint(ROOT, ROOT)
@@ -37,6 +38,7 @@ def test_the_package_keeps_its_layers():
     ("coevo/evolve.py", "from ..app import runs", "swarmcode_torch.coevo is not allowed to import swarmcode_torch.app"),
     ("baselines/__init__.py", "from ..app import records", "swarmcode_torch.baselines is not allowed to import swarmcode_torch.app"),
 ])
+@pytest.mark.subprocess
 def test_an_import_across_the_layers_breaks_the_contract(tmp_path, module, line, broken):
     shutil.copytree(ROOT / "swarmcode_torch", tmp_path / "swarmcode_torch",
                     ignore=shutil.ignore_patterns("__pycache__"))

@@ -265,6 +265,7 @@ def test_examples_script_runs_its_scenario(tmp_path, monkeypatch, capsys):
     assert json.loads((run_dir / "summary.json").read_text())["generation"] == 0
 
 
+@pytest.mark.subprocess
 def test_package_exports_and_cheap_import():
     code = ("import sys, swarmcode_torch as sc; "
             "heavy = sorted({m.split('.')[0] for m in sys.modules} & "
@@ -283,6 +284,7 @@ def test_package_exports_and_cheap_import():
     assert SwarmCoDeConfig is sc.SwarmCoDeConfig is sc.EvolveConfig   # the name before 0.3
 
 
+@pytest.mark.subprocess
 def test_python_dash_m_runs_the_cli():
     r = subprocess.run([sys.executable, "-m", "swarmcode_torch", "--help"], capture_output=True,
                        text=True, timeout=300)

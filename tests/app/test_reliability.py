@@ -194,6 +194,7 @@ files.atomic_write_bytes(target, bytes([2]) * (8 << 20))
 """
 
 
+@pytest.mark.subprocess
 def test_a_killed_atomic_write_leaves_the_old_file_whole_and_cleanup_removes_its_temp(tmp_path):
     # the writer stops half-way through its second write and says so: the kill lands there
     d = tmp_path
@@ -326,6 +327,7 @@ def _wait_for(path_glob, base: Path, proc, timeout=180):
     return list(base.glob(path_glob))[0]
 
 
+@pytest.mark.subprocess
 def test_a_live_run_refuses_a_second_process_and_a_killed_runs_lock_is_taken_over(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "swarmcode_torch.app.cli", "evolve", *TINY,
                              "--generations", "100000", "--checkpoint-every", "1", *FAST,
@@ -348,6 +350,7 @@ def test_a_live_run_refuses_a_second_process_and_a_killed_runs_lock_is_taken_ove
     assert not (run / LOCK_FILE).exists()                # and released at the end
 
 
+@pytest.mark.subprocess
 def test_a_live_sweep_refuses_a_second_sweep_and_resume_and_sigterm_releases_its_locks(tmp_path):
     out = tmp_path / "sweep"
     args = ["sweep", "--budgets", "1500", "--seeds", "0", "--scenario", "one-niche",
@@ -392,6 +395,7 @@ def test_the_lock_is_released_on_an_error_and_on_ctrl_c(finished_run, tmp_path, 
     assert not (run / LOCK_FILE).exists()                 # released on Ctrl-C
 
 
+@pytest.mark.subprocess
 def test_a_stale_lock_of_a_dead_pid_is_taken_over(finished_run, tmp_path):
     run = _copy_run(finished_run, tmp_path / "run")
     dead = subprocess.Popen([sys.executable, "-c", "pass"])

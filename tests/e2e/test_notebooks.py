@@ -35,6 +35,7 @@ def test_every_notebook_declares_its_figures():
         assert {t: len(c) for t, c in cells.items()} == EXPECTED_IMAGES[path.stem], path.name
 
 
+@pytest.mark.subprocess
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_runs(path):

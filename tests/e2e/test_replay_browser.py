@@ -15,7 +15,7 @@ from swarmcode_torch.sim.scenario import load_scenario
 
 from replaykit import DESIGNS
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.subprocess]
 
 webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
 

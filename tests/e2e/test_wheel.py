@@ -13,6 +13,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 
+pytestmark = pytest.mark.subprocess
+
 
 def sh(*args, cwd=None, timeout=300):
     # without PYTHONPATH: nothing but the venv and the system site-packages may be imported
