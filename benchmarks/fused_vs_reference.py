@@ -1,6 +1,6 @@
 """Do the fused C++ tick and the Python tick give the same results in distribution?
 
-The two ticks agree to float rounding from any state (tests/test_fused.py), but over an episode
+The two ticks agree to float rounding from any state (tests/sim/test_fused.py), but over an episode
 of contact dynamics rounding differences grow, so runs are not bit for bit the same. This runs
 the same short evolutions (one per seed) with each tick (`SWARMCODE_TICK=reference` / `fused`,
 each in its own process) and puts their per-generation best fitness, species and deliveries

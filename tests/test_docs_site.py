@@ -114,6 +114,7 @@ def _text(path: Path) -> str:
     return html.unescape(re.sub(r"<[^>]+>", "", path.read_text(encoding="utf-8")))
 
 
+@pytest.mark.subprocess
 def test_site_reference_has_every_public_name(site):
     html = "".join(p.read_text(encoding="utf-8") for p in (site / "reference").rglob("*.html"))
     ids = set(re.findall(r'id="swarmcode_torch\.(\w+)"', html))
@@ -125,6 +126,7 @@ def test_site_reference_has_every_public_name(site):
     assert "Total number of generations of the run." in config
 
 
+@pytest.mark.subprocess
 def test_site_cli_page_is_the_help_of_every_command(site):
     import typer
 
@@ -140,6 +142,7 @@ def test_site_cli_page_is_the_help_of_every_command(site):
                          .split("Usage: swarmcode-torch")[0], re.M), option
 
 
+@pytest.mark.subprocess
 def test_site_hardware_page_has_every_catalog_field_and_bound(site):
     from swarmcode_torch.sim import hardware as hw
     text = _text(site / "formats/hardware/index.html")
@@ -151,6 +154,7 @@ def test_site_hardware_page_has_every_catalog_field_and_bound(site):
         assert f"{'[' if lo_ok else '('}{lo:g}, {hi:g}]" in rows[section, key]
 
 
+@pytest.mark.subprocess
 def test_site_has_the_notebooks_and_the_changelog(site):
     for nb in ("01_quickstart", "02_analyze_run", "03_budget_sweep"):
         page = site / "notebooks" / nb / "index.html"
@@ -176,6 +180,7 @@ def _project(tmp_path: Path, page: str) -> Path:
     return tmp_path / "mkdocs.yml"
 
 
+@pytest.mark.subprocess
 def test_links_to_repository_files_outside_the_site_build_and_lead_to_the_file(tmp_path):
     pytest.importorskip("mkdocs")
     page = ("# Other\n\n[world](../examples/world.toml), [table](results/cpu/table.json), "
@@ -194,6 +199,7 @@ def test_links_to_repository_files_outside_the_site_build_and_lead_to_the_file(t
     assert not (tmp_path / "site/results").exists()
 
 
+@pytest.mark.subprocess
 @pytest.mark.parametrize("link", ["missing.md", "../examples/missing.toml", "results/none.json"])
 def test_a_broken_link_fails_the_strict_build(tmp_path, link):
     pytest.importorskip("mkdocs")

@@ -13,6 +13,7 @@ ROOT = Path(__file__).resolve().parent.parent
 pytest.importorskip("mypy", reason="mypy is not installed (pip install -e '.[dev]')")
 
 
+@pytest.mark.subprocess
 def test_mypy_passes_over_sim_and_coevo():
     r = subprocess.run([sys.executable, "-m", "mypy"], cwd=ROOT, capture_output=True, text=True,
                        timeout=600)

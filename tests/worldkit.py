@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 
 from swarmcode_torch.sim import bt
-from swarmcode_torch.coevo.population import R_MAX, R_MIN
+from swarmcode_torch.sim.hardware import R_MAX, R_MIN
 from swarmcode_torch.sim.hardware import phenotype
 from swarmcode_torch.sim.layout import Layout, make_layouts
 from swarmcode_torch.sim.scenario import load_scenario

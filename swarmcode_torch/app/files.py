@@ -66,7 +66,7 @@ def current_umask() -> int:
 def interrupt_point(what: str) -> None:
     """Called after each step of a run that writes (a file replaced or appended to) and after
     each generation is computed; does nothing. Tests replace it to interrupt or kill a run at
-    every such point (tests/test_reliability.py, the interrupt sweep)."""
+    every such point (tests/app/test_reliability.py, the interrupt sweep)."""
 
 
 def open_nofollow(path: Path, flags: int, mode: int = 0o666) -> int:

@@ -411,7 +411,7 @@ def build_tables(opcodes: torch.Tensor, chunk: int | None = None,
 
 def _native_tables(ops: torch.Tensor) -> torch.Tensor | None:
     """`build_tables` on the CPU by the fused tick's C++ extension (`sim.fused`): the same walk
-    over every (program, combination) pair, the same int32 words (tests/test_bt.py). None where
+    over every (program, combination) pair, the same int32 words (tests/sim/test_bt.py). None where
     the extension is not built or not wanted (``SWARMCODE_TICK=reference``)."""
     from .fused import load_extension, tick_choice
 
@@ -564,7 +564,7 @@ def tree_lines(program: Sequence[int]) -> list[tuple[str, int]]:
 
 def trace(program: Sequence[int], leaf_status: Sequence[int]) -> tuple[int, list[tuple[int, int]]]:
     """One tick of one program, node by node (plain Python, for replays; the simulator itself
-    runs :func:`lookup`, which it agrees with: tests/test_bt.py).
+    runs :func:`lookup`, which it agrees with: tests/sim/test_bt.py).
 
     Returns ``(acting, visited)``: `visited` lists ``(slot, status)`` of every node the tick
     ticked, in the order they returned (a control node after its children; slot -1 is the

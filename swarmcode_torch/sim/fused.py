@@ -10,7 +10,7 @@ dtypes), `FusedTicks` runs the Python tick instead and says so once.
 The same extension holds `walk_tables`, the CPU walk of `bt.build_tables` (exact: integers).
 
 The Python tick stays the reference: ``SWARMCODE_TICK=reference`` makes `tick_function` choose
-it everywhere. The two agree to float rounding (tests/test_fused.py; the tolerance is in
+it everywhere. The two agree to float rounding (tests/sim/test_fused.py; the tolerance is in
 benchmarks/README.md): the contact solver sums its pairs in another order.
 """
 

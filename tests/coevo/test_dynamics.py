@@ -1,15 +1,12 @@
 """Species dynamics (foundings, extinctions, ages, lifetimes) and niches (capabilities)."""
 
-import json
 import math
 
 import pytest
 import torch
-from typer.testing import CliRunner
 
-from swarmcode_torch.app.analysis import design_capabilities
-from swarmcode_torch.app.cli import app
 from swarmcode_torch.coevo.dynamics import Turnover, lifetimes, niche_count, replay, window_stats
+from swarmcode_torch.coevo.population import from_designs, genome_phenotype
 from swarmcode_torch.sim.hardware import phenotype
 from swarmcode_torch.sim.scenario import load_scenario
 from swarmcode_torch.sim.state import WorldParams, capabilities
@@ -22,6 +19,15 @@ def design(effector, radius, tiers=3, torque=1.0, count=1, species=0):
             "battery_tier": tiers, "motor_tier": tiers, "torque_point": torque,
             "battery_point": 1.0, "dominance": 0.5, "selectivity": 0.5, "count": count,
             "bt": [13] * 4}
+
+
+def design_capabilities(designs, scenario):
+    """The package classes each design can lift, from its genes (what the application records
+    as a design's `capability`)."""
+    genome, _ = from_designs(designs)
+    can = capabilities(genome_phenotype(genome, scenario.hardware), scenario,
+                       WorldParams.for_scenario(scenario))
+    return [[j for j, ok in enumerate(row) if ok] for row in can.tolist()]
 
 
 def test_capabilities_of_hand_made_robots_in_four_niche():
@@ -91,50 +97,3 @@ def test_turnover_advance_is_incremental_replay():
     assert u.advance(1, [5, 6]) == (1, 1)
     assert t.alive == frozenset({4, 5}) and u.alive == frozenset({5, 6})   # copy is independent
     assert u.ages(1, [5, 6]) == [1, 0]
-
-
-@pytest.fixture(scope="module")
-def tiny_run(tmp_path_factory):
-    logdir = tmp_path_factory.mktemp("runs")
-    r = CliRunner().invoke(app, ["evolve", "--scenario", "four-niche", "--population", "8",
-                                 "--swarm-size", "5", "--trials", "1", "--ticks", "10",
-                                 "--generations", "4", "--seed", "2", "--logdir", str(logdir),
-                                 "--render-every", "0"])
-    assert r.exit_code == 0, r.output
-    (run,) = list(logdir.iterdir())
-    return run
-
-
-def test_a_run_records_niches_and_dynamics_everywhere(tiny_run):
-    summary = json.loads((tiny_run / "summary.json").read_text())
-    assert isinstance(summary["niches"], int) and 0 <= summary["niches"] <= 4
-    recs = [json.loads(x) for x in (tiny_run / "teams.jsonl").read_text().splitlines()]
-    for rec in recs:
-        # the recorded niches are those of the recorded designs' genes
-        caps = design_capabilities([{k: v for k, v in d.items() if k != "capability"}
-                                    for d in rec["designs"]], FOUR)
-        assert caps == [d["capability"] for d in rec["designs"]]
-        assert rec["niches"] == niche_count(caps)
-    last = summary["last_generation"]
-    for key in ("species/founded", "species/extinct", "species/median_age", "team/niches",
-                "team/median_age"):
-        assert key in last
-    # generation 0 founds every species of the population
-    from swarmcode_torch.app.runs import load_checkpoint
-    history = load_checkpoint(tiny_run)["history"]
-    _, rows = replay(history)
-    assert rows[0]["founded"] == len(history[0]["population"])
-
-
-def test_inspect_prints_capabilities_and_dynamics_prints_windows(tiny_run):
-    r = CliRunner().invoke(app, ["inspect", str(tiny_run)])
-    assert r.exit_code == 0, r.output
-    assert "lifts:" in r.output and "niches (distinct capabilities)" in r.output
-    r = CliRunner().invoke(app, ["dynamics", str(tiny_run), "--window", "0:4", "--json"])
-    assert r.exit_code == 0, r.output
-    (st,) = json.loads(r.output)
-    assert st["generations"] == 4 and st["from"] == 0 and st["to"] == 4
-    r = CliRunner().invoke(app, ["dynamics", str(tiny_run)])
-    assert r.exit_code == 0 and "founded" in r.output
-    r = CliRunner().invoke(app, ["dynamics", str(tiny_run), "--window", "5:2"])
-    assert r.exit_code == 2 and "--window" in r.output

@@ -16,7 +16,7 @@ from swarmcode_torch.app.analysis import run_dynamics
 from swarmcode_torch.app.cli import app
 from swarmcode_torch.app.runs import load_checkpoint, read_config, read_summary, read_teams
 
-TOOLS = Path(__file__).resolve().parent.parent / "experiments" / "tools"
+TOOLS = Path(__file__).resolve().parents[2] / "experiments" / "tools"
 TINY = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
         "--ticks", "15", "--render-every", "0"]
 GENERATIONS = 4

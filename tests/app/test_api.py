@@ -21,7 +21,7 @@ from swarmcode_torch.app.reporting import (HPARAM_METRICS, METRICS_FILE, SCALAR_
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.sim.scenario import builtin_names, load_scenario
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
 SETTINGS = dict(scenario="one-niche", population=4, swarm_size=3, trials=1, ticks=6, seed=3,
                 budget=900.0, device="cpu", compile=False)
@@ -265,6 +265,7 @@ def test_examples_script_runs_its_scenario(tmp_path, monkeypatch, capsys):
     assert json.loads((run_dir / "summary.json").read_text())["generation"] == 0
 
 
+@pytest.mark.subprocess
 def test_package_exports_and_cheap_import():
     code = ("import sys, swarmcode_torch as sc; "
             "heavy = sorted({m.split('.')[0] for m in sys.modules} & "
@@ -283,6 +284,7 @@ def test_package_exports_and_cheap_import():
     assert SwarmCoDeConfig is sc.SwarmCoDeConfig is sc.EvolveConfig   # the name before 0.3
 
 
+@pytest.mark.subprocess
 def test_python_dash_m_runs_the_cli():
     r = subprocess.run([sys.executable, "-m", "swarmcode_torch", "--help"], capture_output=True,
                        text=True, timeout=300)

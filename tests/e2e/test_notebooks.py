@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
+NOTEBOOKS = sorted((Path(__file__).parents[2] / "notebooks").glob("*.ipynb"))
 
 #: tag -> (mime type its cell must output); and per notebook, how many cells carry each tag
 IMAGE_TAGS = {"png": "image/png", "gif": "image/gif"}
@@ -35,6 +35,7 @@ def test_every_notebook_declares_its_figures():
         assert {t: len(c) for t, c in cells.items()} == EXPECTED_IMAGES[path.stem], path.name
 
 
+@pytest.mark.subprocess
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_runs(path, tmp_path, monkeypatch):

@@ -79,6 +79,7 @@ def offline(tmp_path, monkeypatch):
     wandb.teardown()           # the next run reads the environment again (its WANDB_DIR)
 
 
+@pytest.mark.subprocess
 def test_evolve_wandb_logs_the_config_scalars_and_replays_offline(tmp_path, offline):
     r = CliRunner().invoke(app, [*RUN, "--logdir", str(tmp_path / "runs"), "--wandb",
                                  "--wandb-project", "swarm-test"])
@@ -113,6 +114,7 @@ def test_evolve_wandb_logs_the_config_scalars_and_replays_offline(tmp_path, offl
     assert image.is_file() and image.read_bytes()[:4] == b"\x89PNG"
 
 
+@pytest.mark.subprocess
 def test_the_api_logs_to_wandb_offline(tmp_path, offline):
     result = sc.evolve(scenario="one-niche", population=4, swarm_size=3, trials=1, ticks=6,
                        generations=2, device="cpu", compile=False, logdir=tmp_path / "runs",

@@ -68,6 +68,7 @@ def runs_of(out: Path) -> list[str]:
     return sorted(p.name for p in out.iterdir() if p.is_dir())
 
 
+@pytest.mark.subprocess
 def test_sweep_on_ray_matches_in_process(ray_cluster, in_process_sweep, tmp_path):
     out = tmp_path / "sweep"
     r = ok(invoke(*SWEEP, "--seeds", "0,1", "--out", out, "--workers", 2))
@@ -85,6 +86,7 @@ def test_sweep_on_ray_matches_in_process(ray_cluster, in_process_sweep, tmp_path
     assert r.output.count("already done") == 4 and "Ray:" not in r.output
 
 
+@pytest.mark.subprocess
 def test_failed_run_is_reported_the_others_finish(ray_cluster, in_process_sweep, tmp_path):
     out = tmp_path / "sweep"
     held = out / "budget-300_seed-0"
@@ -118,6 +120,7 @@ def _summary(run: Path) -> dict:
     return s
 
 
+@pytest.mark.subprocess
 def test_killed_worker_run_resumes_on_rerun(ray_cluster, tmp_path):
     args = ["sweep", *SIZE, "--generations", 20, "--budgets", "300", "--seeds", "0",
             "--checkpoint-every", 2]
@@ -165,6 +168,7 @@ def _only_run(logdir: Path) -> Path:
     return run
 
 
+@pytest.mark.subprocess
 def test_sharded_evolution_equals_unsharded(ray_cluster, tmp_path):
     args = ["evolve", *SIZE, "--generations", 2, "--render-every", 0, "--budget", 400]
     ok(invoke(*args, "--logdir", tmp_path / "one"))

@@ -64,6 +64,7 @@ def test_a_wide_window_shows_the_bar_and_every_figure(monkeypatch):
     assert "generation 1  best team 123.5" in last and "1.25s/gen" in last
 
 
+@pytest.mark.subprocess
 def test_commands_and_paths_are_never_wrapped_off_a_terminal(tmp_path):
     # a log (stdout a pipe) is 120 columns wide; a long --logdir must still print whole
     logdir = tmp_path / ("a-long-directory-name-" * 4) / ("and-another-one-" * 4)

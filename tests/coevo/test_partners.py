@@ -192,9 +192,9 @@ def test_choose_partners_allowed_mask_removes_species_and_keeps_the_draws():
 def test_one_partner_per_niche_puts_a_duplicate_beside_its_resident():
     from dataclasses import replace
 
-    from swarmcode_torch.app.render import team_genome
     from swarmcode_torch.coevo.config import EvalConfig
     from swarmcode_torch.coevo.evaluation import plan_evaluation
+    from swarmcode_torch.coevo.population import from_designs
     from swarmcode_torch.sim.scenario import load_scenario
 
     def design(effector, radius):
@@ -203,7 +203,7 @@ def test_one_partner_per_niche_puts_a_duplicate_beside_its_resident():
                 "selectivity": 1.0, "count": 1, "bt": [13] * 4}
     # species 10: 3 heavy pinchers (the resident), 11: 2 heavy pinchers of another design (a
     # duplicate of its niche), 12: a heavy suction robot, 13: a robot that lifts nothing
-    genome, _ = team_genome([design("pincher", 0.4)] * 3 + [design("pincher", 0.45)] * 2
+    genome, _ = from_designs([design("pincher", 0.4)] * 3 + [design("pincher", 0.45)] * 2
                             + [design("suction", 0.4), design("pincher", 0.31)])
     species = torch.tensor([10, 10, 10, 11, 11, 12, 13])
     ids = torch.tensor([10, 11, 12, 13])

@@ -5,7 +5,7 @@ from dataclasses import replace
 import pytest
 import torch
 
-from swarmcode_torch.coevo.population import R_MAX, R_MIN
+from swarmcode_torch.sim.hardware import R_MAX, R_MIN
 from swarmcode_torch.sim.contacts import cell_overflow, collide, neighbour_candidates
 from swarmcode_torch.sim.state import WorldParams
 

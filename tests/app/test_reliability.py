@@ -144,7 +144,7 @@ from swarmcode_torch.app.runs import (LOCK_FILE, RunLock, clean_temporary_files,
 
 FAST = ["--render-every", "0", "--no-compile", "--device", "cpu"]
 RFAST = ["--render-every", "0", "--device", "cpu"]             # what --resume may be given
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _teams(run: Path) -> list[dict]:
@@ -178,40 +178,41 @@ def test_repair_teams_without_any_newline_and_with_a_long_tail(tmp_path):
 _WRITER = """
 import sys
 from pathlib import Path
-from swarmcode_torch.app.runs import atomic_write_bytes
-target, i = Path(sys.argv[1]), 0
-while True:
-    i += 1
-    atomic_write_bytes(target, bytes([i % 251]) * (8 << 20))
+from swarmcode_torch.app import files
+target, whole_write = Path(sys.argv[1]), files._write_all
+files.atomic_write_bytes(target, bytes([1]) * (8 << 20))        # the old version, whole
+
+
+def half_then_wait(fd, data):
+    whole_write(fd, data[: len(data) // 2])
+    print("mid-write", flush=True)                               # the kill lands here
+    sys.stdin.read()
+
+
+files._write_all = half_then_wait
+files.atomic_write_bytes(target, bytes([2]) * (8 << 20))
 """
 
 
+@pytest.mark.subprocess
 def test_a_killed_atomic_write_leaves_the_old_file_whole_and_cleanup_removes_its_temp(tmp_path):
-    leftovers = []
-    for attempt in range(5):                       # until a kill lands mid-write (almost always)
-        d = tmp_path / f"attempt{attempt}"
-        d.mkdir()
-        target = d / "checkpoint.pt"
-        proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(target)], cwd=REPO)
-        try:
-            deadline = time.monotonic() + 120
-            while not target.exists():
-                assert proc.poll() is None and time.monotonic() < deadline
-                time.sleep(0.05)
-            time.sleep(0.3 + 0.1 * attempt)
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=60)
-        finally:
-            proc.kill()
-        assert proc.returncode == -signal.SIGKILL
-        data = target.read_bytes()
-        assert len(data) == 8 << 20 and data == data[:1] * len(data)   # a whole version
-        leftovers = list(d.glob(".checkpoint.pt.*"))
-        if leftovers:
-            break
-    assert leftovers, "no kill landed during a write"
+    # the writer stops half-way through its second write and says so: the kill lands there
+    d = tmp_path
+    target = d / "checkpoint.pt"
+    proc = subprocess.Popen([sys.executable, "-c", _WRITER, str(target)], cwd=REPO,
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline() == "mid-write\n"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+    assert target.read_bytes() == bytes([1]) * (8 << 20)           # the old version, whole
+    (leftover,) = d.glob(".checkpoint.pt.*")
+    assert leftover.read_bytes() == bytes([2]) * (4 << 20)         # the half-written new one
     (d / ".hidden").write_text("not ours")                # other hidden files are left alone
-    assert sorted(clean_temporary_files(d)) == sorted(leftovers)
+    assert clean_temporary_files(d) == [leftover]
     assert not list(d.glob(".checkpoint.pt.*")) and (d / ".hidden").exists()
     assert (d / "checkpoint.pt").stat().st_size == 8 << 20
 
@@ -328,6 +329,7 @@ def _wait_for(path_glob, base: Path, proc, timeout=180):
     return list(base.glob(path_glob))[0]
 
 
+@pytest.mark.subprocess
 def test_a_live_run_refuses_a_second_process_and_a_killed_runs_lock_is_taken_over(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "swarmcode_torch.app.cli", "evolve", *TINY,
                              "--generations", "100000", "--checkpoint-every", "1", *FAST,
@@ -350,6 +352,7 @@ def test_a_live_run_refuses_a_second_process_and_a_killed_runs_lock_is_taken_ove
     assert not (run / LOCK_FILE).exists()                # and released at the end
 
 
+@pytest.mark.subprocess
 def test_a_live_sweep_refuses_a_second_sweep_and_resume_and_sigterm_releases_its_locks(tmp_path):
     out = tmp_path / "sweep"
     args = ["sweep", "--budgets", "1500", "--seeds", "0", "--scenario", "one-niche",
@@ -394,6 +397,7 @@ def test_the_lock_is_released_on_an_error_and_on_ctrl_c(finished_run, tmp_path, 
     assert not (run / LOCK_FILE).exists()                 # released on Ctrl-C
 
 
+@pytest.mark.subprocess
 def test_a_stale_lock_of_a_dead_pid_is_taken_over(finished_run, tmp_path):
     run = _copy_run(finished_run, tmp_path / "run")
     dead = subprocess.Popen([sys.executable, "-c", "pass"])

@@ -15,7 +15,7 @@ from swarmcode_torch.app.runs import RunError
 from swarmcode_torch.coevo.config import EvalConfig
 from swarmcode_torch.coevo.evaluation import team_scores
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 TINY = dict(scenario="one-niche", population=4, swarm_size=3, trials=2, ticks=6, seed=3,
             device="cpu", compile=False)
 CALLS = []

@@ -25,7 +25,7 @@ from swarmcode_torch.sim.scenario import ScenarioError, load_scenario, parse_sce
 
 from test_reliability import MINE, invoke, one_line_error
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
 
 #: test_reliability's custom world, its robots built from catalog.toml beside it

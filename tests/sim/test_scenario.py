@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from swarmcode_torch.coevo.population import R_MAX, R_MIN
+from swarmcode_torch.sim.hardware import R_MAX, R_MIN
 from swarmcode_torch.sim.hardware import default_catalog, phenotype
 from swarmcode_torch.sim.layout import make_layouts, spawn_slots
 from swarmcode_torch.sim.scenario import (ScenarioError, builtin_names, load_scenario,

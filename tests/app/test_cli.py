@@ -277,6 +277,7 @@ def test_sweep_set_applies_to_every_run_and_refuses_clearly(tmp_path):
         assert not any(bad.iterdir())                     # no run directory left behind
 
 
+@pytest.mark.subprocess
 def test_sigterm_writes_the_last_finished_generation(tmp_path):
     # a scheduler's stop (SIGTERM) acts as Ctrl-C: the run exits 143 with its checkpoint written
     import signal

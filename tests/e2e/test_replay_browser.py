@@ -13,9 +13,9 @@ from swarmcode_torch.app.replay_page import page_data, write_page
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.sim.scenario import load_scenario
 
-from test_replay_page import DESIGNS
+from replaykit import DESIGNS
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.subprocess]
 
 webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
 
