@@ -313,7 +313,7 @@ def _entry_point_command() -> list[str]:
     import sys
     import tomllib
 
-    spec = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    spec = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())
     module, func = spec["project"]["scripts"]["swarmcode-torch"].split(":")
     return [sys.executable, "-c", f"import sys; sys.argv[0] = 'swarmcode-torch'; "
                                   f"from {module} import {func}; {func}()"]
