@@ -10,18 +10,21 @@ import argparse
 import json
 import statistics
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import RESULTS_DIR, now, run_metadata, write_json  # noqa: E402
+
 from swarmcode_torch.sim import bt  # noqa: E402
 
 
-def timed(fn: Callable[[], object], device: torch.device, repeats: int, warmup: int = 2) -> list[float]:
+def timed(
+    fn: Callable[[], object], device: torch.device, repeats: int, warmup: int = 2
+) -> list[float]:
     """Wall-clock seconds of repeats calls of fn, after warmup calls (synchronizing on CUDA)."""
     for _ in range(warmup):
         fn()
@@ -45,20 +48,28 @@ def main() -> None:
     parser.add_argument("--length", type=int, default=32)
     parser.add_argument("--robots", type=int, default=8000)
     parser.add_argument("--repeats", type=int, default=10)
-    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's)")
+    parser.add_argument(
+        "--threads", type=int, default=None, help="torch CPU threads (default: torch's)"
+    )
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", default=None,
-                        help="output JSON (default benchmarks/results/bt_<device>.json)")
+    parser.add_argument(
+        "--out", default=None, help="output JSON (default benchmarks/results/bt_<device>.json)"
+    )
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
     device = torch.device(args.device)
 
     g = torch.Generator().manual_seed(args.seed)
-    templates = [bt.template_tensor(n, args.length) for n in bt.TEMPLATES
-                 if len(bt.TEMPLATES[n]) <= args.length]
-    programs = torch.cat([torch.stack(templates), bt.random_programs(args.programs, args.length, g)])
-    programs = programs[:args.programs].to(device)
+    templates = [
+        bt.template_tensor(n, args.length)
+        for n in bt.TEMPLATES
+        if len(bt.TEMPLATES[n]) <= args.length
+    ]
+    programs = torch.cat(
+        [torch.stack(templates), bt.random_programs(args.programs, args.length, g)]
+    )
+    programs = programs[: args.programs].to(device)
     prog_idx = torch.randint(0, args.programs, (args.robots,), generator=g).to(device)
     leaf_status = torch.randint(0, 3, (args.robots, bt.NUM_OPCODES), generator=g)
     leaf_status[:, 2:6] %= 2  # conditions return SUCCESS / FAILURE only
@@ -81,8 +92,11 @@ def main() -> None:
         "programs": args.programs,
         "length": args.length,
         "robots": args.robots,
-        "max_leaves": int(((programs >= bt.COND_HAS_PACKAGE) & (programs <= bt.ACT_MOVE_TO_RANDOM_PACK))
-                          .sum(1).max()),
+        "max_leaves": int(
+            ((programs >= bt.COND_HAS_PACKAGE) & (programs <= bt.ACT_MOVE_TO_RANDOM_PACK))
+            .sum(1)
+            .max()
+        ),
         "build_tables": summary(build),
         "compute_jumps": summary(jumps),
         "lookup_per_tick": summary(lookup),

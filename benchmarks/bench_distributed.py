@@ -36,22 +36,46 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import int_list, median, now, parse_configs, run_metadata, write_json  # noqa: E402
-from swarmcode_torch.coevo import evaluation, evolve  # noqa: E402
+
 from swarmcode_torch.app.distributed import ShardedEvaluator  # noqa: E402
-from swarmcode_torch.coevo.evolve import Evolution  # noqa: E402
+from swarmcode_torch.coevo import evaluation, evolve  # noqa: E402
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.coevo.evolve import Evolution  # noqa: E402
 
 
 # ------------------------------------------------------------------ 1. sweeps
 def bench_sweep(args, workers: int, out: Path) -> dict:
-    cmd = [sys.executable, "-m", "swarmcode_torch", "sweep", "--budgets", args.sweep_budgets,
-           "--seeds", args.sweep_seeds, "--scenario", args.sweep_scenario,
-           "--population", str(args.sweep_population), "--swarm-size", str(args.sweep_swarm),
-           "--trials", "1", "--ticks", str(args.sweep_ticks),
-           "--generations", str(args.sweep_generations), "--no-compile", "--device", "cpu",
-           "--out", str(out), "--workers", str(workers)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "swarmcode_torch",
+        "sweep",
+        "--budgets",
+        args.sweep_budgets,
+        "--seeds",
+        args.sweep_seeds,
+        "--scenario",
+        args.sweep_scenario,
+        "--population",
+        str(args.sweep_population),
+        "--swarm-size",
+        str(args.sweep_swarm),
+        "--trials",
+        "1",
+        "--ticks",
+        str(args.sweep_ticks),
+        "--generations",
+        str(args.sweep_generations),
+        "--no-compile",
+        "--device",
+        "cpu",
+        "--out",
+        str(out),
+        "--workers",
+        str(workers),
+    ]
     env = dict(os.environ)
-    if args.threads:            # the in-process sweep's torch threads (Ray tasks: --cpus-per-run)
+    if args.threads:  # the in-process sweep's torch threads (Ray tasks: --cpus-per-run)
         env["OMP_NUM_THREADS"] = str(args.threads)
     t = time.perf_counter()
     r = subprocess.run(cmd, capture_output=True, text=True, env=env)
@@ -59,14 +83,20 @@ def bench_sweep(args, workers: int, out: Path) -> dict:
     if r.returncode != 0:
         raise SystemExit(f"sweep with --workers {workers} failed:\n{r.stdout}\n{r.stderr}")
     runs = len(args.sweep_budgets.split(",")) * len(args.sweep_seeds.split(","))
-    return {"workers": workers, "runs": runs, "wall_seconds": wall,
-            "command": " ".join(cmd[1:]).replace(str(out), "OUT"),
-            "table_csv": (out / "table.csv").read_text()}
+    return {
+        "workers": workers,
+        "runs": runs,
+        "wall_seconds": wall,
+        "command": " ".join(cmd[1:]).replace(str(out), "OUT"),
+        "table_csv": (out / "table.csv").read_text(),
+    }
 
 
 def ray_start_seconds() -> float:
-    code = ("import time, ray; t = time.perf_counter(); ray.init(include_dashboard=False); "
-            "ray.shutdown(); print(time.perf_counter() - t)")
+    code = (
+        "import time, ray; t = time.perf_counter(); ray.init(include_dashboard=False); "
+        "ray.shutdown(); print(time.perf_counter() - t)"
+    )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     return float(r.stdout.split()[-1])
 
@@ -76,9 +106,13 @@ class _Timers:
     """Wall time of the parts of a generation, by wrapping the functions `generation` and
     `evaluate` call (device synchronised)."""
 
-    PARTS = {"speciation": (evolve, "speciate"), "reproduction": (evolve, "reproduce"),
-             "eval_plan": (evaluation, "plan_evaluation"),
-             "simulation": (evaluation, "simulate_batch"), "scoring": (evaluation, "score_plan")}
+    PARTS = {
+        "speciation": (evolve, "speciate"),
+        "reproduction": (evolve, "reproduce"),
+        "eval_plan": (evaluation, "plan_evaluation"),
+        "simulation": (evaluation, "simulate_batch"),
+        "scoring": (evaluation, "score_plan"),
+    }
 
     def __init__(self, device: torch.device):
         self.device = device
@@ -106,27 +140,39 @@ class _Timers:
 
 def _same_state(a, b) -> bool:
     ga, gb = a.genome.state_dict(), b.genome.state_dict()
-    return all(torch.equal(ga[k], gb[k]) for k in ga) and torch.equal(a.fitness, b.fitness) \
+    return (
+        all(torch.equal(ga[k], gb[k]) for k in ga)
+        and torch.equal(a.fitness, b.fitness)
         and torch.equal(a.rng_state, b.rng_state)
+    )
 
 
 def bench_generations(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
-    cfg = SwarmCoDeConfig(scenario=name, swarm_size=swarm, population=pop, trials=args.trials,
-                       ticks=args.ticks, generations=10_000, device=str(device),
-                       compile=args.compile, seed=0, budget=args.budget)
+    cfg = SwarmCoDeConfig(
+        scenario=name,
+        swarm_size=swarm,
+        population=pop,
+        trials=args.trials,
+        ticks=args.ticks,
+        generations=10_000,
+        device=str(device),
+        compile=args.compile,
+        seed=0,
+        budget=args.budget,
+    )
     ev = Evolution(cfg)
     for _ in range(args.warmup):
         ev.step()
     start = ev.state
     modes: list[dict] = []
     reference_states = None
-    for shards in [0] + args.shards:              # 0: in this process
+    for shards in [0] + args.shards:  # 0: in this process
         ev.state = start
         evaluator = None
         if shards:
             evaluator = ShardedEvaluator(ev.ctx, shards, args.cpus_per_shard)
             ev.ctx.evaluator = evaluator
-            ev.step()                             # the actors' first generation: not timed
+            ev.step()  # the actors' first generation: not timed
             ev.state = start
             evaluator.stats.clear()
         gen_s, metrics, states, rollout_s = [], [], [], []
@@ -137,12 +183,23 @@ def bench_generations(name: str, swarm: int, pop: int, args, device: torch.devic
                 m = ev.step()
                 gen_s.append(now(device) - t)
                 rollout_s.append(m.sim_seconds)
-                metrics.append(json.dumps({k: v for k, v in m.items() if isinstance(v, (int, float))
-                                           and not k.startswith("perf/")}, sort_keys=True))
+                metrics.append(
+                    json.dumps(
+                        {
+                            k: v
+                            for k, v in m.items()
+                            if isinstance(v, (int, float)) and not k.startswith("perf/")
+                        },
+                        sort_keys=True,
+                    )
+                )
                 states.append(ev.state)
-        row = {"mode": "in process" if not shards else f"{shards} shards on Ray",
-               "shards": shards, "seconds_per_generation": median(gen_s),
-               "all_generation_seconds": gen_s}
+        row = {
+            "mode": "in process" if not shards else f"{shards} shards on Ray",
+            "shards": shards,
+            "seconds_per_generation": median(gen_s),
+            "all_generation_seconds": gen_s,
+        }
         if not shards:
             reference_states, reference_metrics = states, metrics
             parts = {k: v / args.generations for k, v in timers.seconds.items()}
@@ -156,33 +213,50 @@ def bench_generations(name: str, swarm: int, pop: int, args, device: torch.devic
         else:
             st = evaluator.stats
             n = len(st)
-            row.update({
-                "bytes_sent_per_generation": sum(s["bytes_sent"] for s in st) / n,
-                "bytes_received_per_generation": sum(s["bytes_received"] for s in st) / n,
-                "evaluations_per_shard": st[0]["evaluations"],
-                "pack_and_send_seconds": median([s["send_seconds"] for s in st]),
-                "wait_seconds": median([s["wait_seconds"] for s in st]),
-                "unpack_seconds": median([s["gather_seconds"] for s in st]),
-                "slowest_shard_sim_seconds": median([max(s["shard_sim_seconds"]) for s in st]),
-                "driver_seconds_per_generation": median(gen_s) - median(
-                    [s["wait_seconds"] for s in st]),
-                "where": evaluator.where,
-                "same_as_in_process": all(_same_state(a, b) for a, b in
-                                          zip(states, reference_states))
-                and metrics == reference_metrics,
-            })
+            row.update(
+                {
+                    "bytes_sent_per_generation": sum(s["bytes_sent"] for s in st) / n,
+                    "bytes_received_per_generation": sum(s["bytes_received"] for s in st) / n,
+                    "evaluations_per_shard": st[0]["evaluations"],
+                    "pack_and_send_seconds": median([s["send_seconds"] for s in st]),
+                    "wait_seconds": median([s["wait_seconds"] for s in st]),
+                    "unpack_seconds": median([s["gather_seconds"] for s in st]),
+                    "slowest_shard_sim_seconds": median([max(s["shard_sim_seconds"]) for s in st]),
+                    "driver_seconds_per_generation": median(gen_s)
+                    - median([s["wait_seconds"] for s in st]),
+                    "where": evaluator.where,
+                    "same_as_in_process": all(
+                        _same_state(a, b) for a, b in zip(states, reference_states)
+                    )
+                    and metrics == reference_metrics,
+                }
+            )
             ev.ctx.evaluator = None
             evaluator.close()
         modes.append(row)
-        print(f"{name} pop {pop}: {row['mode']}: {row['seconds_per_generation']:.3f} s/gen"
-              + (f", {row['bytes_sent_per_generation'] / 1024:.1f} KiB sent, "
-                 f"{row['bytes_received_per_generation'] / 1024:.1f} KiB back, same: "
-                 f"{row['same_as_in_process']}" if shards else
-                 f", driver share {100 * row['driver_share']:.0f} %"), flush=True)
-    return {"scenario": name, "swarm_size": swarm, "population": pop, "trials": args.trials,
-            "ticks": ev.ctx.eval_cfg.ticks, "envs": 2 * pop * args.trials,
-            "tick": ev.ctx.tick_mode, "warmup_generations": args.warmup,
-            "timed_generations": args.generations, "modes": modes}
+        print(
+            f"{name} pop {pop}: {row['mode']}: {row['seconds_per_generation']:.3f} s/gen"
+            + (
+                f", {row['bytes_sent_per_generation'] / 1024:.1f} KiB sent, "
+                f"{row['bytes_received_per_generation'] / 1024:.1f} KiB back, same: "
+                f"{row['same_as_in_process']}"
+                if shards
+                else f", driver share {100 * row['driver_share']:.0f} %"
+            ),
+            flush=True,
+        )
+    return {
+        "scenario": name,
+        "swarm_size": swarm,
+        "population": pop,
+        "trials": args.trials,
+        "ticks": ev.ctx.eval_cfg.ticks,
+        "envs": 2 * pop * args.trials,
+        "tick": ev.ctx.tick_mode,
+        "warmup_generations": args.warmup,
+        "timed_generations": args.generations,
+        "modes": modes,
+    }
 
 
 class _NoTimers:
@@ -213,8 +287,12 @@ def main() -> None:
     ap.add_argument("--sweep-swarm", type=int, default=4)
     ap.add_argument("--sweep-ticks", type=int, default=20)
     ap.add_argument("--sweep-generations", type=int, default=5)
-    ap.add_argument("--threads", type=int, default=None,
-                    help="torch CPU threads of this process and of the in-process sweep")
+    ap.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        help="torch CPU threads of this process and of the in-process sweep",
+    )
     ap.add_argument("--notes", default=None, help="a note stored in the JSON")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
@@ -228,11 +306,14 @@ def main() -> None:
     try:
         sweeps = [bench_sweep(args, w, tmp / f"sweep-{w}") for w in args.sweep_workers]
         for s in sweeps:
-            print(f"sweep of {s['runs']} runs, --workers {s['workers']}: "
-                  f"{s['wall_seconds']:.1f} s", flush=True)
-        result["sweep"] = {"runs": [{k: v for k, v in s.items() if k != "table_csv"}
-                                    for s in sweeps],
-                           "tables_identical": len({s["table_csv"] for s in sweeps}) == 1}
+            print(
+                f"sweep of {s['runs']} runs, --workers {s['workers']}: {s['wall_seconds']:.1f} s",
+                flush=True,
+            )
+        result["sweep"] = {
+            "runs": [{k: v for k, v in s.items() if k != "table_csv"} for s in sweeps],
+            "tables_identical": len({s["table_csv"] for s in sweeps}) == 1,
+        }
         if any(w > 1 for w in args.sweep_workers):
             result["sweep"]["ray_start_seconds"] = ray_start_seconds()
         write_json(result, out)

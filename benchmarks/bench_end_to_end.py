@@ -31,16 +31,36 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def run_one(name: str, swarm: int, pop: int, args) -> dict:
     with tempfile.TemporaryDirectory() as logdir:
-        cmd = [sys.executable, "-m", "swarmcode_torch.app.cli", "evolve", "--scenario", name,
-               "--swarm-size", str(swarm), "--population", str(pop),
-               "--generations", str(args.generations), "--seed", str(args.seed),
-               "--device", args.device, "--logdir", logdir, "--render-every", "0",
-               "--log-every", str(max(1, args.generations // 5))]
+        cmd = [
+            sys.executable,
+            "-m",
+            "swarmcode_torch.app.cli",
+            "evolve",
+            "--scenario",
+            name,
+            "--swarm-size",
+            str(swarm),
+            "--population",
+            str(pop),
+            "--generations",
+            str(args.generations),
+            "--seed",
+            str(args.seed),
+            "--device",
+            args.device,
+            "--logdir",
+            logdir,
+            "--render-every",
+            "0",
+            "--log-every",
+            str(max(1, args.generations // 5)),
+        ]
         for kv in args.set or []:
             cmd += ["--set", kv]
         t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                text=True)
+        proc = subprocess.Popen(
+            cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
         try:
             out, _ = proc.communicate(timeout=args.time_limit)
         except subprocess.TimeoutExpired:
@@ -55,9 +75,13 @@ def run_one(name: str, swarm: int, pop: int, args) -> dict:
     done = summary["generation"] + 1
     last = summary.get("last_generation", {})
     return {
-        "scenario": name, "swarm_size": swarm, "population": pop,
-        "generations": args.generations, "generations_done": done,
-        "finished": done >= args.generations, "wall_seconds": wall,
+        "scenario": name,
+        "swarm_size": swarm,
+        "population": pop,
+        "generations": args.generations,
+        "generations_done": done,
+        "finished": done >= args.generations,
+        "wall_seconds": wall,
         "wall_seconds_projected": wall * args.generations / done,
         "last_generation_seconds": last.get("perf/generation_seconds"),
         "tick": summary.get("tick"),
@@ -68,14 +92,22 @@ def run_one(name: str, swarm: int, pop: int, args) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
-    ap.add_argument("--configs", default="four-niche:20:50,swarm200:200:50",
-                    help="scenario:swarm:population,...")
+    ap.add_argument(
+        "--configs",
+        default="four-niche:20:50,swarm200:200:50",
+        help="scenario:swarm:population,...",
+    )
     ap.add_argument("--generations", type=int, default=500)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--time-limit", type=float, default=None,
-                    help="seconds per run before it is interrupted (then projected)")
-    ap.add_argument("--set", action="append", metavar="KEY=VALUE",
-                    help="passed to evolve's --set (repeatable)")
+    ap.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        help="seconds per run before it is interrupted (then projected)",
+    )
+    ap.add_argument(
+        "--set", action="append", metavar="KEY=VALUE", help="passed to evolve's --set (repeatable)"
+    )
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     device = torch.device(args.device)
@@ -86,10 +118,16 @@ def main() -> None:
     for name, swarm, pop in parse_configs(args.configs):
         r = run_one(name, swarm, pop, args)
         rows.append(r)
-        what = "" if r["finished"] else \
-            f" (all {r['generations']}: {r['wall_seconds_projected']:.0f} s projected)"
-        print(f"{name} swarm {swarm} pop {pop}: {r['generations_done']} of {r['generations']} "
-              f"generations in {r['wall_seconds']:.1f} s{what}, tick {r['tick']}", flush=True)
+        what = (
+            ""
+            if r["finished"]
+            else f" (all {r['generations']}: {r['wall_seconds_projected']:.0f} s projected)"
+        )
+        print(
+            f"{name} swarm {swarm} pop {pop}: {r['generations_done']} of {r['generations']} "
+            f"generations in {r['wall_seconds']:.1f} s{what}, tick {r['tick']}",
+            flush=True,
+        )
         write_json({**run_metadata(device), "results": rows}, out)
     print(f"wrote {out}")
 

@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 REPO = Path(__file__).resolve().parents[1]
 
-WORKER = r'''
+WORKER = r"""
 import json, sys, time, torch
 src = sys.argv[1]
 sys.path.insert(0, src + "/benchmarks")
@@ -90,14 +90,20 @@ for line in sys.stdin:
     dt = time.perf_counter() - t0
     out["seconds"] = dt
     print(json.dumps(out), flush=True)
-'''
+"""
 
 
 class Worker:
     def __init__(self, src: Path, threads: int):
         env = dict(os.environ, PYTHONPATH=str(src), OMP_NUM_THREADS=str(threads))
-        self.p = subprocess.Popen([sys.executable, "-c", WORKER, str(src)], stdin=subprocess.PIPE,
-                                  stdout=subprocess.PIPE, text=True, env=env, cwd=str(src))
+        self.p = subprocess.Popen(
+            [sys.executable, "-c", WORKER, str(src)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            env=env,
+            cwd=str(src),
+        )
 
     def ask(self, **cmd) -> dict:
         self.p.stdin.write(json.dumps(cmd) + "\n")
@@ -128,9 +134,16 @@ def bench_ticks(args, old: Path, new: Path) -> list[dict]:
         E, N, T = (int(x) for x in cfg.split(":"))
         workers = {"old": Worker(old, args.tick_threads), "new": Worker(new, args.tick_threads)}
         try:
-            setup = {k: w.ask(op="tick_setup", E=E, N=N, threads=args.tick_threads,
-                              mode="compiled" if k == "old" else "fused")["seconds"]
-                     for k, w in workers.items()}
+            setup = {
+                k: w.ask(
+                    op="tick_setup",
+                    E=E,
+                    N=N,
+                    threads=args.tick_threads,
+                    mode="compiled" if k == "old" else "fused",
+                )["seconds"]
+                for k, w in workers.items()
+            }
             times = {"old": [], "new": []}
             loads = []
             for r in range(args.reps):
@@ -144,14 +157,29 @@ def bench_ticks(args, old: Path, new: Path) -> list[dict]:
             for w in workers.values():
                 w.close()
         rt = {k: E * N / median(v) for k, v in times.items()}
-        row = {"workload": f"tick E={E} x N={N}", "E": E, "N": N,
-               "threads": args.tick_threads, "old": "compiled (torch.compile fullgraph)",
-               "new": "fused C++ tick", "setup_seconds": setup,
-               "seconds_per_tick": {k: median(v) for k, v in times.items()},
-               "all_seconds_per_tick": times, "robot_ticks_per_second": rt,
-               "ratio_new_over_old": rt["new"] / rt["old"], "load_average": loads}
-        print(json.dumps({k: row[k] for k in ("workload", "seconds_per_tick",
-                                               "ratio_new_over_old", "load_average")}), flush=True)
+        row = {
+            "workload": f"tick E={E} x N={N}",
+            "E": E,
+            "N": N,
+            "threads": args.tick_threads,
+            "old": "compiled (torch.compile fullgraph)",
+            "new": "fused C++ tick",
+            "setup_seconds": setup,
+            "seconds_per_tick": {k: median(v) for k, v in times.items()},
+            "all_seconds_per_tick": times,
+            "robot_ticks_per_second": rt,
+            "ratio_new_over_old": rt["new"] / rt["old"],
+            "load_average": loads,
+        }
+        print(
+            json.dumps(
+                {
+                    k: row[k]
+                    for k in ("workload", "seconds_per_tick", "ratio_new_over_old", "load_average")
+                }
+            ),
+            flush=True,
+        )
         rows.append(row)
     return rows
 
@@ -159,14 +187,23 @@ def bench_ticks(args, old: Path, new: Path) -> list[dict]:
 def bench_generation(args, old: Path, new: Path) -> dict:
     workers = {"old": Worker(old, args.gen_threads), "new": Worker(new, args.gen_threads)}
     try:
-        modes = {k: w.ask(op="gen_setup", scenario="four-niche", swarm=20, pop=50, warmup=2,
-                          compile=True if k == "old" else None, threads=args.gen_threads)
-                 for k, w in workers.items()}
+        modes = {
+            k: w.ask(
+                op="gen_setup",
+                scenario="four-niche",
+                swarm=20,
+                pop=50,
+                warmup=2,
+                compile=True if k == "old" else None,
+                threads=args.gen_threads,
+            )
+            for k, w in workers.items()
+        }
         times = {"old": [], "new": []}
         sims = {"old": [], "new": []}
         loads = []
         for r in range(args.gen_reps):
-            for k in (("old", "new") if r % 2 == 0 else ("new", "old")):
+            for k in ("old", "new") if r % 2 == 0 else ("new", "old"):
                 out = workers[k].ask(op="gen_time", threads=args.gen_threads)
                 times[k].append(out["seconds"])
                 sims[k].append(out["sim_seconds"])
@@ -175,39 +212,76 @@ def bench_generation(args, old: Path, new: Path) -> dict:
         for w in workers.values():
             w.close()
     med = {k: median(v) for k, v in times.items()}
-    row = {"workload": "generation four-niche swarm 20 population 50", "threads": args.gen_threads,
-           "tick_mode": {k: v["tick_mode"] for k, v in modes.items()},
-           "seconds_per_generation": med, "all_seconds": times,
-           "sim_share": {k: sum(sims[k]) / sum(times[k]) for k in times},
-           "ratio_old_over_new": med["old"] / med["new"], "load_average": loads}
-    print(json.dumps({k: row[k] for k in ("workload", "seconds_per_generation",
-                                           "ratio_old_over_new", "load_average")}), flush=True)
+    row = {
+        "workload": "generation four-niche swarm 20 population 50",
+        "threads": args.gen_threads,
+        "tick_mode": {k: v["tick_mode"] for k, v in modes.items()},
+        "seconds_per_generation": med,
+        "all_seconds": times,
+        "sim_share": {k: sum(sims[k]) / sum(times[k]) for k in times},
+        "ratio_old_over_new": med["old"] / med["new"],
+        "load_average": loads,
+    }
+    print(
+        json.dumps(
+            {
+                k: row[k]
+                for k in (
+                    "workload",
+                    "seconds_per_generation",
+                    "ratio_old_over_new",
+                    "load_average",
+                )
+            }
+        ),
+        flush=True,
+    )
     return row
 
 
-FIRST = ["evolve", "--scenario", "budget", "--budget", "4000", "--generations", "20",
-         "--population", "30"]
+FIRST = [
+    "evolve",
+    "--scenario",
+    "budget",
+    "--budget",
+    "4000",
+    "--generations",
+    "20",
+    "--population",
+    "30",
+]
 
 
 def bench_first(args, old: Path, new: Path) -> dict:
     def run(src: Path, ext_dir: str | None) -> dict:
         with tempfile.TemporaryDirectory() as logdir:
             env = dict(os.environ, PYTHONPATH=str(src))
-            env.pop("OMP_NUM_THREADS", None)   # as a user starts it: the defaults choose
+            env.pop("OMP_NUM_THREADS", None)  # as a user starts it: the defaults choose
             if ext_dir is not None:
                 env["TORCH_EXTENSIONS_DIR"] = ext_dir
             l0 = load()
             t0 = time.perf_counter()
-            r = subprocess.run([sys.executable, "-m", "swarmcode_torch", *FIRST, "--logdir", logdir],
-                               env=env, cwd=logdir, capture_output=True, text=True)
+            r = subprocess.run(
+                [sys.executable, "-m", "swarmcode_torch", *FIRST, "--logdir", logdir],
+                env=env,
+                cwd=logdir,
+                capture_output=True,
+                text=True,
+            )
             dt = time.perf_counter() - t0
             if r.returncode != 0:
                 raise RuntimeError(r.stdout[-2000:] + r.stderr[-2000:])
             summ = next(Path(logdir).glob("*/summary.json"))
             s = json.loads(summ.read_text())
-            return {"seconds": dt, "load_average_before": l0, "load_average_after": load(),
-                    "tick": s.get("tick"), "best_fitness": s.get("best_fitness"),
-                    "team_cost": s.get("team_cost"), "deliveries": s.get("deliveries")}
+            return {
+                "seconds": dt,
+                "load_average_before": l0,
+                "load_average_after": load(),
+                "tick": s.get("tick"),
+                "best_fitness": s.get("best_fitness"),
+                "team_cost": s.get("team_cost"),
+                "deliveries": s.get("deliveries"),
+            }
 
     out = {"command": "swarmcode-torch " + " ".join(FIRST)}
     if args.first_cold:
@@ -223,30 +297,42 @@ def bench_first(args, old: Path, new: Path) -> dict:
 
 
 def main() -> None:
-    from common import RESULTS_DIR, run_metadata, write_json
     import torch
+    from common import RESULTS_DIR, run_metadata, write_json
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--old", type=Path, required=True, help="the old source tree (a worktree)")
     ap.add_argument("--new", type=Path, default=REPO, help="the new source tree [this one]")
     ap.add_argument("--parts", default="tick,generation,first")
-    ap.add_argument("--tick-configs", default="300:20:20,64:200:5",
-                    help="E:N:ticks of the old tick per timing (the new one runs --new-tick-factor "
-                         "times as many)")
+    ap.add_argument(
+        "--tick-configs",
+        default="300:20:20,64:200:5",
+        help="E:N:ticks of the old tick per timing (the new one runs --new-tick-factor "
+        "times as many)",
+    )
     ap.add_argument("--new-tick-factor", type=int, default=5)
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--tick-threads", type=int, default=1)
     ap.add_argument("--gen-threads", type=int, default=2)
     ap.add_argument("--gen-reps", type=int, default=4)
-    ap.add_argument("--first-old", action=argparse.BooleanOptionalAction, default=True,
-                    help="first: run the old tree's command too (it takes minutes)")
-    ap.add_argument("--first-cold", action=argparse.BooleanOptionalAction, default=True,
-                    help="first: run the new tree once more with an empty extension cache")
+    ap.add_argument(
+        "--first-old",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="first: run the old tree's command too (it takes minutes)",
+    )
+    ap.add_argument(
+        "--first-cold",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="first: run the new tree once more with an empty extension cache",
+    )
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     meta = run_metadata(torch.device("cpu"))
-    meta["old_commit"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=args.old,
-                                        capture_output=True, text=True).stdout.strip()
+    meta["old_commit"] = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], cwd=args.old, capture_output=True, text=True
+    ).stdout.strip()
     meta["nice"] = os.nice(0)
     res = {"meta": meta, "rows": {}}
     parts = args.parts.split(",")

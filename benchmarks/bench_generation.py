@@ -41,15 +41,32 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import median, now, parse_configs, run_metadata, write_json  # noqa: E402
-from swarmcode_torch.coevo.evolve import Evolution  # noqa: E402
-from swarmcode_torch.coevo.config import SwarmCoDeConfig  # noqa: E402
+
 from swarmcode_torch.coevo import evaluation  # noqa: E402
+from swarmcode_torch.coevo.config import SwarmCoDeConfig  # noqa: E402
+from swarmcode_torch.coevo.evolve import Evolution  # noqa: E402
 
 ROLLOUT = "bench::rollout"
-HOST_READS = ("item", "tolist", "__bool__", "__int__", "__float__", "__index__", "cpu", "numpy",
-              "to")
-SHAPE_SYNCS = ("nonzero", "argwhere", "unique", "unique_consecutive", "masked_select",
-               "bincount", "repeat_interleave")
+HOST_READS = (
+    "item",
+    "tolist",
+    "__bool__",
+    "__int__",
+    "__float__",
+    "__index__",
+    "cpu",
+    "numpy",
+    "to",
+)
+SHAPE_SYNCS = (
+    "nonzero",
+    "argwhere",
+    "unique",
+    "unique_consecutive",
+    "masked_select",
+    "bincount",
+    "repeat_interleave",
+)
 LAUNCHES = ("cudaLaunchKernel", "cudaLaunchKernelExC", "cuLaunchKernel", "cuLaunchKernelEx")
 SYNCS = ("cudaStreamSynchronize", "cudaDeviceSynchronize", "cudaEventSynchronize")
 PACKAGE = str(Path(evaluation.__file__).resolve().parents[1])
@@ -65,8 +82,8 @@ class HostReads(torch.overrides.TorchFunctionMode):
         super().__init__()
         self.device = device
         self.host = torch.utils.weak.WeakIdKeyDictionary()  # host tensors (copies, and derived)
-        self.counts = collections.Counter()          # (part, kind) -> calls
-        self.sites = collections.Counter()           # (part, "file:line kind") -> calls
+        self.counts = collections.Counter()  # (part, kind) -> calls
+        self.sites = collections.Counter()  # (part, "file:line kind") -> calls
         self.part = "rest"
 
     def _on_host(self, t: torch.Tensor) -> bool:
@@ -79,7 +96,7 @@ class HostReads(torch.overrides.TorchFunctionMode):
         if not args or not isinstance(args[0], torch.Tensor) or self._on_host(args[0]):
             return False
         if name in SHAPE_SYNCS:
-            if name == "repeat_interleave":       # by a tensor of repeats, unless sized
+            if name == "repeat_interleave":  # by a tensor of repeats, unless sized
                 reps = args[1] if len(args) > 1 else kwargs.get("repeats", args[0])
                 return "output_size" not in kwargs and isinstance(reps, torch.Tensor)
             return True
@@ -101,9 +118,13 @@ class HostReads(torch.overrides.TorchFunctionMode):
             self.counts[self.part, "shape"] += 1
             self.sites[self.part, f"{_caller()} shape:{name}"] += 1
         out = func(*args, **kwargs)
-        if copy or (len(self.host) and any(
+        if copy or (
+            len(self.host)
+            and any(
                 isinstance(t, torch.Tensor) and t in self.host
-                for t in torch.utils._pytree.tree_leaves((args, kwargs)))):
+                for t in torch.utils._pytree.tree_leaves((args, kwargs))
+            )
+        ):
             for t in torch.utils._pytree.tree_leaves(out):
                 if isinstance(t, torch.Tensor):
                     self.host[t] = True
@@ -138,7 +159,7 @@ def count_generation(ev: Evolution, device: torch.device) -> dict:
     """Ops, host syncs and kernel launches of one generation, split into rollout and rest."""
     reads = HostReads(device)
     inner = evaluation.simulate_teams
-    keep_mode = not ev.ctx.compiled    # a compiled tick would recompile under the mode
+    keep_mode = not ev.ctx.compiled  # a compiled tick would recompile under the mode
 
     def marked(*a, **k):
         with contextlib.ExitStack() as stack:
@@ -165,8 +186,18 @@ def count_generation(ev: Evolution, device: torch.device) -> dict:
         evaluation.simulate_teams = inner
     events = prof.events()
     spans = [(e.time_range.start, e.time_range.end) for e in events if e.name == ROLLOUT]
-    zero = dict.fromkeys(("aten_ops", "aten_top_ops", "local_scalar_dense", "kernel_launches",
-                          "graph_launches", "dtoh_copies", "syncs"), 0)
+    zero = dict.fromkeys(
+        (
+            "aten_ops",
+            "aten_top_ops",
+            "local_scalar_dense",
+            "kernel_launches",
+            "graph_launches",
+            "dtoh_copies",
+            "syncs",
+        ),
+        0,
+    )
     out = {"rollout": dict(zero), "rest": dict(zero)}
     for e in events:
         if e.device_type != torch.autograd.DeviceType.CPU or e.name == ROLLOUT:
@@ -180,35 +211,49 @@ def count_generation(ev: Evolution, device: torch.device) -> dict:
                 p = p.cpu_parent
             c["aten_top_ops"] += p is None
             c["local_scalar_dense"] += e.name == "aten::_local_scalar_dense"
-            c["dtoh_copies"] += sum("DtoH" in k.name or "Device -> Pageable" in k.name
-                                    or "Device -> Pinned" in k.name for k in e.kernels)
+            c["dtoh_copies"] += sum(
+                "DtoH" in k.name or "Device -> Pageable" in k.name or "Device -> Pinned" in k.name
+                for k in e.kernels
+            )
         c["kernel_launches"] += e.name in LAUNCHES
         c["graph_launches"] += e.name == "cudaGraphLaunch"
         c["syncs"] += e.name in SYNCS
     for part in out:
-        out[part]["host_reads"] = sum(n for (p, k), n in reads.counts.items()
-                                      if p == part and k != "shape")
+        out[part]["host_reads"] = sum(
+            n for (p, k), n in reads.counts.items() if p == part and k != "shape"
+        )
         out[part]["shape_syncs"] = reads.counts[part, "shape"]
-        out[part]["host_reads_by_kind"] = {k: n for (p, k), n in sorted(reads.counts.items())
-                                           if p == part and k != "shape"}
+        out[part]["host_reads_by_kind"] = {
+            k: n for (p, k), n in sorted(reads.counts.items()) if p == part and k != "shape"
+        }
         if device.type != "cuda":
             for k in ("kernel_launches", "graph_launches", "dtoh_copies", "syncs"):
                 del out[part][k]
     out["rollout_counted"] = {"host_reads": keep_mode}
     out["rollouts"] = len(spans)
     for part in ("rollout", "rest"):
-        out[part]["host_read_sites"] = {k: n for (p, k), n in reads.sites.most_common()
-                                        if p == part}
+        out[part]["host_read_sites"] = {
+            k: n for (p, k), n in reads.sites.most_common() if p == part
+        }
     return out
+
 
 DEFAULT_CONFIGS = "four-niche:20:50,budget:20:100,swarm200:200:50,swarm1000:1000:50"
 
 
 def bench(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
-    cfg = SwarmCoDeConfig(scenario=name, swarm_size=swarm, population=pop, trials=args.trials,
-                       ticks=args.ticks, generations=args.warmup + args.generations,
-                       device=str(device), compile=args.compile, seed=0,
-                       cuda_graphs=args.cuda_graphs)
+    cfg = SwarmCoDeConfig(
+        scenario=name,
+        swarm_size=swarm,
+        population=pop,
+        trials=args.trials,
+        ticks=args.ticks,
+        generations=args.warmup + args.generations,
+        device=str(device),
+        compile=args.compile,
+        seed=0,
+        cuda_graphs=args.cuda_graphs,
+    )
     if device.type == "cuda":
         torch.cuda.reset_peak_memory_stats(device)
     ev = Evolution(cfg)
@@ -226,11 +271,18 @@ def bench(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
     ticks = ev.ctx.eval_cfg.ticks
     envs = 2 * pop * args.trials
     row = {
-        "scenario": name, "swarm_size": swarm, "population": pop, "trials": args.trials,
-        "ticks": ticks, "envs": envs, "compile": ev.ctx.compiled,
+        "scenario": name,
+        "swarm_size": swarm,
+        "population": pop,
+        "trials": args.trials,
+        "ticks": ticks,
+        "envs": envs,
+        "compile": ev.ctx.compiled,
         "cuda_graphs": ev.ctx.tick_mode.endswith("CUDA graphs"),
-        "warmup_generations": args.warmup, "warmup_seconds": warmup_s,
-        "seconds_per_generation": median(gen_s), "all_generation_seconds": gen_s,
+        "warmup_generations": args.warmup,
+        "warmup_seconds": warmup_s,
+        "seconds_per_generation": median(gen_s),
+        "all_generation_seconds": gen_s,
         "sim_share": sum(sim_s) / sum(gen_s),
         "evaluation_share": sum(eval_s) / sum(gen_s),
         "robot_ticks_per_s": envs * swarm * ticks / median(sim_s),
@@ -251,14 +303,26 @@ def main() -> None:
     ap.add_argument("--warmup", type=int, default=1, help="untimed generations first")
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--ticks", type=int, default=None, help="episode length [scenario's]")
-    ap.add_argument("--compile", action=argparse.BooleanOptionalAction, default=None,
-                    help="torch.compile the tick [default: on CUDA only]")
-    ap.add_argument("--cuda-graphs", action=argparse.BooleanOptionalAction, default=None,
-                    help="replay the compiled tick as CUDA graphs (evolve's cuda_graphs key) "
-                         "[default: as evolve, on where the tick runs compiled on CUDA]")
-    ap.add_argument("--count", action=argparse.BooleanOptionalAction, default=True,
-                    help="count ops, host syncs and kernel launches in one more generation "
-                         "(untimed, under torch.profiler)")
+    ap.add_argument(
+        "--compile",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="torch.compile the tick [default: on CUDA only]",
+    )
+    ap.add_argument(
+        "--cuda-graphs",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="replay the compiled tick as CUDA graphs (evolve's cuda_graphs key) "
+        "[default: as evolve, on where the tick runs compiled on CUDA]",
+    )
+    ap.add_argument(
+        "--count",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="count ops, host syncs and kernel launches in one more generation "
+        "(untimed, under torch.profiler)",
+    )
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     device = torch.device(args.device)
@@ -268,16 +332,21 @@ def main() -> None:
         t = time.perf_counter()
         rows.append(bench(name, swarm, pop, args, device))
         r = rows[-1]
-        print(f"{name} swarm {swarm} pop {pop}: {r['seconds_per_generation']:.2f} s/gen, "
-              f"simulation {100 * r['sim_share']:.0f}%, evaluation {100 * r['evaluation_share']:.0f}%, "
-              f"{r['robot_ticks_per_s'] / 1e6:.2f} M robot-ticks/s "
-              f"(warm-up {r['warmup_seconds']:.1f} s; {time.perf_counter() - t:.0f} s total)",
-              flush=True)
+        print(
+            f"{name} swarm {swarm} pop {pop}: {r['seconds_per_generation']:.2f} s/gen, "
+            f"simulation {100 * r['sim_share']:.0f}%, evaluation {100 * r['evaluation_share']:.0f}%, "
+            f"{r['robot_ticks_per_s'] / 1e6:.2f} M robot-ticks/s "
+            f"(warm-up {r['warmup_seconds']:.1f} s; {time.perf_counter() - t:.0f} s total)",
+            flush=True,
+        )
         if "counts_per_generation" in r:
             c = r["counts_per_generation"]
             for part in ("rollout", "rest"):
-                print(f"  {part:8s} " + ", ".join(f"{k} {v}" for k, v in c[part].items()
-                                                   if not isinstance(v, dict)), flush=True)
+                print(
+                    f"  {part:8s} "
+                    + ", ".join(f"{k} {v}" for k, v in c[part].items() if not isinstance(v, dict)),
+                    flush=True,
+                )
         write_json({**run_metadata(device), "results": rows}, out)  # keep what is done
     write_json({**run_metadata(device), "results": rows}, out)
     print(f"wrote {out}")

@@ -17,25 +17,42 @@ import gc
 import math
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import (RESULTS_DIR, add_run_options, apply_run_options, int_list,  # noqa: E402
-                    load_average, median, now, run_metadata, write_json)
-from swarmcode_torch.sim import bt  # noqa: E402
+from common import (
+    RESULTS_DIR,
+    add_run_options,
+    apply_run_options,
+    int_list,  # noqa: E402
+    load_average,
+    median,
+    now,
+    run_metadata,
+    write_json,
+)
+
 from swarmcode_torch.coevo.population import R_MAX, R_MIN  # noqa: E402
+from swarmcode_torch.sim import bt  # noqa: E402
 from swarmcode_torch.sim.hardware import phenotype  # noqa: E402
 from swarmcode_torch.sim.layout import make_layouts  # noqa: E402
-from swarmcode_torch.sim.scenario import Scenario, builtin_names, load_scenario  # noqa: E402
 from swarmcode_torch.sim.runtime import CudaGraphTicks  # noqa: E402
-from swarmcode_torch.sim.state import (Robots, TickInputs, WorldParams, compatible,  # noqa: E402
-                                       random_keys, reset)
+from swarmcode_torch.sim.scenario import Scenario, builtin_names, load_scenario  # noqa: E402
+from swarmcode_torch.sim.state import (
+    Robots,
+    TickInputs,
+    WorldParams,
+    compatible,  # noqa: E402
+    random_keys,
+    reset,
+)
 from swarmcode_torch.sim.step import step  # noqa: E402
 
 PROGRAM_LENGTH = 32
@@ -53,11 +70,21 @@ def scaled_swarm(n: int) -> Scenario:
         return s
     f = n / s.num_robots
     k = math.sqrt(f)
-    packages = tuple(replace(c, count=max(1, round(c.count * f)),
-                             distance=(c.distance[0] * k, c.distance[1] * k)) for c in s.packages)
-    return replace(s, name=f"swarm{n} (swarm200 scaled)", num_robots=n, arena=s.arena * k,
-                   base_radius=s.base_radius * k, obstacle_count=round(s.obstacle_count * f),
-                   packages=packages)
+    packages = tuple(
+        replace(
+            c, count=max(1, round(c.count * f)), distance=(c.distance[0] * k, c.distance[1] * k)
+        )
+        for c in s.packages
+    )
+    return replace(
+        s,
+        name=f"swarm{n} (swarm200 scaled)",
+        num_robots=n,
+        arena=s.arena * k,
+        base_radius=s.base_radius * k,
+        obstacle_count=round(s.obstacle_count * f),
+        packages=packages,
+    )
 
 
 def scenario_for(n: int) -> Scenario:
@@ -75,23 +102,35 @@ def scenario_for(n: int) -> Scenario:
 class Workload:
     """Inputs of step() for one configuration, on the benchmark device."""
 
-    def __init__(self, scenario: Scenario, E: int, seed: int, n_programs: int,
-                 device: torch.device) -> None:
+    def __init__(
+        self, scenario: Scenario, E: int, seed: int, n_programs: int, device: torch.device
+    ) -> None:
         g = torch.Generator().manual_seed(seed)
         N = scenario.num_robots
         u = lambda: torch.rand(E, N, generator=g)  # noqa: E731
         tier = lambda: torch.randint(0, 3, (E, N), generator=g)  # noqa: E731
         self.layout = make_layouts(scenario, E, g, device)
-        ph = phenotype(R_MIN + (R_MAX - R_MIN) * u(), tier(), tier(), tier(), u(), u(),
-                       torch.randint(0, 2, (E, N), generator=g))
+        ph = phenotype(
+            R_MIN + (R_MAX - R_MIN) * u(),
+            tier(),
+            tier(),
+            tier(),
+            u(),
+            u(),
+            torch.randint(0, 2, (E, N), generator=g),
+        )
         # programs: the templates first, then random ones
         programs = bt.random_programs(n_programs, PROGRAM_LENGTH, g)
         templates = [bt.template_tensor(k, PROGRAM_LENGTH) for k in bt.TEMPLATES]
         k = min(len(templates), n_programs)
         programs[:k] = torch.stack(templates[:k])
         program = torch.randint(0, n_programs, (E, N), generator=g)
-        self.robots = Robots(*(t.to(device) for t in Robots.from_phenotype(
-            ph, torch.ones(E, N, dtype=torch.bool), program)))
+        self.robots = Robots(
+            *(
+                t.to(device)
+                for t in Robots.from_phenotype(ph, torch.ones(E, N, dtype=torch.bool), program)
+            )
+        )
         self.tables = bt.build_tables(programs.to(device))
         self.params = WorldParams.for_scenario(scenario)
         self.compat = compatible(self.layout, self.robots, self.params)
@@ -125,6 +164,7 @@ def mem_available() -> int | None:
 # ------------------------------------------------------------------ one configuration
 def graphs_compiled() -> int:
     from torch._dynamo.utils import counters
+
     return int(counters["stats"]["unique_graphs"])
 
 
@@ -142,11 +182,13 @@ def run_mode(w: Workload, mode: str, args, device: torch.device) -> dict[str, An
     if mode == "graphs":
         # the compiled tick captured in CUDA graphs of --graph-ticks ticks (CudaGraphTicks)
         torch._dynamo.reset()
-        g = CudaGraphTicks(torch.compile(step, dynamic=False, fullgraph=args.fullgraph),
-                           ticks_per_graph=args.graph_ticks)
+        g = CudaGraphTicks(
+            torch.compile(step, dynamic=False, fullgraph=args.fullgraph),
+            ticks_per_graph=args.graph_ticks,
+        )
         inputs = TickInputs(w.layout, w.robots, w.compat, w.keys, w.tables)
         t0 = now(device)
-        g.run_ticks(state, inputs, w.params, args.graph_ticks)   # compile + capture + replay
+        g.run_ticks(state, inputs, w.params, args.graph_ticks)  # compile + capture + replay
         rec["compile_seconds"] = now(device) - t0
         times = []
         for _ in range(args.repeats):
@@ -158,8 +200,10 @@ def run_mode(w: Workload, mode: str, args, device: torch.device) -> dict[str, An
     if mode == "compile":
         torch._dynamo.reset()  # a fresh cache: no recompile limit hit, honest compile time
         fn = torch.compile(step, dynamic=False, fullgraph=args.fullgraph, mode=args.compile_mode)
-        cudagraphs = device.type == "cuda" and args.compile_mode in ("reduce-overhead",
-                                                                     "max-autotune")
+        cudagraphs = device.type == "cuda" and args.compile_mode in (
+            "reduce-overhead",
+            "max-autotune",
+        )
         g0 = graphs_compiled()
         t0 = now(device)
         if cudagraphs:
@@ -185,57 +229,95 @@ def run_mode(w: Workload, mode: str, args, device: torch.device) -> dict[str, An
     return _timed(rec, times, args, state, device)
 
 
-def _timed(rec: dict[str, Any], times: list[float], args, state, device: torch.device
-           ) -> dict[str, Any]:
+def _timed(
+    rec: dict[str, Any], times: list[float], args, state, device: torch.device
+) -> dict[str, Any]:
     """rec completed with the figures of `times` (seconds per run of args.ticks ticks)."""
     E, N, ticks = rec["E"], rec["N"], args.ticks
     sec = median(times)
-    rec.update({
-        "ticks": ticks,
-        "repeats": args.repeats,
-        "seconds": sec,
-        "seconds_all": times,
-        "ms_per_tick": 1e3 * sec / ticks,
-        "robot_ticks_per_s": E * N * ticks / sec,
-        "robot_ticks_per_s_best": E * N * ticks / min(times),
-        "env_ticks_per_s": E * ticks / sec,
-        "finite": bool(torch.isfinite(state.pos).all()),
-    })
+    rec.update(
+        {
+            "ticks": ticks,
+            "repeats": args.repeats,
+            "seconds": sec,
+            "seconds_all": times,
+            "ms_per_tick": 1e3 * sec / ticks,
+            "robot_ticks_per_s": E * N * ticks / sec,
+            "robot_ticks_per_s_best": E * N * ticks / min(times),
+            "env_ticks_per_s": E * ticks / sec,
+            "finite": bool(torch.isfinite(state.pos).all()),
+        }
+    )
     if device.type == "cuda":
         rec["peak_memory_bytes"] = torch.cuda.max_memory_allocated(device)
     return rec
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
-    parser.add_argument("--envs", type=int_list, default=None,
-                        help="comma-separated E values (default cpu: 16,64; cuda: 50,200,400)")
-    parser.add_argument("--robots", type=int_list, default=None,
-                        help="comma-separated N values (default cpu: 20,200; cuda: 20,200,1000)")
+    parser.add_argument(
+        "--envs",
+        type=int_list,
+        default=None,
+        help="comma-separated E values (default cpu: 16,64; cuda: 50,200,400)",
+    )
+    parser.add_argument(
+        "--robots",
+        type=int_list,
+        default=None,
+        help="comma-separated N values (default cpu: 20,200; cuda: 20,200,1000)",
+    )
     parser.add_argument("--compile", choices=("eager", "compile", "both"), default="both")
-    parser.add_argument("--cuda-graphs", action="store_true",
-                        help="also time the compiled tick replayed from CUDA graphs (CUDA only)")
-    parser.add_argument("--graph-ticks", type=int, default=10,
-                        help="ticks captured per CUDA graph (with --cuda-graphs)")
-    parser.add_argument("--compile-mode", default=None,
-                        help="torch.compile mode (e.g. reduce-overhead for CUDA graphs)")
-    parser.add_argument("--fullgraph", action=argparse.BooleanOptionalAction, default=True,
-                        help="compile with fullgraph=True (fail on graph breaks)")
-    parser.add_argument("--ticks", type=int, default=None,
-                        help="timed ticks per repeat (default cpu: 20; cuda: 200)")
+    parser.add_argument(
+        "--cuda-graphs",
+        action="store_true",
+        help="also time the compiled tick replayed from CUDA graphs (CUDA only)",
+    )
+    parser.add_argument(
+        "--graph-ticks",
+        type=int,
+        default=10,
+        help="ticks captured per CUDA graph (with --cuda-graphs)",
+    )
+    parser.add_argument(
+        "--compile-mode",
+        default=None,
+        help="torch.compile mode (e.g. reduce-overhead for CUDA graphs)",
+    )
+    parser.add_argument(
+        "--fullgraph",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="compile with fullgraph=True (fail on graph breaks)",
+    )
+    parser.add_argument(
+        "--ticks",
+        type=int,
+        default=None,
+        help="timed ticks per repeat (default cpu: 20; cuda: 200)",
+    )
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per configuration")
     parser.add_argument("--warmup", type=int, default=3, help="untimed ticks before timing")
-    parser.add_argument("--programs", type=int, default=16,
-                        help="distinct behavior trees (the 4 templates, then random ones)")
+    parser.add_argument(
+        "--programs",
+        type=int,
+        default=16,
+        help="distinct behavior trees (the 4 templates, then random ones)",
+    )
     add_run_options(parser)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--mem-fraction", type=float, default=0.5,
-                        help="cpu: skip configurations estimated to need more than this share "
-                             "of available memory")
-    parser.add_argument("--out", default=None,
-                        help="output JSON (default benchmarks/results/sim_<device>.json)")
+    parser.add_argument(
+        "--mem-fraction",
+        type=float,
+        default=0.5,
+        help="cpu: skip configurations estimated to need more than this share of available memory",
+    )
+    parser.add_argument(
+        "--out", default=None, help="output JSON (default benchmarks/results/sim_<device>.json)"
+    )
     args = parser.parse_args()
     device = apply_run_options(parser, args)
     cuda = device.type == "cuda"
@@ -249,15 +331,28 @@ def main() -> None:
         modes.append("graphs")
 
     result: dict[str, Any] = run_metadata(device)
-    result.update({"envs": envs, "robots": robots, "modes": modes, "ticks": args.ticks,
-                   "repeats": args.repeats, "warmup": args.warmup, "programs": args.programs,
-                   "compile_mode": args.compile_mode, "fullgraph": args.fullgraph,
-                   "cold_compile": args.cold_compile,
-                   "scenarios": {}, "results": []})
+    result.update(
+        {
+            "envs": envs,
+            "robots": robots,
+            "modes": modes,
+            "ticks": args.ticks,
+            "repeats": args.repeats,
+            "warmup": args.warmup,
+            "programs": args.programs,
+            "compile_mode": args.compile_mode,
+            "fullgraph": args.fullgraph,
+            "cold_compile": args.cold_compile,
+            "scenarios": {},
+            "results": [],
+        }
+    )
     out = Path(args.out) if args.out else RESULTS_DIR / f"sim_{device.type}.json"
     print(f"{result['device_name']} | torch {result['torch']} | threads {result['threads']}")
-    print(f"{'E':>5} {'N':>5} {'mode':>8} {'ms/tick':>9} {'robot-ticks/s':>14} "
-          f"{'compile s':>9} {'peak MiB':>9}")
+    print(
+        f"{'E':>5} {'N':>5} {'mode':>8} {'ms/tick':>9} {'robot-ticks/s':>14} "
+        f"{'compile s':>9} {'peak MiB':>9}"
+    )
 
     for N in robots:
         scenario = scenario_for(N)
@@ -267,21 +362,34 @@ def main() -> None:
             avail = mem_available()
             if not cuda and avail is not None and need > args.mem_fraction * avail:
                 for mode in modes:
-                    result["results"].append({"E": E, "N": N, "mode": mode, "skipped":
-                                              f"estimated {need / 2**30:.1f} GiB > "
-                                              f"{args.mem_fraction} x {avail / 2**30:.1f} GiB available"})
+                    result["results"].append(
+                        {
+                            "E": E,
+                            "N": N,
+                            "mode": mode,
+                            "skipped": f"estimated {need / 2**30:.1f} GiB > "
+                            f"{args.mem_fraction} x {avail / 2**30:.1f} GiB available",
+                        }
+                    )
                 print(f"{E:>5} {N:>5} skipped (estimated {need / 2**30:.1f} GiB)")
                 continue
             try:
                 w = Workload(scenario, E, args.seed, args.programs, device)
             except torch.cuda.OutOfMemoryError:
                 for mode in modes:
-                    result["results"].append({"E": E, "N": N, "mode": mode, "error": "out of memory"})
+                    result["results"].append(
+                        {"E": E, "N": N, "mode": mode, "error": "out of memory"}
+                    )
                 print(f"{E:>5} {N:>5} out of memory building inputs")
                 continue
             result["scenarios"][str(N)] = {
-                "name": scenario.name, "arena": scenario.arena, "packages": w.P, "grips": w.G,
-                "obstacles": w.O, "episode_ticks": scenario.episode_ticks}
+                "name": scenario.name,
+                "arena": scenario.arena,
+                "packages": w.P,
+                "grips": w.G,
+                "obstacles": w.O,
+                "episode_ticks": scenario.episode_ticks,
+            }
             for mode in modes:
                 try:
                     rec = run_mode(w, mode, args, device)
@@ -293,10 +401,19 @@ def main() -> None:
                 if "error" in rec:
                     print(f"{E:>5} {N:>5} {mode:>8} out of memory")
                 else:
-                    cs = f"{rec['compile_seconds']:9.1f}" if "compile_seconds" in rec else f"{'':>9}"
-                    pk = f"{rec['peak_memory_bytes'] / 2**20:9.0f}" if "peak_memory_bytes" in rec else ""
-                    print(f"{E:>5} {N:>5} {mode:>8} {rec['ms_per_tick']:9.2f} "
-                          f"{rec['robot_ticks_per_s']:14.4g} {cs} {pk}", flush=True)
+                    cs = (
+                        f"{rec['compile_seconds']:9.1f}" if "compile_seconds" in rec else f"{'':>9}"
+                    )
+                    pk = (
+                        f"{rec['peak_memory_bytes'] / 2**20:9.0f}"
+                        if "peak_memory_bytes" in rec
+                        else ""
+                    )
+                    print(
+                        f"{E:>5} {N:>5} {mode:>8} {rec['ms_per_tick']:9.2f} "
+                        f"{rec['robot_ticks_per_s']:14.4g} {cs} {pk}",
+                        flush=True,
+                    )
                 write_json(result, out)  # keep what is done if a later configuration dies
             del w
     result["load_average_at_end"] = load_average()

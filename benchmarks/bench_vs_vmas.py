@@ -36,9 +36,10 @@ import gc
 import math
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import torch
 
@@ -46,8 +47,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_sim import PROGRAM_LENGTH, estimate_bytes, mem_available, run_mode, scenario_for  # noqa: E402
-from common import (RESULTS_DIR, add_run_options, apply_run_options, int_list,  # noqa: E402
-                    load_average, median, now, run_metadata, write_json)
+from common import (
+    RESULTS_DIR,
+    add_run_options,
+    apply_run_options,
+    int_list,  # noqa: E402
+    load_average,
+    median,
+    now,
+    run_metadata,
+    write_json,
+)
+
 from swarmcode_torch.sim import bt  # noqa: E402
 from swarmcode_torch.sim.hardware import phenotype  # noqa: E402
 from swarmcode_torch.sim.layout import make_layouts  # noqa: E402
@@ -64,12 +75,12 @@ else:
 
 # The VMAS side mirrors our constants where VMAS has an equivalent.
 _DEFAULTS = WorldParams()
-GOAL_MARGIN = 0.5                       # goals are drawn in [margin, arena - margin]^2, as ours
-REACH = _DEFAULTS.reach                 # a goal this close is reached and redrawn (m)
+GOAL_MARGIN = 0.5  # goals are drawn in [margin, arena - margin]^2, as ours
+REACH = _DEFAULTS.reach  # a goal this close is reached and redrawn (m)
 GOAL_PERIOD = _DEFAULTS.waypoint_period  # ticks before every goal is redrawn anyway
-KP = _DEFAULTS.kp                       # proportional gain of the controller (1/s)
-MAX_SPEED = _DEFAULTS.v_cap             # m/s
-DT = _DEFAULTS.dt                       # s per tick
+KP = _DEFAULTS.kp  # proportional gain of the controller (1/s)
+MAX_SPEED = _DEFAULTS.v_cap  # m/s
+DT = _DEFAULTS.dt  # s per tick
 
 
 # ------------------------------------------------------------------ the world
@@ -100,18 +111,32 @@ class OurWorld:
     """Inputs of our step() for the random-walk world (the interface of bench_sim's Workload,
     so bench_sim.run_mode times it)."""
 
-    def __init__(self, scenario: Scenario, E: int, radius: float, seed: int,
-                 device: torch.device) -> None:
+    def __init__(
+        self, scenario: Scenario, E: int, radius: float, seed: int, device: torch.device
+    ) -> None:
         g = torch.Generator().manual_seed(seed)
         N = scenario.num_robots
         u = lambda: torch.rand(E, N, generator=g)  # noqa: E731
         tier = lambda: torch.randint(0, 3, (E, N), generator=g)  # noqa: E731
         self.layout = make_layouts(scenario, E, g, device)
-        ph = phenotype(torch.full((E, N), radius), tier(), tier(), tier(), u(), u(),
-                       torch.randint(0, 2, (E, N), generator=g))
+        ph = phenotype(
+            torch.full((E, N), radius),
+            tier(),
+            tier(),
+            tier(),
+            u(),
+            u(),
+            torch.randint(0, 2, (E, N), generator=g),
+        )
         program = bt.encode([bt.ACT_RANDOM_WALK], PROGRAM_LENGTH)[None]  # [1, L]: one leaf
-        self.robots = Robots(*(t.to(device) for t in Robots.from_phenotype(
-            ph, torch.ones(E, N, dtype=torch.bool), torch.zeros(E, N, dtype=torch.long))))
+        self.robots = Robots(
+            *(
+                t.to(device)
+                for t in Robots.from_phenotype(
+                    ph, torch.ones(E, N, dtype=torch.bool), torch.zeros(E, N, dtype=torch.long)
+                )
+            )
+        )
         self.tables = bt.build_tables(program.to(device))
         self.params = WorldParams.for_scenario(scenario)
         self.compat = compatible(self.layout, self.robots, self.params)
@@ -123,8 +148,9 @@ class OurWorld:
         return reset(self.layout, self.robots, self.params)
 
     def tick(self, fn: Callable, state):
-        self.last = fn(state, self.layout, self.robots, self.compat, self.keys, self.tables,
-                       self.params)
+        self.last = fn(
+            state, self.layout, self.robots, self.compat, self.keys, self.tables, self.params
+        )
         return self.last
 
 
@@ -143,8 +169,8 @@ def vmas_scenario_class():
             self.n = kwargs.pop("n_agents")
             self.arena = kwargs.pop("arena")
             self.radius = kwargs.pop("radius")
-            self.start = kwargs.pop("start")      # [E, N, 2] start positions, centred coordinates
-            self.walls = kwargs.pop("walls")      # "lines" or "semidim"
+            self.start = kwargs.pop("start")  # [E, N, 2] start positions, centred coordinates
+            self.walls = kwargs.pop("walls")  # "lines" or "semidim"
             self.reach = kwargs.pop("reach", REACH)
             self.period = kwargs.pop("period", GOAL_PERIOD)
             u_range = kwargs.pop("u_range")
@@ -152,16 +178,33 @@ def vmas_scenario_class():
             ScenarioUtils.check_kwargs_consumed(kwargs, warn=False)
             half = self.arena / 2
             semi = half - self.radius if self.walls == "semidim" else None
-            world = World(batch_dim, device, dt=DT, substeps=substeps, x_semidim=semi,
-                          y_semidim=semi)
+            world = World(
+                batch_dim, device, dt=DT, substeps=substeps, x_semidim=semi, y_semidim=semi
+            )
             for i in range(self.n):
-                world.add_agent(Agent(name=f"robot_{i}", shape=Sphere(radius=self.radius),
-                                      collide=True, movable=True, rotatable=False, mass=1.0,
-                                      u_range=u_range, max_speed=MAX_SPEED))
+                world.add_agent(
+                    Agent(
+                        name=f"robot_{i}",
+                        shape=Sphere(radius=self.radius),
+                        collide=True,
+                        movable=True,
+                        rotatable=False,
+                        mass=1.0,
+                        u_range=u_range,
+                        max_speed=MAX_SPEED,
+                    )
+                )
             if self.walls == "lines":
                 for i in range(4):
-                    world.add_landmark(Landmark(name=f"wall_{i}", shape=Line(length=self.arena),
-                                                collide=True, movable=False, rotatable=False))
+                    world.add_landmark(
+                        Landmark(
+                            name=f"wall_{i}",
+                            shape=Line(length=self.arena),
+                            collide=True,
+                            movable=False,
+                            rotatable=False,
+                        )
+                    )
             self.index = {a.name: i for i, a in enumerate(world.agents)}
             self.goal = torch.zeros(batch_dim, self.n, 2, device=device)
             self.zero = torch.zeros(batch_dim, device=device)
@@ -174,8 +217,12 @@ def vmas_scenario_class():
 
         def reset_world_at(self, env_index=None):
             half = self.arena / 2
-            walls = [((0.0, -half), 0.0), ((0.0, half), 0.0),
-                     ((-half, 0.0), math.pi / 2), ((half, 0.0), math.pi / 2)]
+            walls = [
+                ((0.0, -half), 0.0),
+                ((0.0, half), 0.0),
+                ((-half, 0.0), math.pi / 2),
+                ((half, 0.0), math.pi / 2),
+            ]
             for lm, (xy, rot) in zip(self.world.landmarks, walls):
                 lm.set_pos(torch.tensor(xy, device=self.world.device), batch_index=env_index)
                 lm.set_rot(torch.tensor([rot], device=self.world.device), batch_index=env_index)
@@ -196,13 +243,15 @@ def vmas_scenario_class():
             reached = (self.goal - self.positions()).norm(dim=-1) <= self.reach
             if self.t % self.period == 0:
                 reached = torch.ones_like(reached)
-            self.goal = torch.where(reached[..., None], self.draw_goals(self.world.batch_dim),
-                                    self.goal)
+            self.goal = torch.where(
+                reached[..., None], self.draw_goals(self.world.batch_dim), self.goal
+            )
 
         def observation(self, agent):
             i = self.index[agent.name]
-            return torch.cat([agent.state.pos, agent.state.vel,
-                              self.goal[:, i] - agent.state.pos], -1)
+            return torch.cat(
+                [agent.state.pos, agent.state.vel, self.goal[:, i] - agent.state.pos], -1
+            )
 
         def reward(self, agent):
             return self.zero
@@ -216,7 +265,9 @@ def vmas_actions(scenario, kp: float, u_range: float) -> list[torch.Tensor]:
     return list(u.unbind(1))
 
 
-def run_vmas(start: torch.Tensor, arena: float, args, device: torch.device) -> tuple[dict[str, Any], Any]:
+def run_vmas(
+    start: torch.Tensor, arena: float, args, device: torch.device
+) -> tuple[dict[str, Any], Any]:
     """Build the VMAS environment, warm up, then time args.repeats runs of args.vmas_ticks ticks."""
     E, N = start.shape[:2]
     rec: dict[str, Any] = {"E": E, "N": N, "sim": "vmas", "mode": "vmas"}
@@ -226,10 +277,20 @@ def run_vmas(start: torch.Tensor, arena: float, args, device: torch.device) -> t
         torch.cuda.reset_peak_memory_stats(device)
     scenario = vmas_scenario_class()()
     t0 = now(device)
-    env = vmas.make_env(scenario=scenario, num_envs=E, device=device, continuous_actions=True,
-                        seed=args.seed, n_agents=N, arena=arena, radius=args.radius,
-                        start=start - arena / 2, walls=args.vmas_walls, u_range=args.vmas_u_range,
-                        substeps=args.vmas_substeps)
+    env = vmas.make_env(
+        scenario=scenario,
+        num_envs=E,
+        device=device,
+        continuous_actions=True,
+        seed=args.seed,
+        n_agents=N,
+        arena=arena,
+        radius=args.radius,
+        start=start - arena / 2,
+        walls=args.vmas_walls,
+        u_range=args.vmas_u_range,
+        substeps=args.vmas_substeps,
+    )
     rec["make_env_seconds"] = now(device) - t0
 
     def tick(timer: list[float] | None = None):
@@ -258,53 +319,58 @@ def run_vmas(start: torch.Tensor, arena: float, args, device: torch.device) -> t
     sec = median(times)
     pos = scenario.positions()
     half = arena / 2
-    rec.update({
-        "ticks": args.vmas_ticks,
-        "repeats": args.repeats,
-        "seconds": sec,
-        "seconds_all": times,
-        "controller_seconds": median(ctrl),
-        "env_step_seconds": median(stepped),
-        "ms_per_tick": 1e3 * sec / args.vmas_ticks,
-        "robot_ticks_per_s": E * N * args.vmas_ticks / sec,
-        "robot_ticks_per_s_best": E * N * args.vmas_ticks / min(times),
-        "env_ticks_per_s": E * args.vmas_ticks / sec,
-        "finite": bool(torch.isfinite(pos).all()),
-        "agents_collide": all(a.collide for a in env.world.agents),
-        "max_wall_penetration_m": float((pos.abs() - (half - args.radius)).clamp_min(0).max()),
-        "overlap": overlap_stats(pos, torch.full((E, N), args.radius, device=device)),
-    })
+    rec.update(
+        {
+            "ticks": args.vmas_ticks,
+            "repeats": args.repeats,
+            "seconds": sec,
+            "seconds_all": times,
+            "controller_seconds": median(ctrl),
+            "env_step_seconds": median(stepped),
+            "ms_per_tick": 1e3 * sec / args.vmas_ticks,
+            "robot_ticks_per_s": E * N * args.vmas_ticks / sec,
+            "robot_ticks_per_s_best": E * N * args.vmas_ticks / min(times),
+            "env_ticks_per_s": E * args.vmas_ticks / sec,
+            "finite": bool(torch.isfinite(pos).all()),
+            "agents_collide": all(a.collide for a in env.world.agents),
+            "max_wall_penetration_m": float((pos.abs() - (half - args.radius)).clamp_min(0).max()),
+            "overlap": overlap_stats(pos, torch.full((E, N), args.radius, device=device)),
+        }
+    )
     if device.type == "cuda":
         rec["peak_memory_bytes"] = torch.cuda.max_memory_allocated(device)
     return rec, env
 
 
 def vmas_description(args) -> dict[str, Any]:
-    walls = ("four Line landmarks (collide=True) on the arena's edges: sphere-line penalty "
-             "contact forces" if args.vmas_walls == "lines" else
-             "World x_semidim = y_semidim = W/2 - r: each agent's centre is clamped into the "
-             "arena after integration (no contact force, velocity kept)")
+    walls = (
+        "four Line landmarks (collide=True) on the arena's edges: sphere-line penalty "
+        "contact forces"
+        if args.vmas_walls == "lines"
+        else "World x_semidim = y_semidim = W/2 - r: each agent's centre is clamped into the "
+        "arena after integration (no contact force, velocity kept)"
+    )
     return {
         "version": getattr(vmas, "__version__", None),
         "walls": args.vmas_walls,
         "walls_how": walls,
         "agents": "Agent(shape=Sphere(radius), collide=True, rotatable=False, mass=1, "
-                  f"u_range={args.vmas_u_range}, max_speed={MAX_SPEED}), holonomic dynamics",
+        f"u_range={args.vmas_u_range}, max_speed={MAX_SPEED}), holonomic dynamics",
         "world": f"World(dt={DT}, substeps={args.vmas_substeps}), VMAS defaults otherwise "
-                 "(drag 0.25, collision_force 100, contact_margin 1e-3)",
+        "(drag 0.25, collision_force 100, contact_margin 1e-3)",
         "controller": f"u = clamp({KP} (goal - pos), -u_range, u_range) per axis, from the "
-                      "agents' stacked positions, outside env.step",
+        "agents' stacked positions, outside env.step",
         "goals": f"uniform in the arena less {GOAL_MARGIN} m; redrawn in post_step when within "
-                 f"{REACH} m, and all every {GOAL_PERIOD} ticks",
+        f"{REACH} m, and all every {GOAL_PERIOD} ticks",
         "timed": "per tick: the controller + env.step(actions); controller_seconds and "
-                 "env_step_seconds split it",
+        "env_step_seconds split it",
         "step_computes": "per agent: action checks (NaN, range) and force = action; drag; a "
-                         "Python loop over all entity pairs that keeps those within reach in "
-                         "some environment (one norm and one host sync per pair); one batched "
-                         "soft (logaddexp) penalty force over the kept sphere-sphere pairs and "
-                         "one over sphere-line (wall) pairs; semi-implicit Euler with the speed "
-                         "cap; post_step goal redraw; per agent observation (pos, vel, goal - "
-                         "pos), reward (0) and info; done",
+        "Python loop over all entity pairs that keeps those within reach in "
+        "some environment (one norm and one host sync per pair); one batched "
+        "soft (logaddexp) penalty force over the kept sphere-sphere pairs and "
+        "one over sphere-line (wall) pairs; semi-implicit Euler with the speed "
+        "cap; post_step goal redraw; per agent observation (pos, vel, goal - "
+        "pos), reward (0) and info; done",
     }
 
 
@@ -316,7 +382,8 @@ OURS_COMPUTES = (
     "waypoint; semi-implicit Euler with drag and speed cap; lifted-package rigid bodies; robot-"
     "robot contacts over all [E, N, N] pairs (3 position-relaxation passes and one elastic "
     "velocity impulse); obstacle contacts (none here); walls (clamp + reflect); energy; stuck "
-    "counters; waypoint redraw (counter-based hash) when reached or every waypoint_period ticks")
+    "counters; waypoint redraw (counter-based hash) when reached or every waypoint_period ticks"
+)
 
 
 # ------------------------------------------------------------------ main
@@ -325,37 +392,72 @@ def fmt_rate(x: float | None) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
-    parser.add_argument("--envs", type=int_list, default=None,
-                        help="comma-separated E values (default cpu: 16,64; cuda: 50,200,400)")
-    parser.add_argument("--robots", type=int_list, default=[20, 200],
-                        help="comma-separated N values (default 20,200)")
-    parser.add_argument("--compile", choices=("eager", "compile", "both"), default="both",
-                        help="our side: eager step, torch.compile(step, dynamic=False, "
-                             "fullgraph=True), or both")
-    parser.add_argument("--ticks", type=int, default=None,
-                        help="timed ticks per repeat (default cpu: 20; cuda: 200)")
-    parser.add_argument("--vmas-ticks", type=int, default=None,
-                        help="timed VMAS ticks per repeat (default cpu: --ticks; cuda: 50, as "
-                             "a VMAS tick at N = 200 syncs the host once per agent pair)")
+    parser.add_argument(
+        "--envs",
+        type=int_list,
+        default=None,
+        help="comma-separated E values (default cpu: 16,64; cuda: 50,200,400)",
+    )
+    parser.add_argument(
+        "--robots",
+        type=int_list,
+        default=[20, 200],
+        help="comma-separated N values (default 20,200)",
+    )
+    parser.add_argument(
+        "--compile",
+        choices=("eager", "compile", "both"),
+        default="both",
+        help="our side: eager step, torch.compile(step, dynamic=False, fullgraph=True), or both",
+    )
+    parser.add_argument(
+        "--ticks",
+        type=int,
+        default=None,
+        help="timed ticks per repeat (default cpu: 20; cuda: 200)",
+    )
+    parser.add_argument(
+        "--vmas-ticks",
+        type=int,
+        default=None,
+        help="timed VMAS ticks per repeat (default cpu: --ticks; cuda: 50, as "
+        "a VMAS tick at N = 200 syncs the host once per agent pair)",
+    )
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per configuration")
     parser.add_argument("--warmup", type=int, default=3, help="untimed ticks before timing")
     parser.add_argument("--radius", type=float, default=0.2, help="robot radius on both sides (m)")
-    parser.add_argument("--vmas-walls", choices=("lines", "semidim"), default="lines",
-                        help="VMAS walls: four Line landmarks with collisions (default), or the "
-                             "world's x_semidim / y_semidim position clamp")
-    parser.add_argument("--vmas-substeps", type=int, default=1, help="VMAS physics substeps per tick")
-    parser.add_argument("--vmas-u-range", type=float, default=2.0,
-                        help="VMAS action (force) limit per axis, N on a 1 kg agent")
+    parser.add_argument(
+        "--vmas-walls",
+        choices=("lines", "semidim"),
+        default="lines",
+        help="VMAS walls: four Line landmarks with collisions (default), or the "
+        "world's x_semidim / y_semidim position clamp",
+    )
+    parser.add_argument(
+        "--vmas-substeps", type=int, default=1, help="VMAS physics substeps per tick"
+    )
+    parser.add_argument(
+        "--vmas-u-range",
+        type=float,
+        default=2.0,
+        help="VMAS action (force) limit per axis, N on a 1 kg agent",
+    )
     add_run_options(parser)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--mem-fraction", type=float, default=0.5,
-                        help="cpu: skip our configurations estimated to need more than this "
-                             "share of available memory")
-    parser.add_argument("--out", default=None,
-                        help="output JSON (default benchmarks/results/vmas_<device>.json)")
+    parser.add_argument(
+        "--mem-fraction",
+        type=float,
+        default=0.5,
+        help="cpu: skip our configurations estimated to need more than this "
+        "share of available memory",
+    )
+    parser.add_argument(
+        "--out", default=None, help="output JSON (default benchmarks/results/vmas_<device>.json)"
+    )
     args = parser.parse_args()
     device = apply_run_options(parser, args)
     cuda = device.type == "cuda"
@@ -367,22 +469,34 @@ def main() -> None:
     modes = ["eager", "compile"] if args.compile == "both" else [args.compile]
 
     result: dict[str, Any] = run_metadata(device)
-    result.update({
-        "envs": envs, "robots": robots, "modes": modes, "ticks": args.ticks,
-        "vmas_ticks": args.vmas_ticks, "repeats": args.repeats, "warmup": args.warmup,
-        "radius": args.radius, "cold_compile": args.cold_compile,
-        "world": "N disc robots of radius `radius` driving to random targets (redrawn when "
-                 f"within {REACH} m and every {GOAL_PERIOD} ticks) in a square walled arena, "
-                 "robot-robot collisions, no obstacles; same arena side and start positions "
-                 "on both sides",
-        "note": "our tick does more work than VMAS's (sensing, behavior-tree lookup, package "
-                "bookkeeping, energy, a 3-pass contact solver): see ours.computes and "
-                "vmas.step_computes",
-        "ours": {"computes": OURS_COMPUTES,
-                 "compile": "torch.compile(step, dynamic=False, fullgraph=True)",
-                 "program": "ACT_RANDOM_WALK (one leaf)"},
-        "scenarios": {}, "results": [], "comparison": [],
-    })
+    result.update(
+        {
+            "envs": envs,
+            "robots": robots,
+            "modes": modes,
+            "ticks": args.ticks,
+            "vmas_ticks": args.vmas_ticks,
+            "repeats": args.repeats,
+            "warmup": args.warmup,
+            "radius": args.radius,
+            "cold_compile": args.cold_compile,
+            "world": "N disc robots of radius `radius` driving to random targets (redrawn when "
+            f"within {REACH} m and every {GOAL_PERIOD} ticks) in a square walled arena, "
+            "robot-robot collisions, no obstacles; same arena side and start positions "
+            "on both sides",
+            "note": "our tick does more work than VMAS's (sensing, behavior-tree lookup, package "
+            "bookkeeping, energy, a 3-pass contact solver): see ours.computes and "
+            "vmas.step_computes",
+            "ours": {
+                "computes": OURS_COMPUTES,
+                "compile": "torch.compile(step, dynamic=False, fullgraph=True)",
+                "program": "ACT_RANDOM_WALK (one leaf)",
+            },
+            "scenarios": {},
+            "results": [],
+            "comparison": [],
+        }
+    )
     if vmas is None:
         print("VMAS is not installed: pip install vmas")
         result["vmas"] = {"installed": False, "error": VMAS_IMPORT_ERROR}
@@ -390,7 +504,9 @@ def main() -> None:
         result["vmas"] = {"installed": True, **vmas_description(args)}
     out = Path(args.out) if args.out else RESULTS_DIR / f"vmas_{device.type}.json"
     vtxt = f"VMAS {result['vmas']['version']}" if vmas is not None else "VMAS missing"
-    print(f"{result['device_name']} | torch {result['torch']} | threads {result['threads']} | {vtxt}")
+    print(
+        f"{result['device_name']} | torch {result['torch']} | threads {result['threads']} | {vtxt}"
+    )
     print(f"{'E':>5} {'N':>5} {'side':>13} {'ms/tick':>9} {'robot-ticks/s':>14} {'compile s':>9}")
 
     def show(rec: dict[str, Any], label: str) -> None:
@@ -398,8 +514,11 @@ def main() -> None:
             print(f"{rec['E']:>5} {rec['N']:>5} {label:>13} {rec.get('error') or rec['skipped']}")
             return
         cs = f"{rec['compile_seconds']:9.1f}" if "compile_seconds" in rec else ""
-        print(f"{rec['E']:>5} {rec['N']:>5} {label:>13} {rec['ms_per_tick']:9.2f} "
-              f"{rec['robot_ticks_per_s']:14.4g} {cs}", flush=True)
+        print(
+            f"{rec['E']:>5} {rec['N']:>5} {label:>13} {rec['ms_per_tick']:9.2f} "
+            f"{rec['robot_ticks_per_s']:14.4g} {cs}",
+            flush=True,
+        )
 
     for N in robots:
         scenario = world_scenario(N)
@@ -407,8 +526,12 @@ def main() -> None:
             row: dict[str, Any] = {"E": E, "N": N}
             w = OurWorld(scenario, E, args.radius, args.seed, device)
             result["scenarios"][str(N)] = {
-                "name": scenario.name, "arena": scenario.arena, "packages": w.P, "grips": w.G,
-                "obstacles": 0}
+                "name": scenario.name,
+                "arena": scenario.arena,
+                "packages": w.P,
+                "grips": w.G,
+                "obstacles": 0,
+            }
 
             # VMAS, from the same start positions in the same arena
             if vmas is not None:
@@ -428,15 +551,26 @@ def main() -> None:
             avail = mem_available()
             for mode in modes:
                 if not cuda and avail is not None and need > args.mem_fraction * avail:
-                    rec = {"E": E, "N": N, "sim": "ours", "mode": mode,
-                           "skipped": f"estimated {need / 2**30:.1f} GiB"}
+                    rec = {
+                        "E": E,
+                        "N": N,
+                        "sim": "ours",
+                        "mode": mode,
+                        "skipped": f"estimated {need / 2**30:.1f} GiB",
+                    }
                 else:
                     try:
                         rec = run_mode(w, mode, args, device)
                         rec["sim"] = "ours"
                         rec["overlap"] = overlap_stats(w.last.pos, w.robots.radius)
                     except torch.cuda.OutOfMemoryError:
-                        rec = {"E": E, "N": N, "sim": "ours", "mode": mode, "error": "out of memory"}
+                        rec = {
+                            "E": E,
+                            "N": N,
+                            "sim": "ours",
+                            "mode": mode,
+                            "error": "out of memory",
+                        }
                 rec["scenario"] = scenario.name
                 rec["load_average"] = load_average()
                 result["results"].append(rec)
@@ -454,14 +588,20 @@ def main() -> None:
     write_json(result, out)
 
     print("\nrobot-ticks/s; ratio = ours / VMAS")
-    print(f"{'E':>5} {'N':>5} {'VMAS':>14} {'ours eager':>14} {'ours compiled':>14} "
-          f"{'ratio eager':>11} {'ratio comp.':>11}")
+    print(
+        f"{'E':>5} {'N':>5} {'VMAS':>14} {'ours eager':>14} {'ours compiled':>14} "
+        f"{'ratio eager':>11} {'ratio comp.':>11}"
+    )
     for row in result["comparison"]:
-        ratios = [f"{row[k]:11.2f}" if k in row else f"{'-':>11}"
-                  for k in ("ratio_eager", "ratio_compile")]
-        print(f"{row['E']:>5} {row['N']:>5} {fmt_rate(row.get('vmas'))} "
-              f"{fmt_rate(row.get('ours_eager'))} {fmt_rate(row.get('ours_compile'))} "
-              f"{ratios[0]} {ratios[1]}")
+        ratios = [
+            f"{row[k]:11.2f}" if k in row else f"{'-':>11}"
+            for k in ("ratio_eager", "ratio_compile")
+        ]
+        print(
+            f"{row['E']:>5} {row['N']:>5} {fmt_rate(row.get('vmas'))} "
+            f"{fmt_rate(row.get('ours_eager'))} {fmt_rate(row.get('ours_compile'))} "
+            f"{ratios[0]} {ratios[1]}"
+        )
     print(f"wrote {out}")
 
 

@@ -32,8 +32,13 @@ def git_commit(short: bool = True) -> str:
 def git_dirty() -> bool | None:
     """Whether the working tree has uncommitted changes to tracked files (None if unknown)."""
     try:
-        out = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                             capture_output=True, text=True, check=True, cwd=BENCH_DIR)
+        out = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=BENCH_DIR,
+        )
         return bool(out.stdout.strip())
     except (OSError, subprocess.CalledProcessError):
         return None
@@ -79,9 +84,12 @@ def load_average() -> list[float] | None:
 
 def add_run_options(parser) -> None:
     """The --threads and --cold-compile options that `apply_run_options` applies."""
-    parser.add_argument("--cold-compile", action="store_true",
-                        help="disable inductor's caches, so compile_seconds is a cold compile "
-                             "(otherwise a repeated run reuses cached kernels and compiles faster)")
+    parser.add_argument(
+        "--cold-compile",
+        action="store_true",
+        help="disable inductor's caches, so compile_seconds is a cold compile "
+        "(otherwise a repeated run reuses cached kernels and compiles faster)",
+    )
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
 
 
@@ -91,6 +99,7 @@ def apply_run_options(parser, args) -> torch.device:
         torch.set_num_threads(args.threads)
     if args.cold_compile:
         from torch._inductor import config as inductor_config
+
         inductor_config.force_disable_caches = True
     device = torch.device(args.device)
     if device.type == "cuda" and not torch.cuda.is_available():

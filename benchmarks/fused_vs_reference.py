@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 REPO = Path(__file__).resolve().parents[1]
 
-RUN = r'''
+RUN = r"""
 import json, sys, time
 from swarmcode_torch.app import api
 kw = json.loads(sys.argv[1])
@@ -34,12 +34,12 @@ keys = ("generation", "fitness/best", "fitness/mean", "species/count", "team/del
         "team/cost")
 rows = [{k: r.get(k) for k in keys} for r in res.history]
 print(json.dumps({"rows": rows, "seconds": time.perf_counter() - t0}))
-'''
+"""
 
 
 def main() -> None:
-    from common import RESULTS_DIR, run_metadata, write_json
     import torch
+    from common import RESULTS_DIR, run_metadata, write_json
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0,1,2")
@@ -54,22 +54,37 @@ def main() -> None:
     out = {"meta": run_metadata(torch.device("cpu")), "runs": {}}
     for tick in ("reference", "fused"):
         for seed in (int(s) for s in args.seeds.split(",")):
-            kw = dict(scenario=args.scenario, generations=args.generations,
-                      population=args.population, swarm_size=args.swarm_size,
-                      trials=args.trials, ticks=args.ticks, seed=seed, device="cpu")
+            kw = dict(
+                scenario=args.scenario,
+                generations=args.generations,
+                population=args.population,
+                swarm_size=args.swarm_size,
+                trials=args.trials,
+                ticks=args.ticks,
+                seed=seed,
+                device="cpu",
+            )
             env = dict(os.environ, SWARMCODE_TICK=tick, PYTHONPATH=str(REPO))
-            r = subprocess.run([sys.executable, "-c", RUN, json.dumps(kw)], env=env,
-                               capture_output=True, text=True, check=True)
+            r = subprocess.run(
+                [sys.executable, "-c", RUN, json.dumps(kw)],
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
             out["runs"][f"{tick} seed {seed}"] = json.loads(r.stdout.strip().splitlines()[-1])
             print(tick, seed, out["runs"][f"{tick} seed {seed}"]["rows"][-1], flush=True)
     summary = {}
     for tick in ("reference", "fused"):
         finals = [v["rows"][-1] for k, v in out["runs"].items() if k.startswith(tick)]
         summary[tick] = {
-            key: {"mean": statistics.mean(f[key] for f in finals),
-                  "sd": statistics.pstdev(f[key] for f in finals),
-                  "values": [f[key] for f in finals]}
-            for key in ("fitness/best", "fitness/mean", "species/count", "team/deliveries")}
+            key: {
+                "mean": statistics.mean(f[key] for f in finals),
+                "sd": statistics.pstdev(f[key] for f in finals),
+                "values": [f[key] for f in finals],
+            }
+            for key in ("fitness/best", "fitness/mean", "species/count", "team/deliveries")
+        }
     out["final_generation"] = summary
     print(json.dumps(summary, indent=1))
     write_json(out, args.out)

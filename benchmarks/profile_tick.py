@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_sim import Workload, scenario_for  # noqa: E402
 from common import RESULTS_DIR, now, run_metadata, write_json  # noqa: E402
+
 from swarmcode_torch.sim.runtime import CudaGraphTicks  # noqa: E402
 from swarmcode_torch.sim.state import TickInputs  # noqa: E402
 from swarmcode_torch.sim.step import step  # noqa: E402
@@ -83,6 +84,7 @@ def profile_config(E: int, N: int, args, device: torch.device) -> dict:
         def ticks(s):
             return replay.run_ticks(s, inputs, w.params, args.ticks)
     else:
+
         def ticks(s):
             for _ in range(args.ticks):
                 s = tick(s)
@@ -108,19 +110,28 @@ def profile_config(E: int, N: int, args, device: torch.device) -> dict:
         k = table.setdefault(e.name, [0, 0.0])
         k[0] += 1
         k[1] += e.time_range.elapsed_us()
-    top = sorted(table.items(), key=lambda kv: -kv[1][1])[:args.top]
+    top = sorted(table.items(), key=lambda kv: -kv[1][1])[: args.top]
     return {
-        "E": E, "N": N, "compile_mode": args.compile_mode or "default",
+        "E": E,
+        "N": N,
+        "compile_mode": args.compile_mode or "default",
         "cuda_graphs": args.cuda_graphs,
         "wall_ms_per_tick": 1e3 * wall,
         "gpu_busy_ms_per_tick": busy_us / 1e3,
         "gpu_busy_share": busy_us / 1e6 / wall if wall > 0 else None,
         "kernels_per_tick": len(kernels) / args.ticks,
         "robot_ticks_per_s": E * N / wall,
-        "top_kernels": [{"name": n[:120], "calls_per_tick": c / args.ticks,
-                         "us_per_tick": t / args.ticks,
-                         **({"vectorized": next((v for k, v in vec.items() if k in n), None)}
-                            if vec else {})} for n, (c, t) in top],
+        "top_kernels": [
+            {
+                "name": n[:120],
+                "calls_per_tick": c / args.ticks,
+                "us_per_tick": t / args.ticks,
+                **(
+                    {"vectorized": next((v for k, v in vec.items() if k in n), None)} if vec else {}
+                ),
+            }
+            for n, (c, t) in top
+        ],
     }
 
 
@@ -131,8 +142,11 @@ def main() -> None:
     ap.add_argument("--ticks", type=int, default=50)
     ap.add_argument("--top", type=int, default=8)
     ap.add_argument("--compile-mode", default=None)
-    ap.add_argument("--cuda-graphs", action="store_true",
-                    help="profile the compiled tick replayed from CUDA graphs (runtime.CudaGraphTicks)")
+    ap.add_argument(
+        "--cuda-graphs",
+        action="store_true",
+        help="profile the compiled tick replayed from CUDA graphs (runtime.CudaGraphTicks)",
+    )
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     device = torch.device(args.device)
@@ -144,9 +158,12 @@ def main() -> None:
         E, N = (int(x) for x in item.split(":"))
         r = profile_config(E, N, args, device)
         result["results"].append(r)
-        print(f"E {E} N {N} {r['compile_mode']}: {r['wall_ms_per_tick']:.3f} ms/tick wall, "
-              f"GPU busy {r['gpu_busy_ms_per_tick']:.3f} ms ({100 * (r['gpu_busy_share'] or 0):.0f}%), "
-              f"{r['kernels_per_tick']:.0f} kernels/tick", flush=True)
+        print(
+            f"E {E} N {N} {r['compile_mode']}: {r['wall_ms_per_tick']:.3f} ms/tick wall, "
+            f"GPU busy {r['gpu_busy_ms_per_tick']:.3f} ms ({100 * (r['gpu_busy_share'] or 0):.0f}%), "
+            f"{r['kernels_per_tick']:.0f} kernels/tick",
+            flush=True,
+        )
         for k in r["top_kernels"][:4]:
             print(f"    {k['us_per_tick']:8.1f} us  x{k['calls_per_tick']:.0f}  {k['name'][:80]}")
         write_json(result, out)

@@ -25,16 +25,55 @@ import operator
 import os
 import subprocess
 import sys
-import tomllib
 from pathlib import Path
 
+import tomllib
+
 RUNS = (
-    ["--scenario", "four-niche", "--population", "16", "--swarm-size", "6", "--trials", "2",
-     "--ticks", "40", "--seed", "7", "--generations", "8", "--checkpoint-every", "3",
-     "--render-every", "4", "--log-every", "4"],
-    ["--scenario", "budget", "--budget", "2500", "--population", "12", "--swarm-size", "5",
-     "--trials", "1", "--ticks", "30", "--seed", "3", "--generations", "5", "--render-every",
-     "0", "--set", "p_tag_flip=0.05"],
+    [
+        "--scenario",
+        "four-niche",
+        "--population",
+        "16",
+        "--swarm-size",
+        "6",
+        "--trials",
+        "2",
+        "--ticks",
+        "40",
+        "--seed",
+        "7",
+        "--generations",
+        "8",
+        "--checkpoint-every",
+        "3",
+        "--render-every",
+        "4",
+        "--log-every",
+        "4",
+    ],
+    [
+        "--scenario",
+        "budget",
+        "--budget",
+        "2500",
+        "--population",
+        "12",
+        "--swarm-size",
+        "5",
+        "--trials",
+        "1",
+        "--ticks",
+        "30",
+        "--seed",
+        "3",
+        "--generations",
+        "5",
+        "--render-every",
+        "0",
+        "--set",
+        "p_tag_flip=0.05",
+    ],
 )
 
 BASELINES = """
@@ -54,8 +93,12 @@ for name in ("homogeneous-ga", "ccea", "swarmcode"):
 json.dump(out, open(sys.argv[1], "w"), indent=1, sort_keys=True)
 """
 
-UNTIMED_SUMMARY = {"wall_seconds", "seconds_per_generation", "elapsed_seconds",
-                   "software"}   # versions, device name and commit (0.3.1): not a result
+UNTIMED_SUMMARY = {
+    "wall_seconds",
+    "seconds_per_generation",
+    "elapsed_seconds",
+    "software",
+}  # versions, device name and commit (0.3.1): not a result
 
 
 #: Config keys that one side of a comparison may lack by design: the settings removed in 0.7
@@ -63,21 +106,36 @@ UNTIMED_SUMMARY = {"wall_seconds", "seconds_per_generation", "elapsed_seconds",
 #: holds them, one of 0.7 does not) and the distance weights that 0.7 made settings (the
 #: other way round). Such a key is left out of config.toml and of the checkpoint's config only
 #: when one side lacks it; where both hold it, it is compared.
-VERSION_KEYS = {"gate_margin", "quota_basis", "quota_inertia", "effector_flip", "d_hw_tiers",
-                "bt_point_on_nodes", "merge_species", "evaluated_partners", "baseline_refill",
-                "w_tag", "w_hw", "w_bt", "w_tool", "w_size", "gamma"}
+VERSION_KEYS = {
+    "gate_margin",
+    "quota_basis",
+    "quota_inertia",
+    "effector_flip",
+    "d_hw_tiers",
+    "bt_point_on_nodes",
+    "merge_species",
+    "evaluated_partners",
+    "baseline_refill",
+    "w_tag",
+    "w_hw",
+    "w_bt",
+    "w_tool",
+    "w_size",
+    "gamma",
+}
 
 
 def _common_keys(x: dict, y: dict, prefix: str = "") -> tuple[dict, dict]:
     """x and y without the `VERSION_KEYS` (under `prefix`) that only one of them holds."""
-    drop = {k for k in set(x) ^ set(y) if k.startswith(prefix)
-            and k[len(prefix):] in VERSION_KEYS}
-    return ({k: v for k, v in x.items() if k not in drop},
-            {k: v for k, v in y.items() if k not in drop})
+    drop = {k for k in set(x) ^ set(y) if k.startswith(prefix) and k[len(prefix) :] in VERSION_KEYS}
+    return (
+        {k: v for k, v in x.items() if k not in drop},
+        {k: v for k, v in y.items() if k not in drop},
+    )
 
 
 #: summary.json records added since 0.6 (not results): compared only when both trees write them.
-ADDED_SUMMARY = {"stop"}   # why the run stopped (generations, max_time, patience)
+ADDED_SUMMARY = {"stop"}  # why the run stopped (generations, max_time, patience)
 
 
 def setting_value(text: str):
@@ -95,13 +153,29 @@ def run(src: Path, out: Path, settings: list[str] = ()) -> None:
     out.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "PYTHONPATH": str(src.resolve())}
     out = out.resolve()
-    where = subprocess.run([sys.executable, "-c", "import swarmcode_torch; print(swarmcode_torch.__file__)"],
-                           env=env, capture_output=True, text=True, cwd=out, check=True).stdout
+    where = subprocess.run(
+        [sys.executable, "-c", "import swarmcode_torch; print(swarmcode_torch.__file__)"],
+        env=env,
+        capture_output=True,
+        text=True,
+        cwd=out,
+        check=True,
+    ).stdout
     if not Path(where.strip()).resolve().is_relative_to(src.resolve()):
         sys.exit(f"the package imports from {where.strip()}, not from --src {src}")
     for args in RUNS:
-        cmd = [sys.executable, "-m", "swarmcode_torch", "evolve", *args, "--device", "cpu",
-               "--no-compile", "--logdir", str(out)]
+        cmd = [
+            sys.executable,
+            "-m",
+            "swarmcode_torch",
+            "evolve",
+            *args,
+            "--device",
+            "cpu",
+            "--no-compile",
+            "--logdir",
+            str(out),
+        ]
         for kv in settings:
             cmd += ["--set", kv]
         # cwd=out: `python -m` and `-c` put the working directory first on sys.path, so run
@@ -115,15 +189,22 @@ def run(src: Path, out: Path, settings: list[str] = ()) -> None:
         if not sep:
             sys.exit(f"--set {kv}: expected KEY=VALUE")
         given[key] = setting_value(value)
-    subprocess.run([sys.executable, "-c", BASELINES, str(out / "baselines.json"),
-                    json.dumps(given)], env=env, check=True, cwd=out)
+    subprocess.run(
+        [sys.executable, "-c", BASELINES, str(out / "baselines.json"), json.dumps(given)],
+        env=env,
+        check=True,
+        cwd=out,
+    )
     print(f"wrote {out}")
 
 
 def _untimed(x):
     if isinstance(x, dict):
-        return {k: _untimed(v) for k, v in x.items()
-                if k not in UNTIMED_SUMMARY and not k.startswith("perf/")}
+        return {
+            k: _untimed(v)
+            for k, v in x.items()
+            if k not in UNTIMED_SUMMARY and not k.startswith("perf/")
+        }
     if isinstance(x, list):
         return [_untimed(v) for v in x]
     return "nan" if isinstance(x, float) and math.isnan(x) else x
@@ -134,8 +215,11 @@ def _scalars(run_dir: Path) -> dict:
 
     acc = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
     acc.Reload()
-    return {t: [(e.step, _untimed(e.value)) for e in acc.Scalars(t)]
-            for t in acc.Tags()["scalars"] if not t.startswith("perf/")}
+    return {
+        t: [(e.step, _untimed(e.value)) for e in acc.Scalars(t)]
+        for t in acc.Tags()["scalars"]
+        if not t.startswith("perf/")
+    }
 
 
 def _checkpoint(run_dir: Path) -> dict:
@@ -172,7 +256,7 @@ def compare(a: Path, b: Path) -> int:
         for what, read in checks.items():
             va, vb = read(x), read(y) if y is not None else None
             if what == "summary.json" and vb is not None:
-                for key in ADDED_SUMMARY:     # a record one of the two versions does not write
+                for key in ADDED_SUMMARY:  # a record one of the two versions does not write
                     if (key in va) != (key in vb):
                         va.pop(key, None)
                         vb.pop(key, None)
@@ -186,8 +270,9 @@ def compare(a: Path, b: Path) -> int:
                 same = va == vb
             different += not same
             print(f"{name:12s} {what:20s} {'identical' if same else 'DIFFERENT'}")
-    same = json.loads((a / "baselines.json").read_text()) == \
-        json.loads((b / "baselines.json").read_text())
+    same = json.loads((a / "baselines.json").read_text()) == json.loads(
+        (b / "baselines.json").read_text()
+    )
     different += not same
     print(f"{'baselines':12s} {'metrics':20s} {'identical' if same else 'DIFFERENT'}")
     return 1 if different else 0
@@ -199,8 +284,14 @@ def main() -> None:
     r = sub.add_parser("run")
     r.add_argument("--src", type=Path, required=True, help="source tree (a checkout or worktree)")
     r.add_argument("--out", type=Path, required=True)
-    r.add_argument("--set", dest="settings", action="append", default=[], metavar="KEY=VALUE",
-                   help="a setting for every run and baseline (repeatable)")
+    r.add_argument(
+        "--set",
+        dest="settings",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a setting for every run and baseline (repeatable)",
+    )
     c = sub.add_parser("compare")
     c.add_argument("a", type=Path)
     c.add_argument("b", type=Path)

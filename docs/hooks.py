@@ -51,8 +51,10 @@ def on_config(config):
 def on_files(files, config):
     # as files of the repository root (src_dir), so that they keep their own path; mkdocs-jupyter
     # needs a File whose src_dir and src_uri lead to the notebook
-    for path in [*sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / TUTORIALS).glob("*.ipynb")),
-                 *(p for p in EXTRA_PAGES if (ROOT / p).is_file())]:
+    for path in [
+        *sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / TUTORIALS).glob("*.ipynb")),
+        *(p for p in EXTRA_PAGES if (ROOT / p).is_file()),
+    ]:
         files.append(File(path, str(ROOT), config.site_dir, config.use_directory_urls))
     return files
 
@@ -96,18 +98,19 @@ def repo_target(url: str, src_uri: str, config, files) -> str | None:
     if not target.startswith("../"):
         file = files.get_file_from_path(target)
         if file is not None and not file.inclusion.is_excluded():
-            return None                     # a page or file of the site
+            return None  # a page or file of the site
         excluded = config.exclude_docs
         if absolute.is_dir() and not (excluded and excluded.match_file(target.rstrip("/") + "/")):
-            return None                     # a folder of the site
+            return None  # a folder of the site
     rel = absolute.relative_to(ROOT).as_posix()
-    return rel + ("/" if absolute.is_dir() else "") + url[len(url.split("#", 1)[0]):]
+    return rel + ("/" if absolute.is_dir() else "") + url[len(url.split("#", 1)[0]) :]
 
 
 def rewrite_repo_links(markdown: str, src_uri: str, config, files) -> str:
     """`markdown` with each link to a repository file outside the site replaced by a stand-in
     (`repo-file:PATH`) that `on_page_content` turns into its final address; fenced code is left
     as it is."""
+
     def one(m: re.Match) -> str:
         target = repo_target(m.group(2), src_uri, config, files)
         return m.group(0) if target is None else f"{m.group(1)}{_REPO}{target}"
@@ -135,11 +138,12 @@ def repo_url(path: str, page, config) -> str:
         return f"{config.repo_url.rstrip('/')}/{kind}/main/{path}"
     here = Path(page.file.abs_dest_path).parent
     rel = os.path.relpath(ROOT / path.split("#", 1)[0], here).replace(os.sep, "/")
-    anchor = path[len(path.split("#", 1)[0]):]
+    anchor = path[len(path.split("#", 1)[0]) :]
     return rel + ("/" if path.split("#", 1)[0].endswith("/") else "") + anchor
 
 
 # --- the CLI reference ----------------------------------------------------------------------
+
 
 def cli_reference() -> str:
     """Markdown: the `--help` of `swarmcode-torch` and of each of its commands, as a user sees
@@ -154,14 +158,24 @@ def cli_reference() -> str:
     parts: list[str] = []
 
     def walk(command, path: list[str]) -> None:
-        r = runner.invoke(app, [*path, "--help"], prog_name="swarmcode-torch", env=env,
-                          catch_exceptions=False)
+        r = runner.invoke(
+            app, [*path, "--help"], prog_name="swarmcode-torch", env=env, catch_exceptions=False
+        )
         if r.exit_code != 0:
-            raise RuntimeError(f"swarmcode-torch {' '.join(path)} --help exited {r.exit_code}: "
-                               f"{r.output}")
+            raise RuntimeError(
+                f"swarmcode-torch {' '.join(path)} --help exited {r.exit_code}: {r.output}"
+            )
         title = " ".join(["swarmcode-torch", *path])
-        parts.extend([f"## `{title}`" if path else "## Commands", "",
-                      "```text", r.output.rstrip(), "```", ""])
+        parts.extend(
+            [
+                f"## `{title}`" if path else "## Commands",
+                "",
+                "```text",
+                r.output.rstrip(),
+                "```",
+                "",
+            ]
+        )
         for name, sub in getattr(command, "commands", {}).items():
             if not getattr(sub, "hidden", False):
                 walk(sub, [*path, name])
@@ -171,6 +185,7 @@ def cli_reference() -> str:
 
 
 # --- the hardware catalog -------------------------------------------------------------------
+
 
 def hardware_table() -> str:
     """Markdown: one row per field of a hardware catalog, from the checks the catalog goes
@@ -186,14 +201,18 @@ def hardware_table() -> str:
         elif m := re.match(r"\s*([A-Za-z_]+)\s*=[^#]*#\s*(.*)", line):
             comments[section, m.group(1)] = m.group(2).strip()
     cat = hw.default_catalog()
-    rows = ["| section | key | type | allowed values | built-in value | meaning |",
-            "|---|---|---|---|---|---|"]
+    rows = [
+        "| section | key | type | allowed values | built-in value | meaning |",
+        "|---|---|---|---|---|---|",
+    ]
     for section, key, name, per_tier, (lo, hi, lo_ok) in hw._CATALOG_FIELDS:
         kind = f"list of {hw.NUM_TIERS} numbers (tiers 1, 2, 3)" if per_tier else "number"
         bound = f"{'[' if lo_ok else '('}{lo:g}, {hi:g}]"
         value = getattr(cat, name)
-        shown = (", ".join(f"{x:g}" for x in value) if per_tier else f"{value:g}")
-        rows.append(f"| `[{section}]` | `{key}` | {kind} | {bound} | "
-                    f"{'[' + shown + ']' if per_tier else shown} | "
-                    f"{comments.get((section, key), '').replace('|', '/')} |")
+        shown = ", ".join(f"{x:g}" for x in value) if per_tier else f"{value:g}"
+        rows.append(
+            f"| `[{section}]` | `{key}` | {kind} | {bound} | "
+            f"{'[' + shown + ']' if per_tier else shown} | "
+            f"{comments.get((section, key), '').replace('|', '/')} |"
+        )
     return "\n".join(rows)

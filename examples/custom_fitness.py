@@ -48,29 +48,53 @@ def main(argv: list[str] | None = None) -> sc.RunResult:
     ap.add_argument("--ticks", type=int, default=150)
     ap.add_argument("--trials", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--logdir", default=None, help="write a run directory here (default: none, in memory)")
-    ap.add_argument("--weights", action="store_true",
-                    help="no function: the built-in fitness with its shaping weights set to 0")
+    ap.add_argument(
+        "--logdir", default=None, help="write a run directory here (default: none, in memory)"
+    )
+    ap.add_argument(
+        "--weights",
+        action="store_true",
+        help="no function: the built-in fitness with its shaping weights set to 0",
+    )
     args = ap.parse_args(argv)
 
-    how = (dict(w_pickup=0.0, w_energy=0.0, w_proximity=0.0, w_closeness=0.0)
-           if args.weights else dict(fitness=deliveries_only))
-    result = sc.evolve(scenario=args.scenario, generations=args.generations,
-                       population=args.population, swarm_size=args.swarm_size, ticks=args.ticks,
-                       trials=args.trials, seed=args.seed, device="cpu", logdir=args.logdir,
-                       **how,
-                       callback=lambda r: print(f"gen {r.generation}: best score "
-                                                f"{r.best_fitness:.2f}, deliveries "
-                                                f"{r.team['deliveries']:.1f}"))
+    how = (
+        dict(w_pickup=0.0, w_energy=0.0, w_proximity=0.0, w_closeness=0.0)
+        if args.weights
+        else dict(fitness=deliveries_only)
+    )
+    result = sc.evolve(
+        scenario=args.scenario,
+        generations=args.generations,
+        population=args.population,
+        swarm_size=args.swarm_size,
+        ticks=args.ticks,
+        trials=args.trials,
+        seed=args.seed,
+        device="cpu",
+        logdir=args.logdir,
+        **how,
+        callback=lambda r: print(
+            f"gen {r.generation}: best score "
+            f"{r.best_fitness:.2f}, deliveries "
+            f"{r.team['deliveries']:.1f}"
+        ),
+    )
     best = result.best_team
-    print(f"fitness function: {result.config.fitness_function or 'built-in'}, weights "
-          f"w_delivery={result.config.w_delivery:g} w_pickup={result.config.w_pickup:g} "
-          f"w_closeness={result.config.w_closeness:g}")
-    print(f"best team: score {best['fitness']:.2f}, {best['deliveries']:.1f} deliveries, "
-          f"cost ${best['cost']:.0f}, {best['species']} species")
+    print(
+        f"fitness function: {result.config.fitness_function or 'built-in'}, weights "
+        f"w_delivery={result.config.w_delivery:g} w_pickup={result.config.w_pickup:g} "
+        f"w_closeness={result.config.w_closeness:g}"
+    )
+    print(
+        f"best team: score {best['fitness']:.2f}, {best['deliveries']:.1f} deliveries, "
+        f"cost ${best['cost']:.0f}, {best['species']} species"
+    )
     if result.run_dir is not None:
-        print(f"run directory: {result.run_dir}" + ("" if args.weights else
-              " (resume: sc.resume(run_dir, fitness=deliveries_only))"))
+        print(
+            f"run directory: {result.run_dir}"
+            + ("" if args.weights else " (resume: sc.resume(run_dir, fitness=deliveries_only))")
+        )
     return result
 
 

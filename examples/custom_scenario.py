@@ -28,24 +28,38 @@ def main(argv: list[str] | None = None) -> sc.RunResult:
     ap.add_argument("--ticks", type=int, default=150)
     ap.add_argument("--trials", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--logdir", default=None, help="write a run directory here (default: none, in memory)")
+    ap.add_argument(
+        "--logdir", default=None, help="write a run directory here (default: none, in memory)"
+    )
     args = ap.parse_args(argv)
 
-    scenario = sc.load_scenario(args.scenario)     # a Scenario object: check it, change it, ...
+    scenario = sc.load_scenario(args.scenario)  # a Scenario object: check it, change it, ...
     print(f"{scenario.name}: {scenario.description}")
     print(f"chassis strength per tier (kg/m^2): {scenario.hardware.chassis_strength}")
-    result = sc.evolve(scenario=args.scenario, generations=args.generations,
-                       population=args.population, swarm_size=args.swarm_size, ticks=args.ticks,
-                       trials=args.trials, seed=args.seed, device="cpu", logdir=args.logdir,
-                       callback=lambda r: print(f"gen {r.generation}: best fitness "
-                                                f"{r.best_fitness:.1f}, species "
-                                                f"{r.num_species}"))
+    result = sc.evolve(
+        scenario=args.scenario,
+        generations=args.generations,
+        population=args.population,
+        swarm_size=args.swarm_size,
+        ticks=args.ticks,
+        trials=args.trials,
+        seed=args.seed,
+        device="cpu",
+        logdir=args.logdir,
+        callback=lambda r: print(
+            f"gen {r.generation}: best fitness {r.best_fitness:.1f}, species {r.num_species}"
+        ),
+    )
     best = result.best_team
-    print(f"best team: fitness {best['fitness']:.1f}, cost ${best['cost']:.0f}, "
-          f"{best['species']} species, {best['niches']} niches")
+    print(
+        f"best team: fitness {best['fitness']:.1f}, cost ${best['cost']:.0f}, "
+        f"{best['species']} species, {best['niches']} niches"
+    )
     for d in best["designs"]:
-        print(f"  {d['count']} x species {d['species']}: {d['effector']}, radius "
-              f"{d['radius']:.2f} m, lifts package classes {d['capability']}")
+        print(
+            f"  {d['count']} x species {d['species']}: {d['effector']}, radius "
+            f"{d['radius']:.2f} m, lifts package classes {d['capability']}"
+        )
     if result.run_dir is not None:
         print(f"run directory: {result.run_dir}")
     return result

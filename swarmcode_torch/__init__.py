@@ -24,6 +24,22 @@ from .coevo.population import Population
 from .sim.bt import format_tree
 from .sim.scenario import Scenario, builtin_names, load_scenario
 
-__all__ = ["evolve", "resume", "load", "RunResult", "SwarmCoDeConfig", "EvolveConfig", "Evolution",
-           "GenerationResult", "Population", "load_scenario", "builtin_names", "Scenario",
-           "composition_figure", "replay_run", "run_dynamics", "format_tree", "__version__"]
+__all__ = [
+    "evolve",
+    "resume",
+    "load",
+    "RunResult",
+    "SwarmCoDeConfig",
+    "EvolveConfig",
+    "Evolution",
+    "GenerationResult",
+    "Population",
+    "load_scenario",
+    "builtin_names",
+    "Scenario",
+    "composition_figure",
+    "replay_run",
+    "run_dynamics",
+    "format_tree",
+    "__version__",
+]

@@ -26,7 +26,7 @@ HOOKS = DOCS / "hooks.py"
 def _nav_files() -> list[str]:
     """Every file the nav of mkdocs.yml names (read as text: `- Title: path`)."""
     text = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
-    nav = text[text.index("\nnav:"):]
+    nav = text[text.index("\nnav:") :]
     return re.findall(r"^\s*- (?:[^:\n]+:\s+)?([\w./-]+\.(?:md|ipynb))\s*$", nav, re.M)
 
 
@@ -40,17 +40,25 @@ def _directives() -> dict[str, str]:
 
 
 def test_every_public_name_has_a_reference_entry():
-    documented = {name.split(".", 1)[1] for name in _directives()
-                  if name.count(".") == 1 and name.startswith("swarmcode_torch.")}
+    documented = {
+        name.split(".", 1)[1]
+        for name in _directives()
+        if name.count(".") == 1 and name.startswith("swarmcode_torch.")
+    }
     missing = sorted(set(swarmcode_torch.__all__) - documented)
-    assert not missing, f"public names without a `::: swarmcode_torch.NAME` in docs/reference: {missing}"
+    assert not missing, (
+        f"public names without a `::: swarmcode_torch.NAME` in docs/reference: {missing}"
+    )
 
 
 def test_every_page_and_notebook_is_in_the_nav_and_every_nav_entry_exists():
     nav = _nav_files()
     assert len(nav) == len(set(nav)), "a page is twice in the nav"
-    pages = {p.relative_to(DOCS).as_posix() for p in DOCS.rglob("*.md")
-             if not p.relative_to(DOCS).as_posix().startswith("results/")}
+    pages = {
+        p.relative_to(DOCS).as_posix()
+        for p in DOCS.rglob("*.md")
+        if not p.relative_to(DOCS).as_posix().startswith("results/")
+    }
     notebooks = {p.relative_to(ROOT).as_posix() for p in (ROOT / "notebooks").glob("*.ipynb")}
     assert len(notebooks) == 3
     assert pages | notebooks | {"CHANGELOG.md"} == set(nav)
@@ -66,8 +74,11 @@ def _accepted_scenario_keys() -> set[str]:
     tree = ast.parse((ROOT / "swarmcode_torch/sim/scenario.py").read_text(encoding="utf-8"))
     keys = set()
     for node in ast.walk(tree):
-        if isinstance(node, ast.Set) and node.elts and all(
-                isinstance(e, ast.Constant) and isinstance(e.value, str) for e in node.elts):
+        if (
+            isinstance(node, ast.Set)
+            and node.elts
+            and all(isinstance(e, ast.Constant) and isinstance(e.value, str) for e in node.elts)
+        ):
             keys |= {e.value for e in node.elts}
     return keys
 
@@ -86,15 +97,20 @@ def test_scenario_format_page_documents_every_accepted_key():
     assert used <= keys and {"grips", "size", "radius_band", "hardware"} <= keys
     page = (DOCS / "formats/scenario.md").read_text(encoding="utf-8")
     table_keys = set(re.findall(r"^\| `(\w+)` \|", page, re.M))
-    assert keys <= table_keys, f"not in docs/formats/scenario.md's tables: {sorted(keys - table_keys)}"
+    assert keys <= table_keys, (
+        f"not in docs/formats/scenario.md's tables: {sorted(keys - table_keys)}"
+    )
 
 
 def _build(config: Path, out: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict",
-                           "-f", str(config), "-d", str(out)],
-                          capture_output=True, text=True, timeout=600, cwd=config.parent,
-                          env={**os.environ, "NO_MKDOCS_2_WARNING": "1",
-                               "PYTHONPATH": str(ROOT)})
+    return subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(config), "-d", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=config.parent,
+        env={**os.environ, "NO_MKDOCS_2_WARNING": "1", "PYTHONPATH": str(ROOT)},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -111,6 +127,7 @@ def site(tmp_path_factory) -> Path:
 
 def _text(path: Path) -> str:
     import html
+
     return html.unescape(re.sub(r"<[^>]+>", "", path.read_text(encoding="utf-8")))
 
 
@@ -131,6 +148,7 @@ def test_site_cli_page_is_the_help_of_every_command(site):
     import typer
 
     from swarmcode_torch.app.cli import app
+
     commands = list(typer.main.get_command(app).commands)
     assert {"evolve", "sweep", "inspect", "replay", "dynamics", "scenarios"} <= set(commands)
     text = _text(site / "cli/index.html")
@@ -138,16 +156,22 @@ def test_site_cli_page_is_the_help_of_every_command(site):
         assert f"Usage: swarmcode-torch {name} [OPTIONS]" in text, name
     # the options of the code as it is, e.g. evolve's
     for option in ("--scenario", "--generations", "--resume", "--set"):
-        assert re.search(rf"^\s+{option}\b", text.split("Usage: swarmcode-torch evolve")[1]
-                         .split("Usage: swarmcode-torch")[0], re.M), option
+        assert re.search(
+            rf"^\s+{option}\b",
+            text.split("Usage: swarmcode-torch evolve")[1].split("Usage: swarmcode-torch")[0],
+            re.M,
+        ), option
 
 
 @pytest.mark.subprocess
 def test_site_hardware_page_has_every_catalog_field_and_bound(site):
     from swarmcode_torch.sim import hardware as hw
+
     text = _text(site / "formats/hardware/index.html")
-    rows = {(m.group(1), m.group(2)): m.group(0)
-            for m in re.finditer(r"\[(\w+)\]\s+(\w+)\s+(.*?)\n(.*?)\n(.*?)\n", text)}
+    rows = {
+        (m.group(1), m.group(2)): m.group(0)
+        for m in re.finditer(r"\[(\w+)\]\s+(\w+)\s+(.*?)\n(.*?)\n(.*?)\n", text)
+    }
     assert len(hw._CATALOG_FIELDS) == 16
     for section, key, _, _, (lo, hi, lo_ok) in hw._CATALOG_FIELDS:
         assert (section, key) in rows, (section, key)
@@ -161,11 +185,12 @@ def test_site_has_the_notebooks_and_the_changelog(site):
         assert page.is_file(), nb
     assert "import swarmcode_torch as sc" in _text(site / "notebooks/01_quickstart/index.html")
     assert "Keep a Changelog" in _text(site / "CHANGELOG/index.html")
-    assert not (site / "results").exists()      # the data folders stay out of the site
+    assert not (site / "results").exists()  # the data folders stay out of the site
     assert not (site / "hooks.py").exists()
 
 
 # --- links to repository files: a small project of its own with the site's hooks -----------
+
 
 def _project(tmp_path: Path, page: str) -> Path:
     (tmp_path / "docs/results/cpu").mkdir(parents=True)
@@ -176,16 +201,19 @@ def _project(tmp_path: Path, page: str) -> Path:
     (tmp_path / "docs/other.md").write_text(page)
     (tmp_path / "mkdocs.yml").write_text(
         "site_name: t\ndocs_dir: docs\nexclude_docs: |\n  /results/\n"
-        f"hooks:\n  - {HOOKS.as_posix()}\nnav:\n  - index.md\n  - other.md\n")
+        f"hooks:\n  - {HOOKS.as_posix()}\nnav:\n  - index.md\n  - other.md\n"
+    )
     return tmp_path / "mkdocs.yml"
 
 
 @pytest.mark.subprocess
 def test_links_to_repository_files_outside_the_site_build_and_lead_to_the_file(tmp_path):
     pytest.importorskip("mkdocs")
-    page = ("# Other\n\n[world](../examples/world.toml), [table](results/cpu/table.json), "
-            "[folder](results/cpu/), [home](index.md#home)\n\n"
-            "```\n[not a link](../nowhere.md)\n```\n")
+    page = (
+        "# Other\n\n[world](../examples/world.toml), [table](results/cpu/table.json), "
+        "[folder](results/cpu/), [home](index.md#home)\n\n"
+        "```\n[not a link](../nowhere.md)\n```\n"
+    )
     r = _build(_project(tmp_path, page), tmp_path / "site")
     assert r.returncode == 0, r.stdout + r.stderr
     built = tmp_path / "site/other/index.html"

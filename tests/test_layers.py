@@ -20,8 +20,9 @@ needs_lint = pytest.mark.skipif(not Path(LINT).exists(), reason="import-linter i
 
 def lint(cwd: Path, pythonpath: Path) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(pythonpath)}
-    return subprocess.run([LINT, "--no-cache"], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=300)
+    return subprocess.run(
+        [LINT, "--no-cache"], cwd=cwd, env=env, capture_output=True, text=True, timeout=300
+    )
 
 
 @pytest.mark.subprocess
@@ -33,15 +34,33 @@ def test_the_package_keeps_its_layers():
 
 
 @needs_lint
-@pytest.mark.parametrize("module, line, broken", [
-    ("sim/hardware.py", "from ..coevo import population", "swarmcode_torch.sim is not allowed to import swarmcode_torch.coevo"),
-    ("coevo/evolve.py", "from ..app import runs", "swarmcode_torch.coevo is not allowed to import swarmcode_torch.app"),
-    ("baselines/__init__.py", "from ..app import records", "swarmcode_torch.baselines is not allowed to import swarmcode_torch.app"),
-])
+@pytest.mark.parametrize(
+    "module, line, broken",
+    [
+        (
+            "sim/hardware.py",
+            "from ..coevo import population",
+            "swarmcode_torch.sim is not allowed to import swarmcode_torch.coevo",
+        ),
+        (
+            "coevo/evolve.py",
+            "from ..app import runs",
+            "swarmcode_torch.coevo is not allowed to import swarmcode_torch.app",
+        ),
+        (
+            "baselines/__init__.py",
+            "from ..app import records",
+            "swarmcode_torch.baselines is not allowed to import swarmcode_torch.app",
+        ),
+    ],
+)
 @pytest.mark.subprocess
 def test_an_import_across_the_layers_breaks_the_contract(tmp_path, module, line, broken):
-    shutil.copytree(ROOT / "swarmcode_torch", tmp_path / "swarmcode_torch",
-                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(
+        ROOT / "swarmcode_torch",
+        tmp_path / "swarmcode_torch",
+        ignore=shutil.ignore_patterns("__pycache__"),
+    )
     shutil.copy(ROOT / "pyproject.toml", tmp_path)
     with open(tmp_path / "swarmcode_torch" / module, "a") as f:
         f.write(f"\n{line}  # noqa\n")
@@ -71,15 +90,15 @@ def _imported(tree: ast.AST) -> list[tuple[int, str]]:
 def _allowed(name: str, layers: tuple[str, ...]) -> bool:
     parts = name.split(".")
     if parts[0] != "swarmcode_torch":
-        return True                                   # not the package: torch, pytest, ...
-    return len(parts) > 1 and parts[1] in layers      # bare `swarmcode_torch` loads the app
+        return True  # not the package: torch, pytest, ...
+    return len(parts) > 1 and parts[1] in layers  # bare `swarmcode_torch` loads the app
 
 
 def layer_violations(tests: Path) -> list[str]:
     """'FILE:LINE imports NAME' for each import of a test under tests/sim or tests/coevo (or of
     a helper module of `tests` that such a test imports, however indirectly) that reaches above
     the folder's layer."""
-    local = {p.stem: p for p in tests.rglob("*.py")}   # helpers and test modules, by name
+    local = {p.stem: p for p in tests.rglob("*.py")}  # helpers and test modules, by name
     found = []
     for folder, layers in ALLOWED.items():
         for test in sorted((tests / folder).rglob("*.py")):
@@ -95,8 +114,10 @@ def layer_violations(tests: Path) -> list[str]:
                         todo.append((local[top], via + [f"{path.relative_to(tests)}:{line}"]))
                     elif not _allowed(name, layers):
                         chain = " via ".join([f"{path.relative_to(tests)}:{line}"] + via[::-1])
-                        found.append(f"tests/{chain} imports {name} (tests/{folder} may import "
-                                     f"only {', '.join('swarmcode_torch.' + x for x in layers)})")
+                        found.append(
+                            f"tests/{chain} imports {name} (tests/{folder} may import "
+                            f"only {', '.join('swarmcode_torch.' + x for x in layers)})"
+                        )
     return found
 
 
@@ -111,11 +132,13 @@ def test_the_check_names_the_file_and_the_import(tmp_path):
     (tmp_path / "kit.py").write_text("from swarmcode_torch.coevo.population import R_MAX\n")
     (tmp_path / "sim" / "test_a.py").write_text(
         "import torch\nfrom swarmcode_torch.sim import bt\n\n"
-        "def test_x():\n    from swarmcode_torch.coevo import evolve\n")
+        "def test_x():\n    from swarmcode_torch.coevo import evolve\n"
+    )
     (tmp_path / "sim" / "test_b.py").write_text("import kit\n")
     (tmp_path / "coevo" / "test_c.py").write_text(
         "from swarmcode_torch.coevo import evolve\nimport kit\nimport swarmcode_torch as sc\n"
-        "from swarmcode_torch import app\n")
+        "from swarmcode_torch import app\n"
+    )
     assert layer_violations(tmp_path) == [
         "tests/sim/test_a.py:5 imports swarmcode_torch.coevo.evolve "
         "(tests/sim may import only swarmcode_torch.sim)",

@@ -15,8 +15,9 @@ pytest.importorskip("mypy", reason="mypy is not installed (pip install -e '.[dev
 
 @pytest.mark.subprocess
 def test_mypy_passes_over_sim_and_coevo():
-    r = subprocess.run([sys.executable, "-m", "mypy"], cwd=ROOT, capture_output=True, text=True,
-                       timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-m", "mypy"], cwd=ROOT, capture_output=True, text=True, timeout=600
+    )
     assert r.returncode == 0, f"mypy found type errors:\n{r.stdout[-6000:]}\n{r.stderr[-2000:]}"
     # every module of the two packages was checked: the configured files are these folders
     modules = [p for d in ("sim", "coevo") for p in (ROOT / "swarmcode_torch" / d).rglob("*.py")]

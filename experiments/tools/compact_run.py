@@ -21,13 +21,17 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from swarmcode_torch.app.analysis import run_dynamics  # noqa: E402
 from swarmcode_torch.app.reporting import composition_figure  # noqa: E402
-from swarmcode_torch.app.runs import (RunError, load_checkpoint, read_config,  # noqa: E402
-                                      read_summary)
+from swarmcode_torch.app.runs import (
+    RunError,
+    load_checkpoint,
+    read_config,  # noqa: E402
+    read_summary,
+)
 
 
 def compact(run: Path, out: Path, start: int = 0) -> list[dict]:
     """Write the compact form of `run` into `out`; return the rows of dynamics.json."""
-    read_config(run)                       # a run directory, checked, before anything is written
+    read_config(run)  # a run directory, checked, before anything is written
     read_summary(run)
     ck = load_checkpoint(run)
     out.mkdir(parents=True, exist_ok=True)
@@ -35,8 +39,10 @@ def compact(run: Path, out: Path, start: int = 0) -> list[dict]:
         shutil.copy(run / name, out / name)
     end = int(ck["generation"])
     wins = [(lo, min(lo + 100, end)) for lo in range(start, end, 100)] + [(end - 50, end)]
-    rows = [{"generations": hi - lo, "from": lo, "to": hi, **r}
-            for (lo, hi), r in zip(wins, run_dynamics(run, wins))]
+    rows = [
+        {"generations": hi - lo, "from": lo, "to": hi, **r}
+        for (lo, hi), r in zip(wins, run_dynamics(run, wins))
+    ]
     (out / "dynamics.json").write_text(json.dumps(rows, indent=1))
     fig = composition_figure(ck["history"])
     fig.savefig(out / "composition.png", dpi=60)

@@ -20,25 +20,36 @@ import math
 from pathlib import Path
 
 from swarmcode_torch.app.analysis import run_dynamics
-from swarmcode_torch.coevo.dynamics import mean_std as mean_std_of
 from swarmcode_torch.app.runs import RunError, load_checkpoint
+from swarmcode_torch.coevo.dynamics import mean_std as mean_std_of
 
 #: (key, header, format of one run's value); mean and std take one more decimal
-COLUMNS = (("team_species", "team sp", "{:.1f}"), ("population_species", "pop sp", "{:.1f}"),
-           ("niches", "niches", "{:.1f}"), ("team_score", "score", "{:.0f}"),
-           ("founded_per_generation", "founded/gen", "{:.2f}"),
-           ("founded_lasting_per_generation", "lasting/gen", "{:.2f}"),
-           ("median_lifetime", "lifetime", "{:.1f}"), ("median_age", "age", "{:.0f}"))
+COLUMNS = (
+    ("team_species", "team sp", "{:.1f}"),
+    ("population_species", "pop sp", "{:.1f}"),
+    ("niches", "niches", "{:.1f}"),
+    ("team_score", "score", "{:.0f}"),
+    ("founded_per_generation", "founded/gen", "{:.2f}"),
+    ("founded_lasting_per_generation", "lasting/gen", "{:.2f}"),
+    ("median_lifetime", "lifetime", "{:.1f}"),
+    ("median_age", "age", "{:.0f}"),
+)
 
 
 def run_row(run: Path, last: int, founding_from: int) -> dict:
     end = int(load_checkpoint(run)["generation"])
     tail, long = run_dynamics(run, [(end - last, end), (founding_from, end)])
-    return {**{k: tail[k] for k in ("team_species", "population_species", "niches",
-                                    "team_score", "median_age")},
-            "founded_per_generation": long["founded_per_generation"],
-            "founded_lasting_per_generation": long["founded_lasting_per_generation"],
-            "median_lifetime": long["median_lifetime"], "generations": end, "run": str(run)}
+    return {
+        **{
+            k: tail[k]
+            for k in ("team_species", "population_species", "niches", "team_score", "median_age")
+        },
+        "founded_per_generation": long["founded_per_generation"],
+        "founded_lasting_per_generation": long["founded_lasting_per_generation"],
+        "median_lifetime": long["median_lifetime"],
+        "generations": end,
+        "run": str(run),
+    }
 
 
 def mean_std(values: list[float], fmt: str) -> str:
@@ -52,27 +63,40 @@ def mean_std(values: list[float], fmt: str) -> str:
 
 def cell(values: list[float], fmt: str) -> str:
     """'mean ± std (v1, v2, v3)'."""
-    return mean_std(values, fmt) + " (" + ", ".join(
-        "-" if v is None or math.isnan(v) else fmt.format(v) for v in values) + ")"
+    return (
+        mean_std(values, fmt)
+        + " ("
+        + ", ".join("-" if v is None or math.isnan(v) else fmt.format(v) for v in values)
+        + ")"
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("groups", nargs="*", help="LABEL=RUN_DIR[,RUN_DIR...], or @FILE:LABEL[=SHOWN] "
-                                               "(as --stored, in this place in the table)")
+    ap.add_argument(
+        "groups",
+        nargs="*",
+        help="LABEL=RUN_DIR[,RUN_DIR...], or @FILE:LABEL[=SHOWN] "
+        "(as --stored, in this place in the table)",
+    )
     ap.add_argument("--last", type=int, default=50)
     ap.add_argument("--founding-from", type=int, default=100)
     ap.add_argument("--json", type=Path)
-    ap.add_argument("--stored", action="append", default=[], metavar="FILE:LABEL[=SHOWN]",
-                    help="a group's rows from an earlier --json output (runs whose checkpoints "
-                         "are not kept), shown as SHOWN")
+    ap.add_argument(
+        "--stored",
+        action="append",
+        default=[],
+        metavar="FILE:LABEL[=SHOWN]",
+        help="a group's rows from an earlier --json output (runs whose checkpoints "
+        "are not kept), shown as SHOWN",
+    )
     a = ap.parse_args(argv)
     out = {}
     print("| group | runs | " + " | ".join(c[1] for c in COLUMNS) + " |")
     print("|---|---|" + "---|" * len(COLUMNS))
     groups = []
     for g in a.groups + ["@" + spec for spec in a.stored]:
-        if g.startswith("@"):         # @FILE:LABEL[=SHOWN], as --stored, in its place
+        if g.startswith("@"):  # @FILE:LABEL[=SHOWN], as --stored, in its place
             path, _, labels = g[1:].partition(":")
             label, _, shown = labels.partition("=")
             try:

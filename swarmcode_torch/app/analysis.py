@@ -5,19 +5,19 @@ each team design, and a replay of its best team as a GIF (`swarmcode-torch repla
 from __future__ import annotations
 
 import io
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Sequence
 
 from ..coevo.dynamics import median, niche_count, replay, window_stats
+from ..sim.scenario import Scenario
+from .checkpoints import load_checkpoint
+from .files import REPLAY_FILE, RunError, atomic_write_bytes
 from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
 from .replay_page import HTML_FILE, page_data, write_page
-from .checkpoints import load_checkpoint
-from .files import REPLAY_FILE, RunError, atomic_write_bytes
 from .runconfig import _size, estimate_bytes, memory_limit, read_config, run_scenario
 from .summary import generation_team, read_summary, read_teams
-from ..sim.scenario import Scenario
 
 
 def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:
@@ -26,8 +26,11 @@ def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:
     out: dict[int, dict] = {}
     for g, rec in read_teams(run_dir).items():
         try:
-            niches = int(rec["niches"]) if "niches" in rec else \
-                niche_count(design_capabilities(rec["designs"], scenario))
+            niches = (
+                int(rec["niches"])
+                if "niches" in rec
+                else niche_count(design_capabilities(rec["designs"], scenario))
+            )
             out[g] = {"niches": niches, "score": float(rec["fitness"])}
         except (KeyError, TypeError, ValueError):
             continue
@@ -51,7 +54,7 @@ def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None
     if not history:
         raise RunError(f"{run_dir} has no finished generation")
     try:
-        scenario = run_scenario(run_dir, cfg)      # the run's own copy where it kept one
+        scenario = run_scenario(run_dir, cfg)  # the run's own copy where it kept one
     except ValueError as e:
         raise RunError(f"{run_dir}: its scenario cannot be loaded ({e})") from None
     turnover, rows = replay(history)
@@ -66,9 +69,17 @@ def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None
     return out
 
 
-def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0,
-               ticks: int | None = None, every: int = 2, generation: int | None = None,
-               fps: float = 10, dpi: int = 80, html: bool = False) -> tuple[Path, dict]:
+def replay_run(
+    run_dir: str | Path,
+    out: str | Path | None = None,
+    seed: int = 0,
+    ticks: int | None = None,
+    every: int = 2,
+    generation: int | None = None,
+    fps: float = 10,
+    dpi: int = 80,
+    html: bool = False,
+) -> tuple[Path, dict]:
     """Render the best team of a run (summary.json "designs"), or the best team of one
     `generation` (teams.jsonl), as a GIF, or (`html`) as an interactive page.
 
@@ -97,23 +108,34 @@ def replay_run(run_dir: str | Path, out: str | Path | None = None, seed: int = 0
     else:
         record = read_summary(run_dir, figures=False)
     designs = record["designs"]
-    scenario = run_scenario(run_dir, cfg)        # the run's own copies, when it has them
+    scenario = run_scenario(run_dir, cfg)  # the run's own copies, when it has them
     robots = sum(d["count"] for d in designs)
     need = estimate_bytes(replace(cfg, population=1, trials=1, swarm_size=robots), scenario)
     limit, what = memory_limit("cpu")
     if need > limit:
-        raise RunError(f"the team to replay has {robots} robots, which would need about "
-                       f"{_size(need)} of memory, more than the {_size(limit)} of {what}")
+        raise RunError(
+            f"the team to replay has {robots} robots, which would need about "
+            f"{_size(need)} of memory, more than the {_size(limit)} of {what}"
+        )
     if ticks is None:
         ticks = cfg.ticks or scenario.episode_ticks
     if html:
         fitness = record.get("fitness") if generation is not None else record.get("best_fitness")
-        rec = {"run": run_dir.name, "fitness": fitness if isinstance(fitness, (int, float)) else None,
-               "generation": generation if generation is not None else record.get("best_generation")}
+        rec = {
+            "run": run_dir.name,
+            "fitness": fitness if isinstance(fitness, (int, float)) else None,
+            "generation": generation if generation is not None else record.get("best_generation"),
+        }
         what = f"generation {generation}" if generation is not None else "best team"
-        data = page_data(designs, scenario, cfg, seed=seed, ticks=ticks,
-                         title=f"SwarmCoDe replay: {run_dir.name}, {what}",
-                         record={k: v for k, v in rec.items() if v is not None})
+        data = page_data(
+            designs,
+            scenario,
+            cfg,
+            seed=seed,
+            ticks=ticks,
+            title=f"SwarmCoDe replay: {run_dir.name}, {what}",
+            record={k: v for k, v in rec.items() if v is not None},
+        )
         write_page(data, out)
         return out, dict(data["panels"]["focal"]["metrics"])
     genome, team = team_genome(designs, cfg.tag_length)

@@ -23,17 +23,18 @@ import os
 import re
 import sys
 import time
+from collections.abc import Callable, Iterable
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any
 
-from . import records, session
 from ..coevo.config import SwarmCoDeConfig
 from ..coevo.evaluation import ScoreFn, score_fn_name
-from ..sim.runtime import set_threads
 from ..coevo.evolve import Evolution, GenerationResult
+from ..sim.runtime import set_threads
 from ..sim.scenario import Scenario
+from . import records, session
 from .checkpoints import load_run
 from .files import RunError, new_run_dir
 from .runconfig import scenario_to_toml  # noqa: F401 - the API's, as before
@@ -84,9 +85,11 @@ class RunResult:
         try:
             import pandas as pd
         except ImportError:
-            raise ImportError("RunResult.to_pandas() needs pandas: pip install pandas (or "
-                              "pip install -e '.[pandas]' in the source tree); RunResult.history "
-                              "holds the same records as a list of dicts") from None
+            raise ImportError(
+                "RunResult.to_pandas() needs pandas: pip install pandas (or "
+                "pip install -e '.[pandas]' in the source tree); RunResult.history "
+                "holds the same records as a list of dicts"
+            ) from None
         return pd.DataFrame(self.history).set_index("generation")
 
     def __repr__(self) -> str:
@@ -94,8 +97,10 @@ class RunResult:
         fit = best.get("fitness")
         text = f"fitness {fit:.2f}, {best.get('species')} species" if fit is not None else "no team"
         where = str(self.run_dir) if self.run_dir is not None else "in memory"
-        return (f"RunResult({self.config.scenario!r}, {self.generations}/"
-                f"{self.config.generations} generations, best team: {text}, {where})")
+        return (
+            f"RunResult({self.config.scenario!r}, {self.generations}/"
+            f"{self.config.generations} generations, best team: {text}, {where})"
+        )
 
 
 class _History:
@@ -125,13 +130,15 @@ def _interactive(stream) -> bool:
         return True
     try:
         return bool(stream.isatty())
-    except (AttributeError, ValueError):       # no isatty, or a closed stream
+    except (AttributeError, ValueError):  # no isatty, or a closed stream
         return False
 
 
 def _clock(seconds: float) -> str:
     s = int(round(seconds))
-    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+    return (
+        f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+    )
 
 
 class _Progress:
@@ -155,10 +162,12 @@ class _Progress:
         ran = done - self.first
         left = (time.monotonic() - self.start) / ran * (total - done) if ran > 0 else None
         team = result.team
-        line = (f"done {done}/{total}  left {'?' if left is None else _clock(left)}  best "
-                f"{result.best['fitness']:.1f}  species {result.num_species}  team "
-                f"{team['species']} sp, {team['niches']} niches, ${team['cost']:.0f}  "
-                f"{result.seconds:.2f}s/gen")
+        line = (
+            f"done {done}/{total}  left {'?' if left is None else _clock(left)}  best "
+            f"{result.best['fitness']:.1f}  species {result.num_species}  team "
+            f"{team['species']} sp, {team['niches']} niches, ${team['cost']:.0f}  "
+            f"{result.seconds:.2f}s/gen"
+        )
         if self.inplace:
             self.stream.write("\r" + line.ljust(self.width))
             self.width = max(self.width, len(line))
@@ -177,7 +186,7 @@ class _Progress:
             self.width = 0
 
 
-def _progress(progress: bool | None) -> "_Progress | None":
+def _progress(progress: bool | None) -> _Progress | None:
     """The progress reporter of `progress`: None (the default) shows it on a terminal or in a
     notebook, True always, False never."""
     if progress is not None and not isinstance(progress, bool):
@@ -188,7 +197,7 @@ def _progress(progress: bool | None) -> "_Progress | None":
 
 
 @contextmanager
-def _closing(shown: "_Progress | None"):
+def _closing(shown: _Progress | None):
     """The progress line ended however the run ends (a Ctrl-C, an error)."""
     try:
         yield
@@ -198,8 +207,11 @@ def _closing(shown: "_Progress | None"):
 
 
 def _check_every(checkpoint_every: int, render_every: int, figure_every: int) -> None:
-    for name, v in (("checkpoint_every", checkpoint_every), ("render_every", render_every),
-                    ("figure_every", figure_every)):
+    for name, v in (
+        ("checkpoint_every", checkpoint_every),
+        ("render_every", render_every),
+        ("figure_every", figure_every),
+    ):
         if not isinstance(v, int) or isinstance(v, bool):
             raise TypeError(f"{name} must be an integer, got {v!r:.40}")
     if checkpoint_every < 1 or render_every < 0 or figure_every < 1:
@@ -211,18 +223,22 @@ def _check_hooks(callback, reporters) -> list:
     and on_end: TypeError before any file is written, not a crash mid-run. The reporters as a
     list."""
     if callback is not None and not callable(callback):
-        raise TypeError(f"callback must be a function of a GenerationResult, got "
-                        f"{type(callback).__name__}")
+        raise TypeError(
+            f"callback must be a function of a GenerationResult, got {type(callback).__name__}"
+        )
     if isinstance(reporters, (str, bytes)) or not hasattr(reporters, "__iter__"):
         raise TypeError(f"reporters must be a list of reporters, got {type(reporters).__name__}")
     reporters = list(reporters)
     for i, r in enumerate(reporters):
-        missing = [m for m in ("on_start", "on_generation", "on_end")
-                   if not callable(getattr(r, m, None))]
+        missing = [
+            m for m in ("on_start", "on_generation", "on_end") if not callable(getattr(r, m, None))
+        ]
         if missing:
-            raise TypeError(f"reporters[{i}] ({type(r).__name__}) has no {', '.join(missing)} "
-                            "method (a reporter has on_start(ev), on_generation(ev, result) and "
-                            "on_end(ev))")
+            raise TypeError(
+                f"reporters[{i}] ({type(r).__name__}) has no {', '.join(missing)} "
+                "method (a reporter has on_start(ev), on_generation(ev, result) and "
+                "on_end(ev))"
+            )
     return reporters
 
 
@@ -239,8 +255,10 @@ def _checked_fitness(fitness: ScoreFn | None) -> ScoreFn | None:
     if fitness is None:
         return None
     if not callable(fitness):
-        raise TypeError(f"fitness must be a function (metrics, cost, cfg) -> Tensor, "
-                        f"got {type(fitness).__name__}")
+        raise TypeError(
+            f"fitness must be a function (metrics, cost, cfg) -> Tensor, "
+            f"got {type(fitness).__name__}"
+        )
     if getattr(fitness, "__wrapped_fitness__", False):
         return fitness
 
@@ -252,9 +270,11 @@ def _checked_fitness(fitness: ScoreFn | None) -> ScoreFn | None:
         if isinstance(out, torch.Tensor) and out.numel() and out.is_floating_point():
             big = out.abs().max()
             if bool(torch.isfinite(big)) and float(big) > MAX_SCORE:
-                raise ValueError(f"the fitness function {score_fn_name(fitness)} returned a "
-                                 f"score of {float(big):.3g}, beyond the +-{MAX_SCORE:g} a run "
-                                 "can average (scale it down)")
+                raise ValueError(
+                    f"the fitness function {score_fn_name(fitness)} returned a "
+                    f"score of {float(big):.3g}, beyond the +-{MAX_SCORE:g} a run "
+                    "can average (scale it down)"
+                )
         return out
 
     checked.__module__ = getattr(fitness, "__module__", None) or type(fitness).__module__
@@ -271,8 +291,9 @@ def _wandb_reporters(project: str | None, run_dir: Path | None, render_every: in
     return [] if project is None else [WandbReporter(project, run_dir, render_every=render_every)]
 
 
-def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int = 50,
-                   figure_every: int = 50) -> list:
+def file_reporters(
+    run_dir: Path, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50
+) -> list:
     """The reporters that write a run directory, as `swarmcode-torch evolve` runs them:
     summary.json and teams.jsonl, metrics.csv, TensorBoard events (a replay image every
     `render_every` generations, 0: never; the composition figure every `figure_every`) and
@@ -281,36 +302,58 @@ def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int 
     return session.file_reporters(run_dir, checkpoint_every, render_every, figure_every)
 
 
-def _result(ev: Evolution, run_dir: Path | None, history: list[dict],
-            bounds: "session.Bounds | None" = None) -> RunResult:
+def _result(
+    ev: Evolution, run_dir: Path | None, history: list[dict], bounds: session.Bounds | None = None
+) -> RunResult:
     best = ev.state.best
-    return RunResult(config=ev.cfg, run_dir=run_dir, history=history,
-                     species=list(ev.state.history), best_team=dict(best) if best else None,
-                     scenario=ev.ctx.scenario, evolution=ev,
-                     stopped=bounds.reason if bounds is not None else None)
+    return RunResult(
+        config=ev.cfg,
+        run_dir=run_dir,
+        history=history,
+        species=list(ev.state.history),
+        best_team=dict(best) if best else None,
+        scenario=ev.ctx.scenario,
+        evolution=ev,
+        stopped=bounds.reason if bounds is not None else None,
+    )
 
 
-def _bounds(max_time, patience, snapshot_every) -> "session.Bounds | None":
+def _bounds(max_time, patience, snapshot_every) -> session.Bounds | None:
     """The run's `session.Bounds` (None without max_time and patience); ValueError otherwise."""
-    if not isinstance(snapshot_every, int) or isinstance(snapshot_every, bool) or \
-            snapshot_every < 0:
-        raise ValueError(f"snapshot_every must be an integer >= 0 (0: no snapshots), got "
-                         f"{snapshot_every!r:.40}")
+    if (
+        not isinstance(snapshot_every, int)
+        or isinstance(snapshot_every, bool)
+        or snapshot_every < 0
+    ):
+        raise ValueError(
+            f"snapshot_every must be an integer >= 0 (0: no snapshots), got {snapshot_every!r:.40}"
+        )
     if max_time is None and patience is None:
         return None
     return session.Bounds(max_time=max_time, patience=patience)
 
 
 # ------------------------------------------------------------------ evolve, resume, load
-def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
-           scenario: str | os.PathLike | Scenario | None = None,
-           logdir: str | os.PathLike | None = "runs", checkpoint_every: int = 10,
-           render_every: int = 50, figure_every: int = 50, reporters: Iterable = (),
-           callback: Callable[[GenerationResult], Any] | None = None,
-           fitness: ScoreFn | None = None, threads: int | None = None,
-           from_run: str | os.PathLike | None = None, snapshot_every: int = 0,
-           max_time: float | str | None = None, patience: int | None = None,
-           wandb: str | None = None, progress: bool | None = None, **settings) -> RunResult:
+def evolve(
+    config: SwarmCoDeConfig | str | os.PathLike | None = None,
+    *,
+    scenario: str | os.PathLike | Scenario | None = None,
+    logdir: str | os.PathLike | None = "runs",
+    checkpoint_every: int = 10,
+    render_every: int = 50,
+    figure_every: int = 50,
+    reporters: Iterable = (),
+    callback: Callable[[GenerationResult], Any] | None = None,
+    fitness: ScoreFn | None = None,
+    threads: int | None = None,
+    from_run: str | os.PathLike | None = None,
+    snapshot_every: int = 0,
+    max_time: float | str | None = None,
+    patience: int | None = None,
+    wandb: str | None = None,
+    progress: bool | None = None,
+    **settings,
+) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
     config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
@@ -368,11 +411,26 @@ def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
     set_threads(threads)
     reporters = [*([shown] if shown else []), *reporters, *wandb_reporters]
     if from_run is not None:
-        return _branch(config, scenario, logdir, from_run, settings, fitness, reporters, callback,
-                       bounds, checkpoint_every, render_every, figure_every, snapshot_every,
-                       wandb_reporters, shown)
+        return _branch(
+            config,
+            scenario,
+            logdir,
+            from_run,
+            settings,
+            fitness,
+            reporters,
+            callback,
+            bounds,
+            checkpoint_every,
+            render_every,
+            figure_every,
+            snapshot_every,
+            wandb_reporters,
+            shown,
+        )
     if isinstance(config, (str, os.PathLike)):
         from .runconfig import read_config_file
+
         config = read_config_file(Path(config))
     scenario_obj = scenario if isinstance(scenario, Scenario) else None
     if scenario is not None and scenario_obj is None:
@@ -385,25 +443,49 @@ def evolve(config: SwarmCoDeConfig | str | os.PathLike | None = None, *,
     history = _History(callback)
     with ExitStack() as stack:
         start = session.start_new(stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness)
-        for r in wandb_reporters:               # named after the run directory, if there is one
+        for r in wandb_reporters:  # named after the run directory, if there is one
             r.run_dir = start.run_dir
-        reps = [] if logdir is None else \
-            session.file_reporters(start.run_dir, checkpoint_every, render_every, figure_every,
-                                   snapshot_every=snapshot_every)
+        reps = (
+            []
+            if logdir is None
+            else session.file_reporters(
+                start.run_dir,
+                checkpoint_every,
+                render_every,
+                figure_every,
+                snapshot_every=snapshot_every,
+            )
+        )
         with _closing(shown):
             session.run(start.ev, start.run_dir, [*reps, history, *reporters], bounds=bounds)
     return _result(start.ev, start.run_dir, history.rows, bounds)
 
 
-def _branch(config, scenario, logdir, from_run, settings, fitness, reporters, callback, bounds,
-            checkpoint_every, render_every, figure_every, snapshot_every,
-            wandb_reporters=(), shown=None) -> RunResult:
+def _branch(
+    config,
+    scenario,
+    logdir,
+    from_run,
+    settings,
+    fitness,
+    reporters,
+    callback,
+    bounds,
+    checkpoint_every,
+    render_every,
+    figure_every,
+    snapshot_every,
+    wandb_reporters=(),
+    shown=None,
+) -> RunResult:
     """`evolve(from_run=...)`: a new run from a run's snapshot (`session.start_branch`)."""
     from .checkpoints import load_branch, parse_run_ref
 
     if config is not None:
-        raise ValueError("config and from_run cannot be used together: a branch starts from its "
-                         "parent's config (give the changes as settings)")
+        raise ValueError(
+            "config and from_run cannot be used together: a branch starts from its "
+            "parent's config (give the changes as settings)"
+        )
     if isinstance(scenario, Scenario):
         raise ValueError("a branch runs on its parent's scenario; scenario cannot change")
     if scenario is not None:
@@ -411,7 +493,7 @@ def _branch(config, scenario, logdir, from_run, settings, fitness, reporters, ca
     run, generation = parse_run_ref(os.fspath(from_run))
     branch = load_branch(run, generation)
     cfg = make_config(branch.config, **settings)
-    if logdir == "runs":                    # the default: beside the parent
+    if logdir == "runs":  # the default: beside the parent
         logdir = branch.run_dir.parent
     make_dir = None if logdir is None else (lambda ev: new_run_dir(Path(logdir), cfg))
     history = _History(callback)
@@ -419,16 +501,25 @@ def _branch(config, scenario, logdir, from_run, settings, fitness, reporters, ca
         start = session.start_branch(stack, branch, cfg, make_dir, fitness=fitness)
         for r in wandb_reporters:
             r.run_dir = start.run_dir
-        reps = [] if logdir is None else \
-            session.file_reporters(start.run_dir, checkpoint_every, render_every, figure_every,
-                                   snapshot_every=snapshot_every)
+        reps = (
+            []
+            if logdir is None
+            else session.file_reporters(
+                start.run_dir,
+                checkpoint_every,
+                render_every,
+                figure_every,
+                snapshot_every=snapshot_every,
+            )
+        )
         with _closing(shown):
             session.run(start.ev, start.run_dir, [*reps, history, *reporters], bounds=bounds)
     return _result(start.ev, start.run_dir, history.rows, bounds)
 
 
-def start_evolution(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
-                    fitness: ScoreFn | None = None) -> tuple[Evolution, bytes]:
+def start_evolution(
+    cfg: SwarmCoDeConfig, scenario: Scenario | None = None, fitness: ScoreFn | None = None
+) -> tuple[Evolution, bytes]:
     """The checks `swarmcode-torch evolve` makes before it creates anything (the config, the
     scenario, the memory the run needs), then the run's `Evolution` and the bytes of its
     scenario file (a run directory keeps them as scenario.toml). `scenario`: a Scenario object
@@ -449,14 +540,24 @@ def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
     return [r for r in read_metrics_csv(path)[0] if r["generation"] < before]
 
 
-def resume(run_dir: str | os.PathLike, generations: int | None = None, device: str | None = None,
-           *, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50,
-           reporters: Iterable = (),
-           callback: Callable[[GenerationResult], Any] | None = None,
-           fitness: ScoreFn | None = None, threads: int | None = None,
-           snapshot_every: int = 0, max_time: float | str | None = None,
-           patience: int | None = None, wandb: str | None = None,
-           progress: bool | None = None) -> RunResult:
+def resume(
+    run_dir: str | os.PathLike,
+    generations: int | None = None,
+    device: str | None = None,
+    *,
+    checkpoint_every: int = 10,
+    render_every: int = 50,
+    figure_every: int = 50,
+    reporters: Iterable = (),
+    callback: Callable[[GenerationResult], Any] | None = None,
+    fitness: ScoreFn | None = None,
+    threads: int | None = None,
+    snapshot_every: int = 0,
+    max_time: float | str | None = None,
+    patience: int | None = None,
+    wandb: str | None = None,
+    progress: bool | None = None,
+) -> RunResult:
     """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
     to `generations` in all (default: the run's), on `device` (default: the run's);
     `fitness`: the run's own fitness function, for a run started with one (`evolve`). The
@@ -466,32 +567,42 @@ def resume(run_dir: str | os.PathLike, generations: int | None = None, device: s
     `GenerationResult`), `threads`, `snapshot_every`, `max_time`, `patience`, `wandb` and
     `progress`: as in `evolve` (`max_time` counts from this call)."""
     _check_every(checkpoint_every, render_every, figure_every)
-    reporters = _check_hooks(callback, reporters) + _wandb_reporters(wandb, Path(run_dir),
-                                                                     render_every)
+    reporters = _check_hooks(callback, reporters) + _wandb_reporters(
+        wandb, Path(run_dir), render_every
+    )
     fitness = _checked_fitness(fitness)
     bounds = _bounds(max_time, patience, snapshot_every)
     shown = _progress(progress)
-    if generations is not None and (not isinstance(generations, int)
-                                    or isinstance(generations, bool) or generations < 1):
-        raise ValueError(f"generations must be an integer >= 1 (the total to extend the run "
-                         f"to), got {generations!r:.40}")
+    if generations is not None and (
+        not isinstance(generations, int) or isinstance(generations, bool) or generations < 1
+    ):
+        raise ValueError(
+            f"generations must be an integer >= 1 (the total to extend the run "
+            f"to), got {generations!r:.40}"
+        )
     set_threads(threads)
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise RunError(f"{run_dir} is not a run directory (no such directory)")
     with ExitStack() as stack:
-        start = session.start_resume(stack, run_dir, generations=generations, device=device,
-                                     fitness=fitness)
+        start = session.start_resume(
+            stack, run_dir, generations=generations, device=device, fitness=fitness
+        )
         ev = start.ev
         earlier = _earlier_rows(run_dir, ev.state.generation)
-        if ev.done:                         # nothing to run: no file changes (as the CLI)
+        if ev.done:  # nothing to run: no file changes (as the CLI)
             return _result(ev, run_dir, earlier)
         history = _History(callback)
-        reps = session.file_reporters(run_dir, checkpoint_every, render_every, figure_every,
-                                      snapshot_every=snapshot_every)
+        reps = session.file_reporters(
+            run_dir, checkpoint_every, render_every, figure_every, snapshot_every=snapshot_every
+        )
         with _closing(shown):
-            session.run(ev, run_dir, [*reps, history, *([shown] if shown else []), *reporters],
-                        bounds=bounds)
+            session.run(
+                ev,
+                run_dir,
+                [*reps, history, *([shown] if shown else []), *reporters],
+                bounds=bounds,
+            )
     return _result(ev, run_dir, earlier + history.rows, bounds)
 
 
@@ -502,6 +613,11 @@ def load(run_dir: str | os.PathLike) -> RunResult:
     run_dir = Path(run_dir)
     cfg, ck, scenario = load_run(run_dir)
     best = ck["best"]
-    return RunResult(config=cfg, run_dir=run_dir, history=_earlier_rows(run_dir, math.inf),
-                     species=list(ck["history"]), best_team=dict(best) if best else None,
-                     scenario=scenario)
+    return RunResult(
+        config=cfg,
+        run_dir=run_dir,
+        history=_earlier_rows(run_dir, math.inf),
+        species=list(ck["history"]),
+        best_team=dict(best) if best else None,
+        scenario=scenario,
+    )

@@ -18,10 +18,22 @@ from ..coevo.config import SwarmCoDeConfig, with_overrides
 from ..coevo.evaluation import score_fn_name
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.scenario import Scenario
-from .files import (CHECKPOINT_FILE, CONFIG_FILE, HARDWARE_COPY, METRICS_FILE, SCENARIO_COPY,
-                    SNAPSHOT_DIR, RunError, atomic_write_bytes, open_nofollow, read_file_bytes, refuse_links)
+from .files import (
+    CHECKPOINT_FILE,
+    CONFIG_FILE,
+    HARDWARE_COPY,
+    METRICS_FILE,
+    SCENARIO_COPY,
+    SNAPSHOT_DIR,
+    RunError,
+    atomic_write_bytes,
+    open_nofollow,
+    read_file_bytes,
+    refuse_links,
+)
 from .migrations import check_runnable
 from .runconfig import check_config, config_differences, config_from_dict, read_config, run_scenario
+
 
 def copy_digests(run_dir: Path) -> dict[str, str]:
     """sha256 of the run's scenario.toml and hardware.toml copies (those it has): a checkpoint
@@ -45,9 +57,11 @@ def check_copies(run_dir: Path, d: dict) -> None:
     for name in (SCENARIO_COPY, HARDWARE_COPY):
         if saved.get(name) != now.get(name):
             state = "is missing" if name not in now else "was changed"
-            raise RunError(f"{Path(run_dir) / name} {state} since the run started (its sha256 "
-                           f"is not the one {CHECKPOINT_FILE} recorded); the run computes with "
-                           "its own copy: restore it, or start a new run")
+            raise RunError(
+                f"{Path(run_dir) / name} {state} since the run started (its sha256 "
+                f"is not the one {CHECKPOINT_FILE} recorded); the run computes with "
+                "its own copy: restore it, or start a new run"
+            )
 
 
 def save_checkpoint(run_dir: Path, ev: Evolution, path: Path | None = None) -> Path:
@@ -96,11 +110,21 @@ def list_snapshots(run_dir: Path) -> dict[int, Path]:
 
 
 #: What a checkpoint may hold at the top level, and the type of each entry.
-_CHECKPOINT_KEYS = {"version": int, "config": dict, "generation": int, "genome": dict,
-                    "species_hint": torch.Tensor, "proto": (dict, type(None)),
-                    "proto_ids": torch.Tensor, "next_species_id": int, "fitness": torch.Tensor,
-                    "has_fitness": torch.Tensor, "rng_state": torch.Tensor,
-                    "best": (dict, type(None)), "history": list}
+_CHECKPOINT_KEYS = {
+    "version": int,
+    "config": dict,
+    "generation": int,
+    "genome": dict,
+    "species_hint": torch.Tensor,
+    "proto": (dict, type(None)),
+    "proto_ids": torch.Tensor,
+    "next_species_id": int,
+    "fitness": torch.Tensor,
+    "has_fitness": torch.Tensor,
+    "rng_state": torch.Tensor,
+    "best": (dict, type(None)),
+    "history": list,
+}
 
 
 def read_checkpoint(path: Path) -> dict:
@@ -110,12 +134,14 @@ def read_checkpoint(path: Path) -> dict:
     swarmcode-torch checkpoint."""
     path = Path(path)
     try:
-        with os.fdopen(open_nofollow(path, os.O_RDONLY), "rb") as f:   # never through a link
+        with os.fdopen(open_nofollow(path, os.O_RDONLY), "rb") as f:  # never through a link
             d = torch.load(f, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as e:
         if "weights only load failed" in str(e).lower() or "unsupported global" in str(e).lower():
-            raise RunError(f"{path} was refused: loading it would run code (only tensors, "
-                           "numbers, strings and plain containers are allowed)") from None
+            raise RunError(
+                f"{path} was refused: loading it would run code (only tensors, "
+                "numbers, strings and plain containers are allowed)"
+            ) from None
         raise RunError(f"{path} is corrupt or not a checkpoint (UnpicklingError)") from None
     except OSError as e:
         raise RunError(f"{path} cannot be read ({e.strerror or type(e).__name__})") from None
@@ -127,8 +153,9 @@ def read_checkpoint(path: Path) -> dict:
         if key not in d:
             raise RunError(f"{path} is not a complete checkpoint (no {key!r})")
         if not isinstance(d[key], kind) or isinstance(d[key], bool) and kind is int:
-            raise RunError(f"{path} is damaged: {key!r} has the wrong type "
-                           f"({type(d[key]).__name__})")
+            raise RunError(
+                f"{path} is damaged: {key!r} has the wrong type ({type(d[key]).__name__})"
+            )
     return d
 
 
@@ -148,18 +175,21 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     refuse_links(run_dir)
     cfg = read_config(run_dir)
     d = load_checkpoint(run_dir)
-    scenario = run_scenario(run_dir, cfg)       # a damaged copy: the file and field named
+    scenario = run_scenario(run_dir, cfg)  # a damaged copy: the file and field named
     check_copies(run_dir, d)
     saved = config_from_dict(d["config"], f"{run_dir / CHECKPOINT_FILE} (its config)")
     diff = config_differences(cfg, saved, scenario)
     if diff:
-        raise RunError(f"{run_dir / CONFIG_FILE} does not match the config saved in "
-                       f"{CHECKPOINT_FILE} (differing keys: {', '.join(diff)}); restore "
-                       f"{CONFIG_FILE} or start a new run")
+        raise RunError(
+            f"{run_dir / CONFIG_FILE} does not match the config saved in "
+            f"{CHECKPOINT_FILE} (differing keys: {', '.join(diff)}); restore "
+            f"{CONFIG_FILE} or start a new run"
+        )
     metrics = run_dir / METRICS_FILE
     if metrics.exists() or metrics.is_symlink():
         from .reporting import read_metrics_csv
-        read_metrics_csv(metrics, raw=True)      # a header a resume would lose rows under
+
+        read_metrics_csv(metrics, raw=True)  # a header a resume would lose rows under
     return cfg, d, scenario
 
 
@@ -171,14 +201,18 @@ def same_function(recorded: str, given: str) -> bool:
         return True
     main = "__main__."
     for a, b in ((recorded, given), (given, recorded)):
-        if a.startswith(main) and not b.startswith(main) and b.endswith("." + a[len(main):]):
+        if a.startswith(main) and not b.startswith(main) and b.endswith("." + a[len(main) :]):
             return True
     return False
 
 
-def resume(run_dir: Path, generations: int | None = None, device: str | None = None,
-           loaded: tuple[SwarmCoDeConfig, dict, Scenario] | None = None,
-           fitness=None) -> Evolution:
+def resume(
+    run_dir: Path,
+    generations: int | None = None,
+    device: str | None = None,
+    loaded: tuple[SwarmCoDeConfig, dict, Scenario] | None = None,
+    fitness=None,
+) -> Evolution:
     """The run in `run_dir`, continued from its checkpoint with its saved config and its own
     copy of the scenario (`load_run`; `loaded` is what `load_run` returned, if it was called).
     `fitness`: the user fitness function of a run started with one (`api.evolve(fitness=)`),
@@ -187,27 +221,36 @@ def resume(run_dir: Path, generations: int | None = None, device: str | None = N
     run_dir = Path(run_dir)
     cfg, d, scenario = loaded or load_run(run_dir)
     if cfg.fitness_function is not None and fitness is None:
-        raise RunError(f"{run_dir} was scored by a custom fitness function "
-                       f"({cfg.fitness_function}): resume it from Python with the same "
-                       "function, swarmcode_torch.resume(run_dir, fitness=fn)")
+        raise RunError(
+            f"{run_dir} was scored by a custom fitness function "
+            f"({cfg.fitness_function}): resume it from Python with the same "
+            "function, swarmcode_torch.resume(run_dir, fitness=fn)"
+        )
     if cfg.fitness_function is None and fitness is not None:
-        raise RunError(f"{run_dir} was scored by the built-in fitness; a resume cannot change "
-                       "its fitness function (start a new run with fitness=fn)")
-    if cfg.fitness_function is not None and not same_function(cfg.fitness_function,
-                                                               score_fn_name(fitness)):
-        raise RunError(f"{run_dir} was scored by {cfg.fitness_function}, not by "
-                       f"{score_fn_name(fitness)}: a resume cannot change its fitness function "
-                       f"(resume it with {cfg.fitness_function}, or start a new run with "
-                       "fitness=fn)")
+        raise RunError(
+            f"{run_dir} was scored by the built-in fitness; a resume cannot change "
+            "its fitness function (start a new run with fitness=fn)"
+        )
+    if cfg.fitness_function is not None and not same_function(
+        cfg.fitness_function, score_fn_name(fitness)
+    ):
+        raise RunError(
+            f"{run_dir} was scored by {cfg.fitness_function}, not by "
+            f"{score_fn_name(fitness)}: a resume cannot change its fitness function "
+            f"(resume it with {cfg.fitness_function}, or start a new run with "
+            "fitness=fn)"
+        )
     check_runnable(d["config"], str(run_dir / CHECKPOINT_FILE))
     cfg = with_overrides(cfg, generations=generations, device=device)
     check_config(cfg, scenario)
-    try:                           # the run keeps the scenario it names; it runs on its copy
+    try:  # the run keeps the scenario it names; it runs on its copy
         return Evolution.from_checkpoint(d, cfg, fitness, scenario, checked=True)
     except ValueError as e:
         raise RunError(f"{run_dir / CHECKPOINT_FILE} does not fit the run's config: {e}") from None
     except (KeyError, TypeError, RuntimeError, IndexError) as e:
-        raise RunError(f"checkpoint in {run_dir} is incompatible ({type(e).__name__}: {e})") from None
+        raise RunError(
+            f"checkpoint in {run_dir} is incompatible ({type(e).__name__}: {e})"
+        ) from None
 
 
 @dataclass
@@ -229,8 +272,11 @@ class Branch:
     @property
     def parent(self) -> dict:
         """The [parent] table of the new run's config.toml and its summary.json's "parent"."""
-        return {"run": str(self.run_dir.absolute()), "generation": self.generation,
-                "checkpoint": self.path.relative_to(self.run_dir).as_posix()}
+        return {
+            "run": str(self.run_dir.absolute()),
+            "generation": self.generation,
+            "checkpoint": self.path.relative_to(self.run_dir).as_posix(),
+        }
 
 
 def parse_run_ref(text: str) -> tuple[Path, int | None]:
@@ -277,10 +323,13 @@ def load_branch(run_dir: Path, generation: int | None = None) -> Branch:
                 held = d["generation"]
             if held != generation:
                 have = ", ".join(map(str, snaps)) or "none"
-                extra = f"; its {CHECKPOINT_FILE} holds generation {held}" if held is not None \
-                    else ""
-                raise RunError(f"{run_dir} has no snapshot of generation {generation} "
-                               f"(snapshots of generations: {have}{extra})")
+                extra = (
+                    f"; its {CHECKPOINT_FILE} holds generation {held}" if held is not None else ""
+                )
+                raise RunError(
+                    f"{run_dir} has no snapshot of generation {generation} "
+                    f"(snapshots of generations: {have}{extra})"
+                )
         if d is None:
             d = read_checkpoint(path)
         if d["generation"] != generation:
@@ -290,8 +339,10 @@ def load_branch(run_dir: Path, generation: int | None = None) -> Branch:
     saved = config_from_dict(d["config"], f"{path} (its config)")
     diff = config_differences(cfg, saved, scenario)
     if diff:
-        raise RunError(f"{run_dir / CONFIG_FILE} does not match the config saved in {path} "
-                       f"(differing keys: {', '.join(diff)})")
+        raise RunError(
+            f"{run_dir / CONFIG_FILE} does not match the config saved in {path} "
+            f"(differing keys: {', '.join(diff)})"
+        )
 
     def copy(name: str) -> bytes | None:
         p = run_dir / name
@@ -302,8 +353,9 @@ def load_branch(run_dir: Path, generation: int | None = None) -> Branch:
         except OSError as e:
             raise RunError(f"{p} cannot be read ({e.strerror or type(e).__name__})") from None
 
-    return Branch(run_dir, d["generation"], path, cfg, d, scenario, copy(SCENARIO_COPY),
-                  copy(HARDWARE_COPY))
+    return Branch(
+        run_dir, d["generation"], path, cfg, d, scenario, copy(SCENARIO_COPY), copy(HARDWARE_COPY)
+    )
 
 
 class CheckpointReporter:
@@ -325,7 +377,7 @@ class CheckpointReporter:
             snapshot_folder(self.run_dir, make=True)
         path = self.run_dir / CHECKPOINT_FILE
         if path.exists() or path.is_symlink():
-            self.saved = ev.state.generation        # resumed from it
+            self.saved = ev.state.generation  # resumed from it
         else:
             self._save(ev)
 

@@ -21,9 +21,10 @@ from __future__ import annotations
 import os
 import pickle
 import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import torch
 
@@ -96,8 +97,9 @@ def check_ray_address(address: str, what: str) -> None:
     host, sep, port_text = address.rpartition(":")
     host = host.strip("[]")
     if not sep or not host or not port_text.isdigit() or not 0 < int(port_text) < 65536:
-        raise RayUnavailable(f"{what}: --ray-address must be auto or HOST:PORT, got "
-                             f"{address[:100]!r}")
+        raise RayUnavailable(
+            f"{what}: --ray-address must be auto or HOST:PORT, got {address[:100]!r}"
+        )
     timeout = _connect_timeout()
     where = f"the Ray cluster at {address}"
     try:
@@ -111,16 +113,20 @@ def check_ray_address(address: str, what: str) -> None:
                 if not chunk:
                     break
                 answer += chunk
-    except socket.timeout:
-        raise RayUnavailable(f"{what}: cannot join {where}: no answer within {timeout:g} s") \
-            from None
+    except TimeoutError:
+        raise RayUnavailable(
+            f"{what}: cannot join {where}: no answer within {timeout:g} s"
+        ) from None
     except OSError as e:
-        raise RayUnavailable(f"{what}: cannot join {where} "
-                             f"({e.strerror or type(e).__name__})") from None
+        raise RayUnavailable(
+            f"{what}: cannot join {where} ({e.strerror or type(e).__name__})"
+        ) from None
     if len(answer) < 9 or answer[3] != 0x04:
-        raise RayUnavailable(f"{what}: cannot join {where}: it does not answer as a Ray head "
-                             "(no gRPC answer); give the address of the head's GCS, "
-                             "HOST:6379 by default")
+        raise RayUnavailable(
+            f"{what}: cannot join {where}: it does not answer as a Ray head "
+            "(no gRPC answer); give the address of the head's GCS, "
+            "HOST:6379 by default"
+        )
 
 
 @contextmanager
@@ -156,8 +162,10 @@ def check_resources(ray, need: dict[str, float], what: str) -> dict[str, float]:
     have = ray.cluster_resources()
     for name, amount in need.items():
         if amount > have.get(name, 0.0) + 1e-9:
-            raise RayUnavailable(f"{what} needs {amount:g} {name} at once, the Ray cluster has "
-                                 f"{have.get(name, 0.0):g}")
+            raise RayUnavailable(
+                f"{what} needs {amount:g} {name} at once, the Ray cluster has "
+                f"{have.get(name, 0.0):g}"
+            )
     return have
 
 
@@ -171,9 +179,15 @@ def _run_task(fn: Callable, threads: int, hide_gpus: bool, *args):
     return fn(*args)
 
 
-def run_tasks(fn: Callable, jobs: list[tuple], *, workers: int, num_cpus: float,
-              num_gpus: float, on_finish: Callable[[int, str | None, dict], None] | None = None
-              ) -> list[str | None]:
+def run_tasks(
+    fn: Callable,
+    jobs: list[tuple],
+    *,
+    workers: int,
+    num_cpus: float,
+    num_gpus: float,
+    on_finish: Callable[[int, str | None, dict], None] | None = None,
+) -> list[str | None]:
     """fn(*job) for every job as a Ray task (Ray connected: `ray_session`), at most `workers` at
     once, each reserving `num_cpus` CPUs and `num_gpus` GPUs; fn returns None when the job
     finished, else its error in one line. A task is not retried: its job is reported failed
@@ -206,8 +220,16 @@ def run_tasks(fn: Callable, jobs: list[tuple], *, workers: int, num_cpus: float,
                 else:
                     failed += 1
                 if on_finish is not None:
-                    on_finish(i, errors[i], {"done": done, "running": len(running),
-                                             "failed": failed, "total": len(jobs)})
+                    on_finish(
+                        i,
+                        errors[i],
+                        {
+                            "done": done,
+                            "running": len(running),
+                            "failed": failed,
+                            "total": len(jobs),
+                        },
+                    )
     except KeyboardInterrupt:
         refs = list(running)
         for ref in refs:
@@ -231,18 +253,25 @@ def _pack_tensor(t: torch.Tensor) -> tuple:
     dtype = t.dtype
     same = False
     if t.dim() > 0 and t.shape[0] > 1:
-        bits = t.view(_SAME_SIZE_INT[t.element_size()]) \
-            if t.is_floating_point() and t.element_size() in _SAME_SIZE_INT else t
+        bits = (
+            t.view(_SAME_SIZE_INT[t.element_size()])
+            if t.is_floating_point() and t.element_size() in _SAME_SIZE_INT
+            else t
+        )
         same = bool((bits == bits[:1]).all())
     base = t[:1] if same else t
     if dtype in _INT_WIDTHS and base.numel():
         lo, hi = int(base.min()), int(base.max())
-        small = next(w for w in _INT_WIDTHS
-                     if torch.iinfo(w).min <= lo and hi <= torch.iinfo(w).max)
+        small = next(
+            w for w in _INT_WIDTHS if torch.iinfo(w).min <= lo and hi <= torch.iinfo(w).max
+        )
         if small.itemsize < dtype.itemsize:
             base = base.to(small)
-    return base.contiguous().numpy(), str(dtype).removeprefix("torch."), \
-        tuple(t.shape) if same else None
+    return (
+        base.contiguous().numpy(),
+        str(dtype).removeprefix("torch."),
+        tuple(t.shape) if same else None,
+    )
 
 
 def _unpack_tensor(packed: tuple) -> torch.Tensor:
@@ -255,23 +284,33 @@ def pack_batch(batch: SimBatch) -> bytes:
     """The bytes a shard is sent: its `SimBatch` (genome rows, teams, environments), pickled
     with `_pack_tensor`'s lossless compaction."""
     p = _pack_tensor
-    tree = ({f.name: p(getattr(batch.genome, f.name)) for f in fields(Population)},
-            p(batch.focal_team), p(batch.baseline_team), [p(t) for t in batch.layouts],
-            batch.trials)
+    tree = (
+        {f.name: p(getattr(batch.genome, f.name)) for f in fields(Population)},
+        p(batch.focal_team),
+        p(batch.baseline_team),
+        [p(t) for t in batch.layouts],
+        batch.trials,
+    )
     return pickle.dumps(tree, protocol=pickle.HIGHEST_PROTOCOL)
 
 
 def unpack_batch(data: bytes, device: torch.device | str = "cpu") -> SimBatch:
     genome, focal, base, layouts, trials = pickle.loads(data)
     u = _unpack_tensor
-    return SimBatch(Population(**{k: u(v) for k, v in genome.items()}), u(focal), u(base),
-                    Layout(*(u(t) for t in layouts)), trials).to(device)
+    return SimBatch(
+        Population(**{k: u(v) for k, v in genome.items()}),
+        u(focal),
+        u(base),
+        Layout(*(u(t) for t in layouts)),
+        trials,
+    ).to(device)
 
 
 def pack_metrics(m: dict, seconds: float) -> bytes:
     """The bytes a shard sends back: its per-environment metrics and rollout seconds."""
-    return pickle.dumps(({k: _pack_tensor(v) for k, v in m.items()}, seconds),
-                        protocol=pickle.HIGHEST_PROTOCOL)
+    return pickle.dumps(
+        ({k: _pack_tensor(v) for k, v in m.items()}, seconds), protocol=pickle.HIGHEST_PROTOCOL
+    )
 
 
 def unpack_metrics(data: bytes, device: torch.device | str = "cpu") -> tuple[dict, float]:
@@ -287,11 +326,11 @@ class ShardSpec:
 
     params: WorldParams
     ticks: int
-    device: str                 # "cpu" or "cuda" (the GPU Ray gave the actor)
-    compiled: bool              # torch.compile the tick
-    cuda_graphs: bool           # replay it as CUDA graphs
+    device: str  # "cpu" or "cuda" (the GPU Ray gave the actor)
+    compiled: bool  # torch.compile the tick
+    cuda_graphs: bool  # replay it as CUDA graphs
     cuda_graphs_required: bool  # cuda_graphs was set explicitly (a failure is an error)
-    threads: int                # torch CPU threads
+    threads: int  # torch CPU threads
     hardware: Catalog = field(default_factory=default_catalog)
 
 
@@ -314,15 +353,18 @@ class EvalShard:
         import socket
 
         if self.device.type == "cuda":
-            return f"{self.device} ({torch.cuda.get_device_name(self.device)}) on " \
-                   f"{socket.gethostname()}"
+            return (
+                f"{self.device} ({torch.cuda.get_device_name(self.device)}) on "
+                f"{socket.gethostname()}"
+            )
         return f"cpu ({torch.get_num_threads()} threads) on {socket.gethostname()}"
 
     def simulate(self, payload: bytes) -> bytes:
         """`pack_batch` bytes -> `pack_metrics` bytes of its per-environment metrics."""
         batch = unpack_batch(payload, self.device)
-        m, seconds = simulate_batch(batch, self.spec.params, self.spec.ticks, self.step_fn,
-                                    catalog=self.spec.hardware)
+        m, seconds = simulate_batch(
+            batch, self.spec.params, self.spec.ticks, self.step_fn, catalog=self.spec.hardware
+        )
         return pack_metrics(m, seconds)
 
 
@@ -350,26 +392,41 @@ class ShardedEvaluator:
         need = {"CPU": workers * cpus_per_worker}
         if gpu:
             need["GPU"] = float(workers)
-        check_resources(ray, need, what + (" (one GPU each, the run's device is CUDA)"
-                                           if gpu else f" x {cpus_per_worker:g} CPU"))
+        check_resources(
+            ray,
+            need,
+            what
+            + (
+                " (one GPU each, the run's device is CUDA)"
+                if gpu
+                else f" x {cpus_per_worker:g} CPU"
+            ),
+        )
         step = ctx.step_fn
         graphs = isinstance(step, CudaGraphTicks)
-        spec = ShardSpec(params=ctx.params, ticks=ctx.eval_cfg.ticks,
-                         device="cuda" if gpu else "cpu", compiled=ctx.compiled,
-                         cuda_graphs=graphs,
-                         cuda_graphs_required=graphs and ctx.cfg.cuda_graphs is not None,
-                         threads=max(1, int(cpus_per_worker)),
-                         hardware=ctx.scenario.hardware)
-        actor = ray.remote(num_cpus=cpus_per_worker, num_gpus=1 if gpu else 0,
-                           max_restarts=0)(EvalShard)
+        spec = ShardSpec(
+            params=ctx.params,
+            ticks=ctx.eval_cfg.ticks,
+            device="cuda" if gpu else "cpu",
+            compiled=ctx.compiled,
+            cuda_graphs=graphs,
+            cuda_graphs_required=graphs and ctx.cfg.cuda_graphs is not None,
+            threads=max(1, int(cpus_per_worker)),
+            hardware=ctx.scenario.hardware,
+        )
+        actor = ray.remote(num_cpus=cpus_per_worker, num_gpus=1 if gpu else 0, max_restarts=0)(
+            EvalShard
+        )
         self.actors = [actor.remote(spec) for _ in range(workers)]
         try:
-            self.where = ray.get([a.ready.remote() for a in self.actors],
-                                 timeout=ACTOR_START_TIMEOUT)
+            self.where = ray.get(
+                [a.ready.remote() for a in self.actors], timeout=ACTOR_START_TIMEOUT
+            )
         except Exception as e:  # noqa: BLE001 - a timeout or a dead actor: one line
             self.close()
-            raise RayUnavailable(f"{what}: the evaluation actors did not start "
-                                 f"({one_line(e)})") from None
+            raise RayUnavailable(
+                f"{what}: the evaluation actors did not start ({one_line(e)})"
+            ) from None
         self.stats: list[dict] = []
 
     def simulate(self, plan: EvalPlan, genome: Population) -> tuple[dict, float]:
@@ -392,12 +449,18 @@ class ShardedEvaluator:
         results = [unpack_metrics(o, self.device) for o in outs]
         m = gather_metrics([r[0] for r in results])
         seconds = [r[1] for r in results]
-        self.stats.append({
-            "shards": len(bounds), "evaluations": [hi - lo for lo, hi in bounds],
-            "bytes_sent": sent, "bytes_received": sum(len(o) for o in outs),
-            "send_seconds": t_sent - t0, "wait_seconds": t_back - t_sent,
-            "gather_seconds": time.perf_counter() - t_back, "shard_sim_seconds": seconds,
-        })
+        self.stats.append(
+            {
+                "shards": len(bounds),
+                "evaluations": [hi - lo for lo, hi in bounds],
+                "bytes_sent": sent,
+                "bytes_received": sum(len(o) for o in outs),
+                "send_seconds": t_sent - t0,
+                "wait_seconds": t_back - t_sent,
+                "gather_seconds": time.perf_counter() - t_back,
+                "shard_sim_seconds": seconds,
+            }
+        )
         return m, max(seconds)
 
     def close(self) -> None:
@@ -410,8 +473,9 @@ class ShardedEvaluator:
 
 
 @contextmanager
-def sharded_evaluation(ev, workers: int, address: str | None = None,
-                       cpus_per_worker: float = 1.0) -> Iterator[ShardedEvaluator]:
+def sharded_evaluation(
+    ev, workers: int, address: str | None = None, cpus_per_worker: float = 1.0
+) -> Iterator[ShardedEvaluator]:
     """Within the block, `ev` (an `evolve.Evolution`) evaluates each generation in `workers`
     shards on Ray actors (Ray joined at `address`, or a local cluster started, unless this
     process is connected already); the actors are stopped on leaving it.

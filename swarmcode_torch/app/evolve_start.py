@@ -50,12 +50,16 @@ def bound_line(bounds, ev, run_dir: Path) -> str:
     """What a run stopped by --max-time or --patience prints."""
     g = ev.state.generation
     if bounds.reason == "patience":
-        why = (f"the best team (generation {ev.state.best['generation']}) has not improved for "
-               f"{bounds.patience} generations (--patience {bounds.patience})")
+        why = (
+            f"the best team (generation {ev.state.best['generation']}) has not improved for "
+            f"{bounds.patience} generations (--patience {bounds.patience})"
+        )
     else:
         why = f"--max-time reached ({bounds.elapsed:.1f}s of {bounds.max_time:g}s)"
-    return (f"Stopped after {g} generations: {why}; checkpoint of generation {g} is in "
-            f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}")
+    return (
+        f"Stopped after {g} generations: {why}; checkpoint of generation {g} is in "
+        f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}"
+    )
 
 
 def new_config(config_file: Path | None, from_run: str | None, preset, settings, **given):
@@ -68,21 +72,27 @@ def new_config(config_file: Path | None, from_run: str | None, preset, settings,
     branch = None
     if from_run is not None:
         if config_file is not None:
-            fail("--config and --from cannot be used together: a branch starts from its "
-                 "parent's config (give the changes as options and --set)")
+            fail(
+                "--config and --from cannot be used together: a branch starts from its "
+                "parent's config (give the changes as options and --set)"
+            )
         run, generation = parse_run_ref(from_run)
         check_path(str(run), "--from")
         branch = load_branch(run, generation)
         if branch.config.fitness_function is not None:
-            fail(f"{run} was scored by a custom fitness function "
-                 f"({branch.config.fitness_function}): branch it from Python, "
-                 "swarmcode_torch.evolve(from_run=..., fitness=fn)")
+            fail(
+                f"{run} was scored by a custom fitness function "
+                f"({branch.config.fitness_function}): branch it from Python, "
+                "swarmcode_torch.evolve(from_run=..., fitness=fn)"
+            )
         base = branch.config
     elif config_file is not None:
         base = read_config_file(config_file)
         if base.fitness_function is not None:
-            fail(f"{config_file}: fitness_function: a fitness function is given from Python "
-                 "(swarmcode_torch.evolve(config=FILE, fitness=fn))")
+            fail(
+                f"{config_file}: fitness_function: a fitness function is given from Python "
+                "(swarmcode_torch.evolve(config=FILE, fitness=fn))"
+            )
     else:
         return session.resolve_config(preset, settings, **given), None
     if preset is not None:
@@ -114,10 +124,33 @@ def print_config(config_file, from_run, resume, preset, settings, **given) -> No
     sys.stdout.flush()
 
 
-def start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, population,
-                  swarm_size, trials, ticks, seed, device, compile, logdir, checkpoint_every,
-                  log_every, render_every, resume, settings, attach=None, figure_every=50,
-                  where: Where, preset=None, config_file=None, from_run=None):
+def start_evolve(
+    stack: ExitStack,
+    *,
+    scenario,
+    budget,
+    objective,
+    generations,
+    population,
+    swarm_size,
+    trials,
+    ticks,
+    seed,
+    device,
+    compile,
+    logdir,
+    checkpoint_every,
+    log_every,
+    render_every,
+    resume,
+    settings,
+    attach=None,
+    figure_every=50,
+    where: Where,
+    preset=None,
+    config_file=None,
+    from_run=None,
+):
     """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
     The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
@@ -126,26 +159,40 @@ def start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, 
     from .settings import option_names
 
     if checkpoint_every < 1 or log_every < 1 or figure_every < 1 or render_every < 0:
-        fail("--checkpoint-every, --log-every and --figure-every must be >= 1, "
-             "--render-every >= 0")
-    given = dict(scenario=scenario, budget=budget, objective=objective, population=population,
-                 swarm_size=swarm_size, trials=trials, ticks=ticks, seed=seed, compile=compile)
+        fail("--checkpoint-every, --log-every and --figure-every must be >= 1, --render-every >= 0")
+    given = dict(
+        scenario=scenario,
+        budget=budget,
+        objective=objective,
+        population=population,
+        swarm_size=swarm_size,
+        trials=trials,
+        ticks=ticks,
+        seed=seed,
+        compile=compile,
+    )
     try:
         if resume is not None:
             if generations is not None and generations < 1:
-                fail(f"--generations must be >= 1 (the total to extend the run to), got "
-                     f"{generations}")
+                fail(
+                    f"--generations must be >= 1 (the total to extend the run to), got "
+                    f"{generations}"
+                )
             extra = [k.replace("_", "-") for k, v in given.items() if v is not None]
             extra += ["set"] if settings else []
             extra += ["preset"] if preset is not None else []
             extra += ["config"] if config_file is not None else []
             extra += ["from"] if from_run is not None else []
             if extra:
-                fail(f"--resume uses the run's saved config; only --generations and --device may "
-                     f"change (got --{', --'.join(extra)})")
+                fail(
+                    f"--resume uses the run's saved config; only --generations and --device may "
+                    f"change (got --{', --'.join(extra)})"
+                )
             if logdir is not None:
-                fail(f"--logdir cannot be used with --resume: the run continues in its own "
-                     f"directory ({resume})")
+                fail(
+                    f"--logdir cannot be used with --resume: the run continues in its own "
+                    f"directory ({resume})"
+                )
             if not resume.is_dir():
                 fail(f"--resume {resume} is not a run directory (no such directory)")
 
@@ -155,25 +202,40 @@ def start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, 
             def loaded(saved: int) -> None:
                 where.saved = saved
 
-            start = session.start_resume(stack, resume, generations=generations, device=device,
-                                         stop_if_done=True, on_locked=locked, on_loaded=loaded,
-                                         attach=attach)
+            start = session.start_resume(
+                stack,
+                resume,
+                generations=generations,
+                device=device,
+                stop_if_done=True,
+                on_locked=locked,
+                on_loaded=loaded,
+                attach=attach,
+            )
             if start.ev is None:
-                console.print(f"{resume} already has {start.saved} generations"
-                              f"{'' if generations is None else f' (asked for {generations})'}; "
-                              "nothing to do, no file changed", markup=False, highlight=False,
-                              soft_wrap=True)
+                console.print(
+                    f"{resume} already has {start.saved} generations"
+                    f"{'' if generations is None else f' (asked for {generations})'}; "
+                    "nothing to do, no file changed",
+                    markup=False,
+                    highlight=False,
+                    soft_wrap=True,
+                )
                 return None, resume, None
             ev = start.ev
-            console.print(f"Resuming [bold]{escape(str(resume))}[/] at generation "
-                          f"{ev.state.generation} of {ev.cfg.generations}", soft_wrap=True)
+            console.print(
+                f"Resuming [bold]{escape(str(resume))}[/] at generation "
+                f"{ev.state.generation} of {ev.cfg.generations}",
+                soft_wrap=True,
+            )
             return ev, resume, start.saved
-        cfg, branch = new_config(config_file, from_run, preset, settings,
-                                  generations=generations, device=device, **given)
-        if logdir is None:      # a branch goes beside its parent
+        cfg, branch = new_config(
+            config_file, from_run, preset, settings, generations=generations, device=device, **given
+        )
+        if logdir is None:  # a branch goes beside its parent
             logdir = branch.run_dir.parent if branch is not None else Path("runs")
 
-        def check_logdir() -> None:        # after the config's checks, before the Evolution
+        def check_logdir() -> None:  # after the config's checks, before the Evolution
             if logdir.exists() and not logdir.is_dir():
                 fail(f"--logdir {logdir} is not a directory")
 
@@ -185,18 +247,37 @@ def start_evolve(stack: ExitStack, *, scenario, budget, objective, generations, 
 
         on_dir = lambda run_dir: setattr(where, "run_dir", run_dir)  # noqa: E731
         if branch is not None:
-            start = session.start_branch(stack, branch, cfg, make_dir, names=option_names(),
-                                         before_build=check_logdir, attach=attach, on_dir=on_dir)
-            console.print(f"Branching from {escape(str(branch.path))} (generation "
-                          f"{branch.generation})", highlight=False)
+            start = session.start_branch(
+                stack,
+                branch,
+                cfg,
+                make_dir,
+                names=option_names(),
+                before_build=check_logdir,
+                attach=attach,
+                on_dir=on_dir,
+            )
+            console.print(
+                f"Branching from {escape(str(branch.path))} (generation {branch.generation})",
+                highlight=False,
+            )
         else:
-            start = session.start_new(stack, cfg, make_dir, names=option_names(),
-                                      before_build=check_logdir, attach=attach, on_dir=on_dir)
+            start = session.start_new(
+                stack,
+                cfg,
+                make_dir,
+                names=option_names(),
+                before_build=check_logdir,
+                attach=attach,
+                on_dir=on_dir,
+            )
         ev, run_dir = start.ev, start.run_dir
-        console.print(f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
-                      f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
-                      f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})",
-                      soft_wrap=True)
+        console.print(
+            f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
+            f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
+            f"swarm {ev.ctx.eval_cfg.swarm_size}, tick {ev.ctx.tick_mode})",
+            soft_wrap=True,
+        )
         return ev, run_dir, None
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))

@@ -23,26 +23,36 @@ CONFIG_FILE = "config.toml"
 CHECKPOINT_FILE = "checkpoint.pt"
 SUMMARY_FILE = "summary.json"
 TEAMS_FILE = "teams.jsonl"
-PARTIAL_SUFFIX = ".partial"             # teams.jsonl.partial: cut-off lines set aside on resume
-SCENARIO_COPY = "scenario.toml"         # the scenario file the run ran on, as read
-HARDWARE_COPY = "hardware.toml"         # the hardware catalog the run ran with, as read
-LOCK_FILE = "run.lock"                  # held by the live run: "pid=... host=..."
-SWEEP_LOCK_FILE = "sweep.lock"          # held by a live sweep in its --out directory
-METRICS_FILE = "metrics.csv"            # every scalar of every generation (reporting.CsvReporter)
-REPLAY_FILE = "team.gif"                # the default output of `replay`
-SNAPSHOT_DIR = "snapshots"              # snapshots/generation-000100.pt (--snapshot-every)
+PARTIAL_SUFFIX = ".partial"  # teams.jsonl.partial: cut-off lines set aside on resume
+SCENARIO_COPY = "scenario.toml"  # the scenario file the run ran on, as read
+HARDWARE_COPY = "hardware.toml"  # the hardware catalog the run ran with, as read
+LOCK_FILE = "run.lock"  # held by the live run: "pid=... host=..."
+SWEEP_LOCK_FILE = "sweep.lock"  # held by a live sweep in its --out directory
+METRICS_FILE = "metrics.csv"  # every scalar of every generation (reporting.CsvReporter)
+REPLAY_FILE = "team.gif"  # the default output of `replay`
+SNAPSHOT_DIR = "snapshots"  # snapshots/generation-000100.pt (--snapshot-every)
 #: A sweep's outputs in its --out directory (sweep.write_outputs).
 TABLE_MD, TABLE_CSV, BUDGET_PLOT = "table.md", "table.csv", "budget.png"
 #: Files of a run directory written with `atomic_write_bytes`; a temporary `.NAME.xxxxxxxx` of
 #: one of them (or of any file that exists) left by a killed write is removed on start.
-ATOMIC_FILES = (CONFIG_FILE, CHECKPOINT_FILE, SUMMARY_FILE, SCENARIO_COPY, HARDWARE_COPY,
-                METRICS_FILE, TEAMS_FILE, REPLAY_FILE, TABLE_MD, TABLE_CSV)
+ATOMIC_FILES = (
+    CONFIG_FILE,
+    CHECKPOINT_FILE,
+    SUMMARY_FILE,
+    SCENARIO_COPY,
+    HARDWARE_COPY,
+    METRICS_FILE,
+    TEAMS_FILE,
+    REPLAY_FILE,
+    TABLE_MD,
+    TABLE_CSV,
+)
 #: The most bytes read from a text file of a run or a scenario (config.toml, scenario.toml,
 #: hardware.toml, summary.json; a scenario file and the catalog it names): far above any real
 #: one, far below what would exhaust memory.
-MAX_TEXT_BYTES = 16 * 2 ** 20
+MAX_TEXT_BYTES = 16 * 2**20
 #: The most bytes read from teams.jsonl and metrics.csv (one record a generation).
-MAX_RECORD_BYTES = 2 * 2 ** 30
+MAX_RECORD_BYTES = 2 * 2**30
 
 
 class RunError(ValueError):
@@ -74,12 +84,16 @@ def open_nofollow(path: Path, flags: int, mode: int = 0o666) -> int:
     own, and a link planted in a run directory must not make a run read or write elsewhere.
     OSError (ELOOP) for a link, reported as "is a symbolic link"."""
     try:
-        return os.open(path, flags | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0),
-                       mode)
+        return os.open(
+            path, flags | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0), mode
+        )
     except OSError as e:
         if e.errno == errno.ELOOP or (e.errno == errno.EMLINK and os.path.islink(path)):
-            raise OSError(errno.ELOOP, "is a symbolic link (refused: a run's files must be "
-                          "its own)", str(path)) from None
+            raise OSError(
+                errno.ELOOP,
+                "is a symbolic link (refused: a run's files must be its own)",
+                str(path),
+            ) from None
         raise
 
 
@@ -91,11 +105,13 @@ def read_file_bytes(path: Path, limit: int = MAX_TEXT_BYTES) -> bytes:
     try:
         st = os.fstat(fd)
         import stat as _stat
+
         if not _stat.S_ISREG(st.st_mode):
             raise OSError(errno.EINVAL, "not a regular file", str(path))
         if st.st_size > limit:
-            raise OSError(errno.EFBIG, f"file too large ({st.st_size} bytes, at most {limit})",
-                          str(path))
+            raise OSError(
+                errno.EFBIG, f"file too large ({st.st_size} bytes, at most {limit})", str(path)
+            )
         chunks, total = [], 0
         while True:
             b = os.read(fd, min(1 << 20, limit + 1 - total))
@@ -104,8 +120,7 @@ def read_file_bytes(path: Path, limit: int = MAX_TEXT_BYTES) -> bytes:
             chunks.append(b)
             total += len(b)
             if total > limit:
-                raise OSError(errno.EFBIG, f"file too large (more than {limit} bytes)",
-                              str(path))
+                raise OSError(errno.EFBIG, f"file too large (more than {limit} bytes)", str(path))
         return b"".join(chunks)
     finally:
         os.close(fd)
@@ -140,7 +155,7 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
-        os.replace(tmp, path)              # replaces a link at `path`, never writes through it
+        os.replace(tmp, path)  # replaces a link at `path`, never writes through it
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
@@ -167,8 +182,11 @@ def clean_temporary_files(run_dir: Path, targets: re.Pattern | None = None) -> l
         if not m or not entry.is_file(follow_symlinks=False):
             continue
         target = m.group("target")
-        if target in ATOMIC_FILES or (targets is not None and targets.match(target)) or \
-                (run_dir / target).exists():
+        if (
+            target in ATOMIC_FILES
+            or (targets is not None and targets.match(target))
+            or (run_dir / target).exists()
+        ):
             try:
                 os.unlink(entry.path)
                 removed.append(Path(entry.path))
@@ -193,7 +211,7 @@ def repair_teams(run_dir: Path) -> int:
         if f.read(1) == b"\n":
             return 0
         cut, pos = 0, size
-        while pos > 0:                                 # the last newline, read backwards
+        while pos > 0:  # the last newline, read backwards
             step = min(pos, 1 << 16)
             pos -= step
             f.seek(pos)
@@ -238,8 +256,11 @@ def trim_teams(run_dir: Path, generation: int) -> int:
     keep, dropped = [], 0
     for line in data.splitlines(keepends=True):
         try:
-            rec = json.loads(line) if nesting_depth(line.decode("utf-8", "replace")) \
-                <= MAX_NESTING else None
+            rec = (
+                json.loads(line)
+                if nesting_depth(line.decode("utf-8", "replace")) <= MAX_NESTING
+                else None
+            )
             g = rec.get("generation") if isinstance(rec, dict) else None
         except (ValueError, RecursionError):
             g = None
@@ -275,8 +296,9 @@ def read_text(path: Path, limit: int = MAX_TEXT_BYTES) -> str:
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
-        raise RunError(f"{path} is not UTF-8 text (byte 0x{data[e.start]:02x} at offset "
-                       f"{e.start})") from None
+        raise RunError(
+            f"{path} is not UTF-8 text (byte 0x{data[e.start]:02x} at offset {e.start})"
+        ) from None
 
 
 def os_error_text(e: OSError) -> str:
@@ -316,8 +338,18 @@ def new_run_dir(logdir: Path, cfg: SwarmCoDeConfig) -> Path:
 
 
 #: The files of a run directory (each must be the run's own file, never a link).
-RUN_FILES = (CONFIG_FILE, CHECKPOINT_FILE, SUMMARY_FILE, TEAMS_FILE, TEAMS_FILE + PARTIAL_SUFFIX,
-             SCENARIO_COPY, HARDWARE_COPY, LOCK_FILE, METRICS_FILE, REPLAY_FILE)
+RUN_FILES = (
+    CONFIG_FILE,
+    CHECKPOINT_FILE,
+    SUMMARY_FILE,
+    TEAMS_FILE,
+    TEAMS_FILE + PARTIAL_SUFFIX,
+    SCENARIO_COPY,
+    HARDWARE_COPY,
+    LOCK_FILE,
+    METRICS_FILE,
+    REPLAY_FILE,
+)
 
 
 def refuse_links(run_dir: Path) -> None:
@@ -326,5 +358,7 @@ def refuse_links(run_dir: Path) -> None:
     for name in RUN_FILES:
         path = Path(run_dir) / name
         if path.is_symlink():
-            raise RunError(f"{path} is a symbolic link; a run's files must be its own (remove "
-                           "the link, or put the file itself there)")
+            raise RunError(
+                f"{path} is a symbolic link; a run's files must be its own (remove "
+                "the link, or put the file itself there)"
+            )

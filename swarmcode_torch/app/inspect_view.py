@@ -15,14 +15,21 @@ def print_lineage(run_dir: Path) -> None:
 
     parent = read_parent(run_dir)
     if parent is not None:
-        console.print(f"Branched from {parent.get('run')} at generation "
-                      f"{parent.get('generation')} ({parent.get('checkpoint')})", markup=False,
-                      highlight=False, soft_wrap=True)
+        console.print(
+            f"Branched from {parent.get('run')} at generation "
+            f"{parent.get('generation')} ({parent.get('checkpoint')})",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
     stop = read_summary(run_dir).get("stop")
     if isinstance(stop, dict) and stop.get("reason") in ("max_time", "patience"):
-        console.print(f"Stopped early by {stop['reason']} at generation {stop.get('generation')}"
-                      "; it can be continued with evolve --resume", markup=False,
-                      highlight=False)
+        console.print(
+            f"Stopped early by {stop['reason']} at generation {stop.get('generation')}"
+            "; it can be continued with evolve --resume",
+            markup=False,
+            highlight=False,
+        )
 
 
 def inspect_sweep(path: Path) -> bool:
@@ -40,20 +47,37 @@ def inspect_sweep(path: Path) -> bool:
         return False
     if sweep.table is not None:
         console.print(sweep.table, markup=False, highlight=False, soft_wrap=True)
-        console.print(f"Table: {path / TABLE_MD}, {path / TABLE_CSV}", markup=False,
-                      highlight=False, soft_wrap=True)
+        console.print(
+            f"Table: {path / TABLE_MD}, {path / TABLE_CSV}",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
     else:
-        console.print(f"{path} is a sweep without a table yet: run its sweep command again with "
-                      f"--out {path} to finish it and write the table", markup=False,
-                      highlight=False, soft_wrap=True)
+        console.print(
+            f"{path} is a sweep without a table yet: run its sweep command again with "
+            f"--out {path} to finish it and write the table",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
     console.print(f"Runs ({len(sweep.runs)}):", highlight=False)
     for name, done, total in sweep.runs:
-        state = ("no generation recorded" if done is None else
-                 f"{done}/{total} generations" if total is not None else f"{done} generations")
+        state = (
+            "no generation recorded"
+            if done is None
+            else f"{done}/{total} generations"
+            if total is not None
+            else f"{done} generations"
+        )
         console.print(f"  {name}: {state}", markup=False, highlight=False, soft_wrap=True)
     if sweep.runs:
-        console.print(f"Inspect a run: swarmcode-torch inspect {path / sweep.runs[0][0]}",
-                      markup=False, highlight=False, soft_wrap=True)
+        console.print(
+            f"Inspect a run: swarmcode-torch inspect {path / sweep.runs[0][0]}",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
     return True
 
 

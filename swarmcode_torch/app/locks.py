@@ -16,6 +16,7 @@ try:
 except ImportError:  # pragma: no cover - not POSIX
     fcntl = None
 
+
 class RunLock:
     """An exclusive lock on a run (or sweep) directory for one process: the file `name` in it
     holds the holder's pid and host. The lock itself is an advisory `flock` on that file, which
@@ -35,15 +36,17 @@ class RunLock:
             text = ""
         return text or "an unknown process"
 
-    def acquire(self) -> "RunLock":
+    def acquire(self) -> RunLock:
         info = f"pid={os.getpid()} host={socket.gethostname()} since={time.strftime('%Y-%m-%dT%H:%M:%S')}\n"
         while True:
-            try:                           # a link planted as the lock file is refused
+            try:  # a link planted as the lock file is refused
                 fd = open_nofollow(self.path, os.O_RDWR | os.O_CREAT)
             except OSError as e:
                 if e.errno == errno.ELOOP:
-                    raise RunError(f"{self.path} is a symbolic link; a run's lock must be its "
-                                   "own file (remove the link)") from None
+                    raise RunError(
+                        f"{self.path} is a symbolic link; a run's lock must be its "
+                        "own file (remove the link)"
+                    ) from None
                 raise
             try:
                 if fcntl is not None:
@@ -52,20 +55,23 @@ class RunLock:
                     except OSError as e:
                         if e.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
                             raise
-                        raise RunError(f"{self.dir} is in use by a live run ({self._holder()}, "
-                                       f"{self.path}); wait for it to finish or stop it first") \
-                            from None
+                        raise RunError(
+                            f"{self.dir} is in use by a live run ({self._holder()}, "
+                            f"{self.path}); wait for it to finish or stop it first"
+                        ) from None
                 elif self._live_holder():  # pragma: no cover - no flock: trust the pid
-                    raise RunError(f"{self.dir} is in use by a live run ({self._holder()}, "
-                                   f"{self.path}); wait for it to finish or stop it first")
-                try:                       # the file may have been released (removed) meanwhile
+                    raise RunError(
+                        f"{self.dir} is in use by a live run ({self._holder()}, "
+                        f"{self.path}); wait for it to finish or stop it first"
+                    )
+                try:  # the file may have been released (removed) meanwhile
                     same = os.stat(self.path).st_ino == os.fstat(fd).st_ino
                 except FileNotFoundError:
                     same = False
                 if not same:
                     os.close(fd)
                     continue
-                os.ftruncate(fd, 0)        # a dead holder's pid is overwritten: taken over
+                os.ftruncate(fd, 0)  # a dead holder's pid is overwritten: taken over
                 _write_all(fd, info.encode())
             except BaseException:
                 os.close(fd)
@@ -97,7 +103,7 @@ class RunLock:
             os.close(self.fd)
             self.fd = None
 
-    def __enter__(self) -> "RunLock":
+    def __enter__(self) -> RunLock:
         return self.acquire()
 
     def __exit__(self, *exc) -> None:

@@ -9,8 +9,12 @@ from ..coevo.config import SwarmCoDeConfig
 from .files import RunError
 
 #: Settings of configs saved before `quota_basis` and the mutation steps were config keys.
-LEGACY_DEFAULTS = {"quota_basis": "mean", "hw_sigma": 0.1, "social_sigma": 0.1,
-                   "p_categorical": 0.1}
+LEGACY_DEFAULTS = {
+    "quota_basis": "mean",
+    "hw_sigma": 0.1,
+    "social_sigma": 0.1,
+    "p_categorical": 0.1,
+}
 
 #: Episode lengths of built-in scenarios whose default has changed since runs began pinning
 #: theirs in config.toml; a saved config without `ticks` ran with these.
@@ -36,7 +40,7 @@ def migrate_config(d: Any, keep_retired: bool = False) -> Any:
         tag_length = d.get("tag_length", SwarmCoDeConfig.tag_length)
         d["p_tag_flip"] = 1.0 / int(tag_length) if isinstance(tag_length, int) else None
     if "min_share" not in d:
-        d["min_share"] = 0.0     # written before the quota threshold existed
+        d["min_share"] = 0.0  # written before the quota threshold existed
     # written before the paper-text fixes of d_hw and the tree mutation: the old behaviour
     d.setdefault("d_hw_tiers", True)
     d.setdefault("bt_point_on_nodes", False)
@@ -90,10 +94,12 @@ def retired_setting(d: dict) -> str | None:
             continue
         v = d[key]
         if key == "quota_basis" and d.get("quota_size_exponent") is not None:
-            continue               # the exponent set the quotas
+            continue  # the exponent set the quotas
         if not any(v == ok and type(v) is type(ok) for ok in same):
-            return (f"{key} = {v!r} is a retired setting that this version cannot run (last "
-                    f"run by swarmcode-torch {last})")
+            return (
+                f"{key} = {v!r} is a retired setting that this version cannot run (last "
+                f"run by swarmcode-torch {last})"
+            )
     return retired_value(d)
 
 
@@ -102,8 +108,10 @@ def retired_value(d: dict) -> str | None:
     (`RETIRED_VALUES`), which this version can neither run nor read; None if there is none."""
     for (key, value), last in RETIRED_VALUES.items():
         if d.get(key) == value:
-            return (f"{key} = {value!r} is retired; this version cannot run it (last run by "
-                    f"swarmcode-torch {last})")
+            return (
+                f"{key} = {value!r} is retired; this version cannot run it (last run by "
+                f"swarmcode-torch {last})"
+            )
     return None
 
 

@@ -22,17 +22,35 @@ from ..sim.state import WorldParams, capabilities
 
 #: The scalar tags of a generation, in the order of metrics.csv's columns.
 SCALAR_TAGS = (
-    "fitness/best", "fitness/mean", "species/count", "species/founded", "species/extinct",
-    "species/median_age", "team/fitness", "team/species", "team/niches", "team/median_age",
+    "fitness/best",
+    "fitness/mean",
+    "species/count",
+    "species/founded",
+    "species/extinct",
+    "species/median_age",
+    "team/fitness",
+    "team/species",
+    "team/niches",
+    "team/median_age",
     "team/cost",
-    "team/budget", "team/deliveries", "team/deliveries_individual", "team/deliveries_collab",
-    "team/energy_used", "team/focal_max", "perf/generation_seconds", "perf/eval_seconds", "perf/sim_seconds",
+    "team/budget",
+    "team/deliveries",
+    "team/deliveries_individual",
+    "team/deliveries_collab",
+    "team/energy_used",
+    "team/focal_max",
+    "perf/generation_seconds",
+    "perf/eval_seconds",
+    "perf/sim_seconds",
 )
 
 #: The gene histograms of a generation: tag -> GenerationResult field. Named `traits/`: the
 #: groups of TensorBoard's Time Series sort by name, so they come after `species/` and `team/`.
-HISTOGRAMS = {"traits/radius": "radius", "traits/dominance": "dominance",
-              "traits/selectivity": "selectivity"}
+HISTOGRAMS = {
+    "traits/radius": "radius",
+    "traits/dominance": "dominance",
+    "traits/selectivity": "selectivity",
+}
 
 
 def design_capabilities(designs, scenario) -> list[list[int]]:
@@ -59,20 +77,33 @@ def team_record(team: BestTeam, generation: int, scenario) -> dict:
     host, caps = team.genome, _capability_lists(team.phenotype, scenario)
     # focal: the design of the focal individual; baseline_count: its robots in the baseline
     # team (the focal's slots refilled by its partners), which the replay page shows
-    designs = [dict(design_record(host, i, s, c), count=n, focal=bool(f), baseline_count=nb,
-                    capability=cap)
-               for i, (s, c, n, nb, f, cap) in enumerate(zip(
-                   team.species.tolist(), team.phenotype.cost.tolist(), team.count.tolist(),
-                   team.baseline_count.tolist(), team.focal.tolist(), caps))]
+    designs = [
+        dict(
+            design_record(host, i, s, c), count=n, focal=bool(f), baseline_count=nb, capability=cap
+        )
+        for i, (s, c, n, nb, f, cap) in enumerate(
+            zip(
+                team.species.tolist(),
+                team.phenotype.cost.tolist(),
+                team.count.tolist(),
+                team.baseline_count.tolist(),
+                team.focal.tolist(),
+                caps,
+            )
+        )
+    ]
     designs.sort(key=lambda d: -d["count"])
     tm = team.metrics
     return {
-        "generation": generation, "fitness": team.fitness,
-        "cost": team.cost, "species": len(designs),
+        "generation": generation,
+        "fitness": team.fitness,
+        "cost": team.cost,
+        "species": len(designs),
         "deliveries_individual": tm["delivered_individual"],
         "deliveries_collab": tm["delivered_collab"],
         "deliveries": tm["delivered_individual"] + tm["delivered_collab"],
-        "energy_used": tm["energy_used"], "designs": designs,
+        "energy_used": tm["energy_used"],
+        "designs": designs,
         "niches": niche_count(d["capability"] for d in designs),
     }
 
@@ -110,18 +141,25 @@ def scalars(r: GenerationResult) -> dict[str, Any]:
     team = r.team
     return {
         "generation": r.generation,
-        "fitness/best": r.best_fitness, "fitness/mean": r.mean_fitness,
-        "species/count": r.num_species, "species/founded": r.founded,
-        "species/extinct": r.extinct, "species/median_age": r.species_median_age,
-        "team/fitness": team["fitness"], "team/species": team["species"],
-        "team/niches": team["niches"], "team/median_age": r.team_median_age,
+        "fitness/best": r.best_fitness,
+        "fitness/mean": r.mean_fitness,
+        "species/count": r.num_species,
+        "species/founded": r.founded,
+        "species/extinct": r.extinct,
+        "species/median_age": r.species_median_age,
+        "team/fitness": team["fitness"],
+        "team/species": team["species"],
+        "team/niches": team["niches"],
+        "team/median_age": r.team_median_age,
         "team/cost": team["cost"],
         "team/budget": r.budget if r.budget is not None else math.nan,
         "team/deliveries": team["deliveries"],
         "team/deliveries_individual": team["deliveries_individual"],
         "team/deliveries_collab": team["deliveries_collab"],
-        "team/energy_used": team["energy_used"], "team/focal_max": r.focal_max,
-        "perf/generation_seconds": r.seconds, "perf/eval_seconds": r.eval_seconds,
+        "team/energy_used": team["energy_used"],
+        "team/focal_max": r.focal_max,
+        "perf/generation_seconds": r.seconds,
+        "perf/eval_seconds": r.eval_seconds,
         "perf/sim_seconds": r.sim_seconds,
     }
 
@@ -145,13 +183,20 @@ def git_commit() -> str | None:
     if not (root / ".git").exists():
         return None
     try:
-        sha = subprocess.run(["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"],
-                             capture_output=True, text=True, timeout=10)
+        sha = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short=12", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
         if sha.returncode or not sha.stdout.strip():
             return None
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain",
-                                "--untracked-files=no"], capture_output=True, text=True,
-                               timeout=10)
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
     except (OSError, subprocess.SubprocessError):
         return None
     return sha.stdout.strip() + ("+dirty" if dirty.returncode == 0 and dirty.stdout.strip() else "")
@@ -175,31 +220,48 @@ def software(device: torch.device | str) -> dict:
         name = device_name(resolve_device(device) if isinstance(device, str) else device)
     except (RuntimeError, ValueError, AssertionError):
         name = str(device)
-    return {"swarmcode-torch": __version__, "torch": torch.__version__, "device": name,
-            "commit": git_commit()}
+    return {
+        "swarmcode-torch": __version__,
+        "torch": torch.__version__,
+        "device": name,
+        "commit": git_commit(),
+    }
 
 
 def summary(ev: Evolution, r: GenerationResult) -> dict:
     """The contents of summary.json after a generation."""
     best = r.best
-    return json_clean({
-        "generation": r.generation, "generations": ev.cfg.generations,
-        "scenario": ev.cfg.scenario, "objective": ev.cfg.objective, "preset": ev.cfg.preset,
-        "best_fitness": best["fitness"], "best_generation": best["generation"],
-        "team_cost": best["cost"], "budget": ev.cfg.budget, "num_species": best["species"],
-        "niches": best.get("niches"),
-        "deliveries": best["deliveries"],
-        "deliveries_individual": best["deliveries_individual"],
-        "deliveries_collab": best["deliveries_collab"], "energy_used": best["energy_used"],
-        "species_in_population": r.num_species,
-        "device": str(ev.ctx.device), "tick": ev.ctx.tick_mode,
-        "software": software(ev.ctx.device),
-        "designs": best["designs"],
-        "last_generation": {k: v for k, v in scalars(r).items() if k != "generation"},
-        # only a run scored by a user function says so (the built-in is the paper's fitness)
-        **({"fitness": f"custom: {ev.cfg.fitness_function}"}
-           if ev.cfg.fitness_function is not None else {}),
-    })
+    return json_clean(
+        {
+            "generation": r.generation,
+            "generations": ev.cfg.generations,
+            "scenario": ev.cfg.scenario,
+            "objective": ev.cfg.objective,
+            "preset": ev.cfg.preset,
+            "best_fitness": best["fitness"],
+            "best_generation": best["generation"],
+            "team_cost": best["cost"],
+            "budget": ev.cfg.budget,
+            "num_species": best["species"],
+            "niches": best.get("niches"),
+            "deliveries": best["deliveries"],
+            "deliveries_individual": best["deliveries_individual"],
+            "deliveries_collab": best["deliveries_collab"],
+            "energy_used": best["energy_used"],
+            "species_in_population": r.num_species,
+            "device": str(ev.ctx.device),
+            "tick": ev.ctx.tick_mode,
+            "software": software(ev.ctx.device),
+            "designs": best["designs"],
+            "last_generation": {k: v for k, v in scalars(r).items() if k != "generation"},
+            # only a run scored by a user function says so (the built-in is the paper's fitness)
+            **(
+                {"fitness": f"custom: {ev.cfg.fitness_function}"}
+                if ev.cfg.fitness_function is not None
+                else {}
+            ),
+        }
+    )
 
 
 def team_line(r: GenerationResult) -> dict:

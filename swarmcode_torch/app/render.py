@@ -12,19 +12,19 @@ Matplotlib (Agg canvas, no pyplot) and PIL are imported inside the functions tha
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import torch
 from torch import Tensor
 
-from ..sim import bt
-from ..coevo.population import PINCHER, SUCTION, Population, from_designs
 from ..coevo.evaluation import team_robots
+from ..coevo.population import PINCHER, SUCTION, Population, from_designs
+from ..sim import bt
 from ..sim.layout import Layout, make_layouts
-from ..sim.scenario import Scenario
 from ..sim.rollout import rollout
+from ..sim.scenario import Scenario
 from ..sim.state import DELIVERED, Robots, State, WorldParams
 
 _EFFECTOR_NAMES = {SUCTION: "suction", PINCHER: "pincher"}
@@ -60,7 +60,7 @@ class Episode:
     params: WorldParams
     snapshots: list[State]
     metrics: dict[str, float]
-    name: str = ""                                   # shown in frame titles (scenario name)
+    name: str = ""  # shown in frame titles (scenario name)
     labels: list[str] = field(default_factory=list)  # legend text per design row
     #: with record_episode(leaves=True): the leaf statuses ``[N, 14]`` the trees read at ticks
     #: 1 .. T (`rollout`'s observe_leaf), for `bt.trace`
@@ -75,9 +75,16 @@ def _env0(state: State) -> State:
     return State(*(x.clone() if x.dim() == 0 else x[0].clone() for x in state))
 
 
-def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: int,
-                   ticks: int | None = None, every: int = 1,
-                   params: WorldParams | None = None, leaves: bool = False) -> Episode:
+def record_episode(
+    genome: Population,
+    team: Tensor,
+    scenario: Scenario,
+    seed: int,
+    ticks: int | None = None,
+    every: int = 1,
+    params: WorldParams | None = None,
+    leaves: bool = False,
+) -> Episode:
     """Run the team (``[S]`` genome rows, -1 = empty slot) in one random environment on the CPU.
 
     The environment is ``make_layouts(replace(scenario, num_robots=S), 1, Generator(seed))``;
@@ -97,8 +104,9 @@ def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: i
     if int(teams.max()) >= genome.size:
         raise ValueError(f"team refers to row {int(teams.max())} of a genome of {genome.size}")
     params = params or WorldParams.for_scenario(scenario)
-    layout = make_layouts(dataclasses.replace(scenario, num_robots=S), 1,
-                          torch.Generator().manual_seed(int(seed)))
+    layout = make_layouts(
+        dataclasses.replace(scenario, num_robots=S), 1, torch.Generator().manual_seed(int(seed))
+    )
 
     robots = team_robots(genome, teams, scenario.hardware)  # as the evaluation builds them
     tables = bt.build_tables(genome.bt)
@@ -115,15 +123,24 @@ def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: i
         seen.append(leaf[0].clone())
 
     with torch.no_grad():
-        m = rollout(layout, robots, tables, params, ticks, observe=keep,
-                    observe_leaf=keep_leaf if leaves else None)
+        m = rollout(
+            layout,
+            robots,
+            tables,
+            params,
+            ticks,
+            observe=keep,
+            observe_leaf=keep_leaf if leaves else None,
+        )
     metrics = {k: float(v[0]) for k, v in m.items()}
 
     labels = []
     for r in range(genome.size):
         n = int((teams == r).sum())
-        labels.append(f"{_EFFECTOR_NAMES.get(int(genome.effector[r]), '?')} "
-                      f"r={float(genome.radius[r]):.2f} x{n}")
+        labels.append(
+            f"{_EFFECTOR_NAMES.get(int(genome.effector[r]), '?')} "
+            f"r={float(genome.radius[r]):.2f} x{n}"
+        )
     return Episode(layout, robots, params, snaps, metrics, scenario.name, labels, seen)
 
 
@@ -131,6 +148,7 @@ def record_episode(genome: Population, team: Tensor, scenario: Scenario, seed: i
 def design_colors(n: int) -> list:
     """`n` RGBA colours from tab10, one per design row (cycling after 10)."""
     from matplotlib import colormaps
+
     cmap = colormaps["tab10"]
     return [cmap(_TAB10_ORDER[i % 10]) for i in range(n)]
 
@@ -139,6 +157,7 @@ def _mass_colors(episode: Episode, mass: Tensor) -> list:
     """Package face colours: light orange (light packages) to dark brown (heavy), over the
     episode; the lightest is a clear orange, never the white of a free grip marker."""
     from matplotlib import colormaps
+
     cmap = colormaps["YlOrBr"]
     lay = episode.layout
     all_m = lay.p_mass[0][lay.p_present[0]]
@@ -147,8 +166,9 @@ def _mass_colors(episode: Episode, mass: Tensor) -> list:
     return [cmap(0.35 + 0.6 * float(f)) for f in frac]
 
 
-def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = None,
-               legend: bool = True) -> None:
+def draw_frame(
+    ax, episode: Episode, snapshot: State, colors: Sequence | None = None, legend: bool = True
+) -> None:
     """Draw one snapshot on a matplotlib Axes (cleared first), in arena coordinates (m).
 
     Grey discs: obstacles; green disc: the base. Packages on the ground or carried: squares
@@ -177,19 +197,30 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
 
     # arena, base, obstacles
     ax.add_patch(Rectangle((0, 0), W, W, facecolor="white", edgecolor="black", lw=1.2, zorder=0))
-    ax.add_patch(Circle((W / 2, W / 2), prm.base_radius, facecolor="#cfeccf",
-                        edgecolor="#3a8a3a", lw=1.0, zorder=1))
+    ax.add_patch(
+        Circle(
+            (W / 2, W / 2),
+            prm.base_radius,
+            facecolor="#cfeccf",
+            edgecolor="#3a8a3a",
+            lw=1.0,
+            zorder=1,
+        )
+    )
     o_keep = lay.o_present[0]
-    obst = [Circle(tuple(p), float(r)) for p, r in
-            zip(lay.o_pos[0][o_keep].tolist(), lay.o_radius[0][o_keep].tolist())]
+    obst = [
+        Circle(tuple(p), float(r))
+        for p, r in zip(lay.o_pos[0][o_keep].tolist(), lay.o_radius[0][o_keep].tolist())
+    ]
     if obst:
-        ax.add_collection(PatchCollection(obst, facecolor="#9a9a9a", edgecolor="#555555",
-                                          lw=0.8, zorder=2))
+        ax.add_collection(
+            PatchCollection(obst, facecolor="#9a9a9a", edgecolor="#555555", lw=0.8, zorder=2)
+        )
 
     # packages (not delivered)
     present = lay.p_present[0] & (s.p_status != DELIVERED)
-    holder = s.holder                                     # [P, G]
-    g_eff = lay.g_effector[0]                             # [P, G]
+    holder = s.holder  # [P, G]
+    g_eff = lay.g_effector[0]  # [P, G]
     idx = torch.nonzero(present).flatten().tolist()
     face = _mass_colors(episode, lay.p_mass[0])
     ground, carried, ground_c, carried_c = [], [], [], []
@@ -206,7 +237,7 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
                 if e < 0:
                     continue
                 gx, gy = (s.p_pos[p] + lay.g_offset[0, p, g]).tolist()
-                taken = int(holder[p, g]) >= 0   # held: small and black, on its robot
+                taken = int(holder[p, g]) >= 0  # held: small and black, on its robot
                 fill, h = ("black", 0.07) if taken else ("white", 0.11)
                 if e == PINCHER:
                     grips_p.append(Rectangle((gx - h, gy - h), 2 * h, 2 * h))
@@ -217,7 +248,7 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
         else:
             e = int(g_eff[p, 0])
             r = size
-            if held:   # drawn small on top of its carrier, so that the robot's colour shows
+            if held:  # drawn small on top of its carrier, so that the robot's colour shows
                 carrier = int(holder[p, 0])
                 r = min(size, 0.5 * float(rob.radius[0, carrier]))
             if e == PINCHER:
@@ -228,8 +259,9 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
             (carried if held else ground).append(patch)
             (carried_c if held else ground_c).append(face[p])
     if ground:
-        ax.add_collection(PatchCollection(ground, facecolor=ground_c, edgecolor="black",
-                                          lw=0.6, zorder=3))
+        ax.add_collection(
+            PatchCollection(ground, facecolor=ground_c, edgecolor="black", lw=0.6, zorder=3)
+        )
 
     # robots
     keep = rob.present[0].tolist()
@@ -255,17 +287,23 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
         ec.append("black" if carrying[i] else "#444444")
         lw.append(1.2 if carrying[i] else 0.4)
     if discs:
-        ax.add_collection(PatchCollection(discs, facecolor=fc, edgecolor=ec, linewidths=lw,
-                                          zorder=4))
-        ax.add_collection(PatchCollection(marks, facecolor="none", edgecolor="#1a1a1a",
-                                          linewidths=0.9, zorder=4.5))
+        ax.add_collection(
+            PatchCollection(discs, facecolor=fc, edgecolor=ec, linewidths=lw, zorder=4)
+        )
+        ax.add_collection(
+            PatchCollection(
+                marks, facecolor="none", edgecolor="#1a1a1a", linewidths=0.9, zorder=4.5
+            )
+        )
     if carried:
-        ax.add_collection(PatchCollection(carried, facecolor=carried_c, edgecolor="black",
-                                          lw=0.6, zorder=5))
+        ax.add_collection(
+            PatchCollection(carried, facecolor=carried_c, edgecolor="black", lw=0.6, zorder=5)
+        )
     for patches, fills in ((grips_p, grip_fill_p), (grips_s, grip_fill_s)):
         if patches:
-            ax.add_collection(PatchCollection(patches, facecolor=fills, edgecolor="black",
-                                              lw=0.7, zorder=6))
+            ax.add_collection(
+                PatchCollection(patches, facecolor=fills, edgecolor="black", lw=0.7, zorder=6)
+            )
 
     # title: tick and deliveries so far
     done = (s.p_status == DELIVERED) & lay.p_present[0]
@@ -274,44 +312,107 @@ def draw_frame(ax, episode: Episode, snapshot: State, colors: Sequence | None = 
     total = int(lay.p_present[0].sum())
     extra = f" ({n_ind} indiv, {n_col} collab)" if bool(collab.any()) else ""
     name = f"{episode.name}  " if episode.name else ""
-    ax.set_title(f"{name}tick {int(s.t)}   delivered {n_ind + n_col}/{total}{extra}",
-                 fontsize=9)
+    ax.set_title(f"{name}tick {int(s.t)}   delivered {n_ind + n_col}/{total}{extra}", fontsize=9)
 
     if legend and episode.labels:
         from matplotlib.lines import Line2D
+
         used = sorted(set(p for p, k in zip(prog, keep) if k))
         eff_of = {p: e for p, e, k in zip(prog, effector, keep) if k}
-        handles = [(Line2D([], [], marker="o", ls="", markersize=9, markeredgecolor="#333333",
-                           markerfacecolor=colors[r % len(colors)]),
-                    Line2D([], [], marker="s" if eff_of[r] == PINCHER else "o", ls="",
-                           markersize=4, markeredgecolor="#1a1a1a", markerfacecolor="none",
-                           markeredgewidth=0.9))
-                   for r in used]
+        handles = [
+            (
+                Line2D(
+                    [],
+                    [],
+                    marker="o",
+                    ls="",
+                    markersize=9,
+                    markeredgecolor="#333333",
+                    markerfacecolor=colors[r % len(colors)],
+                ),
+                Line2D(
+                    [],
+                    [],
+                    marker="s" if eff_of[r] == PINCHER else "o",
+                    ls="",
+                    markersize=4,
+                    markeredgecolor="#1a1a1a",
+                    markerfacecolor="none",
+                    markeredgewidth=0.9,
+                ),
+            )
+            for r in used
+        ]
         labels = [episode.labels[r] if r < len(episode.labels) else f"design {r}" for r in used]
         kinds = lay.p_present[0]
         indiv_eff = set(g_eff[kinds & ~collab, 0].tolist())
         pkg = "#d9a35b"
         for e, m in ((PINCHER, "s"), (SUCTION, "o")):
             if e in indiv_eff:
-                handles.append(Line2D([], [], marker=m, ls="", markersize=6, markeredgecolor="black",
-                                      markerfacecolor=pkg))
+                handles.append(
+                    Line2D(
+                        [],
+                        [],
+                        marker=m,
+                        ls="",
+                        markersize=6,
+                        markeredgecolor="black",
+                        markerfacecolor=pkg,
+                    )
+                )
                 labels.append(f"{_EFFECTOR_NAMES[e]} package")
         if bool((kinds & collab).any()):
-            handles.append(Line2D([], [], marker="h", ls="", markersize=8, markeredgecolor="black",
-                                  markerfacecolor=pkg))
+            handles.append(
+                Line2D(
+                    [],
+                    [],
+                    marker="h",
+                    ls="",
+                    markersize=8,
+                    markeredgecolor="black",
+                    markerfacecolor=pkg,
+                )
+            )
             labels.append("collab package")
             grip_eff = set(g_eff[kinds & collab].flatten().tolist())
             for e, m in ((PINCHER, "s"), (SUCTION, "o")):
                 if e in grip_eff:
-                    handles.append(Line2D([], [], marker=m, ls="", markersize=4,
-                                          markeredgecolor="black", markerfacecolor="white"))
+                    handles.append(
+                        Line2D(
+                            [],
+                            [],
+                            marker=m,
+                            ls="",
+                            markersize=4,
+                            markeredgecolor="black",
+                            markerfacecolor="white",
+                        )
+                    )
                     labels.append(f"{_EFFECTOR_NAMES[e]} grip")
-            handles.append(Line2D([], [], marker="o", ls="", markersize=4, markeredgecolor="black",
-                                  markerfacecolor="black"))
+            handles.append(
+                Line2D(
+                    [],
+                    [],
+                    marker="o",
+                    ls="",
+                    markersize=4,
+                    markeredgecolor="black",
+                    markerfacecolor="black",
+                )
+            )
             labels.append("held grip")
-        ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
-                  frameon=False, handletextpad=0.3, borderaxespad=0.0,
-                  title="darker = heavier", title_fontsize=8)
+        ax.legend(
+            handles,
+            labels,
+            loc="upper left",
+            bbox_to_anchor=(1.01, 1.0),
+            fontsize=8,
+            frameon=False,
+            handletextpad=0.3,
+            borderaxespad=0.0,
+            title="darker = heavier",
+            title_fontsize=8,
+        )
 
 
 class _Canvas:
@@ -320,6 +421,7 @@ class _Canvas:
     def __init__(self, episode: Episode, dpi: int, size: tuple[float, float] = (7.0, 5.2)):
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
+
         self.fig = Figure(figsize=size, dpi=dpi)
         self.canvas = FigureCanvasAgg(self.fig)
         self.ax = self.fig.add_axes((0.01, 0.01, 0.71, 0.93))
@@ -328,6 +430,7 @@ class _Canvas:
 
     def render(self, snapshot: State):
         import numpy as np
+
         draw_frame(self.ax, self.episode, snapshot, self.colors)
         self.canvas.draw()
         return np.asarray(self.canvas.buffer_rgba())[..., :3].copy()
@@ -341,6 +444,7 @@ def frame_image(episode: Episode, index: int = -1, dpi: int = 80):
 def save_png(episode: Episode, path: str | Path, index: int = -1, dpi: int = 100) -> Path:
     """Write snapshot `index` (default the last) as a PNG."""
     from PIL import Image
+
     path = Path(path)
     Image.fromarray(frame_image(episode, index, dpi)).save(path)
     return path
@@ -350,13 +454,23 @@ def save_gif(episode: Episode, path: str | Path, fps: float = 10, dpi: int = 80)
     """Write every snapshot of the episode as an animated GIF (looping) to `path` (a file name,
     or a binary file object)."""
     from PIL import Image
+
     path = Path(path) if isinstance(path, (str, Path)) else path
     cv = _Canvas(episode, dpi)
-    frames = [Image.fromarray(cv.render(s)).quantize(colors=128, method=Image.Quantize.MEDIANCUT)
-              for s in episode.snapshots]
+    frames = [
+        Image.fromarray(cv.render(s)).quantize(colors=128, method=Image.Quantize.MEDIANCUT)
+        for s in episode.snapshots
+    ]
     duration = max(int(round(1000.0 / fps)), 20)
-    frames[0].save(path, format="GIF", save_all=True, append_images=frames[1:],
-                   duration=duration, loop=0, optimize=False)
+    frames[0].save(
+        path,
+        format="GIF",
+        save_all=True,
+        append_images=frames[1:],
+        duration=duration,
+        loop=0,
+        optimize=False,
+    )
     return path
 
 

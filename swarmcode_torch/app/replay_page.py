@@ -31,9 +31,9 @@ import html
 import json
 import math
 import re
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Sequence
 
 import torch
 from torch import Tensor
@@ -46,16 +46,20 @@ from ..sim.scenario import Scenario
 from ..sim.state import DELIVERED, capabilities
 from .render import Episode, design_colors, record_episode, team_genome
 
-HTML_FILE = "team.html"   # the default output of `replay --html`
+HTML_FILE = "team.html"  # the default output of `replay --html`
 _EFFECTOR = {PINCHER: "pincher"}
-_TERMS = (("delivery", "deliveries"), ("collab", "collaborative deliveries and bonus"),
-          ("pickup", "pick-ups"), ("energy", "energy left"), ("proximity", "proximity"),
-          ("closeness", "closeness"))
+_TERMS = (
+    ("delivery", "deliveries"),
+    ("collab", "collaborative deliveries and bonus"),
+    ("pickup", "pick-ups"),
+    ("energy", "energy left"),
+    ("proximity", "proximity"),
+    ("closeness", "closeness"),
+)
 
 
 # ------------------------------------------------------------------ teams
-def focal_and_baseline(designs: Sequence[dict], seed: int = 0
-                       ) -> tuple[int, Tensor, Tensor, bool]:
+def focal_and_baseline(designs: Sequence[dict], seed: int = 0) -> tuple[int, Tensor, Tensor, bool]:
     """(focal design index, focal team ``[S]``, baseline team ``[S]``, whether the baseline is
     the recorded one) as rows of ``team_genome(designs)`` (-1: an empty slot); see the module
     docstring. A record that gives
@@ -87,8 +91,9 @@ def focal_and_baseline(designs: Sequence[dict], seed: int = 0
     return focal, team, baseline, recorded is not None
 
 
-def _recorded_refill(designs: Sequence[dict], counts: list[int], focal: int,
-                     n_slots: int) -> Tensor | None:
+def _recorded_refill(
+    designs: Sequence[dict], counts: list[int], focal: int, n_slots: int
+) -> Tensor | None:
     """The focal's slots as the record's baseline counts fill them ([n_slots] design rows, -1
     empty), or None where the record has none or they do not fit the team."""
     base = [d.get("baseline_count") for d in designs]
@@ -101,7 +106,7 @@ def _recorded_refill(designs: Sequence[dict], counts: list[int], focal: int,
         return None
     fill = [i for i, e in enumerate(extra) for _ in range(e)]
     if not fill and sum(base) == 0:
-        return torch.full((n_slots,), -1, dtype=torch.long)   # no partner: an empty team
+        return torch.full((n_slots,), -1, dtype=torch.long)  # no partner: an empty team
     if len(fill) != n_slots:
         return None
     return torch.tensor(fill, dtype=torch.long)
@@ -124,13 +129,23 @@ def _round(x: float, nd: int = 6) -> float | None:
     return round(float(x), nd) if math.isfinite(float(x)) else None
 
 
-def _panel(ep: Episode, team: Tensor, programs: Tensor, traces: list[dict],
-           cost: float, species: int, cfg, scenario: Scenario) -> dict:
+def _panel(
+    ep: Episode,
+    team: Tensor,
+    programs: Tensor,
+    traces: list[dict],
+    cost: float,
+    species: int,
+    cfg,
+    scenario: Scenario,
+) -> dict:
     """One team's episode as page data; fills `traces` (per design: combination -> trace)."""
     snaps = ep.snapshots
     rob = ep.robots
-    stack = {k: torch.stack([getattr(s, k) for s in snaps]) for k in
-             ("pos", "energy", "holding", "grip", "p_pos", "p_status", "holder", "p_picked")}
+    stack = {
+        k: torch.stack([getattr(s, k) for s in snaps])
+        for k in ("pos", "energy", "holding", "grip", "p_pos", "p_status", "holder", "p_picked")
+    }
     cap = rob.capacity[0].clamp_min(1e-9)
     present = rob.present[0]
     # the team's mean energy left each tick, as episode_metrics computes it at the end
@@ -166,27 +181,36 @@ def _panel(ep: Episode, team: Tensor, programs: Tensor, traces: list[dict],
             "payload": [_round(x, 3) for x in rob.payload[0].tolist()],
             "force": [_round(x, 3) for x in rob.force[0].tolist()],
         },
-        "pos": _q(stack["pos"], 100.0),                   # cm, delta over ticks [T+1, N, 2]
-        "energy": _q(pct, 10.0),                          # 0.1 %, delta [T+1, N]
+        "pos": _q(stack["pos"], 100.0),  # cm, delta over ticks [T+1, N, 2]
+        "energy": _q(pct, 10.0),  # 0.1 %, delta [T+1, N]
         "team_energy": team_energy.tolist(),
         "holding": stack["holding"].reshape(-1).tolist(),  # [T+1, N]
         "grip": stack["grip"].reshape(-1).tolist(),
-        "p_pos": _q(stack["p_pos"], 100.0),              # [T+1, Q, 2]
+        "p_pos": _q(stack["p_pos"], 100.0),  # [T+1, Q, 2]
         "p_status": stack["p_status"].reshape(-1).tolist(),
-        "holder": stack["holder"].reshape(-1).tolist(),   # [T+1, Q, G]
+        "holder": stack["holder"].reshape(-1).tolist(),  # [T+1, Q, G]
         "p_picked": stack["p_picked"].long().reshape(-1).tolist(),
-        "combo": combos,                                  # [T, N] ticks 1..T, -1: no tree ran
+        "combo": combos,  # [T, N] ticks 1..T, -1: no tree ran
         "metrics": {k: _round(v) for k, v in m.items()},
         "terms": {k: _round(v) for k, v in terms.items()},
         "raw": _round(float(sum(terms[k] for k, _ in _TERMS) * terms["activity"])),
         "floor": ecfg.weights.floor,
-        "penalty": _round(penalty), "cost": _round(cost, 2), "species": species,
+        "penalty": _round(penalty),
+        "cost": _round(cost, 2),
+        "species": species,
         "score": _round(score),
     }
 
 
-def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
-              ticks: int | None = None, title: str = "", record: dict | None = None) -> dict:
+def page_data(
+    designs: Sequence[dict],
+    scenario: Scenario,
+    cfg,
+    seed: int = 0,
+    ticks: int | None = None,
+    title: str = "",
+    record: dict | None = None,
+) -> dict:
     """Everything the page shows, as JSON-friendly data: both teams' episodes in the environment
     of `seed`, the designs, the layout, the scores. `cfg`: the run's SwarmCoDeConfig."""
     genome, _ = team_genome(designs, cfg.tag_length)
@@ -201,10 +225,10 @@ def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
         ep = record_episode(genome, t, scenario, seed, ticks=ticks, every=1, leaves=True)
         present = t >= 0
         counts = torch.tensor([_species_count(designs, t)])
-        cost = float(team_cost(row_cost[t.clamp_min(0)], present, counts,
-                               scenario.species_overhead)[0])
-        panels[name] = _panel(ep, t, genome.bt, traces, cost, int(counts[0]), cfg,
-                              scenario)
+        cost = float(
+            team_cost(row_cost[t.clamp_min(0)], present, counts, scenario.species_overhead)[0]
+        )
+        panels[name] = _panel(ep, t, genome.bt, traces, cost, int(counts[0]), cfg, scenario)
         eps[name] = ep
     f, b = panels["focal"]["score"], panels["baseline"]["score"]
     gated = float(gate(torch.tensor([f]), torch.tensor([b]), cfg.p_marginal)[0])
@@ -213,60 +237,98 @@ def page_data(designs: Sequence[dict], scenario: Scenario, cfg, seed: int = 0,
     cls = [i for i, c in enumerate(scenario.packages) for _ in range(c.count)]
     from matplotlib import colormaps
     from matplotlib.colors import to_hex
+
     mass = lay.p_mass[0]
     pm = mass[present]
     lo, hi = (float(pm.min()), float(pm.max())) if pm.numel() else (0.0, 1.0)
     ylor = colormaps["YlOrBr"]
-    pcol = [to_hex(ylor(0.35 + 0.6 * min(max((float(x) - lo) / max(hi - lo, 1e-6), 0), 1)))
-            for x in mass.tolist()]
+    pcol = [
+        to_hex(ylor(0.35 + 0.6 * min(max((float(x) - lo) / max(hi - lo, 1e-6), 0), 1)))
+        for x in mass.tolist()
+    ]
     o = lay.o_present[0]
     if all("capability" in d for d in designs):
         can = [list(d["capability"]) for d in designs]
-    else:   # an older record: from the genes, as analysis.design_capabilities does
+    else:  # an older record: from the genes, as analysis.design_capabilities does
         rows = capabilities(ph, scenario, eps["focal"].params).tolist()
         can = [[j for j, ok in enumerate(r) if ok] for r in rows]
     dd = []
     for i, d in enumerate(designs):
-        dd.append({
-            "species": d.get("species"), "effector": d["effector"] if isinstance(d["effector"], str)
-            else _EFFECTOR.get(int(d["effector"]), "suction"),
-            "radius": d["radius"], "chassis_tier": d["chassis_tier"],
-            "battery_tier": d["battery_tier"], "motor_tier": d["motor_tier"],
-            "torque_point": d["torque_point"], "battery_point": d["battery_point"],
-            "dominance": d.get("dominance"), "selectivity": d.get("selectivity"),
-            "cost": _round(float(row_cost[i]), 2),
-            "capability": can[i],
-            "count": int(d.get("count", 1)),
-            "baseline_count": int((base == i).sum()),
-            "color": to_hex(colors[i]), "focal": i == focal,
-            "tree": [[text, slot] for text, slot in bt.tree_lines(genome.bt[i].tolist())],
-            "ops": genome.bt[i].tolist(),
-            "traces": {str(k): v for k, v in sorted(traces[i].items())},
-        })
+        dd.append(
+            {
+                "species": d.get("species"),
+                "effector": d["effector"]
+                if isinstance(d["effector"], str)
+                else _EFFECTOR.get(int(d["effector"]), "suction"),
+                "radius": d["radius"],
+                "chassis_tier": d["chassis_tier"],
+                "battery_tier": d["battery_tier"],
+                "motor_tier": d["motor_tier"],
+                "torque_point": d["torque_point"],
+                "battery_point": d["battery_point"],
+                "dominance": d.get("dominance"),
+                "selectivity": d.get("selectivity"),
+                "cost": _round(float(row_cost[i]), 2),
+                "capability": can[i],
+                "count": int(d.get("count", 1)),
+                "baseline_count": int((base == i).sum()),
+                "color": to_hex(colors[i]),
+                "focal": i == focal,
+                "tree": [[text, slot] for text, slot in bt.tree_lines(genome.bt[i].tolist())],
+                "ops": genome.bt[i].tolist(),
+                "traces": {str(k): v for k, v in sorted(traces[i].items())},
+            }
+        )
     Q, G = lay.g_effector.shape[1:]
     return {
-        "title": title, "scenario": scenario.name, "seed": int(seed), "ticks": ticks,
-        "dt": eps["focal"].params.dt, "arena": scenario.arena, "base_radius": scenario.base_radius,
-        "robots": int(team.numel()), "Q": int(Q), "G": int(G),
+        "title": title,
+        "scenario": scenario.name,
+        "seed": int(seed),
+        "ticks": ticks,
+        "dt": eps["focal"].params.dt,
+        "arena": scenario.arena,
+        "base_radius": scenario.base_radius,
+        "robots": int(team.numel()),
+        "Q": int(Q),
+        "G": int(G),
         "record": record or {},
-        "objective": cfg.objective, "budget": cfg.budget,
+        "objective": cfg.objective,
+        "budget": cfg.budget,
         "custom_fitness": getattr(cfg, "fitness_function", None),
-        "weights": {k: getattr(cfg.fitness_weights, k) for k in
-                    ("W_delivery", "W_collab_bonus", "W_pickup", "W_energy", "W_proximity",
-                     "W_closeness", "inactive_factor", "floor")},
+        "weights": {
+            k: getattr(cfg.fitness_weights, k)
+            for k in (
+                "W_delivery",
+                "W_collab_bonus",
+                "W_pickup",
+                "W_energy",
+                "W_proximity",
+                "W_closeness",
+                "inactive_factor",
+                "floor",
+            )
+        },
         "classes": [c.label for c in scenario.packages],
         "packages": {
-            "present": present.long().tolist(), "cls": cls + [-1] * (int(Q) - len(cls)),
+            "present": present.long().tolist(),
+            "cls": cls + [-1] * (int(Q) - len(cls)),
             "collab": lay.p_collab[0].long().tolist(),
             "size": [_round(x, 4) for x in lay.p_size[0].tolist()],
-            "mass": [_round(x, 3) for x in mass.tolist()], "color": pcol,
+            "mass": [_round(x, 3) for x in mass.tolist()],
+            "color": pcol,
             "g_eff": lay.g_effector[0].reshape(-1).tolist(),
             "g_off": [_round(x, 4) for x in lay.g_offset[0].reshape(-1).tolist()],
         },
-        "obstacles": [[_round(x, 3), _round(y, 3), _round(r, 3)] for (x, y), r in
-                      zip(lay.o_pos[0][o].tolist(), lay.o_radius[0][o].tolist())],
-        "designs": dd, "focal": focal, "baseline_recorded": recorded,
-        "panels": panels, "gated": _round(gated), "marginal": _round(f - b),
+        "obstacles": [
+            [_round(x, 3), _round(y, 3), _round(r, 3)]
+            for (x, y), r in zip(lay.o_pos[0][o].tolist(), lay.o_radius[0][o].tolist())
+        ],
+        "designs": dd,
+        "focal": focal,
+        "baseline_recorded": recorded,
+        "panels": panels,
+        "gated": _round(gated),
+        "marginal": _round(f - b),
         "p_marginal": cfg.p_marginal,
     }
 
@@ -279,8 +341,12 @@ def final_counts(data: dict, panel: str) -> dict:
     pk = data["packages"]
     last = slice(T * Q, (T + 1) * Q)
     st, picked = p["p_status"][last], p["p_picked"][last]
-    out = {"delivered_individual": 0, "delivered_collab": 0, "picked_individual": 0,
-           "picked_collab": 0}
+    out = {
+        "delivered_individual": 0,
+        "delivered_collab": 0,
+        "picked_individual": 0,
+        "picked_collab": 0,
+    }
     for q in range(Q):
         if not pk["present"][q]:
             continue
@@ -301,12 +367,18 @@ def render_html(data: dict) -> str:
     raw = json.dumps(data, separators=(",", ":"), allow_nan=False).encode()
     blob = base64.b64encode(gzip.compress(raw, compresslevel=9, mtime=0)).decode("ascii")
     # the script must not close its own tag; the data is base64, which has no '<'
-    parts = {"/*STYLE*/": _asset("replay_page.css"),
-             "/*SCRIPT*/": _asset("replay_page.js").replace("</script", "<\\/script"),
-             "@TITLE@": html.escape(data.get("title") or "SwarmCoDe replay"), "@DATA@": blob}
+    parts = {
+        "/*STYLE*/": _asset("replay_page.css"),
+        "/*SCRIPT*/": _asset("replay_page.js").replace("</script", "<\\/script"),
+        "@TITLE@": html.escape(data.get("title") or "SwarmCoDe replay"),
+        "@DATA@": blob,
+    }
     # one pass over the template: nothing inserted is searched for markers again
-    return re.sub("|".join(re.escape(k) for k in parts), lambda m: parts[m.group(0)],
-                  _asset("replay_page.html"))
+    return re.sub(
+        "|".join(re.escape(k) for k in parts),
+        lambda m: parts[m.group(0)],
+        _asset("replay_page.html"),
+    )
 
 
 def decode_page(text: str) -> dict:

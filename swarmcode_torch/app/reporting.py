@@ -13,8 +13,8 @@ import math
 from pathlib import Path
 
 from ..coevo.evolve import Evolution, GenerationResult
-from .records import HISTOGRAMS, SCALAR_TAGS, scalars
 from .files import METRICS_FILE
+from .records import HISTOGRAMS, SCALAR_TAGS, scalars
 
 
 def composition_figure(history: list[dict], legend: int = 8):
@@ -41,10 +41,17 @@ def composition_figure(history: list[dict], legend: int = 8):
             largest = sorted(range(len(ids)), key=lambda j: (-sum(rows[j]), ids[j]))[:legend]
             if largest:
                 more = len(ids) - len(largest)
-                ax.legend([bands[j] for j in largest], [str(ids[j]) for j in largest],
-                          title="species" + (f"\n(+{more} more)" if more else ""),
-                          loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8,
-                          title_fontsize=8, frameon=False, handlelength=1.2)
+                ax.legend(
+                    [bands[j] for j in largest],
+                    [str(ids[j]) for j in largest],
+                    title="species" + (f"\n(+{more} more)" if more else ""),
+                    loc="upper left",
+                    bbox_to_anchor=(1.0, 1.0),
+                    fontsize=8,
+                    title_fontsize=8,
+                    frameon=False,
+                    handlelength=1.2,
+                )
         ax.set_title(f"species in the {title}")
         ax.set_xlabel("generation")
         ax.set_ylabel("individuals" if key == "population" else "robots")
@@ -66,40 +73,65 @@ def figure_image(fig):
 #: generation beside `records.SCALAR_TAGS`: tag -> key of the team record. They are also the
 #: metrics of TensorBoard's HParams tab (the last value of each run), so that no scalar is
 #: written only for it.
-HPARAM_METRICS = {"best/fitness": "fitness", "best/cost": "cost", "best/species": "species",
-                  "best/niches": "niches", "best/deliveries": "deliveries"}
+HPARAM_METRICS = {
+    "best/fitness": "fitness",
+    "best/cost": "cost",
+    "best/species": "species",
+    "best/niches": "niches",
+    "best/deliveries": "deliveries",
+}
 
 #: Config keys shown in TensorBoard's HParams tab for every run, beside the keys whose value
 #: differs from the run's preset: the first `HPARAM_FIRST` and the algorithm settings that
 #: differ from the preset are marked as those that differ, which the tab lists first and shows
 #: (its first five columns); the run's size after them.
-HPARAM_KEYS = ("preset", "scenario", "budget", "objective", "seed", "population", "swarm_size",
-               "generations")
+HPARAM_KEYS = (
+    "preset",
+    "scenario",
+    "budget",
+    "objective",
+    "seed",
+    "population",
+    "swarm_size",
+    "generations",
+)
 HPARAM_FIRST = ("preset", "scenario", "budget", "objective", "seed")
 #: Settings of a run's size and of where it computes (listed after the others).
-RUN_SIZE_KEYS = ("population", "swarm_size", "generations", "trials", "ticks", "device",
-                 "compile")
+RUN_SIZE_KEYS = ("population", "swarm_size", "generations", "trials", "ticks", "device", "compile")
 
 #: TensorBoard's Custom Scalars tab: category -> chart title -> the tags drawn together.
 CUSTOM_SCALARS = {
     "species and niches": {
-        "species: population, generation's team, best team":
-            ["species/count", "team/species", "best/species"],
+        "species: population, generation's team, best team": [
+            "species/count",
+            "team/species",
+            "best/species",
+        ],
         "niches: generation's team, best team": ["team/niches", "best/niches"],
         "species founded and extinct": ["species/founded", "species/extinct"],
         "median species age: population, team": ["species/median_age", "team/median_age"],
     },
     "fitness, cost and budget": {
-        "fitness: population best and mean, generation's team, best team":
-            ["fitness/best", "fitness/mean", "team/fitness", "best/fitness"],
+        "fitness: population best and mean, generation's team, best team": [
+            "fitness/best",
+            "fitness/mean",
+            "team/fitness",
+            "best/fitness",
+        ],
         "team cost and budget ($)": ["team/cost", "team/budget", "best/cost"],
-        "deliveries: generation's team, best team":
-            ["team/deliveries", "team/deliveries_individual", "team/deliveries_collab",
-             "best/deliveries"],
+        "deliveries: generation's team, best team": [
+            "team/deliveries",
+            "team/deliveries_individual",
+            "team/deliveries_collab",
+            "best/deliveries",
+        ],
     },
     "time": {
-        "seconds per generation": ["perf/generation_seconds", "perf/eval_seconds",
-                                   "perf/sim_seconds"],
+        "seconds per generation": [
+            "perf/generation_seconds",
+            "perf/eval_seconds",
+            "perf/sim_seconds",
+        ],
     },
 }
 
@@ -107,8 +139,10 @@ CUSTOM_SCALARS = {
 def best_scalars(result: GenerationResult) -> dict[str, float]:
     """The run's best team so far as scalars (`HPARAM_METRICS`); NaN for a missing value."""
     best = result.best or {}
-    return {tag: float(best[key]) if best.get(key) is not None else math.nan
-            for tag, key in HPARAM_METRICS.items()}
+    return {
+        tag: float(best[key]) if best.get(key) is not None else math.nan
+        for tag, key in HPARAM_METRICS.items()
+    }
 
 
 def custom_scalars_layout() -> dict:
@@ -116,8 +150,13 @@ def custom_scalars_layout() -> dict:
     chart whose tags are anchored regular expressions (each names one tag exactly)."""
     import re
 
-    return {cat: {title: ["Multiline", [f"^{re.escape(t)}$" for t in tags]]
-                  for title, tags in charts.items()} for cat, charts in CUSTOM_SCALARS.items()}
+    return {
+        cat: {
+            title: ["Multiline", [f"^{re.escape(t)}$" for t in tags]]
+            for title, tags in charts.items()
+        }
+        for cat, charts in CUSTOM_SCALARS.items()
+    }
 
 
 def _hparam_value(v):
@@ -135,8 +174,9 @@ def hparams(ev: Evolution) -> tuple[dict, dict]:
     cfg = ev.cfg.to_dict()
     base = preset_config(ev.cfg.preset if ev.cfg.preset in PRESETS else "default").to_dict()
     differs = {k: cfg[k] != base.get(k) for k in cfg}
-    keys = [k for k in HPARAM_KEYS if k in cfg] + [k for k in cfg
-                                                   if differs[k] and k not in HPARAM_KEYS]
+    keys = [k for k in HPARAM_KEYS if k in cfg] + [
+        k for k in cfg if differs[k] and k not in HPARAM_KEYS
+    ]
     hp = {}
     for k in keys:
         v = ev.ctx.eval_cfg.swarm_size if k == "swarm_size" and cfg[k] is None else cfg[k]
@@ -159,8 +199,9 @@ def replay_strip(ev: Evolution, designs: list[dict], seed: int, frames: int = 3,
 
     genome, team = team_genome(designs, ev.cfg.tag_length)
     ticks = ev.ctx.eval_cfg.ticks
-    ep = record_episode(genome, team, ev.ctx.scenario, seed, ticks=ticks,
-                        every=max(1, ticks // (frames - 1)))
+    ep = record_episode(
+        genome, team, ev.ctx.scenario, seed, ticks=ticks, every=max(1, ticks // (frames - 1))
+    )
     picks = np.linspace(0, len(ep.snapshots) - 1, frames).round().astype(int)
     return np.concatenate([frame_image(ep, int(i), dpi=dpi) for i in picks], axis=1)
 
@@ -173,17 +214,26 @@ def hparams_summaries(ev: Evolution) -> list:
     from tensorboard.plugins.hparams import api_pb2, metadata, plugin_data_pb2
 
     hp, differs = hparams(ev)
-    kind = {str: api_pb2.DATA_TYPE_STRING, bool: api_pb2.DATA_TYPE_BOOL,
-            float: api_pb2.DATA_TYPE_FLOAT64}
+    kind = {
+        str: api_pb2.DATA_TYPE_STRING,
+        bool: api_pb2.DATA_TYPE_BOOL,
+        float: api_pb2.DATA_TYPE_FLOAT64,
+    }
     # a key of every run that this run leaves unset (no budget) is a column all the same: the
     # tab takes its columns from one run's experiment
-    unset = {k: "" if k == "preset" else 0.0 for k in HPARAM_KEYS
-             if k not in hp and k in ev.cfg.to_dict()}
-    infos = [api_pb2.HParamInfo(name=k, type=kind[type(v)],
-                                differs=differs.get(k, k in HPARAM_FIRST))
-             for k, v in {**hp, **unset}.items()]
-    metrics = [api_pb2.MetricInfo(name=api_pb2.MetricName(tag=t), display_name=f"best {k}")
-               for t, k in HPARAM_METRICS.items()]
+    unset = {
+        k: "" if k == "preset" else 0.0
+        for k in HPARAM_KEYS
+        if k not in hp and k in ev.cfg.to_dict()
+    }
+    infos = [
+        api_pb2.HParamInfo(name=k, type=kind[type(v)], differs=differs.get(k, k in HPARAM_FIRST))
+        for k, v in {**hp, **unset}.items()
+    ]
+    metrics = [
+        api_pb2.MetricInfo(name=api_pb2.MetricName(tag=t), display_name=f"best {k}")
+        for t, k in HPARAM_METRICS.items()
+    ]
     start = plugin_data_pb2.SessionStartInfo()
     for k, v in hp.items():
         if isinstance(v, str):
@@ -193,12 +243,21 @@ def hparams_summaries(ev: Evolution) -> list:
         else:
             start.hparams[k].number_value = v
     out = []
-    for tag, data in ((metadata.EXPERIMENT_TAG, plugin_data_pb2.HParamsPluginData(
-            experiment=api_pb2.Experiment(hparam_infos=infos, metric_infos=metrics))),
-                      (metadata.SESSION_START_INFO_TAG,
-                       plugin_data_pb2.HParamsPluginData(session_start_info=start))):
-        out.append(Summary(value=[Summary.Value(
-            tag=tag, metadata=metadata.create_summary_metadata(data))]))
+    for tag, data in (
+        (
+            metadata.EXPERIMENT_TAG,
+            plugin_data_pb2.HParamsPluginData(
+                experiment=api_pb2.Experiment(hparam_infos=infos, metric_infos=metrics)
+            ),
+        ),
+        (
+            metadata.SESSION_START_INFO_TAG,
+            plugin_data_pb2.HParamsPluginData(session_start_info=start),
+        ),
+    ):
+        out.append(
+            Summary(value=[Summary.Value(tag=tag, metadata=metadata.create_summary_metadata(data))])
+        )
     return out
 
 
@@ -219,7 +278,7 @@ class TensorBoardReporter:
         self.writer = None
         self.figure_every = max(1, figure_every)
         self.render_every = render_every
-        self._figure_step: int | None = None      # the generation of the last figure drawn
+        self._figure_step: int | None = None  # the generation of the last figure drawn
 
     def on_start(self, ev: Evolution) -> None:
         # on a resume, events of the generations the run computes again (those from its
@@ -262,7 +321,7 @@ class TensorBoardReporter:
             return
         if ev.state.history:
             step = ev.state.history[-1]["generation"]
-            if self._figure_step != step:       # the last generation's figure, once
+            if self._figure_step != step:  # the last generation's figure, once
                 self._figure(ev, step)
             best = ev.state.best
             if self.render_every and best and best.get("designs"):
@@ -298,8 +357,9 @@ class CsvReporter:
         from .files import atomic_write_bytes
 
         buf = io.StringIO()
-        w = csv.DictWriter(buf, fieldnames=columns, restval="", extrasaction="ignore",
-                           lineterminator="\n")
+        w = csv.DictWriter(
+            buf, fieldnames=columns, restval="", extrasaction="ignore", lineterminator="\n"
+        )
         w.writeheader()
         for r in rows:
             w.writerow({k: ("" if v is None else v) for k, v in r.items()})
@@ -310,14 +370,16 @@ class CsvReporter:
         row = {k: (int(v) if isinstance(v, bool) else v) for k, v in scalars(result).items()}
         if self.columns is None or not set(row) <= set(self.columns):
             old, _ = read_metrics_csv(self.path, raw=True) if self.path.is_file() else ([], [])
-            self._rewrite((self.columns or []) + [k for k in row if k not in (self.columns or [])],
-                          old)
+            self._rewrite(
+                (self.columns or []) + [k for k in row if k not in (self.columns or [])], old
+            )
         from .files import append_line
 
         buf = io.StringIO()
         csv.DictWriter(buf, fieldnames=self.columns, restval="", lineterminator="").writerow(
-            {k: ("" if v is None else v) for k, v in row.items()})
-        append_line(self.path, buf.getvalue())      # one os.write: on disk when it returns
+            {k: ("" if v is None else v) for k, v in row.items()}
+        )
+        append_line(self.path, buf.getvalue())  # one os.write: on disk when it returns
 
     def on_end(self, ev: Evolution) -> None:
         pass
@@ -347,15 +409,21 @@ def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[st
         columns = list(reader.fieldnames or [])
         unknown = [c for c in columns if c != "generation" and c not in SCALAR_TAGS]
         if columns and ("generation" not in columns or unknown or len(set(columns)) < len(columns)):
-            what = (f"unknown columns {', '.join(repr(c[:40]) for c in unknown[:5])}" if unknown
-                    else "no 'generation' column" if "generation" not in columns
-                    else "a column named twice")
-            raise RunError(f"{path}: not a metrics.csv header ({what}); restore the header or "
-                           "move the file away")
+            what = (
+                f"unknown columns {', '.join(repr(c[:40]) for c in unknown[:5])}"
+                if unknown
+                else "no 'generation' column"
+                if "generation" not in columns
+                else "a column named twice"
+            )
+            raise RunError(
+                f"{path}: not a metrics.csv header ({what}); restore the header or "
+                "move the file away"
+            )
         rows = []
         for r in reader:
             if None in r or any(v is None for v in r.values()):
-                continue              # more or fewer cells than the header: a cut-short line
+                continue  # more or fewer cells than the header: a cut-short line
             try:
                 gen = int(r["generation"])
                 row = {k: (v if raw else _number(v)) for k, v in r.items()}
@@ -377,8 +445,9 @@ def require_wandb():
     try:
         import wandb
     except ImportError:
-        raise ImportError(f"Weights & Biases logging needs the wandb package: {WANDB_INSTALL}"
-                          ) from None
+        raise ImportError(
+            f"Weights & Biases logging needs the wandb package: {WANDB_INSTALL}"
+        ) from None
     return wandb
 
 
@@ -401,9 +470,15 @@ class WandbReporter:
     keyword (`init`) as wandb takes them. Needs the `wandb` package (`WANDB_INSTALL`), imported
     when the reporter is made."""
 
-    def __init__(self, project: str = "swarmcode-torch", run_dir: Path | None = None,
-                 render_every: int = 50, entity: str | None = None, mode: str | None = None,
-                 **init):
+    def __init__(
+        self,
+        project: str = "swarmcode-torch",
+        run_dir: Path | None = None,
+        render_every: int = 50,
+        entity: str | None = None,
+        mode: str | None = None,
+        **init,
+    ):
         self.wandb = require_wandb()
         self.project, self.entity, self.mode = project, entity, mode
         self.run_dir = Path(run_dir) if run_dir is not None else None
@@ -414,12 +489,17 @@ class WandbReporter:
     def on_start(self, ev: Evolution) -> None:
         from .records import json_clean
 
-        init = {"project": self.project, "entity": self.entity, "mode": self.mode,
-                "config": json_clean(ev.cfg.to_dict())}
+        init = {
+            "project": self.project,
+            "entity": self.entity,
+            "mode": self.mode,
+            "config": json_clean(ev.cfg.to_dict()),
+        }
         if self.run_dir is not None:
             init.update(name=self.run_dir.name, id=_wandb_run_id(self.run_dir), resume="allow")
-        self.run = self.wandb.init(**{k: v for k, v in {**init, **self.init}.items()
-                                      if v is not None})
+        self.run = self.wandb.init(
+            **{k: v for k, v in {**init, **self.init}.items() if v is not None}
+        )
 
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
         row = scalars(result)
@@ -430,7 +510,8 @@ class WandbReporter:
         if self.render_every and result.generation % self.render_every == 0:
             log["team/replay"] = self.wandb.Image(
                 replay_strip(ev, result.team["designs"], seed=result.generation),
-                caption=f"generation {result.generation}: the generation's best team")
+                caption=f"generation {result.generation}: the generation's best team",
+            )
         self.run.log(log, step=result.generation)
 
     def on_end(self, ev: Evolution) -> None:
@@ -439,10 +520,15 @@ class WandbReporter:
         best = ev.state.best
         if self.render_every and ev.state.history and best and best.get("designs"):
             step = ev.state.history[-1]["generation"]
-            self.run.log({"best/replay": self.wandb.Image(
-                replay_strip(ev, best["designs"], seed=step),
-                caption=f"the run's best team (generation {best.get('generation')})")},
-                step=step)
+            self.run.log(
+                {
+                    "best/replay": self.wandb.Image(
+                        replay_strip(ev, best["designs"], seed=step),
+                        caption=f"the run's best team (generation {best.get('generation')})",
+                    )
+                },
+                step=step,
+            )
         self.close()
 
     def close(self) -> None:

@@ -6,18 +6,34 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import tomli_w
 import torch
 
 from ..coevo.config import SettingError, SwarmCoDeConfig
-from ..sim.hardware import Catalog, CatalogError, catalog_toml_lines, default_catalog, default_catalog_bytes, parse_catalog
+from ..sim.hardware import (
+    Catalog,
+    CatalogError,
+    catalog_toml_lines,
+    default_catalog,
+    default_catalog_bytes,
+    parse_catalog,
+)
 from ..sim.scenario import EFFECTORS, Scenario, load_scenario, parse_scenario
 from . import records
-from .files import (CONFIG_FILE, HARDWARE_COPY, SCENARIO_COPY, RunError, atomic_write_bytes,
-                    check_nesting, read_file_bytes, read_text)
+from .files import (
+    CONFIG_FILE,
+    HARDWARE_COPY,
+    SCENARIO_COPY,
+    RunError,
+    atomic_write_bytes,
+    check_nesting,
+    read_file_bytes,
+    read_text,
+)
 from .migrations import migrate_config, retired_value
 from .settings import setting_message
 
@@ -27,7 +43,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 #: The memory assumed when the machine's cannot be read.
-FALLBACK_MEMORY = 64 * 2 ** 30
+FALLBACK_MEMORY = 64 * 2**30
 
 
 # ------------------------------------------------------------------ config.toml
@@ -36,20 +52,27 @@ def config_table(cfg: SwarmCoDeConfig) -> dict[str, Any]:
     its default is set (quota_size_exponent) is "none", which reading a config turns back into
     None."""
     defaults = SwarmCoDeConfig().to_dict()
-    return {k: (v if v is not None else "none") for k, v in cfg.to_dict().items()
-            if v is not None or defaults.get(k) is not None}
+    return {
+        k: (v if v is not None else "none")
+        for k, v in cfg.to_dict().items()
+        if v is not None or defaults.get(k) is not None
+    }
 
 
-def config_to_toml(cfg: SwarmCoDeConfig, software: dict | None = None,
-                   parent: dict | None = None) -> str:
+def config_to_toml(
+    cfg: SwarmCoDeConfig, software: dict | None = None, parent: dict | None = None
+) -> str:
     """config.toml: every set key of `cfg` (`config_table`), written by tomli-w; `software`
     (`records.software`), what wrote it, goes into a comment line (a config file holds settings
     only); `parent`, the run and generation a branched run started from, into a [parent]
     table (`read_parent`)."""
-    lines = ["# swarmcode-torch run configuration (re-run with: swarmcode-torch evolve --resume DIR)"]
+    lines = [
+        "# swarmcode-torch run configuration (re-run with: swarmcode-torch evolve --resume DIR)"
+    ]
     if software:
-        lines.append("# written by " + ", ".join(f"{k} {v}" for k, v in software.items()
-                                                  if v is not None))
+        lines.append(
+            "# written by " + ", ".join(f"{k} {v}" for k, v in software.items() if v is not None)
+        )
     table: dict[str, Any] = config_table(cfg)
     if parent:
         table[PARENT_TABLE] = dict(parent)
@@ -63,8 +86,10 @@ PARENT_TABLE = "parent"
 def write_config(run_dir: Path, cfg: SwarmCoDeConfig, parent: dict | None = None) -> None:
     """config.toml of `run_dir`, written atomically; `parent`: the [parent] table of a branched
     run (`config_to_toml`)."""
-    atomic_write_bytes(Path(run_dir) / CONFIG_FILE,
-                       config_to_toml(cfg, records.software(cfg.device), parent).encode())
+    atomic_write_bytes(
+        Path(run_dir) / CONFIG_FILE,
+        config_to_toml(cfg, records.software(cfg.device), parent).encode(),
+    )
 
 
 def config_from_dict(d: Any, source: str) -> SwarmCoDeConfig:
@@ -104,8 +129,9 @@ def _split_parent(d: dict, path: Path) -> tuple[dict, dict | None]:
     d = dict(d)
     parent = d.pop(PARENT_TABLE)
     if not isinstance(parent, dict):
-        raise RunError(f"{path}: [{PARENT_TABLE}] must be a table (run, generation), got "
-                       f"{parent!r:.60}")
+        raise RunError(
+            f"{path}: [{PARENT_TABLE}] must be a table (run, generation), got {parent!r:.60}"
+        )
     return d, parent
 
 
@@ -119,8 +145,10 @@ def read_config(run_dir: Path) -> SwarmCoDeConfig:
     missing = [k for k in CONFIG_REQUIRED if k not in d]
     if missing:
         # an empty or cut config would read as the defaults: another run than the one made
-        raise RunError(f"{path}: {'empty' if not d else 'incomplete'} config (no "
-                       f"{', '.join(missing)}); restore it from the run's checkpoint or backup")
+        raise RunError(
+            f"{path}: {'empty' if not d else 'incomplete'} config (no "
+            f"{', '.join(missing)}); restore it from the run's checkpoint or backup"
+        )
     return config_from_dict(d, str(path))
 
 
@@ -153,8 +181,9 @@ def read_config_file(path: Path, base: SwarmCoDeConfig | None = None) -> SwarmCo
     known = set(SwarmCoDeConfig().to_dict())
     for k, v in d.items():
         if k not in known:
-            raise RunError(f"{path}: unknown key {k!r} (a config file holds the keys of a run's "
-                           f"{CONFIG_FILE})")
+            raise RunError(
+                f"{path}: unknown key {k!r} (a config file holds the keys of a run's {CONFIG_FILE})"
+            )
         if isinstance(v, (dict, list)):
             raise RunError(f"{path}: {k}: expected a single value, got {v!r:.60}")
     d = {k: (None if v == "none" else v) for k, v in d.items()}
@@ -178,22 +207,39 @@ def scenario_to_toml(s: Scenario) -> str:
     names = {v: k for k, v in EFFECTORS.items()}
     packages = []
     for p in s.packages:
-        grips = ({"effector": names[p.grips[0]]} if p.kind == "individual"
-                 else {"grips": [names[g] for g in p.grips]})
-        packages.append({"kind": p.kind, **grips, "count": int(p.count),
-                         "distance": [float(x) for x in p.distance],
-                         "mass": [float(x) for x in p.mass],
-                         "radius_band": [float(x) for x in p.radius_band],
-                         "size": float(p.size), "distance_weighting": bool(p.distance_weighting)})
+        grips = (
+            {"effector": names[p.grips[0]]}
+            if p.kind == "individual"
+            else {"grips": [names[g] for g in p.grips]}
+        )
+        packages.append(
+            {
+                "kind": p.kind,
+                **grips,
+                "count": int(p.count),
+                "distance": [float(x) for x in p.distance],
+                "mass": [float(x) for x in p.mass],
+                "radius_band": [float(x) for x in p.radius_band],
+                "size": float(p.size),
+                "distance_weighting": bool(p.distance_weighting),
+            }
+        )
     table: dict[str, Any] = {
-        "name": s.name, "description": s.description, "arena": float(s.arena),
-        "base_radius": float(s.base_radius), "num_robots": int(s.num_robots),
-        "episode_ticks": int(s.episode_ticks), "species_overhead": float(s.species_overhead),
-        "obstacles": {"count": int(s.obstacle_count),
-                      "radius": [float(x) for x in s.obstacle_radius]},
-        "packages": packages}
+        "name": s.name,
+        "description": s.description,
+        "arena": float(s.arena),
+        "base_radius": float(s.base_radius),
+        "num_robots": int(s.num_robots),
+        "episode_ticks": int(s.episode_ticks),
+        "species_overhead": float(s.species_overhead),
+        "obstacles": {
+            "count": int(s.obstacle_count),
+            "radius": [float(x) for x in s.obstacle_radius],
+        },
+        "packages": packages,
+    }
     text = tomli_w.dumps(table)
-    if s.hardware != default_catalog():                 # its own catalog, inline
+    if s.hardware != default_catalog():  # its own catalog, inline
         text += "\n".join(catalog_toml_lines(s.hardware, prefix="hardware.")) + "\n"
     return text
 
@@ -214,14 +260,16 @@ def hardware_bytes(hardware: Catalog | None = None) -> bytes:
     catalog written out as TOML (it parses back to the same catalog)."""
     if hardware is None or hardware == default_catalog():
         return default_catalog_bytes()
-    head = ["# The hardware catalog of this run's scenario (its `hardware` key), as the run "
-            "read it.",
-            "# Tiers are listed 1, 2, 3. Units and the meaning of each field: data/hardware.toml."]
+    head = [
+        "# The hardware catalog of this run's scenario (its `hardware` key), as the run read it.",
+        "# Tiers are listed 1, 2, 3. Units and the meaning of each field: data/hardware.toml.",
+    ]
     return ("\n".join(head + catalog_toml_lines(hardware)) + "\n").encode("utf-8")
 
 
-def write_run_files(run_dir: Path, cfg: SwarmCoDeConfig, scenario_data: bytes,
-                    hardware: Catalog | None = None) -> None:
+def write_run_files(
+    run_dir: Path, cfg: SwarmCoDeConfig, scenario_data: bytes, hardware: Catalog | None = None
+) -> None:
     """config.toml, and the copies that make a new run self-contained: scenario.toml (the bytes
     its scenario was read from) and hardware.toml (the catalog its robots are built from,
     `hardware_bytes`)."""
@@ -264,16 +312,20 @@ def run_scenario(run_dir: Path, cfg: SwarmCoDeConfig) -> Scenario:
     copy = Path(run_dir) / SCENARIO_COPY
     catalog = run_catalog(run_dir)
     if not copy.is_file() and not copy.is_symlink():
-        return load_scenario(cfg.scenario, catalog)      # a run made before runs kept copies
+        return load_scenario(cfg.scenario, catalog)  # a run made before runs kept copies
     try:
-        data = read_file_bytes(copy)                     # never through a link
+        data = read_file_bytes(copy)  # never through a link
     except OSError as e:
         raise RunError(f"{copy} cannot be read ({e.strerror or type(e).__name__})") from None
     return parse_scenario(data, str(copy.absolute()), copy.parent, catalog)
 
 
-def config_differences(a: SwarmCoDeConfig, b: SwarmCoDeConfig, scenario: Scenario | None = None,
-                       ignore: Iterable[str] = ("generations", "device")) -> list[str]:
+def config_differences(
+    a: SwarmCoDeConfig,
+    b: SwarmCoDeConfig,
+    scenario: Scenario | None = None,
+    ignore: Iterable[str] = ("generations", "device"),
+) -> list[str]:
     """The config keys in which `a` and `b` differ (except `ignore`); an unset swarm_size or
     ticks counts as the scenario's (what a run pins when it starts)."""
     da, db = a.to_dict(), b.to_dict()
@@ -346,8 +398,11 @@ def _size(n: float) -> str:
     return f"{n:.3g} EiB"  # pragma: no cover
 
 
-def check_memory(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
-                 option_names: dict[str, str] | None = None) -> None:
+def check_memory(
+    cfg: SwarmCoDeConfig,
+    scenario: Scenario | None = None,
+    option_names: dict[str, str] | None = None,
+) -> None:
     """ValueError, before anything is allocated, when `estimate_bytes` exceeds `memory_limit`:
     the message gives the estimate and the settings that size it, by their config keys
     (`population`, as the API takes them) or as `option_names` spells them (--population)."""
@@ -355,21 +410,32 @@ def check_memory(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
     limit, what = memory_limit(cfg.device if isinstance(cfg.device, str) else "auto")
     if need <= limit:
         return
-    names = {"population": "population", "trials": "trials", "swarm_size": "swarm_size",
-             **(option_names or {})}
+    names = {
+        "population": "population",
+        "trials": "trials",
+        "swarm_size": "swarm_size",
+        **(option_names or {}),
+    }
     N = cfg.swarm_size or (scenario.num_robots if scenario is not None else 1)
-    robots = f"{N} robots" if cfg.swarm_size or scenario is None else \
-        f"{N} robots (num_robots of scenario {cfg.scenario})"
+    robots = (
+        f"{N} robots"
+        if cfg.swarm_size or scenario is None
+        else f"{N} robots (num_robots of scenario {cfg.scenario})"
+    )
     raise ValueError(
         f"this run would need about {_size(need)} of memory, more than the {_size(limit)} of "
         f"{what}: {2 * cfg.population * cfg.trials} environments of {robots} a generation "
         f"(2 x population x trials) and the programs of {cfg.population} individuals of "
         f"bt_length {cfg.bt_length}; use a smaller {names['population']}, {names['trials']} or "
-        f"{names['swarm_size']}")
+        f"{names['swarm_size']}"
+    )
 
 
-def check_config(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
-                 option_names: dict[str, str] | None = None) -> None:
+def check_config(
+    cfg: SwarmCoDeConfig,
+    scenario: Scenario | None = None,
+    option_names: dict[str, str] | None = None,
+) -> None:
     """Everything a run's config must pass before anything is made: its settings' types and
     ranges, then the memory its sizes need (so that sizes far too large are told what they
     would need), then the upper bounds that memory does not bound. ValueError, one line, that

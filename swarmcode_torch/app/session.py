@@ -20,10 +20,11 @@ import math
 import os
 import re
 import time
+from collections.abc import Callable, Iterable
 from contextlib import ExitStack, nullcontext
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Callable, Iterable, Protocol
+from typing import Protocol
 
 from ..coevo.config import PRESETS, SwarmCoDeConfig, preset_config, with_overrides
 from ..coevo.evaluation import ScoreFn
@@ -33,8 +34,15 @@ from . import checkpoints, files, records
 from .checkpoints import Branch, CheckpointReporter, load_run, resume
 from .files import HARDWARE_COPY, SCENARIO_COPY, RunError, atomic_write_bytes
 from .locks import RunLock
-from .runconfig import (check_config, config_differences, hardware_bytes, read_parent,
-                        scenario_data, write_config, write_run_files)
+from .runconfig import (
+    check_config,
+    config_differences,
+    hardware_bytes,
+    read_parent,
+    scenario_data,
+    write_config,
+    write_run_files,
+)
 from .settings import parse_settings
 from .signals import deferred_signals, interrupt_of
 from .summary import SummaryReporter
@@ -49,13 +57,16 @@ class Reporter(Protocol):
 
 
 # ------------------------------------------------------------------ the config
-def resolve_config(preset: str | None, settings: list[str] | None,
-                   names: dict[str, str] | None = None, **options) -> SwarmCoDeConfig:
+def resolve_config(
+    preset: str | None, settings: list[str] | None, names: dict[str, str] | None = None, **options
+) -> SwarmCoDeConfig:
     """The config of the command line: the preset's (default: "default"), the options that are
     given (None: not given) on top, then the --set KEY=VALUE pairs (`settings.parse_settings`,
     its errors naming keys as `names` spells them), applied as given, none included."""
-    return replace(with_overrides(preset_config(preset or "default"), **options),
-                   **parse_settings(settings or [], names))
+    return replace(
+        with_overrides(preset_config(preset or "default"), **options),
+        **parse_settings(settings or [], names),
+    )
 
 
 def make_config(config: SwarmCoDeConfig | None = None, **settings) -> SwarmCoDeConfig:
@@ -66,22 +77,26 @@ def make_config(config: SwarmCoDeConfig | None = None, **settings) -> SwarmCoDeC
         raise TypeError(f"config must be an SwarmCoDeConfig, got {type(config).__name__}")
     unknown = sorted(set(settings) - set(_CONFIG_KEYS))
     if unknown:
-        raise TypeError(f"unknown setting(s) {', '.join(unknown)} (the keys of SwarmCoDeConfig: "
-                        f"{', '.join(_CONFIG_KEYS)})")
+        raise TypeError(
+            f"unknown setting(s) {', '.join(unknown)} (the keys of SwarmCoDeConfig: "
+            f"{', '.join(_CONFIG_KEYS)})"
+        )
     if isinstance(settings.get("scenario"), os.PathLike):
         settings["scenario"] = os.fspath(settings["scenario"])
-    if "preset" in settings:        # the preset's settings first, then the others on top
+    if "preset" in settings:  # the preset's settings first, then the others on top
         name = settings.pop("preset")
         if name not in PRESETS:
             raise ValueError(f"unknown preset {name!r} (presets: {', '.join(PRESETS)})")
-        config = replace(config if config is not None else SwarmCoDeConfig(), **PRESETS[name],
-                         preset=name)
+        config = replace(
+            config if config is not None else SwarmCoDeConfig(), **PRESETS[name], preset=name
+        )
     return replace(config if config is not None else SwarmCoDeConfig(), **settings)
 
 
 # ------------------------------------------------------------------ starting
-def check_start(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
-                names: dict[str, str] | None = None) -> tuple[Scenario, bytes]:
+def check_start(
+    cfg: SwarmCoDeConfig, scenario: Scenario | None = None, names: dict[str, str] | None = None
+) -> tuple[Scenario, bytes]:
     """The checks made before anything is created: the config's settings, its scenario (read
     from `cfg.scenario`'s file, or `scenario`, a Scenario object, checked to survive a round
     trip through TOML), then the memory the run needs and the settings' upper bounds
@@ -95,15 +110,23 @@ def check_start(cfg: SwarmCoDeConfig, scenario: Scenario | None = None,
     return scen, data
 
 
-def build(cfg: SwarmCoDeConfig, checked: Scenario | None = None, scenario: Scenario | None = None,
-          fitness: ScoreFn | None = None) -> Evolution:
+def build(
+    cfg: SwarmCoDeConfig,
+    checked: Scenario | None = None,
+    scenario: Scenario | None = None,
+    fitness: ScoreFn | None = None,
+) -> Evolution:
     """The run's `Evolution`: of `cfg`'s scenario file, or of `scenario`, a Scenario object
     (named by its name: nothing reloads it during a run; its run directory keeps its TOML, which
     resume, replay and inspect read). `checked`: the scenario `check_start` read, which the run's
     must still be (ValueError otherwise)."""
-    ev = (Evolution(cfg, fitness=fitness, checked=True) if scenario is None
-          else Evolution(replace(cfg, scenario=scenario.name), fitness=fitness, scenario=scenario,
-                         checked=True))
+    ev = (
+        Evolution(cfg, fitness=fitness, checked=True)
+        if scenario is None
+        else Evolution(
+            replace(cfg, scenario=scenario.name), fitness=fitness, scenario=scenario, checked=True
+        )
+    )
     if checked is not None and ev.ctx.scenario != checked:
         raise ValueError(f"{cfg.scenario} changed while the run was starting; start it again")
     return ev
@@ -119,12 +142,19 @@ class Start:
     saved: int | None = None
 
 
-def start_new(stack: ExitStack, cfg: SwarmCoDeConfig,
-              make_dir: Callable[[Evolution], Path] | None, *, scenario: Scenario | None = None,
-              fitness: ScoreFn | None = None, names: dict[str, str] | None = None,
-              data: bytes | None = None, before_build: Callable[[], None] | None = None,
-              attach: Callable[[Evolution], None] | None = None,
-              on_dir: Callable[[Path], None] | None = None) -> Start:
+def start_new(
+    stack: ExitStack,
+    cfg: SwarmCoDeConfig,
+    make_dir: Callable[[Evolution], Path] | None,
+    *,
+    scenario: Scenario | None = None,
+    fitness: ScoreFn | None = None,
+    names: dict[str, str] | None = None,
+    data: bytes | None = None,
+    before_build: Callable[[], None] | None = None,
+    attach: Callable[[Evolution], None] | None = None,
+    on_dir: Callable[[Path], None] | None = None,
+) -> Start:
     """A new run: its config checked (`check_start`; not when `data`, its scenario's bytes, is
     given: the caller checked it), `before_build()`, its `Evolution` built, `attach(ev)`
     (evaluation shards) before any file is written, then its directory made (`make_dir(ev)`;
@@ -148,11 +178,18 @@ def start_new(stack: ExitStack, cfg: SwarmCoDeConfig,
     return Start(ev, run_dir)
 
 
-def start_resume(stack: ExitStack, run_dir: Path, *, generations: int | None = None,
-                 device: str | None = None, fitness: ScoreFn | None = None,
-                 stop_if_done: bool = False, on_locked: Callable[[Path], None] | None = None,
-                 on_loaded: Callable[[int], None] | None = None,
-                 attach: Callable[[Evolution], None] | None = None) -> Start:
+def start_resume(
+    stack: ExitStack,
+    run_dir: Path,
+    *,
+    generations: int | None = None,
+    device: str | None = None,
+    fitness: ScoreFn | None = None,
+    stop_if_done: bool = False,
+    on_locked: Callable[[Path], None] | None = None,
+    on_loaded: Callable[[int], None] | None = None,
+    attach: Callable[[Evolution], None] | None = None,
+) -> Start:
     """The run in `run_dir` reopened: locked until `stack` closes (`on_locked(run_dir)`), its
     config, checkpoint and scenario loaded and checked (`checkpoints.load_run`; `on_loaded(the
     checkpoint's generation)`), continued to `generations` on `device` (`checkpoints.resume`),
@@ -172,7 +209,7 @@ def start_resume(stack: ExitStack, run_dir: Path, *, generations: int | None = N
         return Start(ev, run_dir, saved)
     if attach is not None:
         attach(ev)
-    write_config(run_dir, ev.cfg, read_parent(run_dir))   # a branched run stays one
+    write_config(run_dir, ev.cfg, read_parent(run_dir))  # a branched run stays one
     return Start(ev, run_dir, ev.state.generation)
 
 
@@ -190,21 +227,31 @@ def check_branch(branch: Branch, cfg: SwarmCoDeConfig, names: dict[str, str] | N
     fixed = [k for k in BRANCH_FIXED if k in diff]
     if fixed:
         k = fixed[0]
-        raise ValueError(f"{names.get(k, k)} cannot change when branching from {branch.run_dir} "
-                         f"(it is {getattr(branch.config, k)!r}; the snapshot's population, "
-                         f"species and fitness are of it): start a new run instead")
+        raise ValueError(
+            f"{names.get(k, k)} cannot change when branching from {branch.run_dir} "
+            f"(it is {getattr(branch.config, k)!r}; the snapshot's population, "
+            f"species and fitness are of it): start a new run instead"
+        )
     if cfg.generations <= branch.generation:
-        raise ValueError(f"{names.get('generations', 'generations')} must be more than the "
-                         f"snapshot's {branch.generation} generations to branch, got "
-                         f"{cfg.generations}")
+        raise ValueError(
+            f"{names.get('generations', 'generations')} must be more than the "
+            f"snapshot's {branch.generation} generations to branch, got "
+            f"{cfg.generations}"
+        )
 
 
-def start_branch(stack: ExitStack, branch: Branch, cfg: SwarmCoDeConfig,
-                 make_dir: Callable[[Evolution], Path] | None, *, fitness: ScoreFn | None = None,
-                 names: dict[str, str] | None = None,
-                 before_build: Callable[[], None] | None = None,
-                 attach: Callable[[Evolution], None] | None = None,
-                 on_dir: Callable[[Path], None] | None = None) -> Start:
+def start_branch(
+    stack: ExitStack,
+    branch: Branch,
+    cfg: SwarmCoDeConfig,
+    make_dir: Callable[[Evolution], Path] | None,
+    *,
+    fitness: ScoreFn | None = None,
+    names: dict[str, str] | None = None,
+    before_build: Callable[[], None] | None = None,
+    attach: Callable[[Evolution], None] | None = None,
+    on_dir: Callable[[Path], None] | None = None,
+) -> Start:
     """A new run that starts from `branch` (`checkpoints.load_branch`: a run's snapshot) with the
     config `cfg` (the parent's with changed settings; `check_branch`, then `check_config`): its
     first generation continues the snapshot's state, with `cfg`'s settings. A changed seed
@@ -221,6 +268,7 @@ def start_branch(stack: ExitStack, branch: Branch, cfg: SwarmCoDeConfig,
         raise RunError(f"{branch.path} cannot start the branch: {e}") from None
     if cfg.seed != branch.config.seed:
         from ..coevo.evolve import new_generator
+
         ev.state.rng_state = new_generator(ev.ctx).get_state()
     if attach is not None:
         attach(ev)
@@ -231,18 +279,30 @@ def start_branch(stack: ExitStack, branch: Branch, cfg: SwarmCoDeConfig,
     if on_dir is not None:
         on_dir(run_dir)
     write_config(run_dir, ev.cfg, branch.parent)
-    atomic_write_bytes(run_dir / SCENARIO_COPY, branch.scenario_bytes
-                       if branch.scenario_bytes is not None else scenario_data(branch.scenario))
-    atomic_write_bytes(run_dir / HARDWARE_COPY, branch.hardware_bytes
-                       if branch.hardware_bytes is not None
-                       else hardware_bytes(branch.scenario.hardware))
+    atomic_write_bytes(
+        run_dir / SCENARIO_COPY,
+        branch.scenario_bytes
+        if branch.scenario_bytes is not None
+        else scenario_data(branch.scenario),
+    )
+    atomic_write_bytes(
+        run_dir / HARDWARE_COPY,
+        branch.hardware_bytes
+        if branch.hardware_bytes is not None
+        else hardware_bytes(branch.scenario.hardware),
+    )
     return Start(ev, run_dir)
 
 
 # ------------------------------------------------------------------ running
-def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int = 50,
-                   figure_every: int = 50, saved: int | None = None,
-                   snapshot_every: int = 0) -> list:
+def file_reporters(
+    run_dir: Path,
+    checkpoint_every: int = 10,
+    render_every: int = 50,
+    figure_every: int = 50,
+    saved: int | None = None,
+    snapshot_every: int = 0,
+) -> list:
     """The reporters that write a run directory: summary.json and teams.jsonl, metrics.csv,
     TensorBoard events (a replay image every `render_every` generations, 0: never; the
     composition figure every `figure_every`) and, last, checkpoint.pt every `checkpoint_every`
@@ -252,9 +312,12 @@ def file_reporters(run_dir: Path, checkpoint_every: int = 10, render_every: int 
 
     checkpoint = CheckpointReporter(run_dir, checkpoint_every, snapshot_every)
     checkpoint.saved = saved
-    return [SummaryReporter(run_dir), CsvReporter(run_dir),
-            TensorBoardReporter(run_dir, figure_every=figure_every, render_every=render_every),
-            checkpoint]
+    return [
+        SummaryReporter(run_dir),
+        CsvReporter(run_dir),
+        TensorBoardReporter(run_dir, figure_every=figure_every, render_every=render_every),
+        checkpoint,
+    ]
 
 
 def clock() -> float:
@@ -275,14 +338,20 @@ def parse_duration(value: str | float | int, name: str = "max_time") -> float:
     elif isinstance(value, str):
         text = value.strip().lower()
         parts = _DURATION.findall(text)
-        if not text or "".join(n + u for n, u in parts) != text.replace(" ", "") or (
-                len(parts) > 1 and any(u == "" for _, u in parts)):
-            raise ValueError(f"{name} must be a duration such as 3600 (seconds), 90m, 2h or "
-                             f"1h30m, got {value!r:.40}")
+        if (
+            not text
+            or "".join(n + u for n, u in parts) != text.replace(" ", "")
+            or (len(parts) > 1 and any(u == "" for _, u in parts))
+        ):
+            raise ValueError(
+                f"{name} must be a duration such as 3600 (seconds), 90m, 2h or "
+                f"1h30m, got {value!r:.40}"
+            )
         seconds = sum(float(n) * _UNIT[u] for n, u in parts)
     else:
-        raise ValueError(f"{name} must be a duration such as 3600 (seconds), 90m or 2h, got "
-                         f"{value!r:.40}")
+        raise ValueError(
+            f"{name} must be a duration such as 3600 (seconds), 90m or 2h, got {value!r:.40}"
+        )
     if not (seconds > 0 and math.isfinite(seconds)):
         raise ValueError(f"{name} must be a duration > 0, got {value!r:.40}")
     return seconds
@@ -303,9 +372,11 @@ class Bounds:
     elapsed: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.patience is not None and (not isinstance(self.patience, int)
-                                          or isinstance(self.patience, bool)
-                                          or self.patience < 1):
+        if self.patience is not None and (
+            not isinstance(self.patience, int)
+            or isinstance(self.patience, bool)
+            or self.patience < 1
+        ):
             raise ValueError(f"patience must be an integer >= 1, got {self.patience!r:.40}")
         if self.max_time is not None:
             self.max_time = parse_duration(self.max_time)
@@ -333,9 +404,13 @@ class Bounds:
         return out
 
 
-def run(ev: Evolution, run_dir: Path | None, reporters: Iterable[Reporter],
-        on_interrupt: Callable[[Path], None] | None = None,
-        bounds: Bounds | None = None) -> Evolution:
+def run(
+    ev: Evolution,
+    run_dir: Path | None,
+    reporters: Iterable[Reporter],
+    on_interrupt: Callable[[Path], None] | None = None,
+    bounds: Bounds | None = None,
+) -> Evolution:
     """Run generations until the configured total.
 
     Each generation is one step that Ctrl-C or SIGTERM cannot split (`deferred_signals`): the
@@ -360,7 +435,7 @@ def run(ev: Evolution, run_dir: Path | None, reporters: Iterable[Reporter],
     saver = reporters[marks[-1]] if marks else None
     cut = marks[-1] + 1 if marks else len(reporters)
     step_reporters, after = reporters[:cut], reporters[cut:]
-    recorded = ev.state                    # the last state whose records are all written
+    recorded = ev.state  # the last state whose records are all written
     t0 = clock()
     try:
         with hold():
@@ -395,7 +470,7 @@ def run(ev: Evolution, run_dir: Path | None, reporters: Iterable[Reporter],
         interrupt = interrupt_of(e)
         if interrupt is None or not on_disk:
             raise
-        with deferred_signals(deliver=False):   # a second Ctrl-C cannot split this checkpoint
+        with deferred_signals(deliver=False):  # a second Ctrl-C cannot split this checkpoint
             ev.state = recorded
             if saver is not None:
                 saver.save_state(ev)

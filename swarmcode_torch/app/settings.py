@@ -8,21 +8,38 @@ from typing import Any
 from ..coevo.config import SETTING_TYPES, SettingError
 
 #: Config keys that `parse_settings` refuses because the command line has an option for them.
-OPTION_KEYS = frozenset({"scenario", "budget", "objective", "generations", "population",
-                         "swarm_size", "trials", "ticks", "seed", "device", "compile", "preset"})
+OPTION_KEYS = frozenset(
+    {
+        "scenario",
+        "budget",
+        "objective",
+        "generations",
+        "population",
+        "swarm_size",
+        "trials",
+        "ticks",
+        "seed",
+        "device",
+        "compile",
+        "preset",
+    }
+)
 
 
 #: Config keys that only the Python API sets (`parse_settings` refuses them), and how.
-API_KEYS = {"fitness_function": "a fitness function is given from Python: "
-                                "swarmcode_torch.evolve(fitness=fn) (examples/custom_fitness.py)"}
+API_KEYS = {
+    "fitness_function": "a fitness function is given from Python: "
+    "swarmcode_torch.evolve(fitness=fn) (examples/custom_fitness.py)"
+}
 
 
 def option_names(overrides: dict[str, str] | None = None) -> dict[str, str]:
     """Config key -> how the command line sets it (--population, --set delta), for
     `setting_message` and `runs.check_memory`; `overrides` respells some (a sweep's
     --seeds)."""
-    names = {k: ("--" + k.replace("_", "-") if k in OPTION_KEYS else f"--set {k}")
-             for k in SETTING_TYPES}
+    names = {
+        k: ("--" + k.replace("_", "-") if k in OPTION_KEYS else f"--set {k}") for k in SETTING_TYPES
+    }
     names.update(overrides or {})
     return names
 
@@ -58,7 +75,7 @@ def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None)
         kind, nullable = SETTING_TYPES[key]
         try:
             if nullable and text.lower() == "none":
-                out[key] = None              # unset (e.g. quota_size_exponent=none)
+                out[key] = None  # unset (e.g. quota_size_exponent=none)
             elif kind is bool:
                 if text.lower() not in ("true", "false"):
                     raise ValueError
@@ -66,6 +83,7 @@ def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None)
             else:
                 out[key] = kind(text)
         except ValueError:
-            raise ValueError(f"--set {key}: expected a value of type {kind.__name__}, "
-                             f"got {text!r}") from None
+            raise ValueError(
+                f"--set {key}: expected a value of type {kind.__name__}, got {text!r}"
+            ) from None
     return out

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import signal
 import threading
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Iterator
 
 
 @contextmanager
@@ -30,7 +30,7 @@ def deferred_signals(deliver: bool = True) -> Iterator[list[int]]:
     try:
         for sig in (signal.SIGINT, signal.SIGTERM):
             previous[sig] = signal.signal(sig, hold)
-    except (ValueError, OSError):          # pragma: no cover - no signals here
+    except (ValueError, OSError):  # pragma: no cover - no signals here
         for sig, h in previous.items():
             signal.signal(sig, h)
         yield held
@@ -48,7 +48,7 @@ def deferred_signals(deliver: bool = True) -> Iterator[list[int]]:
             if callable(h):
                 h(sig, None)
             elif h != signal.SIG_IGN:
-                signal.raise_signal(sig)   # the default action, as if it arrived now
+                signal.raise_signal(sig)  # the default action, as if it arrived now
 
 
 def interrupt_of(e: BaseException) -> KeyboardInterrupt | None:
@@ -77,14 +77,14 @@ def terminate_as_interrupt():
 
     def handler(signum, frame):
         if terminated:
-            return                         # already stopping: let the checkpoint be written
+            return  # already stopping: let the checkpoint be written
         terminated.append(signum)
         TERMINATED.append(signum)
         raise KeyboardInterrupt
 
     try:
         previous = signal.signal(signal.SIGTERM, handler)
-    except ValueError:                     # not the main thread: leave signals alone
+    except ValueError:  # not the main thread: leave signals alone
         yield terminated
         return
     try:

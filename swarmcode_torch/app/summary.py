@@ -12,8 +12,19 @@ from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.bt import NUM_OPCODES
 from ..sim.hardware import MAX_NESTING, nesting_depth
 from . import records
-from .files import (MAX_RECORD_BYTES, SUMMARY_FILE, TEAMS_FILE, RunError, append_line,
-                    atomic_write_bytes, check_nesting, prepare_run_dir, read_text, trim_teams)
+from .files import (
+    MAX_RECORD_BYTES,
+    SUMMARY_FILE,
+    TEAMS_FILE,
+    RunError,
+    append_line,
+    atomic_write_bytes,
+    check_nesting,
+    prepare_run_dir,
+    read_text,
+    trim_teams,
+)
+
 
 class SummaryReporter:
     """Rewrites summary.json (atomically) after every generation and appends the generation's
@@ -31,7 +42,7 @@ class SummaryReporter:
     def on_start(self, ev: Evolution) -> None:
         from .runconfig import read_parent
 
-        prepare_run_dir(self.run_dir)       # no leftover temporary files, no cut-off line
+        prepare_run_dir(self.run_dir)  # no leftover temporary files, no cut-off line
         trim_teams(self.run_dir, ev.state.generation)
         self.parent = read_parent(self.run_dir)
 
@@ -41,7 +52,7 @@ class SummaryReporter:
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
         append_line(self.teams, json.dumps(records.team_line(result)))
         self.last = records.summary(ev, result)
-        if self.parent is not None:          # a run branched from another (`evolve --from`)
+        if self.parent is not None:  # a run branched from another (`evolve --from`)
             self.last["parent"] = self.parent
         if ev.done:
             self.last["stop"] = {"reason": "generations", "generation": ev.state.generation}
@@ -76,24 +87,38 @@ def check_designs(designs: Any, source: str) -> list[dict]:
         if not isinstance(d, dict):
             raise RunError(f"{w}: expected a table, got {d!r:.60}")
         for key, ok, what in (
-                ("count", lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0,
-                 "an integer >= 0"),
-                ("species", lambda v: isinstance(v, int) and not isinstance(v, bool),
-                 "an integer"),
-                ("effector", lambda v: v in ("suction", "pincher"), "suction or pincher"),
-                ("radius", lambda v: _is_number(v) and math.isfinite(v) and 0 < v <= 10,
-                 "a radius in (0, 10] m"),
-                ("chassis_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
-                ("battery_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
-                ("motor_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
-                ("torque_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
-                ("battery_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
-                ("dominance", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
-                ("cost", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
-                ("bt", lambda v: isinstance(v, list) and 0 < len(v) <= 4096 and all(
-                    isinstance(x, int) and not isinstance(x, bool) and 0 <= x < NUM_OPCODES
-                    for x in v),
-                 f"a list of opcodes 0..{NUM_OPCODES - 1}")):
+            (
+                "count",
+                lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0,
+                "an integer >= 0",
+            ),
+            ("species", lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
+            ("effector", lambda v: v in ("suction", "pincher"), "suction or pincher"),
+            (
+                "radius",
+                lambda v: _is_number(v) and math.isfinite(v) and 0 < v <= 10,
+                "a radius in (0, 10] m",
+            ),
+            ("chassis_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
+            ("battery_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
+            ("motor_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
+            ("torque_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+            ("battery_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+            ("dominance", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+            ("cost", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+            (
+                "bt",
+                lambda v: (
+                    isinstance(v, list)
+                    and 0 < len(v) <= 4096
+                    and all(
+                        isinstance(x, int) and not isinstance(x, bool) and 0 <= x < NUM_OPCODES
+                        for x in v
+                    )
+                ),
+                f"a list of opcodes 0..{NUM_OPCODES - 1}",
+            ),
+        ):
             if key not in d:
                 raise RunError(f"{w}: missing {key!r}")
             if not ok(d[key]):
@@ -102,14 +127,24 @@ def check_designs(designs: Any, source: str) -> list[dict]:
     if total < 1:
         raise RunError(f"{source}: designs: the counts add up to no robot")
     if total > MAX_TEAM:
-        raise RunError(f"{source}: designs: the counts add up to {total} robots, more than any "
-                       f"run can have ({MAX_TEAM})")
+        raise RunError(
+            f"{source}: designs: the counts add up to {total} robots, more than any "
+            f"run can have ({MAX_TEAM})"
+        )
     return designs
 
 
 #: summary.json keys and whether each must be a number (None allowed: a non-finite value).
-_SUMMARY_NUMBERS = ("best_fitness", "team_cost", "deliveries", "deliveries_individual",
-                    "deliveries_collab", "energy_used", "num_species", "best_generation")
+_SUMMARY_NUMBERS = (
+    "best_fitness",
+    "team_cost",
+    "deliveries",
+    "deliveries_individual",
+    "deliveries_collab",
+    "energy_used",
+    "num_species",
+    "best_generation",
+)
 
 
 def read_summary(run_dir: Path, figures: bool = True) -> dict:
@@ -118,8 +153,9 @@ def read_summary(run_dir: Path, figures: bool = True) -> dict:
     null. A replay needs only the designs (figures=False)."""
     path = Path(run_dir) / SUMMARY_FILE
     if not path.is_file():
-        raise RunError(f"{run_dir} has no {SUMMARY_FILE} (is it a run directory with a finished "
-                       "generation?)")
+        raise RunError(
+            f"{run_dir} has no {SUMMARY_FILE} (is it a run directory with a finished generation?)"
+        )
     text = read_text(path)
     check_nesting(text, str(path))
     try:
@@ -153,8 +189,9 @@ def read_teams(run_dir: Path) -> dict[int, dict]:
         return out
     for line in read_text(path, MAX_RECORD_BYTES).splitlines():
         if nesting_depth(line) > MAX_NESTING:
-            raise RunError(f"{path}: a record nested {nesting_depth(line)} levels deep (at most "
-                           f"{MAX_NESTING})")
+            raise RunError(
+                f"{path}: a record nested {nesting_depth(line)} levels deep (at most {MAX_NESTING})"
+            )
         try:
             rec = json.loads(line)
         except json.JSONDecodeError:

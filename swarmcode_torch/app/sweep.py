@@ -13,15 +13,41 @@ from ..coevo.config import SwarmCoDeConfig
 from ..coevo.dynamics import mean_std
 from ..sim.scenario import Scenario
 from .checkpoints import load_checkpoint, load_run
-from .files import (BUDGET_PLOT, CHECKPOINT_FILE, CONFIG_FILE, SCENARIO_COPY, SUMMARY_FILE,
-                    TABLE_CSV, TABLE_MD, RunError, atomic_write_bytes, read_text)
+from .files import (
+    BUDGET_PLOT,
+    CHECKPOINT_FILE,
+    CONFIG_FILE,
+    SCENARIO_COPY,
+    SUMMARY_FILE,
+    TABLE_CSV,
+    TABLE_MD,
+    RunError,
+    atomic_write_bytes,
+    read_text,
+)
 from .runconfig import config_differences, read_config, run_scenario
 from .summary import read_summary
 
-COLUMNS = ("budget", "best_fitness", "team_cost", "deliveries", "deliveries_individual",
-           "deliveries_collab", "energy_used", "num_species")
-HEADERS = ("Budget", "Best fitness", "Team cost", "Total deliveries", "Individual",
-           "Collaborative", "Avg. energy used", "# species")
+COLUMNS = (
+    "budget",
+    "best_fitness",
+    "team_cost",
+    "deliveries",
+    "deliveries_individual",
+    "deliveries_collab",
+    "energy_used",
+    "num_species",
+)
+HEADERS = (
+    "Budget",
+    "Best fitness",
+    "Team cost",
+    "Total deliveries",
+    "Individual",
+    "Collaborative",
+    "Avg. energy used",
+    "# species",
+)
 
 
 def run_name(budget: float | None, seed: int) -> str:
@@ -62,13 +88,18 @@ def plan_run(out: Path, cfg: SwarmCoDeConfig, scenario: Scenario) -> PlannedRun:
     has_checkpoint = (run_dir / CHECKPOINT_FILE).is_file()
     saved = load_run(run_dir)[0] if has_checkpoint else read_config(run_dir)
     diff = config_differences(saved, cfg, scenario, ignore=HOW_KEYS)
-    if "scenario" not in diff and (run_dir / SCENARIO_COPY).is_file() \
-            and run_scenario(run_dir, saved) != scenario:
+    if (
+        "scenario" not in diff
+        and (run_dir / SCENARIO_COPY).is_file()
+        and run_scenario(run_dir, saved) != scenario
+    ):
         diff.append("scenario (the file's content)")
     if diff:
-        raise RunError(f"{run_dir} holds a run with other settings than this sweep's (differing "
-                       f"keys: {', '.join(diff)}); use another --out, or the options it was run "
-                       "with")
+        raise RunError(
+            f"{run_dir} holds a run with other settings than this sweep's (differing "
+            f"keys: {', '.join(diff)}); use another --out, or the options it was run "
+            "with"
+        )
     if not has_checkpoint:
         return planned("new")
     done = load_checkpoint(run_dir)["generation"]
@@ -91,7 +122,7 @@ def sweep_contents(path: Path) -> SweepContents | None:
     cannot be read."""
     path = Path(path)
     if (path / CONFIG_FILE).exists() or (path / SUMMARY_FILE).exists():
-        return None                                    # a run directory
+        return None  # a run directory
     runs = []
     for d in sorted(p for p in path.iterdir() if p.is_dir() and not p.is_symlink()):
         if not (d / CONFIG_FILE).is_file():
@@ -100,8 +131,13 @@ def sweep_contents(path: Path) -> SweepContents | None:
             s = read_summary(d, figures=False)
             done = s.get("generation")
             total = s.get("generations")
-            runs.append((d.name, done + 1 if isinstance(done, int) else None,
-                         total if isinstance(total, int) else None))
+            runs.append(
+                (
+                    d.name,
+                    done + 1 if isinstance(done, int) else None,
+                    total if isinstance(total, int) else None,
+                )
+            )
         except RunError:
             runs.append((d.name, None, None))
     has_table = (path / TABLE_MD).is_file()
@@ -114,7 +150,7 @@ def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
     """One row per budget: each column's mean over seeds and its sample standard deviation
     (`<col>_std`, 0 for one seed; `dynamics.mean_std`)."""
     by_budget: dict = {}
-    for budget, seed, run_dir in runs:
+    for budget, _seed, run_dir in runs:
         by_budget.setdefault(budget, []).append(read_summary(run_dir))
     rows = []
     for budget, summaries in by_budget.items():
@@ -148,8 +184,11 @@ def markdown(rows: list[dict]) -> str:
                 cell += f" ± {_fmt(r[col + '_std'], col)}"
             cells.append(cell)
         lines.append("| " + " | ".join(cells) + " |")
-    note = f"\nMean over {seeds} seeds (± std); the best team of each run." if seeds > 1 else \
-        "\nThe best team of each run."
+    note = (
+        f"\nMean over {seeds} seeds (± std); the best team of each run."
+        if seeds > 1
+        else "\nThe best team of each run."
+    )
     return "\n".join(lines) + "\n" + note + "\n"
 
 
@@ -171,16 +210,33 @@ def plot(rows: list[dict], path: Path) -> None:
     from matplotlib.figure import Figure
     from matplotlib.ticker import MaxNLocator
 
-    rows = [r for r in rows if r["budget"] is not None and r["best_fitness"] is not None
-            and r["num_species"] is not None]
+    rows = [
+        r
+        for r in rows
+        if r["budget"] is not None
+        and r["best_fitness"] is not None
+        and r["num_species"] is not None
+    ]
     x = [r["budget"] for r in rows]
     fig = Figure(figsize=(6, 5))
     fit_ax, species_ax = fig.subplots(2, 1, sharex=True)
-    fit_ax.errorbar(x, [r["best_fitness"] for r in rows], [r["best_fitness_std"] for r in rows],
-                    marker="o", color="tab:blue", capsize=3)
+    fit_ax.errorbar(
+        x,
+        [r["best_fitness"] for r in rows],
+        [r["best_fitness_std"] for r in rows],
+        marker="o",
+        color="tab:blue",
+        capsize=3,
+    )
     fit_ax.set_ylabel("best fitness")
-    species_ax.errorbar(x, [r["num_species"] for r in rows], [r["num_species_std"] for r in rows],
-                        marker="s", color="tab:orange", capsize=3)
+    species_ax.errorbar(
+        x,
+        [r["num_species"] for r in rows],
+        [r["num_species_std"] for r in rows],
+        marker="s",
+        color="tab:orange",
+        capsize=3,
+    )
     species_ax.set_ylabel("species in the best team")
     species_ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     species_ax.set_xlabel("budget ($)")

@@ -14,7 +14,17 @@ from rich.markup import escape
 from ..sim.scenario import ScenarioError
 from . import session
 from .signals import TERMINATED, terminate_as_interrupt
-from .terminal import Failed, console, err, execute, fail, need_ray, os_fail, check_path, set_threads_option
+from .terminal import (
+    Failed,
+    check_path,
+    console,
+    err,
+    execute,
+    fail,
+    need_ray,
+    os_fail,
+    set_threads_option,
+)
 
 
 def parse_list(text: str, kind, option: str) -> list:
@@ -32,10 +42,30 @@ def parse_list(text: str, kind, option: str) -> list:
     return vals
 
 
-def run_sweep(budgets: str, seeds: str, objective: str | None, scenario, generations, population,
-              swarm_size, trials, ticks, device, compile, logdir: str | None, out: str | None,
-              checkpoint_every: int, log_every: int, preset, settings, workers: int,
-              cpus_per_run, gpus_per_run, ray_address, threads) -> None:
+def run_sweep(
+    budgets: str,
+    seeds: str,
+    objective: str | None,
+    scenario,
+    generations,
+    population,
+    swarm_size,
+    trials,
+    ticks,
+    device,
+    compile,
+    logdir: str | None,
+    out: str | None,
+    checkpoint_every: int,
+    log_every: int,
+    preset,
+    settings,
+    workers: int,
+    cpus_per_run,
+    gpus_per_run,
+    ray_address,
+    threads,
+) -> None:
     """The body of `swarmcode-torch sweep` (its options as parsed)."""
     set_threads_option(threads)
     import time
@@ -57,18 +87,29 @@ def run_sweep(budgets: str, seeds: str, objective: str | None, scenario, generat
         fail("--checkpoint-every and --log-every must be >= 1")
     on_ray = sweep_ray_options(workers, cpus_per_run, gpus_per_run, ray_address, device)
     if logdir is not None and out is not None:
-        fail(f"--logdir and --out cannot both be given: --out is the sweep directory itself "
-             f"({out}), --logdir the directory a new one is made in ({logdir})")
+        fail(
+            f"--logdir and --out cannot both be given: --out is the sweep directory itself "
+            f"({out}), --logdir the directory a new one is made in ({logdir})"
+        )
     if logdir is not None and logdir.exists() and not logdir.is_dir():
         fail(f"--logdir {logdir} is not a directory")
     out = out or (logdir or Path("runs")) / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     names = option_names({"seed": "--seeds", "budget": "--budgets"})
     try:
-        base = session.resolve_config(preset, settings, names, objective=objective,
-                                      scenario=scenario, generations=generations,
-                                      population=population, swarm_size=swarm_size,
-                                      trials=trials, ticks=ticks, device=device,
-                                      compile=compile)
+        base = session.resolve_config(
+            preset,
+            settings,
+            names,
+            objective=objective,
+            scenario=scenario,
+            generations=generations,
+            population=population,
+            swarm_size=swarm_size,
+            trials=trials,
+            ticks=ticks,
+            device=device,
+            compile=compile,
+        )
         scen, data = read_scenario(base.scenario)
         for b in budget_list:
             for sd in seed_list:
@@ -89,11 +130,18 @@ def run_sweep(budgets: str, seeds: str, objective: str | None, scenario, generat
             fail(str(e))
         except OSError as e:
             os_fail(e, f"--out {out}: cannot lock the sweep directory")
-        plans = [plan_sweep_run(out, with_overrides(base, budget=b, seed=sd), scen, data)
-                 for b in budget_list for sd in seed_list]      # every refusal before any run
+        plans = [
+            plan_sweep_run(out, with_overrides(base, budget=b, seed=sd), scen, data)
+            for b in budget_list
+            for sd in seed_list
+        ]  # every refusal before any run
         again = f"swarmcode-torch sweep with the same options and --out {out}"
-        console.print(f"Sweep directory: {out} (resume with --out {out})", markup=False,
-                      highlight=False, soft_wrap=True)
+        console.print(
+            f"Sweep directory: {out} (resume with --out {out})",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
         failed: list[tuple[str, str]] = []
         if on_ray is None:
             for b, sd, run_dir, cfg, state in plans:
@@ -103,11 +151,13 @@ def run_sweep(budgets: str, seeds: str, objective: str | None, scenario, generat
         else:
             runs, failed = sweep_on_ray(plans, data, checkpoint_every, log_every, again, *on_ray)
             if not runs:
-                fail(f"every run of the sweep failed ({failed[0][0]}: {failed[0][1]}); fix the "
-                     f"cause, then run it again: {again}")
+                fail(
+                    f"every run of the sweep failed ({failed[0][0]}: {failed[0][1]}); fix the "
+                    f"cause, then run it again: {again}"
+                )
         try:
             for _, _, run_dir in runs:
-                read_summary(run_dir)                  # every figure of the table is checked
+                read_summary(run_dir)  # every figure of the table is checked
             rows = table_rows(runs)
             paths = write_outputs(rows, out)
         except (RunError, ValueError) as e:
@@ -115,16 +165,20 @@ def run_sweep(budgets: str, seeds: str, objective: str | None, scenario, generat
         except OSError as e:
             os_fail(e, f"--out {out}: cannot write the table")
     console.print((out / TABLE_MD).read_text(), highlight=False, markup=False)
-    console.print("Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False,
-                  soft_wrap=True)
+    console.print(
+        "Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False, soft_wrap=True
+    )
     if failed:
         names = ", ".join(name for name, _ in failed)
-        fail(f"{len(failed)} of {len(plans)} runs failed ({names}); the table has the "
-             f"{len(runs)} that finished; fix the cause, then resume them: {again}")
+        fail(
+            f"{len(failed)} of {len(plans)} runs failed ({names}); the table has the "
+            f"{len(runs)} that finished; fix the cause, then resume them: {again}"
+        )
 
 
-def sweep_ray_options(workers: int, cpus: float | None, gpus: float | None,
-                       address: str | None, device: str | None):
+def sweep_ray_options(
+    workers: int, cpus: float | None, gpus: float | None, address: str | None, device: str | None
+):
     """(workers, CPUs per run, GPUs per run, address) of a sweep on Ray, or None for the runs
     one after the other in this process; a one-line error for bad values or Ray options without
     Ray."""
@@ -132,8 +186,10 @@ def sweep_ray_options(workers: int, cpus: float | None, gpus: float | None,
         fail(f"--workers must be >= 1, got {workers}")
     if workers == 1 and address is None:
         if cpus is not None or gpus is not None:
-            fail("--cpus-per-run and --gpus-per-run are for runs on Ray: use them with "
-                 "--workers N > 1 or --ray-address")
+            fail(
+                "--cpus-per-run and --gpus-per-run are for runs on Ray: use them with "
+                "--workers N > 1 or --ray-address"
+            )
         return None
     for name, v in (("--cpus-per-run", cpus), ("--gpus-per-run", gpus)):
         if v is not None and not (v >= 0 and math.isfinite(v)):
@@ -143,14 +199,25 @@ def sweep_ray_options(workers: int, cpus: float | None, gpus: float | None,
     if gpus > 1 and gpus != int(gpus):
         fail(f"--gpus-per-run above 1 must be a whole number of GPUs, got {gpus:g}")
     if device is not None and device.startswith("cuda") and gpus == 0:
-        fail(f"--device {device} on Ray needs --gpus-per-run > 0 (each run reserves its share "
-             "of a GPU; Ray hides the GPUs from a run that reserves none)")
+        fail(
+            f"--device {device} on Ray needs --gpus-per-run > 0 (each run reserves its share "
+            "of a GPU; Ray hides the GPUs from a run that reserves none)"
+        )
     need_ray(f"--workers {workers}" if workers > 1 else "--ray-address")
     return workers, cpus, gpus, address
 
 
-def sweep_on_ray(plans, data: bytes, checkpoint_every: int, log_every: int, again: str,
-                  workers: int, cpus: float, gpus: float, address: str | None):
+def sweep_on_ray(
+    plans,
+    data: bytes,
+    checkpoint_every: int,
+    log_every: int,
+    again: str,
+    workers: int,
+    cpus: float,
+    gpus: float,
+    address: str | None,
+):
     """Run the unfinished runs of a sweep as Ray tasks (`sweep_task`, up to `workers` at once),
     a line as each ends; ([(budget, seed, run directory)] of the finished runs, in the sweep's
     order, [(run name, error)] of the failed ones)."""
@@ -158,46 +225,67 @@ def sweep_on_ray(plans, data: bytes, checkpoint_every: int, log_every: int, agai
 
     todo = [p for p in plans if p[4] != "done"]
     # absolute paths: a worker's working directory may not be this one
-    jobs = [(run_dir.resolve(), cfg, data, state, checkpoint_every, log_every, again)
-            for _, _, run_dir, cfg, state in todo]
+    jobs = [
+        (run_dir.resolve(), cfg, data, state, checkpoint_every, log_every, again)
+        for _, _, run_dir, cfg, state in todo
+    ]
     what = f"--workers {workers}" if workers > 1 else "--ray-address"
 
     def on_finish(i: int, error: str | None, n: dict) -> None:
         name = todo[i][2].name
-        counts = (f"{n['done']} done, {n['running']} running, {n['failed']} failed of "
-                  f"{n['total']}")
+        counts = f"{n['done']} done, {n['running']} running, {n['failed']} failed of {n['total']}"
         if error is None:
             console.print(f"{name}: finished ({counts})", markup=False, highlight=False)
         else:
-            console.print(f"{name}: failed: {error} ({counts})", markup=False, highlight=False,
-                          soft_wrap=True)
+            console.print(
+                f"{name}: failed: {error} ({counts})", markup=False, highlight=False, soft_wrap=True
+            )
 
     errors: list = []
     terminated: list = []
     if jobs:
         try:
             with ray_session(address, what) as ray, terminate_as_interrupt() as terminated:
-                check_resources(ray, {"CPU": cpus, "GPU": gpus}, f"a run with --cpus-per-run "
-                                f"{cpus:g} and --gpus-per-run {gpus:g}")
-                console.print(f"Ray: {len(jobs)} runs, up to {workers} at once ({cpus:g} CPU, "
-                              f"{gpus:g} GPU each)", markup=False, highlight=False)
-                errors = run_tasks(sweep_task, jobs, workers=workers, num_cpus=cpus,
-                                   num_gpus=gpus, on_finish=on_finish)
+                check_resources(
+                    ray,
+                    {"CPU": cpus, "GPU": gpus},
+                    f"a run with --cpus-per-run {cpus:g} and --gpus-per-run {gpus:g}",
+                )
+                console.print(
+                    f"Ray: {len(jobs)} runs, up to {workers} at once ({cpus:g} CPU, "
+                    f"{gpus:g} GPU each)",
+                    markup=False,
+                    highlight=False,
+                )
+                errors = run_tasks(
+                    sweep_task,
+                    jobs,
+                    workers=workers,
+                    num_cpus=cpus,
+                    num_gpus=gpus,
+                    on_finish=on_finish,
+                )
         except RayUnavailable as e:
             fail(str(e))
         except KeyboardInterrupt:
             how = "Terminated" if terminated else "Interrupted"
-            err.print(f"{how}: the running runs were stopped after writing their checkpoints; "
-                      f"continue with: {again}", markup=False, highlight=False, soft_wrap=True)
-            raise typer.Exit(code=143 if terminated else 130)
+            err.print(
+                f"{how}: the running runs were stopped after writing their checkpoints; "
+                f"continue with: {again}",
+                markup=False,
+                highlight=False,
+                soft_wrap=True,
+            )
+            raise typer.Exit(code=143 if terminated else 130) from None
     failed_at = {id(p): e for p, e in zip(todo, errors) if e is not None}
     finished = [p[:3] for p in plans if id(p) not in failed_at]
     failed = [(p[2].name, failed_at[id(p)]) for p in plans if id(p) in failed_at]
     return finished, failed
 
 
-def sweep_task(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int,
-                log_every: int, again: str) -> str | None:
+def sweep_task(
+    run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int, log_every: int, again: str
+) -> str | None:
     """One run of a sweep as a Ray task (`distributed.run_tasks`): `run_sweep_run`, as the
     sweep runs it in this process. None when the run finished; else its error in one line (a
     failed start or write; a stop by Ctrl-C or SIGTERM, after its checkpoint was written)."""
@@ -225,14 +313,18 @@ def plan_sweep_run(out: Path, cfg, scenario, data: bytes):
     except OSError as e:
         os_fail(e, f"{out / run_name(cfg.budget, cfg.seed)}: cannot read the run")
     if p.state == "done":
-        more = f" (it has {p.done}, more than the {cfg.generations} asked for)" \
-            if p.done > cfg.generations else ""
+        more = (
+            f" (it has {p.done}, more than the {cfg.generations} asked for)"
+            if p.done > cfg.generations
+            else ""
+        )
         console.print(f"{p.run_dir.name}: already done{more}", markup=False, highlight=False)
     return p.budget, p.seed, p.run_dir, p.cfg, p.state
 
 
-def run_sweep_run(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int,
-                  log_every: int, again: str) -> None:
+def run_sweep_run(
+    run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int, log_every: int, again: str
+) -> None:
     """One run of a sweep, started (`state` 'new': its config and `data` checked by the sweep)
     or resumed through `session`, then run with the command line's progress and messages."""
     from .files import RunError
@@ -245,13 +337,16 @@ def run_sweep_run(run_dir: Path, cfg, data: bytes, state: str, checkpoint_every:
         try:
             if state == "resume":
                 start = session.start_resume(stack, run_dir, generations=cfg.generations)
-            else:                          # a config error leaves no directory behind
+            else:  # a config error leaves no directory behind
                 start = session.start_new(stack, cfg, make_dir, data=data)
             ev, saved = start.ev, start.saved
         except (ScenarioError, RunError, ValueError) as e:
             fail(str(e))
         except OSError as e:
             os_fail(e, f"{run_dir}: cannot start the run")
-        console.print(f"[bold]{escape(run_dir.name)}[/]: generation {ev.state.generation} -> "
-                      f"{cfg.generations}", soft_wrap=True)
+        console.print(
+            f"[bold]{escape(run_dir.name)}[/]: generation {ev.state.generation} -> "
+            f"{cfg.generations}",
+            soft_wrap=True,
+        )
         execute(ev, run_dir, checkpoint_every, log_every, saved=saved, again=again)

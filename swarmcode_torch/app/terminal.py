@@ -14,8 +14,14 @@ import typer
 from rich import box
 from rich.console import Console
 from rich.markup import escape
-from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
-                           TimeRemainingColumn)
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 from rich.table import Column, Table
 
 from . import session
@@ -56,13 +62,17 @@ def check_path(value: str | None, option: str) -> Path | None:
     if not value.strip():
         fail(f"{option} is empty: give a directory ('.' for the working directory)")
     if len(value) > MAX_PATH or "\0" in value:
-        fail(f"{option}: not a path ({len(value)} characters{', a NUL' if chr(0) in value else ''};"
-             f" at most {MAX_PATH})")
+        fail(
+            f"{option}: not a path ({len(value)} characters{', a NUL' if chr(0) in value else ''};"
+            f" at most {MAX_PATH})"
+        )
     try:
         value.encode("utf-8")
     except UnicodeEncodeError:
-        fail(f"{option}: the path {value.encode('utf-8', 'backslashreplace').decode()[:200]} "
-             "is not UTF-8 text; rename it or give another")
+        fail(
+            f"{option}: the path {value.encode('utf-8', 'backslashreplace').decode()[:200]} "
+            "is not UTF-8 text; rename it or give another"
+        )
     return Path(value)
 
 
@@ -83,17 +93,24 @@ class _FittedProgress(Progress):
     window keeps the count and the time left in view."""
 
     def __init__(self, console: Console):
-        self.wide = [TextColumn("done"), MofNCompleteColumn(), TextColumn("left"),
-                     TimeRemainingColumn(), BarColumn(bar_width=20), TimeElapsedColumn()]
+        self.wide = [
+            TextColumn("done"),
+            MofNCompleteColumn(),
+            TextColumn("left"),
+            TimeRemainingColumn(),
+            BarColumn(bar_width=20),
+            TimeElapsedColumn(),
+        ]
         self.narrow = self.wide[:4]
-        text = TextColumn("{task.description}",
-                          table_column=Column(no_wrap=True, overflow="ellipsis", ratio=1))
+        text = TextColumn(
+            "{task.description}", table_column=Column(no_wrap=True, overflow="ellipsis", ratio=1)
+        )
         self.wide.append(text)
         self.narrow.append(text)
         super().__init__(*self.wide, console=console, expand=True)
 
     def make_tasks_table(self, tasks):
-        live = getattr(self, "live", None)         # None while Progress is being made
+        live = getattr(self, "live", None)  # None while Progress is being made
         if live is not None:
             self.columns = tuple(self.wide if live.console.width >= NARROW else self.narrow)
         return super().make_tasks_table(tasks)
@@ -119,10 +136,12 @@ class ProgressReporter:
         # generations are numbered from 0 (summary.json, teams.jsonl, TensorBoard steps); the
         # count "done" is how many have finished: generation g is the (g + 1)-th
         team = r.team
-        text = (f"generation {r.generation}  best team {r.best['fitness']:.1f} "
-                f"(this generation {team['fitness']:.1f})  species {r.num_species}  "
-                f"team {team['species']} sp, {team['niches']} niches, "
-                f"${team['cost']:.0f}  {r.seconds:.2f}s/gen")
+        text = (
+            f"generation {r.generation}  best team {r.best['fitness']:.1f} "
+            f"(this generation {team['fitness']:.1f})  species {r.num_species}  "
+            f"team {team['species']} sp, {team['niches']} niches, "
+            f"${team['cost']:.0f}  {r.seconds:.2f}s/gen"
+        )
         if self.bar:
             self.bar.update(self.task, completed=ev.state.generation, description=text)
         elif r.generation % self.every == 0 or ev.done:
@@ -170,8 +189,9 @@ def last_checkpoint(saved: int | None) -> str:
     return f"the last {checkpoint_words(saved)}"
 
 
-def stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | None,
-               resuming: bool = False) -> str:
+def stop_line(
+    how: str, run_dir: Path | None, saved: int | None, again: str | None, resuming: bool = False
+) -> str:
     """The line an interrupted run prints: the checkpoint its file really holds
     (`checkpoint_words`: the last finished generation, numbered as in summary.json), or that
     there is none."""
@@ -180,8 +200,10 @@ def stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | No
     if saved is None:
         if resuming:
             return f"{how} before the run resumed; {run_dir} is unchanged"
-        return (f"{how}: no checkpoint was written yet, so {run_dir} holds no generation to "
-                "continue from; start the run again")
+        return (
+            f"{how}: no checkpoint was written yet, so {run_dir} holds no generation to "
+            "continue from; start the run again"
+        )
     again = again or f"swarmcode-torch evolve --resume {run_dir}"
     return f"{how}: {checkpoint_words(saved)} is in {run_dir}; continue with: {again}"
 
@@ -189,13 +211,19 @@ def stop_line(how: str, run_dir: Path | None, saved: int | None, again: str | No
 def stopped(where: Where, terminated: bool) -> None:
     terminated = terminated or bool(TERMINATED)
     how = "Terminated" if terminated else "Interrupted"
-    err.print(stop_line(how, where.run_dir, where.holds(), where.again, where.resuming),
-              markup=False, highlight=False, soft_wrap=True)
+    err.print(
+        stop_line(how, where.run_dir, where.holds(), where.again, where.resuming),
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
     raise typer.Exit(code=143 if terminated else 130)
 
 
-THREADS_HELP = ("CPU threads of this process [default: OMP_NUM_THREADS if set, else the cores "
-                "less the load average, at least 1].")
+THREADS_HELP = (
+    "CPU threads of this process [default: OMP_NUM_THREADS if set, else the cores "
+    "less the load average, at least 1]."
+)
 
 
 def set_threads_option(threads: int | None) -> None:
@@ -214,8 +242,10 @@ def eval_shards_option(eval_workers: int, cpus: float | None, address: str | Non
         fail(f"--eval-workers must be >= 1, got {eval_workers}")
     if eval_workers == 1 and address is None:
         if cpus is not None:
-            fail("--cpus-per-eval-worker is for evaluation shards on Ray: use it with "
-                 "--eval-workers N > 1 or --ray-address")
+            fail(
+                "--cpus-per-eval-worker is for evaluation shards on Ray: use it with "
+                "--eval-workers N > 1 or --ray-address"
+            )
         return None
     if cpus is not None and not (cpus > 0 and math.isfinite(cpus)):
         fail(f"--cpus-per-eval-worker must be a finite number > 0, got {cpus}")
@@ -242,8 +272,11 @@ def attach_shards(stack: ExitStack, ev, workers: int, cpus: float, address: str 
     except RayUnavailable as e:
         fail(str(e))
     where = sorted(set(evaluator.where))
-    console.print(f"Evaluation: {workers} shards on Ray actors ({escape('; '.join(where))})",
-                  highlight=False, soft_wrap=True)
+    console.print(
+        f"Evaluation: {workers} shards on Ray actors ({escape('; '.join(where))})",
+        highlight=False,
+        soft_wrap=True,
+    )
 
 
 def print_shard_traffic(evaluator) -> None:
@@ -253,16 +286,28 @@ def print_shard_traffic(evaluator) -> None:
     n = len(stats)
     sent = sum(s["bytes_sent"] for s in stats) / n
     back = sum(s["bytes_received"] for s in stats) / n
-    console.print(f"Evaluation shards: {sent / 1024:.1f} KiB sent and {back / 1024:.1f} KiB "
-                  f"received per generation (pickled, mean of {n} generations)",
-                  highlight=False, markup=False)
+    console.print(
+        f"Evaluation shards: {sent / 1024:.1f} KiB sent and {back / 1024:.1f} KiB "
+        f"received per generation (pickled, mean of {n} generations)",
+        highlight=False,
+        markup=False,
+    )
 
 
-def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
-             render_every: int = 0, saved: int | None = None,
-             again: str | None = None, figure_every: int = 50,
-             where: Where | None = None, wandb_project: str | None = None,
-             snapshot_every: int = 0, bounds: "session.Bounds | None" = None) -> None:
+def execute(
+    ev,
+    run_dir: Path,
+    checkpoint_every: int,
+    log_every: int,
+    render_every: int = 0,
+    saved: int | None = None,
+    again: str | None = None,
+    figure_every: int = 50,
+    where: Where | None = None,
+    wandb_project: str | None = None,
+    snapshot_every: int = 0,
+    bounds: session.Bounds | None = None,
+) -> None:
     """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints
     (and Weights & Biases with `wandb_project`).
     Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
@@ -276,11 +321,17 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     from .files import RunError, os_error_text
 
     again = again or f"swarmcode-torch evolve --resume {run_dir}"
-    writers = session.file_reporters(run_dir, checkpoint_every, render_every, figure_every,
-                                     saved=saved, snapshot_every=snapshot_every)
+    writers = session.file_reporters(
+        run_dir,
+        checkpoint_every,
+        render_every,
+        figure_every,
+        saved=saved,
+        snapshot_every=snapshot_every,
+    )
     checkpoints = writers[-1]
     extra: list = []
-    if wandb_project is not None:            # after the checkpoints: outside the step
+    if wandb_project is not None:  # after the checkpoints: outside the step
         from .reporting import WandbReporter
 
         extra.append(WandbReporter(wandb_project, run_dir, render_every))
@@ -296,15 +347,20 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
             with terminate_as_interrupt() as terminated:
                 session.run(ev, run_dir, reporters, bounds=bounds)
     except KeyboardInterrupt:
-        with deferred_signals(deliver=False):      # the writers close whole (TensorBoard's thread)
+        with deferred_signals(deliver=False):  # the writers close whole (TensorBoard's thread)
             if progress is not None:
                 progress.stop()
             close_writers(reporters)
-        stopped = bool(terminated or TERMINATED)      # SIGTERM here or before the run loop
-        err.print(stop_line("Terminated" if stopped else "Interrupted", run_dir,
-                            checkpoints.saved, again), markup=False, highlight=False,
-                  soft_wrap=True)
-        raise typer.Exit(code=143 if stopped else 130)
+        stopped = bool(terminated or TERMINATED)  # SIGTERM here or before the run loop
+        err.print(
+            stop_line(
+                "Terminated" if stopped else "Interrupted", run_dir, checkpoints.saved, again
+            ),
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
+        raise typer.Exit(code=143 if stopped else 130) from None
     except RunError as e:
         if progress is not None:
             progress.stop()
@@ -313,19 +369,27 @@ def execute(ev, run_dir: Path, checkpoint_every: int, log_every: int,
     except OSError as e:
         progress.stop()
         close_writers(reporters)
-        what = (f"writing the run's files failed after {ev.state.generation} generations "
-                f"({os_error_text(e)})")
+        what = (
+            f"writing the run's files failed after {ev.state.generation} generations "
+            f"({os_error_text(e)})"
+        )
         if checkpoints.saved is None:
-            fail(f"{what}; no checkpoint was written yet: free space or fix the cause, then start "
-                 "the run again")
-        fail(f"{what}; {last_checkpoint(checkpoints.saved)} "
-             f"({run_dir / 'checkpoint.pt'}); free space or fix the cause, then continue with: "
-             f"{again}")
+            fail(
+                f"{what}; no checkpoint was written yet: free space or fix the cause, then start "
+                "the run again"
+            )
+        fail(
+            f"{what}; {last_checkpoint(checkpoints.saved)} "
+            f"({run_dir / 'checkpoint.pt'}); free space or fix the cause, then continue with: "
+            f"{again}"
+        )
     except ShardError as e:
         progress.stop()
         close_writers(reporters)
-        fail(f"{e} after {ev.state.generation} generations; {last_checkpoint(checkpoints.saved)} "
-             f"({run_dir / 'checkpoint.pt'}); continue with: {again}")
+        fail(
+            f"{e} after {ev.state.generation} generations; {last_checkpoint(checkpoints.saved)} "
+            f"({run_dir / 'checkpoint.pt'}); continue with: {again}"
+        )
     progress.stop()
 
 
@@ -376,17 +440,42 @@ def print_team(run_dir: Path) -> None:
         f"cost ${_num(s['team_cost'], '.0f')} (budget {budget}), {s['num_species']} species, "
         f"deliveries {_num(s['deliveries'], '.2f')} ({_num(s['deliveries_individual'], '.2f')} "
         f"individual, {_num(s['deliveries_collab'], '.2f')} collaborative), energy used "
-        f"{_num(s['energy_used'], '.1f')}%", markup=False)
-    t = Table(title="Robots per design", box=box.SIMPLE_HEAD,
-              caption="ch/bat/mot: chassis, battery, motor tier (1-3); torque, capacity: "
-                      "operating points (0-1); dom: dominance")
-    for col in ("robots", "species", "tool", "radius", "ch", "bat", "mot",
-                "torque", "capacity", "dom", "$ each"):
+        f"{_num(s['energy_used'], '.1f')}%",
+        markup=False,
+    )
+    t = Table(
+        title="Robots per design",
+        box=box.SIMPLE_HEAD,
+        caption="ch/bat/mot: chassis, battery, motor tier (1-3); torque, capacity: "
+        "operating points (0-1); dom: dominance",
+    )
+    for col in (
+        "robots",
+        "species",
+        "tool",
+        "radius",
+        "ch",
+        "bat",
+        "mot",
+        "torque",
+        "capacity",
+        "dom",
+        "$ each",
+    ):
         t.add_column(col, justify="right", no_wrap=True)
     for d in designs:
-        t.add_row(str(d["count"]), str(d["species"]), d["effector"], f"{d['radius']:.3f}",
-                  str(d["chassis_tier"]), str(d["battery_tier"]), str(d["motor_tier"]),
-                  f"{d['torque_point']:.2f}", f"{d['battery_point']:.2f}",
-                  f"{d['dominance']:.2f}", f"{d['cost']:.0f}")
+        t.add_row(
+            str(d["count"]),
+            str(d["species"]),
+            d["effector"],
+            f"{d['radius']:.3f}",
+            str(d["chassis_tier"]),
+            str(d["battery_tier"]),
+            str(d["motor_tier"]),
+            f"{d['torque_point']:.2f}",
+            f"{d['battery_point']:.2f}",
+            f"{d['dominance']:.2f}",
+            f"{d['cost']:.0f}",
+        )
     console.print(t)
     return designs

@@ -23,25 +23,23 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
-from typing import Callable, Iterator, Sequence
 
 import torch
 from torch import Tensor
 
-from ..sim import bt
-from ..coevo.evaluation import simulate_teams, team_scores
 from ..coevo.config import SwarmCoDeConfig
-from ..coevo.evolve import Context, Evolution, GenerationResult, make_context, random_population
-from ..sim.runtime import resolve_device
-from ..coevo.fitness import team_cost
-from ..coevo.population import Population
-from ..coevo.population import genome_phenotype
-from ..sim.layout import Layout, make_layouts
-from ..coevo.reproduction import ReproductionParams, crossover, mutate
 from ..coevo.dynamics import mean_std
-from ..coevo.selection import elite_count
-from ..coevo.selection import rank_within_groups, top_per_group
+from ..coevo.evaluation import simulate_teams, team_scores
+from ..coevo.evolve import Context, Evolution, GenerationResult, make_context, random_population
+from ..coevo.fitness import team_cost
+from ..coevo.population import Population, genome_phenotype
+from ..coevo.reproduction import ReproductionParams, crossover, mutate
+from ..coevo.selection import elite_count, rank_within_groups, top_per_group
+from ..sim import bt
+from ..sim.layout import Layout, make_layouts
+from ..sim.runtime import resolve_device
 
 #: Probability that an offspring of the GA / CCEA is a crossover child (else a clone of parent 1).
 P_CROSSOVER = 0.7
@@ -73,8 +71,8 @@ class BestTeam:
     """A team found by an algorithm: designs [D] (a Population) and its S slots (rows into it)."""
 
     genome: Population
-    team: Tensor            # [S] long rows of `genome`
-    fitness: float          # its score in the run (mean over the run's trials)
+    team: Tensor  # [S] long rows of `genome`
+    fitness: float  # its score in the run (mean over the run's trials)
     cost: float
     generation: int
 
@@ -84,14 +82,22 @@ class BestTeam:
         return int(torch.unique(self.team).numel())
 
 
-def _team_of(genome: Population, team: Tensor, fitness: float, cost: float, generation: int) -> BestTeam:
+def _team_of(
+    genome: Population, team: Tensor, fitness: float, cost: float, generation: int
+) -> BestTeam:
     """A BestTeam holding only the rows of `genome` that `team` [S] uses (copies)."""
     rows, inv = torch.unique(team, return_inverse=True)
     return BestTeam(genome.index(rows).clone(), inv.clone(), fitness, cost, generation)
 
 
-def score_teams(ctx: Context, genome: Population, teams: Tensor, layouts: Layout,
-                tables: Tensor | None = None, step_fn=None) -> tuple[Tensor, Tensor, dict]:
+def score_teams(
+    ctx: Context,
+    genome: Population,
+    teams: Tensor,
+    layouts: Layout,
+    tables: Tensor | None = None,
+    step_fn=None,
+) -> tuple[Tensor, Tensor, dict]:
     """Teams [B, S] (rows of genome), each run in every one of the T environments `layouts`,
     all B * T team-episodes in one `simulate_teams` batch.
 
@@ -101,12 +107,21 @@ def score_teams(ctx: Context, genome: Population, teams: Tensor, layouts: Layout
     B = teams.shape[0]
     T = int(layouts.seed.shape[0])
     dev = teams.device
-    flat = teams.repeat_interleave(T, 0)                                  # [B*T, S]
+    flat = teams.repeat_interleave(T, 0)  # [B*T, S]
     layout_ids = torch.arange(T, device=dev).repeat(B)
     if tables is None:
         tables = bt.build_tables(genome.bt)
-    m = simulate_teams(flat, genome, tables, layout_ids, layouts, ctx.params, ctx.eval_cfg.ticks,
-                       step_fn, ctx.scenario.hardware)
+    m = simulate_teams(
+        flat,
+        genome,
+        tables,
+        layout_ids,
+        layouts,
+        ctx.params,
+        ctx.eval_cfg.ticks,
+        step_fn,
+        ctx.scenario.hardware,
+    )
     robot_cost = genome_phenotype(genome, ctx.scenario.hardware).cost[flat.clamp_min(0)]
     cost = team_cost(robot_cost, flat >= 0, distinct_per_row(flat), ctx.scenario.species_overhead)
     score = team_scores(m, cost, ctx.eval_cfg).view(B, T).mean(1)
@@ -121,9 +136,15 @@ def new_layouts(ctx: Context, num: int, generator: torch.Generator) -> Layout:
 
 
 # ------------------------------------------------------------------ reproduction
-def reproduce_groups(genome: Population, fitness: Tensor, sizes: Sequence[int], max_elite: int,
-                     generator: torch.Generator, params: ReproductionParams | None = None,
-                     p_crossover: float = P_CROSSOVER) -> tuple[Population, Tensor, Tensor]:
+def reproduce_groups(
+    genome: Population,
+    fitness: Tensor,
+    sizes: Sequence[int],
+    max_elite: int,
+    generator: torch.Generator,
+    params: ReproductionParams | None = None,
+    p_crossover: float = P_CROSSOVER,
+) -> tuple[Population, Tensor, Tensor]:
     """Generational reproduction inside fixed groups (the GA: one group; the CCEA: K).
 
     genome [P] and fitness [P] hold the groups as consecutive blocks of `sizes` rows; the children
@@ -144,25 +165,25 @@ def reproduce_groups(genome: Population, fitness: Tensor, sizes: Sequence[int], 
     if int(size_t.sum()) != P or bool((size_t < 1).any()):
         raise ValueError(f"group sizes {list(sizes)} do not partition {P} individuals")
     k = size_t.numel()
-    pos = torch.repeat_interleave(torch.arange(k, device=dev), size_t)   # [P] group of each row
+    pos = torch.repeat_interleave(torch.arange(k, device=dev), size_t)  # [P] group of each row
     starts = size_t.cumsum(0) - size_t
     fit = torch.nan_to_num(fitness.float(), nan=-math.inf)
 
-    order, rank = rank_within_groups(pos, fit, size_t)        # by (group, fitness desc, row)
+    order, rank = rank_within_groups(pos, fit, size_t)  # by (group, fitness desc, row)
     n_elite = torch.minimum(elite_count(size_t, max_elite), size_t)
-    elite = top_per_group(order, rank, pos, n_elite)                      # by group, best first
+    elite = top_per_group(order, rank, pos, n_elite)  # by group, best first
 
     off_pos = torch.repeat_interleave(torch.arange(k, device=dev), size_t - n_elite)
     n_off = off_pos.numel()
     ts = params.tournament_size
-    n = size_t[off_pos][:, None]                                          # [N, 1]
+    n = size_t[off_pos][:, None]  # [N, 1]
     base = starts[off_pos][:, None]
     local1 = (torch.rand(n_off, ts, generator=generator, device=dev) * n).long().clamp(max=n - 1)
     w1 = fit[order[base + local1]].argmax(1, keepdim=True)
-    l1 = local1.gather(1, w1)                                             # [N, 1] rank of p1
+    l1 = local1.gather(1, w1)  # [N, 1] rank of p1
     m = (n - 1).clamp(min=1)
     local2 = (torch.rand(n_off, ts, generator=generator, device=dev) * m).long().clamp(max=m - 1)
-    local2 = torch.where(n > 1, local2 + (local2 >= l1).long(), local2)   # skip p1's rank
+    local2 = torch.where(n > 1, local2 + (local2 >= l1).long(), local2)  # skip p1's rank
     w2 = fit[order[base + local2]].argmax(1, keepdim=True)
     p1 = order[base + l1].squeeze(1)
     p2 = order[base + local2.gather(1, w2)].squeeze(1)
@@ -176,8 +197,12 @@ def reproduce_groups(genome: Population, fitness: Tensor, sizes: Sequence[int], 
     group = torch.cat([pos[elite], off_pos])
     perm = torch.sort(group, stable=True).indices
     children = Population.cat([genome.index(elite), child]).index(perm)
-    is_elite = torch.cat([torch.ones(elite.numel(), dtype=torch.bool, device=dev),
-                          torch.zeros(n_off, dtype=torch.bool, device=dev)])[perm]
+    is_elite = torch.cat(
+        [
+            torch.ones(elite.numel(), dtype=torch.bool, device=dev),
+            torch.zeros(n_off, dtype=torch.bool, device=dev),
+        ]
+    )[perm]
     parent = torch.cat([elite, p1])[perm]
     return children, is_elite, parent
 
@@ -222,24 +247,33 @@ class _Algorithm:
     def _metrics(self, gen_best: float, gen_species: int, mean: float, seconds: float) -> dict:
         return {
             "generation": self.generation - 1,
-            "best": self.best.fitness, "best/species": self.best.species,
-            "team/fitness": gen_best, "team/species": gen_species,
-            "fitness/mean": mean, "episodes": self.episodes, "seconds": seconds,
+            "best": self.best.fitness,
+            "best/species": self.best.species,
+            "team/fitness": gen_best,
+            "team/species": gen_species,
+            "fitness/mean": mean,
+            "episodes": self.episodes,
+            "seconds": seconds,
         }
 
 
 class _FixedPopulationAlgorithm(_Algorithm):
     """A generational algorithm with P individuals scored by one team each on T environments."""
 
-    def __init__(self, cfg: SwarmCoDeConfig, generator: torch.Generator,
-                 resample_environments: bool = True):
+    def __init__(
+        self, cfg: SwarmCoDeConfig, generator: torch.Generator, resample_environments: bool = True
+    ):
         super().__init__(cfg)
         if torch.device(generator.device).type != self.ctx.device.type:
-            raise ValueError(f"the generator is on {generator.device}, the run on {self.ctx.device}")
+            raise ValueError(
+                f"the generator is on {generator.device}, the run on {self.ctx.device}"
+            )
         self.generator = generator
         self.resample_environments = resample_environments
         self.genome = random_population(cfg.population, cfg, generator, self.ctx.device)
-        self._fixed = None if resample_environments else new_layouts(self.ctx, self.trials, generator)
+        self._fixed = (
+            None if resample_environments else new_layouts(self.ctx, self.trials, generator)
+        )
         self.last_scores: Tensor | None = None
 
     @property
@@ -249,8 +283,11 @@ class _FixedPopulationAlgorithm(_Algorithm):
     def environments(self) -> Layout:
         """This generation's T environments, shared by every individual (fresh each generation
         unless `resample_environments` is False)."""
-        return self._fixed if self._fixed is not None else new_layouts(self.ctx, self.trials,
-                                                                       self.generator)
+        return (
+            self._fixed
+            if self._fixed is not None
+            else new_layouts(self.ctx, self.trials, self.generator)
+        )
 
     @property
     def group_sizes(self) -> list[int]:
@@ -267,20 +304,26 @@ class _FixedPopulationAlgorithm(_Algorithm):
     def step(self) -> dict:
         t0 = time.perf_counter()
         teams = self.teams()
-        score, cost, _ = score_teams(self.ctx, self.genome, teams, self.environments(),
-                                     step_fn=self.ctx.step_fn)
+        score, cost, _ = score_teams(
+            self.ctx, self.genome, teams, self.environments(), step_fn=self.ctx.step_fn
+        )
         self.episodes += self.episodes_per_generation
         b = int(score.argmax())
         gen_best = float(score[b])
         genome, gen = self.genome, self.generation
         self._offer(lambda: _team_of(genome, teams[b], gen_best, float(cost[b]), gen), gen_best)
         self.last_scores = score
-        self.genome, _, _ = reproduce_groups(self.genome, score, self.group_sizes,
-                                             self.cfg.max_elite, self.generator,
-                                             self.cfg.reproduction)
+        self.genome, _, _ = reproduce_groups(
+            self.genome,
+            score,
+            self.group_sizes,
+            self.cfg.max_elite,
+            self.generator,
+            self.cfg.reproduction,
+        )
         self._after_reproduction()
         self.generation += 1
-        species = int(distinct_per_row(teams[b:b + 1])[0])
+        species = int(distinct_per_row(teams[b : b + 1])[0])
         return self._metrics(gen_best, species, float(score.mean()), time.perf_counter() - t0)
 
 
@@ -317,15 +360,23 @@ class FixedSpeciesCCEA(_FixedPopulationAlgorithm):
 
     name = "ccea"
 
-    def __init__(self, cfg: SwarmCoDeConfig, num_species: int, generator: torch.Generator,
-                 resample_environments: bool = True):
+    def __init__(
+        self,
+        cfg: SwarmCoDeConfig,
+        num_species: int,
+        generator: torch.Generator,
+        resample_environments: bool = True,
+    ):
         super().__init__(cfg, generator, resample_environments)
         if not 1 <= num_species <= self.swarm_size:
-            raise ValueError(f"num_species must be in 1..swarm size {self.swarm_size}, "
-                             f"got {num_species}")
+            raise ValueError(
+                f"num_species must be in 1..swarm size {self.swarm_size}, got {num_species}"
+            )
         if cfg.population < 2 * num_species:
-            raise ValueError(f"population {cfg.population} is too small for {num_species} "
-                             "species (needs >= 2 per species)")
+            raise ValueError(
+                f"population {cfg.population} is too small for {num_species} "
+                "species (needs >= 2 per species)"
+            )
         dev = self.ctx.device
         self.num_species = num_species
         self.sizes = split_evenly(cfg.population, num_species)
@@ -333,8 +384,9 @@ class FixedSpeciesCCEA(_FixedPopulationAlgorithm):
         size_t = torch.tensor(self.sizes, device=dev)
         self.species = torch.repeat_interleave(torch.arange(num_species, device=dev), size_t)
         self.starts = size_t.cumsum(0) - size_t
-        self.slot_species = torch.repeat_interleave(torch.arange(num_species, device=dev),
-                                                    torch.tensor(self.slots, device=dev))
+        self.slot_species = torch.repeat_interleave(
+            torch.arange(num_species, device=dev), torch.tensor(self.slots, device=dev)
+        )
         u = torch.rand(num_species, generator=generator, device=dev)
         self.representatives = self.starts + (u * size_t).long().clamp(max=size_t - 1)
 
@@ -395,16 +447,18 @@ class SwarmCoDeRun(_Algorithm):
 
 
 # ------------------------------------------------------------------ generator-style API
-def homogeneous_ga(cfg: SwarmCoDeConfig, generations: int, generator: torch.Generator,
-                   **kw) -> Iterator[dict]:
+def homogeneous_ga(
+    cfg: SwarmCoDeConfig, generations: int, generator: torch.Generator, **kw
+) -> Iterator[dict]:
     """Run the homogeneous GA for `generations` generations, yielding each one's metrics."""
     algo = HomogeneousGA(cfg, generator, **kw)
     for _ in range(generations):
         yield algo.step()
 
 
-def fixed_species_ccea(cfg: SwarmCoDeConfig, num_species: int, generations: int,
-                       generator: torch.Generator, **kw) -> Iterator[dict]:
+def fixed_species_ccea(
+    cfg: SwarmCoDeConfig, num_species: int, generations: int, generator: torch.Generator, **kw
+) -> Iterator[dict]:
     """Run the K-species CCEA for `generations` generations, yielding each one's metrics."""
     algo = FixedSpeciesCCEA(cfg, num_species, generator, **kw)
     for _ in range(generations):
@@ -429,16 +483,21 @@ def evaluate_team(best: BestTeam, ctx: Context, layouts: Layout) -> dict:
     team = best.team.to(ctx.device)[None, :]
     genome = best.genome.to(ctx.device)
     score, cost, m = score_teams(ctx, genome, team, layouts)
-    return {"score": float(score[0]), "cost": float(cost[0]),
-            "deliveries": float(m["delivered_individual"][0] + m["delivered_collab"][0])}
+    return {
+        "score": float(score[0]),
+        "cost": float(cost[0]),
+        "deliveries": float(m["delivered_individual"][0] + m["delivered_collab"][0]),
+    }
 
 
 def plan_generations(episodes_budget: int, population: int, trials: int) -> dict[str, int]:
     """Generations of each algorithm for a budget of team-episodes (a multiple of 2 P T)."""
     unit = 2 * population * trials
     if episodes_budget < unit or episodes_budget % unit:
-        raise ValueError(f"the episode budget must be a positive multiple of 2 * population * "
-                         f"trials = {unit}, got {episodes_budget}")
+        raise ValueError(
+            f"the episode budget must be a positive multiple of 2 * population * "
+            f"trials = {unit}, got {episodes_budget}"
+        )
     g = episodes_budget // unit
     return {"swarmcode": g, "swarmcode-no-dominance": g, "homogeneous-ga": 2 * g, "ccea": 2 * g}
 
@@ -458,13 +517,24 @@ def make_algorithm(name: str, cfg: SwarmCoDeConfig, num_species: int = 4) -> _Al
     raise ValueError(f"unknown algorithm {name!r}; expected one of {', '.join(ALGORITHMS)}")
 
 
-def compare(scenario: str = "four-niche", seeds: Sequence[int] = (0, 1, 2),
-            generations: int | None = 10, episodes_budget: int | None = None,
-            population: int = 16, swarm_size: int | None = 10, trials: int = 1,
-            ticks: int | None = 100, budget: float | None = None, objective: str = "fitness",
-            device: str = "auto", num_species: int = 4, eval_trials: int = 16,
-            algorithms: Sequence[str] = ALGORITHMS, base: SwarmCoDeConfig | None = None,
-            progress: Callable[[dict], None] | None = None) -> list[dict]:
+def compare(
+    scenario: str = "four-niche",
+    seeds: Sequence[int] = (0, 1, 2),
+    generations: int | None = 10,
+    episodes_budget: int | None = None,
+    population: int = 16,
+    swarm_size: int | None = 10,
+    trials: int = 1,
+    ticks: int | None = 100,
+    budget: float | None = None,
+    objective: str = "fitness",
+    device: str = "auto",
+    num_species: int = 4,
+    eval_trials: int = 16,
+    algorithms: Sequence[str] = ALGORITHMS,
+    base: SwarmCoDeConfig | None = None,
+    progress: Callable[[dict], None] | None = None,
+) -> list[dict]:
     """Run every algorithm on every seed with the same number of team-episodes.
 
     The budget is `episodes_budget` team-episodes, or `generations` SwarmCoDe generations
@@ -478,8 +548,17 @@ def compare(scenario: str = "four-niche", seeds: Sequence[int] = (0, 1, 2),
     heldout_fitness, heldout_deliveries, seconds; SwarmCoDe rows add population_species.
     """
     base = base or SwarmCoDeConfig()
-    cfg0 = replace(base, scenario=scenario, population=population, swarm_size=swarm_size,
-                   trials=trials, ticks=ticks, budget=budget, objective=objective, device=device)
+    cfg0 = replace(
+        base,
+        scenario=scenario,
+        population=population,
+        swarm_size=swarm_size,
+        trials=trials,
+        ticks=ticks,
+        budget=budget,
+        objective=objective,
+        device=device,
+    )
     if episodes_budget is None:
         if generations is None:
             raise ValueError("give generations or episodes_budget")
@@ -491,8 +570,9 @@ def compare(scenario: str = "four-niche", seeds: Sequence[int] = (0, 1, 2),
     replace(cfg0, generations=1).validate()
 
     ctx = make_context(replace(cfg0, generations=1, compile=False))
-    held_out = new_layouts(ctx, eval_trials,
-                           torch.Generator(device=ctx.device).manual_seed(HELD_OUT_SEED))
+    held_out = new_layouts(
+        ctx, eval_trials, torch.Generator(device=ctx.device).manual_seed(HELD_OUT_SEED)
+    )
     rows = []
     for seed in seeds:
         for name in algorithms:
@@ -505,10 +585,15 @@ def compare(scenario: str = "four-niche", seeds: Sequence[int] = (0, 1, 2),
             seconds = time.perf_counter() - t0
             ev = evaluate_team(algo.best, ctx, held_out)
             row = {
-                "algorithm": name, "seed": seed, "generations": plan[name],
-                "episodes": algo.episodes, "best_fitness": algo.best.fitness,
-                "species": algo.best.species, "team_cost": algo.best.cost,
-                "heldout_fitness": ev["score"], "heldout_deliveries": ev["deliveries"],
+                "algorithm": name,
+                "seed": seed,
+                "generations": plan[name],
+                "episodes": algo.episodes,
+                "best_fitness": algo.best.fitness,
+                "species": algo.best.species,
+                "team_cost": algo.best.cost,
+                "heldout_fitness": ev["score"],
+                "heldout_deliveries": ev["deliveries"],
                 "seconds": seconds,
             }
             if isinstance(algo, SwarmCoDeRun):
@@ -522,8 +607,14 @@ def compare(scenario: str = "four-niche", seeds: Sequence[int] = (0, 1, 2),
     return rows
 
 
-SUMMARY_COLUMNS = ("best_fitness", "heldout_fitness", "heldout_deliveries", "species",
-                   "team_cost", "seconds")
+SUMMARY_COLUMNS = (
+    "best_fitness",
+    "heldout_fitness",
+    "heldout_deliveries",
+    "species",
+    "team_cost",
+    "seconds",
+)
 
 
 def summarize(rows: list[dict], columns: Sequence[str] = SUMMARY_COLUMNS) -> list[dict]:
@@ -534,8 +625,12 @@ def summarize(rows: list[dict], columns: Sequence[str] = SUMMARY_COLUMNS) -> lis
         groups.setdefault(r["algorithm"], []).append(r)
     out = []
     for name, rs in groups.items():
-        s = {"algorithm": name, "seeds": len(rs), "episodes": rs[0]["episodes"],
-             "generations": rs[0]["generations"]}
+        s = {
+            "algorithm": name,
+            "seeds": len(rs),
+            "episodes": rs[0]["episodes"],
+            "generations": rs[0]["generations"],
+        }
         for col in columns:
             s[col], s[f"{col}_std"] = mean_std([float(r[col]) for r in rs])
         out.append(s)

@@ -45,7 +45,7 @@ class AdmissionParams:
     admit_generations: int = 3
     clash_above: float = 0.5
     clash_generations: int = 2
-    decay: float = 0.5             # weight of the previous value in the moving average
+    decay: float = 0.5  # weight of the previous value in the moving average
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,10 +62,12 @@ class Admission:
 
     @classmethod
     def empty(cls, device: torch.device | str = "cpu") -> Admission:
-        return cls(torch.zeros(0, dtype=torch.bool, device=device),
-                   torch.zeros(0, device=device),
-                   torch.zeros(0, dtype=torch.long, device=device),
-                   torch.zeros(0, dtype=torch.long, device=device))
+        return cls(
+            torch.zeros(0, dtype=torch.bool, device=device),
+            torch.zeros(0, device=device),
+            torch.zeros(0, dtype=torch.long, device=device),
+            torch.zeros(0, dtype=torch.long, device=device),
+        )
 
     def grow(self, n: int, partner: bool) -> Admission:
         """Room for species ids below n; ids new to it start as partners if `partner` (the
@@ -74,32 +76,45 @@ class Admission:
         if n <= m:
             return self
         dev, extra = self.partner.device, n - m
-        return Admission(torch.cat([self.partner,
-                                    torch.full((extra,), partner, dtype=torch.bool, device=dev)]),
-                         torch.cat([self.gated, torch.full((extra,), torch.nan, device=dev)]),
-                         torch.cat([self.calm, torch.zeros(extra, dtype=torch.long, device=dev)]),
-                         torch.cat([self.clash, torch.zeros(extra, dtype=torch.long, device=dev)]))
+        return Admission(
+            torch.cat([self.partner, torch.full((extra,), partner, dtype=torch.bool, device=dev)]),
+            torch.cat([self.gated, torch.full((extra,), torch.nan, device=dev)]),
+            torch.cat([self.calm, torch.zeros(extra, dtype=torch.long, device=dev)]),
+            torch.cat([self.clash, torch.zeros(extra, dtype=torch.long, device=dev)]),
+        )
 
     def allowed(self, proto_ids: Tensor) -> Tensor:
         """[K] bool: which of the species proto_ids may be partners."""
         return self.partner[proto_ids]
 
     def state_dict(self) -> dict:
-        return {"partner": self.partner.cpu(), "gated": self.gated.cpu(),
-                "calm": self.calm.cpu(), "clash": self.clash.cpu()}
+        return {
+            "partner": self.partner.cpu(),
+            "gated": self.gated.cpu(),
+            "calm": self.calm.cpu(),
+            "clash": self.clash.cpu(),
+        }
 
     @classmethod
     def from_state_dict(cls, d: dict, device: torch.device | str = "cpu") -> Admission:
         """ValueError unless d holds four 1-D tensors of one length and the right dtypes."""
-        want = {"partner": torch.bool, "gated": torch.float32, "calm": torch.long,
-                "clash": torch.long}
+        want = {
+            "partner": torch.bool,
+            "gated": torch.float32,
+            "calm": torch.long,
+            "clash": torch.long,
+        }
         if not isinstance(d, dict) or set(d) != set(want):
             raise ValueError("checkpoint's partner admission state is malformed")
         n = None
         for k, dt in want.items():
             t = d[k]
-            if not isinstance(t, Tensor) or t.dtype != dt or t.dim() != 1 or \
-                    (n is not None and t.numel() != n):
+            if (
+                not isinstance(t, Tensor)
+                or t.dtype != dt
+                or t.dim() != 1
+                or (n is not None and t.numel() != n)
+            ):
                 raise ValueError("checkpoint's partner admission state is malformed")
             n = t.numel()
         return cls(*(d[k].to(device) for k in want))
@@ -115,14 +130,24 @@ def nearest_partner(design_distance: Tensor, allowed: Tensor) -> Tensor:
     there is none."""
     k = allowed.numel()
     eye = torch.eye(k, dtype=torch.bool, device=allowed.device)
-    d = torch.where(allowed[None, :] & ~eye, design_distance.float(),
-                    torch.full((k, k), torch.inf, device=allowed.device))
+    d = torch.where(
+        allowed[None, :] & ~eye,
+        design_distance.float(),
+        torch.full((k, k), torch.inf, device=allowed.device),
+    )
     best = d.argmin(1)
     return torch.where(torch.isfinite(d.min(1).values), best, -1)
 
 
-def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor, nearest: Tensor,
-           params: AdmissionParams = AdmissionParams(), near: Tensor | None = None) -> Admission:
+def update(
+    adm: Admission,
+    species: Tensor,
+    proto_ids: Tensor,
+    gated: Tensor,
+    nearest: Tensor,
+    params: AdmissionParams = AdmissionParams(),
+    near: Tensor | None = None,
+) -> Admission:
     """The admission after one evaluation: species [P] ids, proto_ids [K] (the species, in
     order of founding), gated [P] bool (whose focal team did not beat its baseline), nearest [K]
     long (`nearest_partner`, the partner each species' baseline was re-filled from), near [K]
@@ -132,7 +157,7 @@ def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor, ne
     k = proto_ids.numel()
     if k == 0:
         return adm
-    member = species[:, None] == proto_ids[None, :]                       # [P, K]
+    member = species[:, None] == proto_ids[None, :]  # [P, K]
     size = member.sum(0)
     share = (member & gated[:, None]).sum(0).float() / size.clamp_min(1).float()
     prev = adm.gated[proto_ids]
@@ -143,7 +168,7 @@ def update(adm: Admission, species: Tensor, proto_ids: Tensor, gated: Tensor, ne
     admit = ~partner & (calm >= params.admit_generations)
     clashing = clash >= params.clash_generations
     demote = torch.zeros(k, dtype=torch.bool, device=species.device)
-    rank = size * (proto_ids.max() + 1) - proto_ids          # higher: larger, then older
+    rank = size * (proto_ids.max() + 1) - proto_ids  # higher: larger, then older
     pair = clashing & (nearest >= 0)
     if near is not None:
         pair = pair & near

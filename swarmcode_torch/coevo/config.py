@@ -188,35 +188,66 @@ class SwarmCoDeConfig:
         for key, opts in OPTIONAL_CHOICES.items():
             v = getattr(self, key)
             if v is not None and v not in opts:
-                raise SettingError(key, f"must be {' or '.join(map(repr, opts))} or unset, "
-                                        f"got {v!r}")
+                raise SettingError(
+                    key, f"must be {' or '.join(map(repr, opts))} or unset, got {v!r}"
+                )
         dev = self.device
         if dev not in ("auto", "cpu", "cuda") and not (
-                dev.startswith("cuda:") and dev[5:].isdigit() and dev[5:].isascii()):
+            dev.startswith("cuda:") and dev[5:].isdigit() and dev[5:].isascii()
+        ):
             raise SettingError("device", f"must be auto, cpu, cuda or cuda:N, got {dev!r}")
         # lower bounds; the sizes' upper bound is the memory their evaluation needs
-        for key, lo in (("generations", 1), ("population", 2), ("trials", 1), ("tag_length", 1),
-                        ("bt_length", 4), ("max_elite", 1), ("swarm_size", 1), ("ticks", 1),
-                        ("seed", 0)):
+        for key, lo in (
+            ("generations", 1),
+            ("population", 2),
+            ("trials", 1),
+            ("tag_length", 1),
+            ("bt_length", 4),
+            ("max_elite", 1),
+            ("swarm_size", 1),
+            ("ticks", 1),
+            ("seed", 0),
+        ):
             v = getattr(self, key)
             if v is not None and v < lo:
                 raise SettingError(key, f"must be >= {lo}, got {v}")
         if self.seed > MAX_SEED:
             raise SettingError("seed", f"must be in [0, {MAX_SEED}] (2**63 - 1), got {self.seed}")
-        for key in ("delta", "lam", "hw_sigma", "social_sigma", "min_share", "w_delivery",
-                    "w_collab_bonus", "w_pickup", "w_energy", "w_proximity", "w_closeness",
-                    "fitness_floor", *DISTANCE_KEYS):
+        for key in (
+            "delta",
+            "lam",
+            "hw_sigma",
+            "social_sigma",
+            "min_share",
+            "w_delivery",
+            "w_collab_bonus",
+            "w_pickup",
+            "w_energy",
+            "w_proximity",
+            "w_closeness",
+            "fitness_floor",
+            *DISTANCE_KEYS,
+        ):
             v = getattr(self, key)
-            if not (v >= 0 and math.isfinite(v)):          # also refuses nan
+            if not (v >= 0 and math.isfinite(v)):  # also refuses nan
                 raise SettingError(key, f"must be a finite number >= 0, got {v}")
         for key in ("delta", "gamma"):
             v = getattr(self, key)
             if not v > 0:
                 raise SettingError(key, f"must be a finite number > 0, got {v}")
-        for key in ("p_marginal", "quota_size_exponent", "alpha", "p_categorical", "p_effector",
-                    "p_tag_flip", "bt_mutation_rate", "p_gene_mutation", "inactive_factor"):
+        for key in (
+            "p_marginal",
+            "quota_size_exponent",
+            "alpha",
+            "p_categorical",
+            "p_effector",
+            "p_tag_flip",
+            "bt_mutation_rate",
+            "p_gene_mutation",
+            "inactive_factor",
+        ):
             v = getattr(self, key)
-            if v is None:                  # an optional one left unset (`p_effector`)
+            if v is None:  # an optional one left unset (`p_effector`)
                 continue
             if not (v >= 0 and math.isfinite(v)):
                 raise SettingError(key, f"must be a finite number in [0, 1], got {v}")
@@ -256,8 +287,13 @@ class SwarmCoDeConfig:
     def evaluation(self, num_robots: int, episode_ticks: int) -> EvalConfig:
         """How teams are scored, with the scenario's team size and episode length where the
         run leaves them unset."""
-        return _part(EvalConfig, self, swarm_size=self.swarm_size or num_robots,
-                     ticks=self.ticks or episode_ticks, weights=self.fitness_weights)
+        return _part(
+            EvalConfig,
+            self,
+            swarm_size=self.swarm_size or num_robots,
+            ticks=self.ticks or episode_ticks,
+            weights=self.fitness_weights,
+        )
 
     @property
     def fitness_weights(self) -> FitnessWeights:
@@ -279,8 +315,11 @@ class SwarmCoDeConfig:
 
 
 #: The settings that name one of a few choices (validated in `SwarmCoDeConfig.validate`).
-CHOICES = {"objective": ("fitness", "roi"), "partners_per_niche": ("all", "one"),
-           "partner_admission": ("open", "substitute")}
+CHOICES = {
+    "objective": ("fitness", "roi"),
+    "partners_per_niche": ("all", "one"),
+    "partner_admission": ("open", "substitute"),
+}
 #: Choices of settings that may also be unset.
 OPTIONAL_CHOICES = {"preset": ("default", "paper")}
 
@@ -291,8 +330,12 @@ OPTIONAL_CHOICES = {"preset": ("default", "paper")}
 #: resampled as the tiers are (docs/MODEL.md, "Presets").
 PRESETS: dict[str, dict[str, Any]] = {
     "default": {},
-    "paper": {"partners_per_niche": "all", "partner_admission": "open",
-              "quota_size_exponent": None, "p_effector": None},
+    "paper": {
+        "partners_per_niche": "all",
+        "partner_admission": "open",
+        "quota_size_exponent": None,
+        "p_effector": None,
+    },
 }
 
 
@@ -306,21 +349,42 @@ def preset_config(name: str = "default", **settings: Any) -> SwarmCoDeConfig:
 
 #: The largest seed a run's generator takes (torch.Generator.manual_seed accepts 64 bits; a seed
 #: is kept non-negative and below 2**63 so that it reads back the same everywhere).
-MAX_SEED = 2 ** 63 - 1
+MAX_SEED = 2**63 - 1
 
 #: Upper bounds of settings that memory does not bound (the application checks memory first
 #: (`app.runs.check_memory`), so that sizes far too large for memory are told what they would need).
-UPPER_BOUNDS = {"generations": 10_000_000, "ticks": 1_000_000, "tag_length": 4096,
-                "bt_length": 4096, "max_elite": 1_000_000, "population": 100_000_000,
-                "trials": 1_000_000, "swarm_size": 10_000_000,
-                # numbers the float32 tensors must hold with room to spare (delta=1e300 is inf
-                # there; social_sigma=1e300 makes NaN genes)
-                "budget": 1e15, "delta": 1e6, "lam": 1e6, "hw_sigma": 1e6,
-                "social_sigma": 1e6, "min_share": 1e9, "w_tag": 1e6, "w_hw": 1e6, "w_bt": 1e6,
-                "w_tool": 1e6, "w_size": 1e6, "gamma": 1e3,
-                # a team-episode's raw fitness is a float32 sum of these times counts
-                "w_delivery": 1e12, "w_collab_bonus": 1e12, "w_pickup": 1e12, "w_energy": 1e12,
-                "w_proximity": 1e12, "w_closeness": 1e12, "fitness_floor": 1e12}
+UPPER_BOUNDS = {
+    "generations": 10_000_000,
+    "ticks": 1_000_000,
+    "tag_length": 4096,
+    "bt_length": 4096,
+    "max_elite": 1_000_000,
+    "population": 100_000_000,
+    "trials": 1_000_000,
+    "swarm_size": 10_000_000,
+    # numbers the float32 tensors must hold with room to spare (delta=1e300 is inf
+    # there; social_sigma=1e300 makes NaN genes)
+    "budget": 1e15,
+    "delta": 1e6,
+    "lam": 1e6,
+    "hw_sigma": 1e6,
+    "social_sigma": 1e6,
+    "min_share": 1e9,
+    "w_tag": 1e6,
+    "w_hw": 1e6,
+    "w_bt": 1e6,
+    "w_tool": 1e6,
+    "w_size": 1e6,
+    "gamma": 1e3,
+    # a team-episode's raw fitness is a float32 sum of these times counts
+    "w_delivery": 1e12,
+    "w_collab_bonus": 1e12,
+    "w_pickup": 1e12,
+    "w_energy": 1e12,
+    "w_proximity": 1e12,
+    "w_closeness": 1e12,
+    "fitness_floor": 1e12,
+}
 
 
 EvolveConfig = SwarmCoDeConfig
@@ -335,7 +399,7 @@ for _name, _hint in typing.get_type_hints(SwarmCoDeConfig).items():
 _ACCEPTS = {bool: (bool,), int: (int,), float: (int, float), str: (str,)}
 _KIND_TEXT = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
 
-_RUN = SwarmCoDeConfig          # the run defaults, as class attributes
+_RUN = SwarmCoDeConfig  # the run defaults, as class attributes
 
 
 def with_overrides(cfg: SwarmCoDeConfig, **kw) -> SwarmCoDeConfig:
@@ -368,22 +432,28 @@ class FitnessWeights:
 
 
 #: FitnessWeights field -> the run setting that gives it.
-FITNESS_KEYS = {"W_delivery": "w_delivery", "W_collab_bonus": "w_collab_bonus",
-                "W_pickup": "w_pickup", "W_energy": "w_energy", "W_proximity": "w_proximity",
-                "W_closeness": "w_closeness", "inactive_factor": "inactive_factor",
-                "floor": "fitness_floor"}
+FITNESS_KEYS = {
+    "W_delivery": "w_delivery",
+    "W_collab_bonus": "w_collab_bonus",
+    "W_pickup": "w_pickup",
+    "W_energy": "w_energy",
+    "W_proximity": "w_proximity",
+    "W_closeness": "w_closeness",
+    "inactive_factor": "inactive_factor",
+    "floor": "fitness_floor",
+}
 
 
 @dataclass(frozen=True)
 class EvalConfig:
     """How teams are built and scored (`evaluation.evaluate`)."""
 
-    swarm_size: int                 # robots per team
-    ticks: int                      # episode length
-    trials: int = _RUN.trials       # random environments per team (focal and baseline share them)
+    swarm_size: int  # robots per team
+    ticks: int  # episode length
+    trials: int = _RUN.trials  # random environments per team (focal and baseline share them)
     budget: float | None = _RUN.budget  # $; None: no budget penalty
     objective: str = _RUN.objective  # "fitness" or "roi" (fitness divided by team cost)
-    lam: float = _RUN.lam            # budget penalty decay
+    lam: float = _RUN.lam  # budget penalty decay
     p_marginal: float = _RUN.p_marginal  # factor on fitness when the marginal contribution is <= 0
     max_elite: int = _RUN.max_elite  # the elite cap (partner elites are drawn from the elites)
     dominance: bool = _RUN.dominance  # False: uniform team composition (an ablation)

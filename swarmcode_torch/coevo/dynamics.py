@@ -73,10 +73,17 @@ def replay(history: Sequence[dict]) -> tuple[Turnover, list[dict]]:
         h = by_gen[g]
         founded, extinct = t.advance(g, h["population"])
         team = [int(s) for s in h.get("team", {})]
-        rows.append({"generation": g, "founded": founded, "extinct": extinct,
-                     "species": len(h["population"]), "team_species": len(team),
-                     "median_age": median(t.ages(g, h["population"])),
-                     "team_median_age": median(t.ages(g, team))})
+        rows.append(
+            {
+                "generation": g,
+                "founded": founded,
+                "extinct": extinct,
+                "species": len(h["population"]),
+                "team_species": len(team),
+                "median_age": median(t.ages(g, h["population"])),
+                "team_median_age": median(t.ages(g, team)),
+            }
+        )
     return t, rows
 
 
@@ -85,8 +92,13 @@ def lifetimes(t: Turnover, start: int, end: int) -> list[int]:
     return [d - t.born[s] for s, d in t.died.items() if start <= d < end]
 
 
-def window_stats(rows: Sequence[dict], t: Turnover, start: int, end: int,
-                 team_niches: dict[int, int] | None = None) -> dict:
+def window_stats(
+    rows: Sequence[dict],
+    t: Turnover,
+    start: int,
+    end: int,
+    team_niches: dict[int, int] | None = None,
+) -> dict:
     """Medians over generations [start, end) of `replay` rows: species in the best team and in
     the population, niches (from `team_niches`: generation -> niches of its best team), founding
     and extinction per generation, median species age, and the median lifetime of the species
@@ -97,12 +109,15 @@ def window_stats(rows: Sequence[dict], t: Turnover, start: int, end: int,
     win = [r for r in rows if start <= r["generation"] < end]
     n = len(win)
     last = rows[-1]["generation"] if rows else start
-    lasting = sum(1 for sp, b in t.born.items()
-                  if start <= b < end and t.died.get(sp, last + 1) - b >= 2)
+    lasting = sum(
+        1 for sp, b in t.born.items() if start <= b < end and t.died.get(sp, last + 1) - b >= 2
+    )
     niche_of = team_niches or {}
     niches = [niche_of[r["generation"]] for r in win if r["generation"] in niche_of]
     return {
-        "generations": n, "from": start, "to": end,
+        "generations": n,
+        "from": start,
+        "to": end,
         "team_species": median([r["team_species"] for r in win]),
         "population_species": median([r["species"] for r in win]),
         "niches": median(niches),

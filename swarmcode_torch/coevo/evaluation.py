@@ -48,12 +48,12 @@ StepFn = Callable
 class EvalResult:
     """Scores of B evaluated individuals, and everything about their focal teams."""
 
-    fitness: Tensor        # [B] gated fitness of each individual (before EMA smoothing)
-    focal: Tensor          # [B] focal team score (mean over trials)
-    baseline: Tensor       # [B] baseline team score
-    team_cost: Tensor      # [B] focal team cost ($)
-    swarms: Swarms         # team compositions (population rows per slot)
-    team_metrics: dict     # name -> [B] focal team episode metrics, mean over trials
+    fitness: Tensor  # [B] gated fitness of each individual (before EMA smoothing)
+    focal: Tensor  # [B] focal team score (mean over trials)
+    baseline: Tensor  # [B] baseline team score
+    team_cost: Tensor  # [B] focal team cost ($)
+    swarms: Swarms  # team compositions (population rows per slot)
+    team_metrics: dict  # name -> [B] focal team episode metrics, mean over trials
     sim_seconds: float = 0.0  # wall time of the rollout alone (device synchronised)
 
 
@@ -87,38 +87,66 @@ def _scores(score_fn: ScoreFn, m: dict, cost: Tensor, cfg: EvalConfig) -> Tensor
     out = score_fn(m, cost, cfg)
     who = f"the fitness function {score_fn_name(score_fn)}"
     if not isinstance(out, Tensor):
-        raise TypeError(f"{who} must return a tensor of shape {tuple(cost.shape)}, "
-                        f"got {type(out).__name__}")
+        raise TypeError(
+            f"{who} must return a tensor of shape {tuple(cost.shape)}, got {type(out).__name__}"
+        )
     if out.shape != cost.shape:
-        raise ValueError(f"{who} must return one score per team-episode, shape "
-                         f"{tuple(cost.shape)}, got {tuple(out.shape)}")
+        raise ValueError(
+            f"{who} must return one score per team-episode, shape "
+            f"{tuple(cost.shape)}, got {tuple(out.shape)}"
+        )
     out = out.to(device=cost.device, dtype=torch.float32)
     if not bool(torch.isfinite(out).all()):
         raise ValueError(f"{who} returned a NaN or infinite score")
     return out
 
 
-def team_robots(genome: Population, teams: Tensor, catalog: Catalog | None = None,
-                phenotype: Phenotype | None = None) -> Robots:
+def team_robots(
+    genome: Population,
+    teams: Tensor,
+    catalog: Catalog | None = None,
+    phenotype: Phenotype | None = None,
+) -> Robots:
     """Per-robot constants of teams [E, S] of population rows (-1: an empty slot), built from
     `catalog` (the scenario's `hardware`; default: the built-in one); each robot runs its row's
     program (row of `bt.build_tables(genome.bt)`). `phenotype`: the genome's, if computed."""
     ph = phenotype if phenotype is not None else genome_phenotype(genome, catalog)
     rows = teams.clamp_min(0)
-    return Robots(radius=ph.radius[rows], mass=ph.mass[rows], force=ph.force[rows],
-                  payload=ph.payload[rows], capacity=ph.capacity[rows],
-                  efficiency=ph.efficiency[rows], effector=ph.effector[rows],
-                  present=teams >= 0, program=rows)
+    return Robots(
+        radius=ph.radius[rows],
+        mass=ph.mass[rows],
+        force=ph.force[rows],
+        payload=ph.payload[rows],
+        capacity=ph.capacity[rows],
+        efficiency=ph.efficiency[rows],
+        effector=ph.effector[rows],
+        present=teams >= 0,
+        program=rows,
+    )
 
 
-def simulate_teams(teams: Tensor, genome: Population, tables: Tensor, layout_ids: Tensor,
-                   layouts: Layout, params: WorldParams, ticks: int,
-                   step_fn: StepFn | None = None, catalog: Catalog | None = None,
-                   phenotype: Phenotype | None = None) -> dict:
+def simulate_teams(
+    teams: Tensor,
+    genome: Population,
+    tables: Tensor,
+    layout_ids: Tensor,
+    layouts: Layout,
+    params: WorldParams,
+    ticks: int,
+    step_fn: StepFn | None = None,
+    catalog: Catalog | None = None,
+    phenotype: Phenotype | None = None,
+) -> dict:
     """Run teams [E, S] (population rows, -1 empty) in layouts[layout_ids], robots built from
     `catalog` (`team_robots`; `phenotype`: the genome's, if computed); metrics [E] each."""
-    return rollout(layouts.select(layout_ids), team_robots(genome, teams, catalog, phenotype),
-                   tables, params, ticks, step_fn)
+    return rollout(
+        layouts.select(layout_ids),
+        team_robots(genome, teams, catalog, phenotype),
+        tables,
+        params,
+        ticks,
+        step_fn,
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,8 +155,8 @@ class EvalPlan:
     environments. Trial t of evaluation i runs in `layouts` row i * trials + t, for the focal and
     the baseline team alike."""
 
-    swarms: Swarms         # [B] focal and baseline teams
-    layouts: Layout        # [B * trials] environments
+    swarms: Swarms  # [B] focal and baseline teams
+    layouts: Layout  # [B * trials] environments
     trials: int
 
     @property
@@ -141,23 +169,36 @@ class SimBatch:
     """Whole evaluations to simulate, self-contained (what an evaluation shard receives): the
     genome rows their teams use, the teams as rows of that genome, their environments."""
 
-    genome: Population         # the rows the teams use
-    focal_team: Tensor     # [B, S] rows of `genome` (-1: an empty slot)
+    genome: Population  # the rows the teams use
+    focal_team: Tensor  # [B, S] rows of `genome` (-1: an empty slot)
     baseline_team: Tensor  # [B, S]
-    layouts: Layout        # [B * trials], as in EvalPlan
+    layouts: Layout  # [B * trials], as in EvalPlan
     trials: int
 
     def to(self, device: torch.device | str) -> SimBatch:
-        return SimBatch(self.genome.to(device), self.focal_team.to(device),
-                        self.baseline_team.to(device),
-                        Layout(*(t.to(device) for t in self.layouts)), self.trials)
+        return SimBatch(
+            self.genome.to(device),
+            self.focal_team.to(device),
+            self.baseline_team.to(device),
+            Layout(*(t.to(device) for t in self.layouts)),
+            self.trials,
+        )
 
 
-def plan_evaluation(genome: Population, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
-                    fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
-                    generator: torch.Generator, allowed: Tensor | None = None,
-                    proto_distance: Tensor | None = None,
-                    phenotype: Phenotype | None = None) -> EvalPlan:
+def plan_evaluation(
+    genome: Population,
+    species: Tensor,
+    proto_ids: Tensor,
+    proto_index: Tensor,
+    fitness: Tensor,
+    has_fitness: Tensor,
+    scenario: Scenario,
+    cfg: EvalConfig,
+    generator: torch.Generator,
+    allowed: Tensor | None = None,
+    proto_distance: Tensor | None = None,
+    phenotype: Phenotype | None = None,
+) -> EvalPlan:
     """The driver's part of an evaluation, every random draw of it from the run's generator:
     partners by tag and selectivity, team slots by dominance, and the environments. Only the
     diagnostic `partners_per_niche = "one"` reads the scenario's package classes (`niche_partners`);
@@ -169,37 +210,59 @@ def plan_evaluation(genome: Population, species: Tensor, proto_ids: Tensor, prot
     P = genome.size
     dev = genome.bt.device
     S, T = cfg.swarm_size, cfg.trials
-    elites = elite_rows(fitness, has_fitness, species, proto_ids,
-                        lambda n: elite_count(n, cfg.max_elite))
+    elites = elite_rows(
+        fitness, has_fitness, species, proto_ids, lambda n: elite_count(n, cfg.max_elite)
+    )
     if cfg.partners_per_niche == "one":
-        oracle = niche_partners(genome, species, proto_ids, elites, fitness, has_fitness, scenario,
-                                phenotype)
+        oracle = niche_partners(
+            genome, species, proto_ids, elites, fitness, has_fitness, scenario, phenotype
+        )
         allowed = oracle if allowed is None else allowed & oracle
-    partners = choose_partners(genome.tag, genome.selectivity, species, proto_ids,
-                               genome.tag[proto_index], elites, generator, allowed)
+    partners = choose_partners(
+        genome.tag,
+        genome.selectivity,
+        species,
+        proto_ids,
+        genome.tag[proto_index],
+        elites,
+        generator,
+        allowed,
+    )
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
     near = None
     if proto_distance is not None:
-        pos = (species[:, None] == proto_ids[None, :]).long().argmax(1)      # [P] species index
-        near = proto_distance.to(dev)[pos]                                    # [P, K]
-    swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator,
-                             near)
+        pos = (species[:, None] == proto_ids[None, :]).long().argmax(1)  # [P] species index
+        near = proto_distance.to(dev)[pos]  # [P, K]
+    swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator, near)
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)
     return EvalPlan(swarms, layouts, T)
 
 
-def niche_partners(genome: Population, species: Tensor, proto_ids: Tensor, elites: Tensor,
-                   fitness: Tensor, has_fitness: Tensor, scenario: Scenario,
-                   phenotype: Phenotype | None = None) -> Tensor:
+def niche_partners(
+    genome: Population,
+    species: Tensor,
+    proto_ids: Tensor,
+    elites: Tensor,
+    fitness: Tensor,
+    has_fitness: Tensor,
+    scenario: Scenario,
+    phenotype: Phenotype | None = None,
+) -> Tensor:
     """[K] bool: the species that may be partners under `partners_per_niche = "one"`
     (`partners.niche_representatives`), a species' capability being its fittest elite's.
     `phenotype`: the genome's, if computed."""
     k = proto_ids.numel()
-    top = elites[:, 0] if elites.shape[1] else torch.full((k,), -1, dtype=torch.long,
-                                                           device=species.device)
+    top = (
+        elites[:, 0]
+        if elites.shape[1]
+        else torch.full((k,), -1, dtype=torch.long, device=species.device)
+    )
     has_elite, first = top >= 0, top.clamp_min(0)
-    ph = (Phenotype(*(t[first] for t in phenotype)) if phenotype is not None
-          else genome_phenotype(genome.index(first), scenario.hardware))
+    ph = (
+        Phenotype(*(t[first] for t in phenotype))
+        if phenotype is not None
+        else genome_phenotype(genome.index(first), scenario.hardware)
+    )
     can = capabilities(ph, scenario, WorldParams.for_scenario(scenario))
     sizes = (species[:, None] == proto_ids[None, :]).sum(0)
     best = ranking_fitness(fitness, has_fitness)[first].masked_fill(~has_elite, -torch.inf)
@@ -215,17 +278,23 @@ def sim_batch(plan: EvalPlan, genome: Population, lo: int = 0, hi: int | None = 
     if lo == 0 and hi == P:
         return SimBatch(genome, focal, base, plan.layouts, T)
     teams = torch.cat([focal, base])
-    rows = torch.unique(teams[teams >= 0])                # sorted
-    local = [torch.where(t >= 0, torch.searchsorted(rows, t.clamp_min(0)), -1)
-             for t in (focal, base)]
+    rows = torch.unique(teams[teams >= 0])  # sorted
+    local = [
+        torch.where(t >= 0, torch.searchsorted(rows, t.clamp_min(0)), -1) for t in (focal, base)
+    ]
     envs = torch.arange(lo * T, hi * T, device=plan.layouts.seed.device)
     return SimBatch(genome.index(rows), local[0], local[1], plan.layouts.select(envs), T)
 
 
-def simulate_batch(batch: SimBatch, params: WorldParams, ticks: int,
-                   step_fn: StepFn | None = None, tables: Tensor | None = None,
-                   catalog: Catalog | None = None,
-                   phenotype: Phenotype | None = None) -> tuple[dict, float]:
+def simulate_batch(
+    batch: SimBatch,
+    params: WorldParams,
+    ticks: int,
+    step_fn: StepFn | None = None,
+    tables: Tensor | None = None,
+    catalog: Catalog | None = None,
+    phenotype: Phenotype | None = None,
+) -> tuple[dict, float]:
     """Run a batch's focal and baseline teams over their trials in one rollout: per-environment
     metrics [2 * B * trials] (every focal trial, then every baseline trial, evaluation-major)
     and the rollout's wall time (device synchronised). `tables`: the behavior-tree tables of
@@ -238,8 +307,18 @@ def simulate_batch(batch: SimBatch, params: WorldParams, ticks: int,
     if tables is None:
         tables = bt.build_tables(batch.genome.bt)
     t0 = _now(dev)
-    m = simulate_teams(teams, batch.genome, tables, layout_ids, batch.layouts, params, ticks,
-                       step_fn, catalog, phenotype)
+    m = simulate_teams(
+        teams,
+        batch.genome,
+        tables,
+        layout_ids,
+        batch.layouts,
+        params,
+        ticks,
+        step_fn,
+        catalog,
+        phenotype,
+    )
     return m, _now(dev) - t0
 
 
@@ -252,9 +331,16 @@ def gather_metrics(parts: list[dict]) -> dict:
     return {k: torch.cat([p[k].view(2, -1) for p in parts], 1).reshape(-1) for k in parts[0]}
 
 
-def score_plan(plan: EvalPlan, genome: Population, m: dict, scenario: Scenario, cfg: EvalConfig,
-          sim_seconds: float = 0.0, score_fn: ScoreFn = team_scores,
-          phenotype: Phenotype | None = None) -> EvalResult:
+def score_plan(
+    plan: EvalPlan,
+    genome: Population,
+    m: dict,
+    scenario: Scenario,
+    cfg: EvalConfig,
+    sim_seconds: float = 0.0,
+    score_fn: ScoreFn = team_scores,
+    phenotype: Phenotype | None = None,
+) -> EvalResult:
     """Scores of a plan's evaluations from their per-environment metrics [2 * B * trials]:
     team cost, each team-episode's score (`score_fn`: F_raw times the budget penalty), the mean
     over trials, the marginal gate. `phenotype`: the genome's, if computed."""
@@ -263,24 +349,43 @@ def score_plan(plan: EvalPlan, genome: Population, m: dict, scenario: Scenario, 
     teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
     ph = phenotype if phenotype is not None else genome_phenotype(genome, scenario.hardware)
     robot_cost = ph.cost[teams.clamp_min(0)]
-    counts = torch.cat([swarms.focal_species_count,
-                        swarms.baseline_species_count]).repeat_interleave(T)
+    counts = torch.cat(
+        [swarms.focal_species_count, swarms.baseline_species_count]
+    ).repeat_interleave(T)
     cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
     scores = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1)
     focal, base = scores[0], scores[1]
     team_m = {k: v.view(2, P, T)[0].mean(-1) for k, v in m.items()}
-    return EvalResult(fitness=gate(focal, base, cfg.p_marginal), focal=focal,
-                      baseline=base, team_cost=cost.view(2, P, T)[0, :, 0], swarms=swarms,
-                      team_metrics=team_m, sim_seconds=sim_seconds)
+    return EvalResult(
+        fitness=gate(focal, base, cfg.p_marginal),
+        focal=focal,
+        baseline=base,
+        team_cost=cost.view(2, P, T)[0, :, 0],
+        swarms=swarms,
+        team_metrics=team_m,
+        sim_seconds=sim_seconds,
+    )
 
 
-def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index: Tensor,
-             fitness: Tensor, has_fitness: Tensor, scenario: Scenario, cfg: EvalConfig,
-             generator: torch.Generator, params: WorldParams | None = None,
-             step_fn: StepFn | None = None, tables: Tensor | None = None,
-             evaluator=None, score_fn: ScoreFn = team_scores,
-             allowed: Tensor | None = None, proto_distance: Tensor | None = None,
-             phenotype: Phenotype | None = None) -> EvalResult:
+def evaluate(
+    genome: Population,
+    species: Tensor,
+    proto_ids: Tensor,
+    proto_index: Tensor,
+    fitness: Tensor,
+    has_fitness: Tensor,
+    scenario: Scenario,
+    cfg: EvalConfig,
+    generator: torch.Generator,
+    params: WorldParams | None = None,
+    step_fn: StepFn | None = None,
+    tables: Tensor | None = None,
+    evaluator=None,
+    score_fn: ScoreFn = team_scores,
+    allowed: Tensor | None = None,
+    proto_distance: Tensor | None = None,
+    phenotype: Phenotype | None = None,
+) -> EvalResult:
     """Score every individual of the population by its marginal contribution to a team:
     `plan_evaluation` (teams and environments, drawn here), the simulation, `score`. The
     simulation runs here (`simulate_batch` of the whole plan), or, given an `evaluator`, where
@@ -292,11 +397,30 @@ def evaluate(genome: Population, species: Tensor, proto_ids: Tensor, proto_index
     params = params or WorldParams.for_scenario(scenario)
     if phenotype is None:
         phenotype = genome_phenotype(genome, scenario.hardware)
-    plan = plan_evaluation(genome, species, proto_ids, proto_index, fitness, has_fitness,
-                           scenario, cfg, generator, allowed, proto_distance, phenotype)
+    plan = plan_evaluation(
+        genome,
+        species,
+        proto_ids,
+        proto_index,
+        fitness,
+        has_fitness,
+        scenario,
+        cfg,
+        generator,
+        allowed,
+        proto_distance,
+        phenotype,
+    )
     if evaluator is None:
-        m, sim_seconds = simulate_batch(sim_batch(plan, genome), params, cfg.ticks, step_fn,
-                                        tables, scenario.hardware, phenotype)
+        m, sim_seconds = simulate_batch(
+            sim_batch(plan, genome),
+            params,
+            cfg.ticks,
+            step_fn,
+            tables,
+            scenario.hardware,
+            phenotype,
+        )
     else:
         m, sim_seconds = evaluator.simulate(plan, genome)
     return score_plan(plan, genome, m, scenario, cfg, sim_seconds, score_fn, phenotype)

@@ -36,8 +36,9 @@ CHECKPOINT_VERSION = 1
 
 
 # ------------------------------------------------------------------ the population
-def random_population(n: int, cfg: SwarmCoDeConfig, generator: torch.Generator,
-                      device: torch.device) -> Population:
+def random_population(
+    n: int, cfg: SwarmCoDeConfig, generator: torch.Generator, device: torch.device
+) -> Population:
     """The initial population: random genes, each seeded with a randomised template tree."""
     g = generator
     names = list(bt.TEMPLATES)
@@ -52,15 +53,15 @@ class EvolutionState:
     """Everything needed to continue a run after `generation` completed generations."""
 
     generation: int
-    genome: Population                 # the population to be evaluated next
-    species_hint: Tensor           # [P] species inherited from the parent (-1: none)
-    proto: Population | None           # previous generation's species prototypes
-    proto_ids: Tensor              # [K] their species ids
+    genome: Population  # the population to be evaluated next
+    species_hint: Tensor  # [P] species inherited from the parent (-1: none)
+    proto: Population | None  # previous generation's species prototypes
+    proto_ids: Tensor  # [K] their species ids
     next_species_id: int
-    fitness: Tensor                # [P] smoothed fitness carried by elites
-    has_fitness: Tensor            # [P] bool
-    rng_state: Tensor              # the run generator's state
-    best: dict | None = None       # the application's record of the run's best team so far
+    fitness: Tensor  # [P] smoothed fitness carried by elites
+    has_fitness: Tensor  # [P] bool
+    rng_state: Tensor  # the run generator's state
+    best: dict | None = None  # the application's record of the run's best team so far
     #                                (`app.records.step` keeps it; saved in checkpoints)
     history: list = field(default_factory=list)  # per-generation composition records
     turnover: Turnover = field(default_factory=Turnover)  # species births and deaths (derived
@@ -97,8 +98,12 @@ class Context:
         return tick_mode(self.step_fn, self.compiled)
 
 
-def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None,
-                 scenario: Scenario | None = None, checked: bool = False) -> Context:
+def make_context(
+    cfg: SwarmCoDeConfig,
+    score_fn: ScoreFn | None = None,
+    scenario: Scenario | None = None,
+    checked: bool = False,
+) -> Context:
     """Validate the config (unless `checked`: the caller has, as the application does once per
     start), load the scenario and pick the device and tick function.
     `score_fn`: a user function that scores team-episodes instead of the built-in fitness (the
@@ -110,8 +115,10 @@ def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None,
             raise TypeError(f"the fitness function must be callable, got {type(score_fn).__name__}")
         cfg = replace(cfg, fitness_function=score_fn_name(score_fn))
     elif cfg.fitness_function is not None:
-        raise ValueError(f"the run is scored by a custom fitness function "
-                         f"({cfg.fitness_function}): give the function again")
+        raise ValueError(
+            f"the run is scored by a custom fitness function "
+            f"({cfg.fitness_function}): give the function again"
+        )
     if not checked:
         cfg.validate()
     if scenario is None:
@@ -122,9 +129,18 @@ def make_context(cfg: SwarmCoDeConfig, score_fn: ScoreFn | None = None,
     # pin the scenario's team size and episode length into the config, so that a saved run keeps
     # them if a built-in scenario's defaults change later
     cfg = replace(cfg, swarm_size=eval_cfg.swarm_size, ticks=eval_cfg.ticks)
-    return Context(cfg, scenario, device, eval_cfg, cfg.reproduction, cfg.speciation,
-                   WorldParams.for_scenario(scenario), step_fn, use_compile,
-                   score_fn=score_fn or team_scores)
+    return Context(
+        cfg,
+        scenario,
+        device,
+        eval_cfg,
+        cfg.reproduction,
+        cfg.speciation,
+        WorldParams.for_scenario(scenario),
+        step_fn,
+        use_compile,
+        score_fn=score_fn or team_scores,
+    )
 
 
 def new_generator(ctx: Context) -> torch.Generator:
@@ -137,12 +153,16 @@ def init_state(ctx: Context) -> EvolutionState:
     P = ctx.cfg.population
     genome = random_population(P, ctx.cfg, g, ctx.device)
     return EvolutionState(
-        generation=0, genome=genome,
+        generation=0,
+        genome=genome,
         species_hint=torch.full((P,), -1, dtype=torch.long, device=ctx.device),
-        proto=None, proto_ids=torch.zeros(0, dtype=torch.long, device=ctx.device),
-        next_species_id=0, fitness=torch.zeros(P, device=ctx.device),
+        proto=None,
+        proto_ids=torch.zeros(0, dtype=torch.long, device=ctx.device),
+        next_species_id=0,
+        fitness=torch.zeros(P, device=ctx.device),
         has_fitness=torch.zeros(P, dtype=torch.bool, device=ctx.device),
-        rng_state=g.get_state())
+        rng_state=g.get_state(),
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,16 +172,16 @@ class BestTeam:
     generation computed of it. The application builds its report record from this
     (`app.records.team_record`)."""
 
-    rows: Tensor                   # [R] population rows of the team's robots
-    genome: Population             # [R] their genes
-    phenotype: Phenotype           # [R] their phenotype (of the generation's one computation)
-    species: Tensor                # [R] their species
-    count: Tensor                  # [R] robots of each row in the team
-    baseline_count: Tensor         # [R] of each row in the baseline team it was scored against
-    focal: Tensor                  # [R] bool: the focal individual's row
-    metrics: dict                  # the team's metrics (means over trials), floats
-    fitness: float                 # the team's score (ungated)
-    cost: float                    # the team's cost
+    rows: Tensor  # [R] population rows of the team's robots
+    genome: Population  # [R] their genes
+    phenotype: Phenotype  # [R] their phenotype (of the generation's one computation)
+    species: Tensor  # [R] their species
+    count: Tensor  # [R] robots of each row in the team
+    baseline_count: Tensor  # [R] of each row in the baseline team it was scored against
+    focal: Tensor  # [R] bool: the focal individual's row
+    metrics: dict  # the team's metrics (means over trials), floats
+    fitness: float  # the team's score (ungated)
+    cost: float  # the team's cost
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,25 +189,25 @@ class GenerationResult:
     """What one generation measured (`generation` returns it; `app.records` turns it into
     TensorBoard tags, metrics.csv rows, summary.json and teams.jsonl)."""
 
-    generation: int                # the generation evaluated (0-based)
-    best_fitness: float            # highest smoothed fitness in the population
+    generation: int  # the generation evaluated (0-based)
+    best_fitness: float  # highest smoothed fitness in the population
     mean_fitness: float
-    num_species: int               # species in the population
-    founded: int                   # species founded this generation
-    extinct: int                   # species gone since the previous generation
-    species_median_age: float      # generations since founding, median over the species
-    best_team: BestTeam            # this generation's best team
-    team_rows: Tensor              # [S] population rows of that team's robots (-1: empty slot)
-    team_median_age: float         # median age of the team's species
-    focal_max: float               # highest focal team score (ungated)
-    composition: dict              # species sizes in the population and in the team
+    num_species: int  # species in the population
+    founded: int  # species founded this generation
+    extinct: int  # species gone since the previous generation
+    species_median_age: float  # generations since founding, median over the species
+    best_team: BestTeam  # this generation's best team
+    team_rows: Tensor  # [S] population rows of that team's robots (-1: empty slot)
+    team_median_age: float  # median age of the team's species
+    focal_max: float  # highest focal team score (ungated)
+    composition: dict  # species sizes in the population and in the team
     budget: float | None
-    seconds: float                 # wall time of the generation
-    eval_seconds: float            # of which evaluation
-    sim_seconds: float             # of which the rollout (device synchronised)
-    radius: Tensor                 # [P] genes of the evaluated population, on the CPU
-    dominance: Tensor              # [P]
-    selectivity: Tensor            # [P]
+    seconds: float  # wall time of the generation
+    eval_seconds: float  # of which evaluation
+    sim_seconds: float  # of which the rollout (device synchronised)
+    radius: Tensor  # [P] genes of the evaluated population, on the CPU
+    dominance: Tensor  # [P]
+    selectivity: Tensor  # [P]
     team: dict | None = None
     """The application's report record of `best_team` (its teams.jsonl line); None here: the
     algorithm builds no records (`app.records.step` fills it in)."""
@@ -200,27 +220,27 @@ class GenerationResult:
 class AfterSpeciation:
     """What a generation has after its speciation (`Hooks.after_speciation`)."""
 
-    generation: int                # the generation (0-based)
-    state: EvolutionState          # the state it started from (its population: `state.genome`)
-    speciation: SpeciationResult   # the population's species and prototypes
+    generation: int  # the generation (0-based)
+    state: EvolutionState  # the state it started from (its population: `state.genome`)
+    speciation: SpeciationResult  # the population's species and prototypes
 
 
 @dataclass(frozen=True, eq=False)
 class AfterEvaluation(AfterSpeciation):
     """... and after its evaluation (`Hooks.after_evaluation`)."""
 
-    evaluation: EvalResult         # every individual's scores and teams
-    fitness: Tensor                # [P] the smoothed fitness reproduction selects by
+    evaluation: EvalResult  # every individual's scores and teams
+    fitness: Tensor  # [P] the smoothed fitness reproduction selects by
 
 
 @dataclass(frozen=True, eq=False)
 class AfterReproduction(AfterEvaluation):
     """... and after its reproduction (`Hooks.after_reproduction`)."""
 
-    next_state: EvolutionState     # the state of the next generation (its offspring, their
+    next_state: EvolutionState  # the state of the next generation (its offspring, their
     #                                species hints, the prototypes)
-    is_elite: Tensor               # [P] bool: the offspring copied unchanged
-    parent: Tensor                 # [P] each offspring's (first) parent, a row of state.genome
+    is_elite: Tensor  # [P] bool: the offspring copied unchanged
+    parent: Tensor  # [P] each offspring's (first) parent, a row of state.genome
 
 
 @dataclass
@@ -241,8 +261,9 @@ def _call(hooks: list, event) -> None:
         fn(event)
 
 
-def generation(state: EvolutionState, ctx: Context,
-               hooks: Hooks | None = None) -> tuple[EvolutionState, GenerationResult]:
+def generation(
+    state: EvolutionState, ctx: Context, hooks: Hooks | None = None
+) -> tuple[EvolutionState, GenerationResult]:
     """Advance one generation; the new state and what this generation measured. `hooks`:
     observers called after speciation, evaluation and reproduction (`Hooks`)."""
     hooks = hooks or Hooks()
@@ -253,8 +274,15 @@ def generation(state: EvolutionState, ctx: Context,
     genome = state.genome
 
     # 1. dynamic speciation
-    sp = speciate(genome, state.species_hint, state.proto, state.proto_ids,
-                  state.next_species_id, ctx.speciation.delta, w=ctx.speciation.weights)
+    sp = speciate(
+        genome,
+        state.species_hint,
+        state.proto,
+        state.proto_ids,
+        state.next_species_id,
+        ctx.speciation.delta,
+        w=ctx.speciation.weights,
+    )
     _call(hooks.after_speciation, AfterSpeciation(state.generation, state, sp))
 
     # which species may be partners (`admission`): the species of generation 0 and, on a run
@@ -264,25 +292,43 @@ def generation(state: EvolutionState, ctx: Context,
         adm = state.admission or Admission.empty(ctx.device).grow(state.next_species_id, True)
         adm = adm.grow(sp.next_species_id, partner=state.generation == 0)
     allowed = None if adm is None else adm.allowed(sp.proto_ids)
-    designs_d = (design_distance(genome.index(sp.proto_index), ctx.speciation.weights)
-                 if adm is not None else None)
+    designs_d = (
+        design_distance(genome.index(sp.proto_index), ctx.speciation.weights)
+        if adm is not None
+        else None
+    )
     # the population's phenotype, once a generation: evaluation and the best team read it
     ph = genome_phenotype(genome, ctx.scenario.hardware)
 
     # 2. evaluation of every individual, all teams and trials in one batch
     t_eval = time.perf_counter()
-    res = evaluate(genome, sp.species, sp.proto_ids, sp.proto_index, state.fitness,
-                   state.has_fitness, ctx.scenario, ctx.eval_cfg, g, ctx.params, ctx.step_fn,
-                   evaluator=ctx.evaluator, score_fn=ctx.score_fn, allowed=allowed,
-                   proto_distance=designs_d, phenotype=ph)
+    res = evaluate(
+        genome,
+        sp.species,
+        sp.proto_ids,
+        sp.proto_index,
+        state.fitness,
+        state.has_fitness,
+        ctx.scenario,
+        ctx.eval_cfg,
+        g,
+        ctx.params,
+        ctx.step_fn,
+        evaluator=ctx.evaluator,
+        score_fn=ctx.score_fn,
+        allowed=allowed,
+        proto_distance=designs_d,
+        phenotype=ph,
+    )
     if adm is not None:
-        assert designs_d is not None and allowed is not None    # both set with `adm`
+        assert designs_d is not None and allowed is not None  # both set with `adm`
         gated = ~beats_baseline(res.focal, res.baseline)
         nearest = admission.nearest_partner(designs_d, allowed)
         # a substitute pair: the nearest partner's design within δ of the species' own
         near = designs_d.gather(1, nearest.clamp_min(0)[:, None]).squeeze(1) <= ctx.speciation.delta
-        adm = admission.update(adm, sp.species, sp.proto_ids, gated, nearest,
-                               admission.SUBSTITUTE, near=near)
+        adm = admission.update(
+            adm, sp.species, sp.proto_ids, gated, nearest, admission.SUBSTITUTE, near=near
+        )
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
     _call(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
@@ -300,19 +346,60 @@ def generation(state: EvolutionState, ctx: Context,
     sel = genome.index(rows)
     names = [f.name for f in fields(Population)]
     n_ph = len(Phenotype._fields)
-    h = _to_host([getattr(sel, n) for n in names] + [t[rows] for t in ph] + [
-        rows, sp.species[rows], counts, base_counts, rows == b,
-        torch.stack([v[b].float() for v in res.team_metrics.values()]), res.focal[b],
-        res.team_cost[b], ids, sizes, fit.max(), fit.mean(), res.focal.max(),
-        genome.radius.detach(), genome.dominance.detach(), genome.selectivity.detach()])
-    host, h = Population(**dict(zip(names, h))), h[len(names):]
+    h = _to_host(
+        [getattr(sel, n) for n in names]
+        + [t[rows] for t in ph]
+        + [
+            rows,
+            sp.species[rows],
+            counts,
+            base_counts,
+            rows == b,
+            torch.stack([v[b].float() for v in res.team_metrics.values()]),
+            res.focal[b],
+            res.team_cost[b],
+            ids,
+            sizes,
+            fit.max(),
+            fit.mean(),
+            res.focal.max(),
+            genome.radius.detach(),
+            genome.dominance.detach(),
+            genome.selectivity.detach(),
+        ]
+    )
+    host, h = Population(**dict(zip(names, h))), h[len(names) :]
     host_ph, h = Phenotype(*h[:n_ph]), h[n_ph:]
-    (team_at, team_species, team_counts, team_base, team_focal, team_m, focal_b, team_cost_b,
-     ids, sizes, fit_max, fit_mean, focal_max, radius, dominance, selectivity) = h
-    best_team = BestTeam(rows=team_at, genome=host, phenotype=host_ph, species=team_species,
-                         count=team_counts, baseline_count=team_base, focal=team_focal,
-                         metrics=dict(zip(res.team_metrics, team_m.tolist())),
-                         fitness=float(focal_b), cost=float(team_cost_b))
+    (
+        team_at,
+        team_species,
+        team_counts,
+        team_base,
+        team_focal,
+        team_m,
+        focal_b,
+        team_cost_b,
+        ids,
+        sizes,
+        fit_max,
+        fit_mean,
+        focal_max,
+        radius,
+        dominance,
+        selectivity,
+    ) = h
+    best_team = BestTeam(
+        rows=team_at,
+        genome=host,
+        phenotype=host_ph,
+        species=team_species,
+        count=team_counts,
+        baseline_count=team_base,
+        focal=team_focal,
+        metrics=dict(zip(res.team_metrics, team_m.tolist())),
+        fitness=float(focal_b),
+        cost=float(team_cost_b),
+    )
 
     # the team's species, most robots first (the first of equals: the lower row)
     in_team = sorted(zip(team_species.tolist(), team_counts.tolist()), key=lambda sc: -sc[1])
@@ -325,30 +412,57 @@ def generation(state: EvolutionState, ctx: Context,
     founded, extinct = turnover.advance(state.generation, composition["population"])
 
     # 3. reproduction
-    children, hint, is_elite, parent = reproduce(genome, fit, sp.species, sp.proto_index,
-                                                 sp.proto_ids, ctx.repro, g,
-                                                 partial(distance, w=ctx.speciation.weights))
+    children, hint, is_elite, parent = reproduce(
+        genome,
+        fit,
+        sp.species,
+        sp.proto_index,
+        sp.proto_ids,
+        ctx.repro,
+        g,
+        partial(distance, w=ctx.speciation.weights),
+    )
     new_state = EvolutionState(
-        generation=state.generation + 1, genome=children, species_hint=hint,
-        proto=genome.index(sp.proto_index), proto_ids=sp.proto_ids,
+        generation=state.generation + 1,
+        genome=children,
+        species_hint=hint,
+        proto=genome.index(sp.proto_index),
+        proto_ids=sp.proto_ids,
         next_species_id=sp.next_species_id,
-        fitness=torch.where(is_elite, fit[parent], 0.0), has_fitness=is_elite,
-        rng_state=g.get_state(), best=state.best, history=state.history + [composition],
-        turnover=turnover, admission=adm)
-    _call(hooks.after_reproduction, AfterReproduction(state.generation, state, sp, res, fit,
-                                                      new_state, is_elite, parent))
+        fitness=torch.where(is_elite, fit[parent], 0.0),
+        has_fitness=is_elite,
+        rng_state=g.get_state(),
+        best=state.best,
+        history=state.history + [composition],
+        turnover=turnover,
+        admission=adm,
+    )
+    _call(
+        hooks.after_reproduction,
+        AfterReproduction(state.generation, state, sp, res, fit, new_state, is_elite, parent),
+    )
 
     result = GenerationResult(
-        generation=state.generation, best_fitness=float(fit_max),
-        mean_fitness=float(fit_mean), num_species=int(ids.numel()), founded=founded,
+        generation=state.generation,
+        best_fitness=float(fit_max),
+        mean_fitness=float(fit_mean),
+        num_species=int(ids.numel()),
+        founded=founded,
         extinct=extinct,
         species_median_age=median(turnover.ages(state.generation, composition["population"])),
-        best_team=best_team, team_rows=team,
+        best_team=best_team,
+        team_rows=team,
         team_median_age=median(turnover.ages(state.generation, composition["team"])),
-        focal_max=float(focal_max), composition=composition,
-        budget=cfg.budget, seconds=time.perf_counter() - t0, eval_seconds=eval_seconds,
-        sim_seconds=res.sim_seconds, radius=radius, dominance=dominance,
-        selectivity=selectivity)
+        focal_max=float(focal_max),
+        composition=composition,
+        budget=cfg.budget,
+        seconds=time.perf_counter() - t0,
+        eval_seconds=eval_seconds,
+        sim_seconds=res.sim_seconds,
+        radius=radius,
+        dominance=dominance,
+        selectivity=selectivity,
+    )
     return new_state, result
 
 
@@ -360,7 +474,7 @@ def _to_host(tensors: list[Tensor]) -> list[Tensor]:
     out, i = [], 0
     for t, src in zip(flat, tensors):
         n = t.numel() * t.element_size()
-        out.append(data[i:i + n].clone().view(t.dtype).view(src.shape))
+        out.append(data[i : i + n].clone().view(t.dtype).view(src.shape))
         i += n
     return out
 
@@ -369,12 +483,19 @@ def _to_host(tensors: list[Tensor]) -> list[Tensor]:
 def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
     """A CPU, torch.save-able snapshot of the run."""
     return {
-        "version": CHECKPOINT_VERSION, "config": cfg.to_dict(), "generation": state.generation,
-        "genome": state.genome.state_dict(), "species_hint": state.species_hint.cpu(),
+        "version": CHECKPOINT_VERSION,
+        "config": cfg.to_dict(),
+        "generation": state.generation,
+        "genome": state.genome.state_dict(),
+        "species_hint": state.species_hint.cpu(),
         "proto": state.proto.state_dict() if state.proto is not None else None,
-        "proto_ids": state.proto_ids.cpu(), "next_species_id": state.next_species_id,
-        "fitness": state.fitness.cpu(), "has_fitness": state.has_fitness.cpu(),
-        "rng_state": state.rng_state.cpu(), "best": state.best, "history": state.history,
+        "proto_ids": state.proto_ids.cpu(),
+        "next_species_id": state.next_species_id,
+        "fitness": state.fitness.cpu(),
+        "has_fitness": state.has_fitness.cpu(),
+        "rng_state": state.rng_state.cpu(),
+        "best": state.best,
+        "history": state.history,
         "admission": state.admission.state_dict() if state.admission is not None else None,
     }
 
@@ -390,15 +511,19 @@ def _check_population(d, cfg: SwarmCoDeConfig, what: str, rows: int | None) -> i
         raise ValueError(f"{what}: missing or not a tensor: {', '.join(missing)}")
     n = int(d["selectivity"].shape[0]) if d["selectivity"].dim() == 1 else -1
     if n < 0 or (rows is not None and n != rows):
-        raise ValueError(f"{what}: {tuple(d['selectivity'].shape)} rows, expected "
-                         f"{rows if rows is not None else 'one dimension'}")
+        raise ValueError(
+            f"{what}: {tuple(d['selectivity'].shape)} rows, expected "
+            f"{rows if rows is not None else 'one dimension'}"
+        )
     shapes = {"tag": (n, cfg.tag_length), "bt": (n, cfg.bt_length)}
     for name in names:
         t = d[name]
         want = shapes.get(name, (n,))
         if tuple(t.shape) != want:
-            raise ValueError(f"{what}: {name} has shape {tuple(t.shape)}, expected {want} "
-                             "(population, tag_length and bt_length of the run's config)")
+            raise ValueError(
+                f"{what}: {name} has shape {tuple(t.shape)}, expected {want} "
+                "(population, tag_length and bt_length of the run's config)"
+            )
         if name == "tag":
             if t.dtype != torch.bool:
                 raise ValueError(f"{what}: tag has dtype {t.dtype}, expected torch.bool")
@@ -407,14 +532,19 @@ def _check_population(d, cfg: SwarmCoDeConfig, what: str, rows: int | None) -> i
             if t.dtype != torch.long:
                 raise ValueError(f"{what}: {name} has dtype {t.dtype}, expected torch.int64")
             if t.numel() and (int(t.min()) < 0 or int(t.max()) >= hi):
-                raise ValueError(f"{what}: {name} holds values outside 0..{hi - 1} "
-                                 f"({int(t.min())}..{int(t.max())})")
+                raise ValueError(
+                    f"{what}: {name} holds values outside 0..{hi - 1} "
+                    f"({int(t.min())}..{int(t.max())})"
+                )
         else:
             low, high = GENE_BOUNDS[name]
             if not t.dtype.is_floating_point:
                 raise ValueError(f"{what}: {name} has dtype {t.dtype}, expected a float")
-            if t.numel() and not (bool(torch.isfinite(t).all()) and float(t.min()) >= low - 1e-6
-                                  and float(t.max()) <= high + 1e-6):
+            if t.numel() and not (
+                bool(torch.isfinite(t).all())
+                and float(t.min()) >= low - 1e-6
+                and float(t.max()) <= high + 1e-6
+            ):
                 raise ValueError(f"{what}: {name} holds values outside [{low}, {high}] (or NaN)")
     return n
 
@@ -431,19 +561,25 @@ def _check_state_dict(d: dict, cfg: SwarmCoDeConfig) -> None:
     if not isinstance(nid, int) or isinstance(nid, bool) or nid < 0:
         raise ValueError(f"next_species_id must be an integer >= 0, got {nid!r:.40}")
     _check_population(d.get("genome"), cfg, "genome", P)
-    for name, dtype, want in (("species_hint", torch.long, (P,)), ("fitness", None, (P,)),
-                              ("has_fitness", torch.bool, (P,)), ("rng_state", torch.uint8, None)):
+    for name, dtype, want in (
+        ("species_hint", torch.long, (P,)),
+        ("fitness", None, (P,)),
+        ("has_fitness", torch.bool, (P,)),
+        ("rng_state", torch.uint8, None),
+    ):
         t = d.get(name)
         if not isinstance(t, Tensor):
             raise ValueError(f"{name}: expected a tensor")
         if want is not None and tuple(t.shape) != want:
-            raise ValueError(f"{name} has shape {tuple(t.shape)}, expected {want} (the run's "
-                             "population)")
+            raise ValueError(
+                f"{name} has shape {tuple(t.shape)}, expected {want} (the run's population)"
+            )
         if dtype is not None and t.dtype != dtype:
             raise ValueError(f"{name} has dtype {t.dtype}, expected {dtype}")
     if d["rng_state"].dim() != 1:
-        raise ValueError(f"rng_state has shape {tuple(d['rng_state'].shape)}, expected a "
-                         "generator state")
+        raise ValueError(
+            f"rng_state has shape {tuple(d['rng_state'].shape)}, expected a generator state"
+        )
     f = d["fitness"]
     if not f.dtype.is_floating_point or not bool(torch.isfinite(f).all()):
         raise ValueError("fitness holds NaN or infinite values (or is not a float tensor)")
@@ -460,8 +596,11 @@ def _check_state_dict(d: dict, cfg: SwarmCoDeConfig) -> None:
     else:
         _check_population(d["proto"], cfg, "proto", int(ids.numel()))
     history = d.get("history")
-    if not isinstance(history, list) or len(history) != gen or not all(
-            isinstance(h, dict) and h.get("generation") == i for i, h in enumerate(history)):
+    if (
+        not isinstance(history, list)
+        or len(history) != gen
+        or not all(isinstance(h, dict) and h.get("generation") == i for i, h in enumerate(history))
+    ):
         raise ValueError(f"history must hold one record per generation 0..{gen - 1}")
 
 
@@ -474,8 +613,10 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
     genome = Population.from_state_dict(d["genome"]).to(dev)
     rng = d["rng_state"]
     if rng.numel() != torch.Generator(device=dev).get_state().numel():
-        raise ValueError(f"checkpoint was written on another kind of device than {dev.type}; "
-                         "resume it with the --device it was run on")
+        raise ValueError(
+            f"checkpoint was written on another kind of device than {dev.type}; "
+            "resume it with the --device it was run on"
+        )
     try:
         torch.Generator(device=dev).set_state(rng)
     except (RuntimeError, TypeError, ValueError):
@@ -486,12 +627,20 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
         if adm.partner.numel() != int(d["next_species_id"]):
             raise ValueError("checkpoint's partner admission state does not cover its species")
     return EvolutionState(
-        generation=int(d["generation"]), genome=genome, species_hint=d["species_hint"].to(dev),
+        generation=int(d["generation"]),
+        genome=genome,
+        species_hint=d["species_hint"].to(dev),
         proto=Population.from_state_dict(d["proto"]).to(dev) if d["proto"] is not None else None,
-        proto_ids=d["proto_ids"].to(dev), next_species_id=int(d["next_species_id"]),
-        fitness=d["fitness"].to(dev), has_fitness=d["has_fitness"].to(dev), rng_state=rng,
-        best=d["best"], history=list(d["history"]), turnover=replay(d["history"])[0],
-        admission=adm)
+        proto_ids=d["proto_ids"].to(dev),
+        next_species_id=int(d["next_species_id"]),
+        fitness=d["fitness"].to(dev),
+        has_fitness=d["has_fitness"].to(dev),
+        rng_state=rng,
+        best=d["best"],
+        history=list(d["history"]),
+        turnover=replay(d["history"])[0],
+        admission=adm,
+    )
 
 
 class Evolution:
@@ -501,17 +650,28 @@ class Evolution:
     `checked`: the config has been validated (`SwarmCoDeConfig.validate`). `hooks`: observers
     of each generation's steps (`Hooks`)."""
 
-    def __init__(self, cfg: SwarmCoDeConfig, state: EvolutionState | None = None,
-                 fitness: ScoreFn | None = None, scenario: Scenario | None = None,
-                 checked: bool = False):
+    def __init__(
+        self,
+        cfg: SwarmCoDeConfig,
+        state: EvolutionState | None = None,
+        fitness: ScoreFn | None = None,
+        scenario: Scenario | None = None,
+        checked: bool = False,
+    ):
         self.ctx = make_context(cfg, fitness, scenario, checked)
         self.cfg = self.ctx.cfg
         self.state = state if state is not None else init_state(self.ctx)
         self.hooks = Hooks()
 
     @classmethod
-    def from_checkpoint(cls, d: dict, cfg: SwarmCoDeConfig, fitness: ScoreFn | None = None,
-                        scenario: Scenario | None = None, checked: bool = False) -> Evolution:
+    def from_checkpoint(
+        cls,
+        d: dict,
+        cfg: SwarmCoDeConfig,
+        fitness: ScoreFn | None = None,
+        scenario: Scenario | None = None,
+        checked: bool = False,
+    ) -> Evolution:
         ev = cls.__new__(cls)
         ev.ctx = make_context(cfg, fitness, scenario, checked)
         ev.cfg = ev.ctx.cfg

@@ -12,13 +12,20 @@ from .config import FitnessWeights
 
 #: Keys `raw_fitness` reads from its metrics dict (all tensors of one common shape).
 METRIC_KEYS = (
-    "delivered_individual", "delivered_collab", "grips_delivered", "picked_individual",
-    "picked_collab", "mean_final_energy", "proximity", "closeness",
+    "delivered_individual",
+    "delivered_collab",
+    "grips_delivered",
+    "picked_individual",
+    "picked_collab",
+    "mean_final_energy",
+    "proximity",
+    "closeness",
 )
 
 
-def raw_fitness_terms(m: dict[str, Tensor],
-                      w: FitnessWeights = FitnessWeights()) -> dict[str, Tensor]:
+def raw_fitness_terms(
+    m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()
+) -> dict[str, Tensor]:
     """The terms of F_raw, each [...]: "delivery", "collab", "pickup", "energy", "proximity",
     "closeness" (weighted), "activity" (the inactive factor: 1, or w.inactive_factor for a team
     that picked nothing up); `raw_fitness` = max(w.floor, sum of the terms * activity)."""
@@ -34,21 +41,24 @@ def raw_fitness_terms(m: dict[str, Tensor],
         "energy": f["mean_final_energy"] * w.W_energy,
         "proximity": f["proximity"] * w.W_proximity,
         "closeness": f["closeness"] * w.W_closeness,
-        "activity": torch.where(picked <= 0, torch.full_like(picked, w.inactive_factor),
-                                torch.ones_like(picked)),
+        "activity": torch.where(
+            picked <= 0, torch.full_like(picked, w.inactive_factor), torch.ones_like(picked)
+        ),
     }
 
 
 def raw_fitness(m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()) -> Tensor:
     """dict of [...] metric tensors (see METRIC_KEYS) -> [...] float F_raw (>= w.floor)."""
     t = raw_fitness_terms(m, w)
-    total = (t["delivery"] + t["collab"] + t["pickup"] + t["energy"] + t["proximity"]
-             + t["closeness"]) * t["activity"]
+    total = (
+        t["delivery"] + t["collab"] + t["pickup"] + t["energy"] + t["proximity"] + t["closeness"]
+    ) * t["activity"]
     return total.clamp(min=w.floor)
 
 
-def budget_penalty(cost: Tensor, budget: float | Tensor | None, lam: float = 0.001,
-                   floor: float = 0.05) -> Tensor:
+def budget_penalty(
+    cost: Tensor, budget: float | Tensor | None, lam: float = 0.001, floor: float = 0.05
+) -> Tensor:
     """[...] team cost -> [...] factor: max(floor, exp(-lam (cost - budget))) over budget,
     else 1."""
     cost = torch.as_tensor(cost).float()
@@ -79,8 +89,9 @@ def ema(prev: Tensor, new: Tensor, has_prev: Tensor, alpha: float = 0.6) -> Tens
     return torch.where(has_prev, alpha * prev + (1.0 - alpha) * new, new)
 
 
-def team_cost(robot_cost: Tensor, robot_present: Tensor, species_count: Tensor,
-              overhead: float) -> Tensor:
+def team_cost(
+    robot_cost: Tensor, robot_present: Tensor, species_count: Tensor, overhead: float
+) -> Tensor:
     """[..., N] robot cost, [..., N] bool present, [...] species count -> [...] sum of present
     costs + overhead*count."""
     hw = torch.where(robot_present, robot_cost, torch.zeros_like(robot_cost)).sum(-1)

@@ -29,9 +29,16 @@ class Swarms:
     partner_in_team: Tensor
 
 
-def choose_partners(tag: Tensor, selectivity: Tensor, species: Tensor, proto_ids: Tensor,
-                    proto_tag: Tensor, elite_index: Tensor, generator: torch.Generator,
-                    allowed: Tensor | None = None) -> Tensor:
+def choose_partners(
+    tag: Tensor,
+    selectivity: Tensor,
+    species: Tensor,
+    proto_ids: Tensor,
+    proto_tag: Tensor,
+    elite_index: Tensor,
+    generator: torch.Generator,
+    allowed: Tensor | None = None,
+) -> Tensor:
     """tag [P, L] bool, selectivity [P], species [P], proto_ids [K], proto_tag [K, L],
     elite_index [K, M] -> partner_rows [P, K] long.
 
@@ -46,9 +53,9 @@ def choose_partners(tag: Tensor, selectivity: Tensor, species: Tensor, proto_ids
     dev = tag.device
     if k == 0 or p == 0 or elite_index.shape[1] == 0:
         return torch.full((p, k), -1, dtype=torch.long, device=dev)
-    dist = hamming(tag, proto_tag.to(dev)) / max(l, 1)                    # [P, K]
+    dist = hamming(tag, proto_tag.to(dev)) / max(l, 1)  # [P, K]
     valid = elite_index >= 0
-    count = valid.sum(1)                                                  # [K]
+    count = valid.sum(1)  # [K]
     eligible = (dist < selectivity[:, None]) & (species[:, None] != proto_ids[None, :])
     eligible &= (count > 0)[None, :]
     if allowed is not None:
@@ -63,12 +70,16 @@ def choose_partners(tag: Tensor, selectivity: Tensor, species: Tensor, proto_ids
 
 def ranking_fitness(fitness: Tensor, has_fitness: Tensor) -> Tensor:
     """[P] float fitness by which elites rank: -inf where there is none (or it is NaN)."""
-    return torch.where(has_fitness, torch.nan_to_num(fitness.float(), nan=-torch.inf),
-                       torch.full_like(fitness, -torch.inf, dtype=torch.float))
+    return torch.where(
+        has_fitness,
+        torch.nan_to_num(fitness.float(), nan=-torch.inf),
+        torch.full_like(fitness, -torch.inf, dtype=torch.float),
+    )
 
 
-def niche_representatives(capability: Tensor, sizes: Tensor, best: Tensor,
-                          has_elite: Tensor) -> Tensor:
+def niche_representatives(
+    capability: Tensor, sizes: Tensor, best: Tensor, has_elite: Tensor
+) -> Tensor:
     """capability [K, U] bool (the package classes each species' design can lift), sizes [K],
     best [K] (its fittest elite's fitness, -inf for none), has_elite [K] bool -> [K] bool: the
     species that may be partners when each niche gives one.
@@ -78,18 +89,23 @@ def niche_representatives(capability: Tensor, sizes: Tensor, best: Tensor,
     (the oldest: species are in order of founding). A species that lifts nothing, and one
     alone in its niche, represents itself; a species without an elite represents nothing."""
     k = sizes.numel()
-    same = (capability[:, None, :] == capability[None, :, :]).all(-1)   # [K, K]
+    same = (capability[:, None, :] == capability[None, :, :]).all(-1)  # [K, K]
     same &= capability.any(-1)[:, None]
     idx = torch.arange(k, device=sizes.device)
     size, fit = sizes[:, None], best[:, None]
-    earlier = idx[None, :] < idx[:, None]                               # [k, j]: j comes first
+    earlier = idx[None, :] < idx[:, None]  # [k, j]: j comes first
     beats = (size.T > size) | ((size.T == size) & ((fit.T > fit) | ((fit.T == fit) & earlier)))
-    beaten = (same & beats & has_elite[None, :]).any(1)                 # [k, j]: j beats k
+    beaten = (same & beats & has_elite[None, :]).any(1)  # [k, j]: j beats k
     return has_elite & ~beaten
 
 
-def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids: Tensor,
-               n_elite_fn: Callable[[Tensor], Tensor] = elite_count) -> Tensor:
+def elite_rows(
+    fitness: Tensor,
+    has_fitness: Tensor,
+    species: Tensor,
+    proto_ids: Tensor,
+    n_elite_fn: Callable[[Tensor], Tensor] = elite_count,
+) -> Tensor:
     """fitness [P], has_fitness [P] bool, species [P], proto_ids [K] -> [K, M] long elite rows
     per species, best first, -1 padded.
 
@@ -102,8 +118,11 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
     if k == 0:
         return torch.full((0, 0), -1, dtype=torch.long, device=dev)
     match = species[:, None] == proto_ids[None, :]
-    pos = torch.where(match.any(1), match.to(torch.int32).argmax(1).long(),
-                      torch.full((p,), k, dtype=torch.long, device=dev))  # k: not in any species
+    pos = torch.where(
+        match.any(1),
+        match.to(torch.int32).argmax(1).long(),
+        torch.full((p,), k, dtype=torch.long, device=dev),
+    )  # k: not in any species
     sizes = group_sizes(pos, k + 1)
     n_wanted = torch.as_tensor(n_elite_fn(sizes[:k]), device=dev)
     f = ranking_fitness(fitness, has_fitness)
@@ -111,8 +130,14 @@ def elite_rows(fitness: Tensor, has_fitness: Tensor, species: Tensor, proto_ids:
     return top_table(order, rank, pos, torch.minimum(n_wanted.long(), sizes[:k]))
 
 
-def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swarm_size: int,
-                    generator: torch.Generator, refill_distance: Tensor | None = None) -> Swarms:
+def assemble_swarms(
+    focal: Tensor,
+    partner_rows: Tensor,
+    dominance: Tensor,
+    swarm_size: int,
+    generator: torch.Generator,
+    refill_distance: Tensor | None = None,
+) -> Swarms:
     """focal [B] rows, partner_rows [B, K] (-1 none), dominance [P] -> Swarms of swarm_size S slots.
 
     Slot 0: the focal design; slots 1..: one per partner in the team (in species order; a uniform
@@ -133,19 +158,22 @@ def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swar
     # uniform random subset of at most S - 1 partners: rank partners by random keys
     keys = torch.rand(b, k, generator=generator, device=dev).masked_fill(~valid, 2.0)
     rank = torch.empty(b, k, dtype=torch.long, device=dev)
-    rank.scatter_(1, torch.sort(keys, dim=1, stable=True).indices,
-                  torch.arange(k, device=dev).expand(b, k).contiguous())
+    rank.scatter_(
+        1,
+        torch.sort(keys, dim=1, stable=True).indices,
+        torch.arange(k, device=dev).expand(b, k).contiguous(),
+    )
     in_team = valid & (rank < s - 1)
     n_team = in_team.sum(1)
 
-    team = torch.full((b, s + 1), -1, dtype=torch.long, device=dev)     # column s: discard bin
+    team = torch.full((b, s + 1), -1, dtype=torch.long, device=dev)  # column s: discard bin
     team[:, 0] = focal
     slot = torch.where(in_team, in_team.long().cumsum(1), torch.full_like(rank, s))
     team.scatter_(1, slot, torch.where(in_team, partner_rows, torch.full_like(partner_rows, -1)))
     team = team[:, :s]
 
     team_partners = torch.where(in_team, partner_rows, torch.full_like(partner_rows, -1))
-    cand = torch.cat([focal[:, None], team_partners], 1)                  # [B, 1 + K]
+    cand = torch.cat([focal[:, None], team_partners], 1)  # [B, 1 + K]
     cand_ok = cand >= 0
     w = torch.where(cand_ok, dom[cand.clamp(min=0)], torch.zeros(cand.shape, device=dev))
     w = torch.where(w.sum(1, keepdim=True) > 0, w, cand_ok.float())
@@ -157,8 +185,9 @@ def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swar
 
     refill = in_team
     if refill_distance is not None and k > 0:
-        d = torch.where(refill, refill_distance.to(dev).float(), torch.full((b, k), torch.inf,
-                                                                            device=dev))
+        d = torch.where(
+            refill, refill_distance.to(dev).float(), torch.full((b, k), torch.inf, device=dev)
+        )
         nearest = torch.zeros_like(refill)
         nearest[torch.arange(b, device=dev), d.argmin(1)] = True
         refill = refill & nearest
@@ -166,13 +195,21 @@ def assemble_swarms(focal: Tensor, partner_rows: Tensor, dominance: Tensor, swar
     if k > 0:
         pw = torch.where(refill, dom[partner_rows.clamp(min=0)], torch.zeros(b, k, device=dev))
         pw = torch.where(pw.sum(1, keepdim=True) > 0, pw, refill.float())
-        pw = torch.where(has_p[:, None], pw, torch.ones_like(pw))        # dummy rows, masked below
+        pw = torch.where(has_p[:, None], pw, torch.ones_like(pw))  # dummy rows, masked below
         bdraw = torch.multinomial(pw, s, replacement=True, generator=generator)
-        brows = torch.where(has_p[:, None], partner_rows.gather(1, bdraw),
-                            torch.full((b, s), -1, dtype=torch.long, device=dev))
+        brows = torch.where(
+            has_p[:, None],
+            partner_rows.gather(1, bdraw),
+            torch.full((b, s), -1, dtype=torch.long, device=dev),
+        )
     else:
         brows = torch.full((b, s), -1, dtype=torch.long, device=dev)
     baseline_team = torch.where(focal_slot, brows, focal_team)
-    return Swarms(focal_team=focal_team, baseline_team=baseline_team,
-                  focal_species_count=n_team + 1, baseline_species_count=n_team,
-                  focal_slot=focal_slot, partner_in_team=in_team)
+    return Swarms(
+        focal_team=focal_team,
+        baseline_team=baseline_team,
+        focal_species_count=n_team + 1,
+        baseline_species_count=n_team,
+        focal_slot=focal_slot,
+        partner_in_team=in_team,
+    )

@@ -13,20 +13,32 @@ from ..sim.hardware import NUM_TIERS, PINCHER, R_MAX, R_MIN, SUCTION, Catalog, P
 
 #: Closed interval of every continuous gene: drawn uniformly in it, mutated within it.
 GENE_BOUNDS: dict[str, tuple[float, float]] = {
-    "selectivity": (0.0, 1.0), "dominance": (0.0, 1.0), "radius": (R_MIN, R_MAX),
-    "torque_point": (0.0, 1.0), "battery_point": (0.0, 1.0),
+    "selectivity": (0.0, 1.0),
+    "dominance": (0.0, 1.0),
+    "radius": (R_MIN, R_MAX),
+    "torque_point": (0.0, 1.0),
+    "battery_point": (0.0, 1.0),
 }
 #: Number of values (0..n-1) of every categorical gene: the part tiers (the paper's tiers
 #: 1..NUM_TIERS) and the effector (SUCTION, PINCHER).
-GENE_VALUES: dict[str, int] = {"chassis": NUM_TIERS, "battery": NUM_TIERS, "motor": NUM_TIERS,
-                               "effector": 2}
+GENE_VALUES: dict[str, int] = {
+    "chassis": NUM_TIERS,
+    "battery": NUM_TIERS,
+    "motor": NUM_TIERS,
+    "effector": 2,
+}
 #: The social genes (mutated with social_sigma; the other continuous genes with hw_sigma).
 SOCIAL_GENES: tuple[str, ...] = ("selectivity", "dominance")
 #: Gene groups inherited together in uniform crossover (tier + operating point of one part move
 #: together).
 CROSSOVER_GROUPS: tuple[tuple[str, ...], ...] = (
-    ("selectivity",), ("dominance",), ("radius",), ("chassis",),
-    ("battery", "battery_point"), ("motor", "torque_point"), ("effector",),
+    ("selectivity",),
+    ("dominance",),
+    ("radius",),
+    ("chassis",),
+    ("battery", "battery_point"),
+    ("motor", "torque_point"),
+    ("effector",),
 )
 EFFECTOR_CODES: dict[str, int] = {"suction": SUCTION, "pincher": PINCHER}
 
@@ -38,21 +50,27 @@ class Population:
     Tiers are stored as indices 0..2 (the paper's tiers 1..3).
     """
 
-    tag: torch.Tensor          # [P, L_tag] bool — speciation / partner tag
+    tag: torch.Tensor  # [P, L_tag] bool — speciation / partner tag
     selectivity: torch.Tensor  # [P] float in [0, 1] — max tag distance of a partner
-    dominance: torch.Tensor    # [P] float in [0, 1] — relative share of the swarm
-    bt: torch.Tensor           # [P, L_bt] long — behavior-tree opcodes (NOP padded)
-    radius: torch.Tensor       # [P] float in [R_MIN, R_MAX]
-    chassis: torch.Tensor      # [P] long in {0, 1, 2}
-    battery: torch.Tensor      # [P] long in {0, 1, 2}
-    motor: torch.Tensor        # [P] long in {0, 1, 2}
-    torque_point: torch.Tensor   # [P] float in [0, 1] — motor operating point
+    dominance: torch.Tensor  # [P] float in [0, 1] — relative share of the swarm
+    bt: torch.Tensor  # [P, L_bt] long — behavior-tree opcodes (NOP padded)
+    radius: torch.Tensor  # [P] float in [R_MIN, R_MAX]
+    chassis: torch.Tensor  # [P] long in {0, 1, 2}
+    battery: torch.Tensor  # [P] long in {0, 1, 2}
+    motor: torch.Tensor  # [P] long in {0, 1, 2}
+    torque_point: torch.Tensor  # [P] float in [0, 1] — motor operating point
     battery_point: torch.Tensor  # [P] float in [0, 1] — battery capacity operating point
-    effector: torch.Tensor     # [P] long — SUCTION (0) or PINCHER (1)
+    effector: torch.Tensor  # [P] long — SUCTION (0) or PINCHER (1)
 
     @classmethod
-    def random(cls, n: int, tag_length: int, bt: torch.Tensor | int, generator: torch.Generator,
-               device: torch.device | str = "cpu") -> Population:
+    def random(
+        cls,
+        n: int,
+        tag_length: int,
+        bt: torch.Tensor | int,
+        generator: torch.Generator,
+        device: torch.device | str = "cpu",
+    ) -> Population:
         """n random genomes, drawn field by field in field order: tag bits w.p. 1/2, continuous
         genes uniform in GENE_BOUNDS, categorical ones uniform in 0..GENE_VALUES - 1; `bt` the
         [n, L] programs, or a length L for uniformly random opcodes."""
@@ -61,14 +79,18 @@ class Population:
             if name == "tag":
                 out[name] = torch.rand(n, tag_length, generator=generator, device=device) < 0.5
             elif name == "bt":
-                out[name] = bt if isinstance(bt, torch.Tensor) else torch.randint(
-                    0, NUM_OPCODES, (n, bt), generator=generator, device=device)
+                out[name] = (
+                    bt
+                    if isinstance(bt, torch.Tensor)
+                    else torch.randint(0, NUM_OPCODES, (n, bt), generator=generator, device=device)
+                )
             elif name in GENE_BOUNDS:
                 lo, hi = GENE_BOUNDS[name]
                 out[name] = lo + (hi - lo) * torch.rand(n, generator=generator, device=device)
             else:
-                out[name] = torch.randint(0, GENE_VALUES[name], (n,), generator=generator,
-                                          device=device)
+                out[name] = torch.randint(
+                    0, GENE_VALUES[name], (n,), generator=generator, device=device
+                )
         return cls(**out)
 
     @property
@@ -107,8 +129,9 @@ class Population:
 
     @staticmethod
     def cat(parts: list[Population]) -> Population:
-        return Population(**{f.name: torch.cat([getattr(p, f.name) for p in parts])
-                         for f in fields(Population)})
+        return Population(
+            **{f.name: torch.cat([getattr(p, f.name) for p in parts]) for f in fields(Population)}
+        )
 
     def hardware_vector(self) -> torch.Tensor:
         """[P, 2] the hardware space of d_hw, each axis in [0, 1]: the two continuous operating
@@ -119,22 +142,33 @@ class Population:
 
 def genome_phenotype(genome: Population, catalog: Catalog | None = None) -> Phenotype:
     """Phenotype of every individual of a population (`Population`)."""
-    return phenotype(genome.radius, genome.chassis, genome.battery, genome.motor,
-                     genome.torque_point, genome.battery_point, genome.effector, catalog)
+    return phenotype(
+        genome.radius,
+        genome.chassis,
+        genome.battery,
+        genome.motor,
+        genome.torque_point,
+        genome.battery_point,
+        genome.effector,
+        catalog,
+    )
 
 
 def design_record(genome: Population, row: int, species: int, cost: float) -> dict:
     """A JSON-friendly description of one robot design (row `row`; tiers 1..NUM_TIERS)."""
     return {
-        "species": species, "effector": "pincher" if int(genome.effector[row]) else "suction",
+        "species": species,
+        "effector": "pincher" if int(genome.effector[row]) else "suction",
         "radius": round(float(genome.radius[row]), 4),
-        "chassis_tier": int(genome.chassis[row]) + 1, "battery_tier": int(genome.battery[row]) + 1,
+        "chassis_tier": int(genome.chassis[row]) + 1,
+        "battery_tier": int(genome.battery[row]) + 1,
         "motor_tier": int(genome.motor[row]) + 1,
         "torque_point": round(float(genome.torque_point[row]), 4),
         "battery_point": round(float(genome.battery_point[row]), 4),
         "dominance": round(float(genome.dominance[row]), 4),
         "selectivity": round(float(genome.selectivity[row]), 4),
-        "cost": round(cost, 2), "bt": [int(x) for x in genome.bt[row].tolist()],
+        "cost": round(cost, 2),
+        "bt": [int(x) for x in genome.bt[row].tolist()],
     }
 
 
@@ -162,17 +196,27 @@ def from_designs(designs: Sequence[dict], tag_length: int = 16) -> tuple[Populat
             count = int(d.get("count", 1))
             if count < 0:
                 raise ValueError(f"design {i}: count must be >= 0, got {count}")
-            rows.append(dict(
-                radius=float(d["radius"]), chassis=tiers[0], battery=tiers[1], motor=tiers[2],
-                torque_point=float(d["torque_point"]), battery_point=float(d["battery_point"]),
-                effector=int(eff), dominance=float(d.get("dominance", 0.5)),
-                selectivity=float(d.get("selectivity", 0.5)),
-                bt=[int(x) for x in d["bt"]], count=count))
+            rows.append(
+                dict(
+                    radius=float(d["radius"]),
+                    chassis=tiers[0],
+                    battery=tiers[1],
+                    motor=tiers[2],
+                    torque_point=float(d["torque_point"]),
+                    battery_point=float(d["battery_point"]),
+                    effector=int(eff),
+                    dominance=float(d.get("dominance", 0.5)),
+                    selectivity=float(d.get("selectivity", 0.5)),
+                    bt=[int(x) for x in d["bt"]],
+                    count=count,
+                )
+            )
         except KeyError as e:
             raise ValueError(f"design {i}: missing field {e.args[0]!r}") from None
     length = max(max(len(r["bt"]) for r in rows), 1)
-    programs = torch.tensor([r["bt"] + [NOP] * (length - len(r["bt"])) for r in rows],
-                            dtype=torch.long)
+    programs = torch.tensor(
+        [r["bt"] + [NOP] * (length - len(r["bt"])) for r in rows], dtype=torch.long
+    )
     if ((programs < 0) | (programs >= NUM_OPCODES)).any():
         raise ValueError(f"design bt lists must hold opcodes 0..{NUM_OPCODES - 1}")
 
@@ -184,10 +228,17 @@ def from_designs(designs: Sequence[dict], tag_length: int = 16) -> tuple[Populat
 
     genome = Population(
         tag=torch.zeros(len(rows), tag_length, dtype=torch.bool),
-        selectivity=floats("selectivity"), dominance=floats("dominance"), bt=programs,
-        radius=floats("radius"), chassis=longs("chassis"), battery=longs("battery"),
-        motor=longs("motor"), torque_point=floats("torque_point"),
-        battery_point=floats("battery_point"), effector=longs("effector"))
+        selectivity=floats("selectivity"),
+        dominance=floats("dominance"),
+        bt=programs,
+        radius=floats("radius"),
+        chassis=longs("chassis"),
+        battery=longs("battery"),
+        motor=longs("motor"),
+        torque_point=floats("torque_point"),
+        battery_point=floats("battery_point"),
+        effector=longs("effector"),
+    )
     counts = longs("count")
     if int(counts.sum()) == 0:
         raise ValueError("the designs' counts add up to no robot")

@@ -18,8 +18,12 @@ from .speciation import distance
 DistanceFn = Callable[[Population, Population], Tensor]
 
 
-def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
-                     protect: int | Tensor | None = None, min_share: float = 0.0) -> Tensor:
+def offspring_quotas(
+    adjusted_fitness_sum: Tensor,
+    population_size: int,
+    protect: int | Tensor | None = None,
+    min_share: float = 0.0,
+) -> Tensor:
     """[K] total adjusted fitness per species -> [K] long quotas summing to population_size.
 
     Proportional shares rounded by largest remainder (ties: lowest index); all-zero (or negative)
@@ -41,7 +45,7 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
     if min_share > 0:
         # a relative tolerance, so that an exact share of min_share is not lost to rounding
         keep = f / f.sum() * population_size >= min_share * (1 - 1e-9)
-        any_kept = (f * keep).sum() > 0           # else no species qualifies: no threshold
+        any_kept = (f * keep).sum() > 0  # else no species qualifies: no threshold
         if protect is not None:
             keep[protect] = True
         f = torch.where(any_kept & ~keep, torch.zeros_like(f), f)
@@ -52,7 +56,7 @@ def offspring_quotas(adjusted_fitness_sum: Tensor, population_size: int,
     order = torch.sort(share - base, descending=True, stable=True).indices
     q[order] += (torch.arange(k, device=dev) < rem).long()
     if protect is not None and population_size > 0:
-        need = q[protect] == 0                    # take 1 from the largest quota
+        need = q[protect] == 0  # take 1 from the largest quota
         q[q.argmax()] -= need.long()
         q[protect] = torch.where(need, 1, q[protect])
     return q
@@ -88,23 +92,31 @@ def replace_subtree(bt: Tensor, start: Tensor, subtree: Tensor, subtree_len: Ten
     return torch.where(t < s, bt, torch.where(t < s + m, from_sub, from_tail))
 
 
-def random_subtrees(n: int, params: ReproductionParams, generator: torch.Generator,
-                    device: torch.device | str = "cpu") -> tuple[Tensor, Tensor]:
+def random_subtrees(
+    n: int,
+    params: ReproductionParams,
+    generator: torch.Generator,
+    device: torch.device | str = "cpu",
+) -> tuple[Tensor, Tensor]:
     """-> ([n, max_leaves + 2] long subtrees NOP-padded, [n] long lengths): a leaf, or SEQ/SEL +
     1..max leaves + END."""
     ml = params.subtree_max_leaves
     s_max = ml + 2
     leaf_ops = torch.tensor(LEAF_OPS, dtype=torch.long, device=device)
     is_leaf = torch.rand(n, generator=generator, device=device) < params.subtree_leaf_prob
-    ctrl = torch.randint(0, 2, (n,), generator=generator, device=device)     # SEQ=0 / SEL=1
+    ctrl = torch.randint(0, 2, (n,), generator=generator, device=device)  # SEQ=0 / SEL=1
     k = torch.randint(1, ml + 1, (n,), generator=generator, device=device)
-    leaves = leaf_ops[torch.randint(0, len(LEAF_OPS), (n, s_max), generator=generator,
-                                    device=device)]
+    leaves = leaf_ops[
+        torch.randint(0, len(LEAF_OPS), (n, s_max), generator=generator, device=device)
+    ]
     t = torch.arange(s_max, device=device)[None, :]
     kk = k[:, None]
     nop = torch.full((n, s_max), NOP, dtype=torch.long, device=device)
-    ctrl_form = torch.where(t == 0, torch.where(ctrl[:, None] == 0, SEQ, SEL),
-                            torch.where(t <= kk, leaves, torch.where(t == kk + 1, END, nop)))
+    ctrl_form = torch.where(
+        t == 0,
+        torch.where(ctrl[:, None] == 0, SEQ, SEL),
+        torch.where(t <= kk, leaves, torch.where(t == kk + 1, END, nop)),
+    )
     leaf_form = torch.where(t == 0, leaves, nop)
     sub = torch.where(is_leaf[:, None], leaf_form, ctrl_form)
     length = torch.where(is_leaf, torch.ones_like(k), k + 2)
@@ -116,7 +128,7 @@ def _random_node(bt: Tensor, generator: torch.Generator) -> Tensor:
     live = bt != NOP
     count = live.sum(1, keepdim=True)
     u = torch.rand(bt.shape[0], 1, generator=generator, device=bt.device)
-    k = torch.minimum((u * count).long(), (count - 1).clamp(min=0))        # the k-th node
+    k = torch.minimum((u * count).long(), (count - 1).clamp(min=0))  # the k-th node
     hit = live & (live.long().cumsum(1) - 1 == k)
     return hit.to(torch.int32).argmax(1, keepdim=True).long()
 
@@ -148,6 +160,7 @@ def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator
 # ---------------------------------------------------------------------------------------------
 # Whole-genome operators
 
+
 def crossover(a: Population, b: Population, generator: torch.Generator) -> Population:
     """Parents [N], [N] -> child [N]: uniform per gene group, uniform per tag bit, one-point BT
     crossover at the same cut in 1..L-1."""
@@ -170,8 +183,9 @@ def crossover(a: Population, b: Population, generator: torch.Generator) -> Popul
     return Population(**{f.name: out[f.name] for f in fields(Population)})
 
 
-def _gauss_clip(x: Tensor, lo: float, hi: float, sigma: float, generator: torch.Generator,
-                p: float = 1.0) -> Tensor:
+def _gauss_clip(
+    x: Tensor, lo: float, hi: float, sigma: float, generator: torch.Generator, p: float = 1.0
+) -> Tensor:
     """[N] -> [N] x + N(0, (sigma (hi - lo))^2), clipped to [lo, hi], each entry w.p. p."""
     noise = torch.randn(x.shape, generator=generator, device=x.device, dtype=x.dtype)
     if p < 1.0:
@@ -208,15 +222,25 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
             sigma = params.social_sigma if name in SOCIAL_GENES else params.hw_sigma
             out[name] = _gauss_clip(x, *GENE_BOUNDS[name], sigma, generator, params.p_gene_mutation)
         else:
-            p_cat = params.p_effector if name == "effector" and params.p_effector is not None \
+            p_cat = (
+                params.p_effector
+                if name == "effector" and params.p_effector is not None
                 else params.p_categorical
+            )
             out[name] = _resample(x, GENE_VALUES[name], p_cat, generator)
     return Population(**out)
 
 
-def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index: Tensor,
-              proto_ids: Tensor, params: ReproductionParams, generator: torch.Generator,
-              distance_fn: DistanceFn = distance) -> tuple[Population, Tensor, Tensor, Tensor]:
+def reproduce(
+    genome: Population,
+    fitness: Tensor,
+    species: Tensor,
+    proto_index: Tensor,
+    proto_ids: Tensor,
+    params: ReproductionParams,
+    generator: torch.Generator,
+    distance_fn: DistanceFn = distance,
+) -> tuple[Population, Tensor, Tensor, Tensor]:
     """Population [P], fitness [P], species [P], prototypes [K] -> (children [P],
     child_species_hint [P], is_elite [P], parent_index [P]).
 
@@ -242,21 +266,22 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
     sizes = group_sizes(pos, k)
     fit = fitness.float()
     fsum = torch.zeros(k, dtype=torch.float64, device=dev).index_add_(0, pos, fit.double())
-    if params.quota_size_exponent is not None:          # mean x size ** exponent
+    if params.quota_size_exponent is not None:  # mean x size ** exponent
         n = sizes.clamp(min=1).double()
         adjusted = fsum / n * n.pow(params.quota_size_exponent)
-    else:                                               # the paper's total
+    else:  # the paper's total
         adjusted = fsum
     quota = torch.zeros(k, dtype=torch.long, device=dev)
-    nonempty = (sizes > 0).nonzero().squeeze(1)                           # empty species get 0
+    nonempty = (sizes > 0).nonzero().squeeze(1)  # empty species get 0
     if p:
         best_pos = pos[fit.argmax()]
         protect = (nonempty == best_pos).to(torch.int32).argmax()
-        quota[nonempty] = offspring_quotas(adjusted[nonempty], p, protect=protect,
-                                           min_share=params.min_share)
+        quota[nonempty] = offspring_quotas(
+            adjusted[nonempty], p, protect=protect, min_share=params.min_share
+        )
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
 
-    order, rank = rank_within_groups(pos, fit, sizes)       # by (species, fitness desc, row)
+    order, rank = rank_within_groups(pos, fit, sizes)  # by (species, fitness desc, row)
     elite = top_per_group(order, rank, pos, n_elite)
     starts = sizes.cumsum(0) - sizes
 
@@ -274,21 +299,24 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
         return rows.gather(-1, win).squeeze(-1)
 
     p1 = tournament(off_pos, 1)[:, 0]
-    cand = tournament(off_pos, params.mate_tries)                         # [N, tries]
+    cand = tournament(off_pos, params.mate_tries)  # [N, tries]
     dmat = distance_fn(genome, genome)
     ok = (dmat[p1[:, None], cand] <= params.delta) & (cand != p1[:, None])
     local_p2 = cand.gather(1, ok.to(torch.int32).argmax(1, keepdim=True).long()).squeeze(1)
     if p > 1:
         g = torch.randint(0, p - 1, (n_off, ts), generator=generator, device=dev)
-        g = g + (g >= p1[:, None]).long()                                 # uniform over rows != p1
+        g = g + (g >= p1[:, None]).long()  # uniform over rows != p1
     else:
         g = torch.zeros(n_off, ts, dtype=torch.long, device=dev)
     global_p2 = g.gather(1, fit[g].argmax(1, keepdim=True)).squeeze(1)
     p2 = torch.where(ok.any(1), local_p2, global_p2)
 
     same = species[p2] == species[p1]
-    p_cross = torch.where(same, torch.full((n_off,), params.crossover_same, device=dev),
-                          torch.full((n_off,), params.crossover_cross, device=dev))
+    p_cross = torch.where(
+        same,
+        torch.full((n_off,), params.crossover_same, device=dev),
+        torch.full((n_off,), params.crossover_cross, device=dev),
+    )
     do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
     g1, g2 = genome.index(p1), genome.index(p2)
     child = crossover(g1, g2, generator).where(do_cross, g1)
@@ -296,7 +324,11 @@ def reproduce(genome: Population, fitness: Tensor, species: Tensor, proto_index:
 
     children = Population.cat([genome.index(elite), child])
     hint = torch.cat([species[elite], species[p1]])
-    is_elite = torch.cat([torch.ones(elite.numel(), dtype=torch.bool, device=dev),
-                          torch.zeros(n_off, dtype=torch.bool, device=dev)])
+    is_elite = torch.cat(
+        [
+            torch.ones(elite.numel(), dtype=torch.bool, device=dev),
+            torch.zeros(n_off, dtype=torch.bool, device=dev),
+        ]
+    )
     parent = torch.cat([elite, p1])
     return children, hint, is_elite, parent

@@ -16,8 +16,9 @@ from .config import SwarmCoDeConfig
 def elite_count(species_size: Tensor, max_elite: int = ...) -> Tensor: ...
 @overload
 def elite_count(species_size: int, max_elite: int = ...) -> int: ...
-def elite_count(species_size: Tensor | int,
-                max_elite: int = SwarmCoDeConfig.max_elite) -> Tensor | int:
+def elite_count(
+    species_size: Tensor | int, max_elite: int = SwarmCoDeConfig.max_elite
+) -> Tensor | int:
     """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite,
     size // 5 + 1)); max_elite is the paper's E."""
     if isinstance(species_size, Tensor):
@@ -29,11 +30,13 @@ def group_sizes(group: Tensor, n: int) -> Tensor:
     """group [P] long in 0..n-1 -> [n] long rows per group: `torch.bincount(group, minlength=n)`
     without its device sync (bincount reads the largest value on the host to size its output)."""
     return torch.zeros(n, dtype=torch.long, device=group.device).scatter_add_(
-        0, group, torch.ones_like(group))
+        0, group, torch.ones_like(group)
+    )
 
 
-def rank_within_groups(group: Tensor, fitness: Tensor, sizes: Tensor | None = None,
-                       first: Tensor | None = None) -> tuple[Tensor, Tensor]:
+def rank_within_groups(
+    group: Tensor, fitness: Tensor, sizes: Tensor | None = None, first: Tensor | None = None
+) -> tuple[Tensor, Tensor]:
     """group [P] long >= 0, fitness [P] -> (order [P], rank [P]).
 
     order: the rows sorted by (group asc, fitness desc, row asc) (stable sorts, so equal fitness
@@ -71,4 +74,4 @@ def top_table(order: Tensor, rank: Tensor, group: Tensor, n: Tensor) -> Tensor:
     flat = torch.full((k * m + 1,), -1, dtype=torch.long, device=dev)
     target = torch.where(keep, g * m + rank, torch.full_like(rank, k * m))
     flat.scatter_(0, target, torch.where(keep, order, torch.full_like(order, -1)))
-    return flat[:k * m].view(k, m)
+    return flat[: k * m].view(k, m)

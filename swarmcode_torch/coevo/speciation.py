@@ -40,8 +40,9 @@ def _one_hot_bt(bt: Tensor) -> Tensor:
     return oh.flatten(1)
 
 
-def distance_terms(a: Population, b: Population,
-                   w: DistanceWeights = DistanceWeights()) -> dict[str, Tensor]:
+def distance_terms(
+    a: Population, b: Population, w: DistanceWeights = DistanceWeights()
+) -> dict[str, Tensor]:
     """Genomes [Pa], [Pb] -> the weighted terms of D, each [Pa, Pb] float32, in the order of the
     sum: tag = w_tag (H/L)^gamma, hw = w_hw d_hw, bt = w_bt d_bt, tool = w_tool d_tool,
     size = w_size d_size.
@@ -68,8 +69,13 @@ def distance_terms(a: Population, b: Population,
         d_bt = torch.zeros(pa, pb, device=dev)
     d_tool = (a.effector[:, None] != b.effector[None, :]).float()
     d_size = (a.radius.float()[:, None] - b.radius.float()[None, :]).abs() / (R_MAX - R_MIN)
-    return {"tag": w.w_tag * d_tag, "hw": w.w_hw * d_hw, "bt": w.w_bt * d_bt,
-            "tool": w.w_tool * d_tool, "size": w.w_size * d_size}
+    return {
+        "tag": w.w_tag * d_tag,
+        "hw": w.w_hw * d_hw,
+        "bt": w.w_bt * d_bt,
+        "tool": w.w_tool * d_tool,
+        "size": w.w_size * d_size,
+    }
 
 
 def distance(a: Population, b: Population, w: DistanceWeights = DistanceWeights()) -> Tensor:
@@ -88,9 +94,15 @@ def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -
     return t["hw"] + t["tool"] + t["size"]
 
 
-def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | None,
-             prev_proto_ids: Tensor, next_species_id: int, delta: float = SwarmCoDeConfig.delta,
-             w: DistanceWeights = DistanceWeights()) -> SpeciationResult:
+def speciate(
+    genome: Population,
+    species_hint: Tensor,
+    prev_proto: Population | None,
+    prev_proto_ids: Tensor,
+    next_species_id: int,
+    delta: float = SwarmCoDeConfig.delta,
+    w: DistanceWeights = DistanceWeights(),
+) -> SpeciationResult:
     """Population [P], hint [P] long (-1 none), previous prototypes [Kp] + ids [Kp] ->
     SpeciationResult.
 
@@ -110,24 +122,27 @@ def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | 
     # (1) carry-over of surviving species.
     if prev_proto is not None and prev_proto_ids.numel() > 0 and p > 0:
         prev_ids = prev_proto_ids.to(dev).long()
-        d_prev = distance(genome, prev_proto.to(dev), w)                  # [P, Kp]
-        member = species_hint.to(dev)[:, None] == prev_ids[None, :]      # [P, Kp]
+        d_prev = distance(genome, prev_proto.to(dev), w)  # [P, Kp]
+        member = species_hint.to(dev)[:, None] == prev_ids[None, :]  # [P, Kp]
         alive = member.any(0)
-        closest = d_prev.masked_fill(~member, math.inf).argmin(0)        # first min = lowest row
+        closest = d_prev.masked_fill(~member, math.inf).argmin(0)  # first min = lowest row
         carried_rows, carried_ids = closest[alive], prev_ids[alive]
     else:
         carried_rows, carried_ids = long_empty, long_empty
     k = int(carried_rows.numel())
 
     assigned = torch.zeros(p, dtype=torch.bool, device=dev)
-    assign_pos = torch.full((p,), -1, dtype=torch.long, device=dev)   # position in the proto list
+    assign_pos = torch.full((p,), -1, dtype=torch.long, device=dev)  # position in the proto list
     assigned[carried_rows] = True
     assign_pos[carried_rows] = torch.arange(k, device=dev)
     # Precompute all pairwise distances when that is cheap.
     full = distance(genome, genome, w) if 0 < p * p <= _FULL_MATRIX_MAX else None
     if k > 0:
-        d_cur = full[:, carried_rows] if full is not None else \
-            distance(genome, genome.index(carried_rows), w)              # [P, Kc]
+        d_cur = (
+            full[:, carried_rows]
+            if full is not None
+            else distance(genome, genome.index(carried_rows), w)
+        )  # [P, Kc]
         arg = d_cur.argmin(1)
         min_d = d_cur.gather(1, arg[:, None]).squeeze(1)
     else:
@@ -148,18 +163,29 @@ def speciate(genome: Population, species_hint: Tensor, prev_proto: Population | 
         assigned[f] = True
         assign_pos[f] = k
         new_rows.append(f)
-        d_new = full[:, f] if full is not None else \
-            distance(genome, genome.index(slice(f, f + 1)), w)[:, 0]
-        better = d_new < min_d                                           # strict: ties keep older
+        d_new = (
+            full[:, f]
+            if full is not None
+            else distance(genome, genome.index(slice(f, f + 1)), w)[:, 0]
+        )
+        better = d_new < min_d  # strict: ties keep older
         arg = torch.where(better, torch.full_like(arg, k), arg)
         min_d = torch.where(better, d_new, min_d)
         k += 1
     assign_pos = torch.where(assigned, assign_pos, arg)
 
     n_new = len(new_rows)
-    proto_ids = torch.cat([carried_ids, torch.arange(next_species_id, next_species_id + n_new,
-                                                     dtype=torch.long, device=dev)])
+    proto_ids = torch.cat(
+        [
+            carried_ids,
+            torch.arange(next_species_id, next_species_id + n_new, dtype=torch.long, device=dev),
+        ]
+    )
     proto_index = torch.cat([carried_rows, torch.tensor(new_rows, dtype=torch.long, device=dev)])
     species = proto_ids[assign_pos] if p > 0 else long_empty
-    return SpeciationResult(species=species, proto_ids=proto_ids, proto_index=proto_index,
-                            next_species_id=next_species_id + n_new)
+    return SpeciationResult(
+        species=species,
+        proto_ids=proto_ids,
+        proto_index=proto_index,
+        next_species_id=next_species_id + n_new,
+    )

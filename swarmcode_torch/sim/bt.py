@@ -48,17 +48,31 @@ RUNNING = 2
 
 CONTROL_OPS = (SEQ, SEL)
 CONDITION_OPS = (COND_HAS_PACKAGE, COND_NEAR_PACKAGE, COND_NEAR_BASE, COND_AM_I_STUCK)
-ACTION_OPS = (ACT_MOVE_TO_PACK, ACT_MOVE_TO_BASE, ACT_RANDOM_WALK, ACT_PICK_UP, ACT_DROP,
-              ACT_MOVE_TO_RANDOM_PACK)
+ACTION_OPS = (
+    ACT_MOVE_TO_PACK,
+    ACT_MOVE_TO_BASE,
+    ACT_RANDOM_WALK,
+    ACT_PICK_UP,
+    ACT_DROP,
+    ACT_MOVE_TO_RANDOM_PACK,
+)
 LEAF_OPS = CONDITION_OPS + ACTION_OPS
 
 OPCODE_NAMES = {
-    SEQ: "SEQ", SEL: "SEL", COND_HAS_PACKAGE: "COND_HAS_PACKAGE",
-    COND_NEAR_PACKAGE: "COND_NEAR_PACKAGE", COND_NEAR_BASE: "COND_NEAR_BASE",
-    COND_AM_I_STUCK: "COND_AM_I_STUCK", ACT_MOVE_TO_PACK: "ACT_MOVE_TO_PACK",
-    ACT_MOVE_TO_BASE: "ACT_MOVE_TO_BASE", ACT_RANDOM_WALK: "ACT_RANDOM_WALK",
-    ACT_PICK_UP: "ACT_PICK_UP", ACT_DROP: "ACT_DROP",
-    ACT_MOVE_TO_RANDOM_PACK: "ACT_MOVE_TO_RANDOM_PACK", END: "END", NOP: "NOP",
+    SEQ: "SEQ",
+    SEL: "SEL",
+    COND_HAS_PACKAGE: "COND_HAS_PACKAGE",
+    COND_NEAR_PACKAGE: "COND_NEAR_PACKAGE",
+    COND_NEAR_BASE: "COND_NEAR_BASE",
+    COND_AM_I_STUCK: "COND_AM_I_STUCK",
+    ACT_MOVE_TO_PACK: "ACT_MOVE_TO_PACK",
+    ACT_MOVE_TO_BASE: "ACT_MOVE_TO_BASE",
+    ACT_RANDOM_WALK: "ACT_RANDOM_WALK",
+    ACT_PICK_UP: "ACT_PICK_UP",
+    ACT_DROP: "ACT_DROP",
+    ACT_MOVE_TO_RANDOM_PACK: "ACT_MOVE_TO_RANDOM_PACK",
+    END: "END",
+    NOP: "NOP",
 }
 
 # ---------------------------------------------------------------------------------------------
@@ -67,9 +81,9 @@ OPCODE_NAMES = {
 
 NUM_COMBOS = 2 ** len(CONDITION_OPS) * 3 ** len(ACTION_OPS)  # 11,664 leaf-status combinations
 
-_FIRED_SHIFT = 4      # packed bits 4..9: fired flags of actions 6..11
-_STATUS_SHIFT = 10    # packed bits 10..11: root status
-_CODE_SHIFT = 16      # build_tables' internal transition words: next state << 16 | fired bits
+_FIRED_SHIFT = 4  # packed bits 4..9: fired flags of actions 6..11
+_STATUS_SHIFT = 10  # packed bits 10..11: root status
+_CODE_SHIFT = 16  # build_tables' internal transition words: next state << 16 | fired bits
 
 
 def _default(block_type: torch.Tensor) -> torch.Tensor:
@@ -93,8 +107,9 @@ def _gather1(t: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
     return t.gather(1, idx.unsqueeze(1)).squeeze(1)
 
 
-def _set1(t: torch.Tensor, idx: torch.Tensor, value: torch.Tensor,
-          mask: torch.Tensor) -> torch.Tensor:
+def _set1(
+    t: torch.Tensor, idx: torch.Tensor, value: torch.Tensor, mask: torch.Tensor
+) -> torch.Tensor:
     """t [B, N] -> copy with t[b, idx[b]] = value[b] where mask[b]."""
     value = torch.where(mask, value, _gather1(t, idx))
     return t.scatter(1, idx.unsqueeze(1), value.unsqueeze(1))
@@ -103,6 +118,7 @@ def _set1(t: torch.Tensor, idx: torch.Tensor, value: torch.Tensor,
 # ---------------------------------------------------------------------------------------------
 # Jumps and the batched, masked interpreter
 # ---------------------------------------------------------------------------------------------
+
 
 def compute_jumps(opcodes: torch.Tensor) -> torch.Tensor:
     """opcodes [..., L] -> jumps [..., L] long.
@@ -130,8 +146,9 @@ def compute_jumps(opcodes: torch.Tensor) -> torch.Tensor:
     return jumps.reshape(shape)
 
 
-def interpret(opcodes: torch.Tensor, jumps: torch.Tensor, leaf_status: torch.Tensor
-              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def interpret(
+    opcodes: torch.Tensor, jumps: torch.Tensor, leaf_status: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """opcodes, jumps [..., L], leaf_status [..., 14] -> action [...], fired [..., 14] bool,
     status [...].
 
@@ -214,9 +231,10 @@ Node = int | tuple[int, list["Node"]]  # a leaf opcode, or (SEQ|SEL, children)
 def parse(program: Sequence[int]) -> list[Node]:
     """Pre-order opcode list -> the implicit root's children (NOP skipped, stray END ignored):
     `parse_slots` without the slots."""
+
     def strip(nodes: list[SlotNode]) -> list[Node]:
-        return [(op, strip(children)) if op in CONTROL_OPS else op
-                for _, op, children in nodes]
+        return [(op, strip(children)) if op in CONTROL_OPS else op for _, op, children in nodes]
+
     return strip(parse_slots(program))
 
 
@@ -241,8 +259,9 @@ def _eval(node: Node, leaf_status: Sequence[int], fired: set[int]) -> tuple[int,
     return (SUCCESS if op == SEQ else FAILURE), NOP
 
 
-def interpret_reference(program: Sequence[int], leaf_status: Sequence[int]
-                        ) -> tuple[int, set[int], int]:
+def interpret_reference(
+    program: Sequence[int], leaf_status: Sequence[int]
+) -> tuple[int, set[int], int]:
     """One program (list of opcodes), leaf_status (14 ints) -> (action, fired actions, root
     status)."""
     fired: set[int] = set()
@@ -253,6 +272,7 @@ def interpret_reference(program: Sequence[int], leaf_status: Sequence[int]
 # ---------------------------------------------------------------------------------------------
 # Fast path: per-program lookup tables over all leaf-status combinations
 # ---------------------------------------------------------------------------------------------
+
 
 def combo_index(leaf_status: torch.Tensor) -> torch.Tensor:
     """leaf_status [..., 14] -> combination index [...] long in [0, NUM_COMBOS).
@@ -324,8 +344,7 @@ def _continuations(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return nxt, cont
 
 
-def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = True
-                 ) -> torch.Tensor:
+def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = True) -> torch.Tensor:
     """ops [P, L], col_status [14 * NC] (status of opcode o under combo c at o*NC+c) -> int32
     [P, NC]."""
     P, L = ops.shape
@@ -336,20 +355,22 @@ def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = Tr
     NS = 2 * L + 2
     base = (torch.arange(P, device=dev) * NS).unsqueeze(1)
     slot = torch.arange(L, device=dev)
-    fire = torch.where(_is_action(ops),
-                       1 << (_FIRED_SHIFT + (ops - ACT_MOVE_TO_PACK).clamp(min=0)), 0)
+    fire = torch.where(
+        _is_action(ops), 1 << (_FIRED_SHIFT + (ops - ACT_MOVE_TO_PACK).clamp(min=0)), 0
+    )
     nxt = torch.cat([cont, (L + 2 + slot).expand(P, L).unsqueeze(-1)], -1)  # [P, L, 3]
-    word = ((base.unsqueeze(-1) + nxt) << _CODE_SHIFT)
+    word = (base.unsqueeze(-1) + nxt) << _CODE_SHIFT
     word[:, :, SUCCESS] |= fire
-    term = ((base + torch.arange(L, NS, device=dev)) << _CODE_SHIFT).unsqueeze(-1).expand(
-        P, NS - L, 3)
+    term = (
+        ((base + torch.arange(L, NS, device=dev)) << _CODE_SHIFT).unsqueeze(-1).expand(P, NS - L, 3)
+    )
     trans = torch.cat([word, term], 1).reshape(-1)  # [P * NS * 3], terminal states loop
     colx = torch.cat([ops, torch.full((P, NS - L), NOP, device=dev)], 1) * NC
     colx = colx.reshape(-1)  # [P * NS], combo-table column of each state's opcode
     final = torch.full((P, NS), NOP, dtype=torch.long, device=dev)
     final[:, L] |= SUCCESS << _STATUS_SHIFT
     final[:, L + 1] |= FAILURE << _STATUS_SHIFT
-    final[:, L + 2:] = ops | (RUNNING << _STATUS_SHIFT)
+    final[:, L + 2 :] = ops | (RUNNING << _STATUS_SHIFT)
     # Walk every (program, combination) pair; finished pairs are set aside after each step.
     g = (base + start.unsqueeze(1)).expand(P, NC).reshape(-1)  # current state, global index
     pos = torch.arange(P * NC, device=dev)  # flat output position of each walking pair
@@ -381,8 +402,9 @@ def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = Tr
     return packed.to(torch.int32).reshape(P, NC)
 
 
-def build_tables(opcodes: torch.Tensor, chunk: int | None = None,
-                 compact: bool | None = None) -> torch.Tensor:
+def build_tables(
+    opcodes: torch.Tensor, chunk: int | None = None, compact: bool | None = None
+) -> torch.Tensor:
     """opcodes [P, L] -> int32 [P, NUM_COMBOS]: packed interpret() result for every combination.
 
     Packing: bits 0-3 action, bit 4+j fired flag of action 6+j, bits 10-11 root status.
@@ -402,8 +424,9 @@ def build_tables(opcodes: torch.Tensor, chunk: int | None = None,
     compact = on_cpu if compact is None else compact
     chunk = chunk or (32 if on_cpu else 512)
     col_status = combo_statuses(ops.device).t().reshape(-1)
-    parts = [_build_chunk(ops[i:i + chunk], col_status, compact)
-             for i in range(0, ops.shape[0], chunk)]
+    parts = [
+        _build_chunk(ops[i : i + chunk], col_status, compact) for i in range(0, ops.shape[0], chunk)
+    ]
     if not parts:
         return torch.zeros(0, NUM_COMBOS, dtype=torch.int32, device=ops.device)
     return torch.cat(parts, 0)
@@ -435,8 +458,9 @@ def unpack(packed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tens
     return p & 0xF, fired, (p >> _STATUS_SHIFT) & 3
 
 
-def lookup(tables: torch.Tensor, prog_idx: torch.Tensor, leaf_status: torch.Tensor
-           ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def lookup(
+    tables: torch.Tensor, prog_idx: torch.Tensor, leaf_status: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """tables [P, NUM_COMBOS], prog_idx [...], leaf_status [..., 14] -> action [...],
     fired [..., 14], status [...]."""
     flat = prog_idx.long() * tables.shape[-1] + combo_index(leaf_status)
@@ -446,6 +470,7 @@ def lookup(tables: torch.Tensor, prog_idx: torch.Tensor, leaf_status: torch.Tens
 # ---------------------------------------------------------------------------------------------
 # Templates, encoding, printing, random programs
 # ---------------------------------------------------------------------------------------------
+
 
 def _block(op: int, *children: int | list[int]) -> list[int]:
     """A control node with its children, closed by END, as a flat pre-order list."""
@@ -471,11 +496,19 @@ TEMPLATES: dict[str, list[int]] = {
     "forage": _sel(_DELIVER, _seq(ACT_MOVE_TO_PACK, ACT_PICK_UP), ACT_RANDOM_WALK),
     "forage_random": _sel(_DELIVER, _seq(ACT_MOVE_TO_RANDOM_PACK, ACT_PICK_UP), ACT_RANDOM_WALK),
     # A robot stuck holding a collaborative package lets go before trying to deliver.
-    "collaborative": _sel(_seq(COND_HAS_PACKAGE, COND_AM_I_STUCK, ACT_DROP), _DELIVER,
-                          _seq(ACT_MOVE_TO_RANDOM_PACK, ACT_PICK_UP), ACT_RANDOM_WALK),
+    "collaborative": _sel(
+        _seq(COND_HAS_PACKAGE, COND_AM_I_STUCK, ACT_DROP),
+        _DELIVER,
+        _seq(ACT_MOVE_TO_RANDOM_PACK, ACT_PICK_UP),
+        ACT_RANDOM_WALK,
+    ),
     # A stuck robot wanders off first; otherwise it forages.
-    "cautious": _sel(_seq(COND_AM_I_STUCK, ACT_RANDOM_WALK), _DELIVER,
-                     _seq(ACT_MOVE_TO_PACK, ACT_PICK_UP), ACT_RANDOM_WALK),
+    "cautious": _sel(
+        _seq(COND_AM_I_STUCK, ACT_RANDOM_WALK),
+        _DELIVER,
+        _seq(ACT_MOVE_TO_PACK, ACT_PICK_UP),
+        ACT_RANDOM_WALK,
+    ),
 }
 
 
@@ -512,8 +545,9 @@ def format_tree(opcodes: torch.Tensor | Sequence[int], root: bool = False) -> st
     return "\n".join(lines)
 
 
-def random_programs(n: int, length: int, generator: torch.Generator | None = None,
-                    p_nop: float = 0.2) -> torch.Tensor:
+def random_programs(
+    n: int, length: int, generator: torch.Generator | None = None, p_nop: float = 0.2
+) -> torch.Tensor:
     """-> LongTensor [n, length]: NOP with probability p_nop, else uniform over opcodes 0..12."""
     ops = torch.randint(0, NOP, (n, length), generator=generator)
     nop = torch.rand(n, length, generator=generator) < p_nop

@@ -14,7 +14,8 @@ def _gather(values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     """values [E, M, *] at index [E, N] (clamped into range) -> [E, N, *]."""
     idx = index.clamp(0, values.shape[1] - 1)
     idx = idx.reshape(idx.shape + (1,) * (values.dim() - 2)).expand(
-        idx.shape + tuple(values.shape[2:]))
+        idx.shape + tuple(values.shape[2:])
+    )
     return values.gather(1, idx)
 
 
@@ -39,12 +40,12 @@ def _robot_contacts_dense(pos, vel, radius, mass, present, params: WorldParams):
     pair = present[:, :, None] & present[:, None, :] & ~eye
     inv_m = 1.0 / mass
     inv_sum = inv_m[:, :, None] + inv_m[:, None, :]
-    w = inv_m[:, :, None] / inv_sum                       # share of the push robot i takes
+    w = inv_m[:, :, None] / inv_sum  # share of the push robot i takes
     rsum = radius[:, :, None] + radius[:, None, :]
     # Sums over partners j of (x_i - x_j) c_ij are written x_i sum_j c_ij - (c @ x)_i, so the
     # solver only ever builds [E, N, N] scalars (and one batched matmul), never [E, N, N, 2].
     for it in range(params.collision_iters):
-        dx = pos[..., 0, None] - pos[:, None, :, 0]                          # [E, N, N] i - j
+        dx = pos[..., 0, None] - pos[:, None, :, 0]  # [E, N, N] i - j
         dy = pos[..., 1, None] - pos[:, None, :, 1]
         d = torch.sqrt(dx * dx + dy * dy)
         inv_d = 1.0 / d.clamp_min(1e-6)
@@ -54,7 +55,7 @@ def _robot_contacts_dense(pos, vel, radius, mass, present, params: WorldParams):
         if it == 0:
             dvx = vel[..., 0, None] - vel[:, None, :, 0]
             dvy = vel[..., 1, None] - vel[:, None, :, 1]
-            vn = (dvx * dx + dvy * dy) * inv_d                                # approach < 0
+            vn = (dvx * dx + dvy * dy) * inv_d  # approach < 0
             j = torch.where((overlap > 0) & (vn < 0), -2.0 * vn / inv_sum, 0.0)
             k = j * inv_d
             vel = vel + inv_m[..., None] * (pos * k.sum(2, keepdim=True) - torch.bmm(k, pos))
@@ -95,15 +96,15 @@ def neighbour_candidates(pos, present, params: WorldParams) -> tuple[torch.Tenso
     g, cxy, cell = _cells(pos, present, params)
     sorted_cell, order = torch.sort(cell, dim=1, stable=True)
     off = torch.arange(-1, 2, device=dev)
-    nx = cxy[..., 0, None, None] + off[:, None]                                 # [E, N, 3, 1]
-    ny = cxy[..., 1, None, None] + off[None, :]                                 # [E, N, 1, 3]
-    inside = (nx >= 0) & (nx < g) & (ny >= 0) & (ny < g)                        # [E, N, 3, 3]
+    nx = cxy[..., 0, None, None] + off[:, None]  # [E, N, 3, 1]
+    ny = cxy[..., 1, None, None] + off[None, :]  # [E, N, 1, 3]
+    inside = (nx >= 0) & (nx < g) & (ny >= 0) & (ny < g)  # [E, N, 3, 3]
     ncell = torch.where(inside, nx * g + ny, -1).reshape(E, N * 9)
     start = torch.searchsorted(sorted_cell, ncell, side="left")
     end = torch.searchsorted(sorted_cell, ncell, side="right")
     m = torch.arange(params.cell_capacity, device=dev)
-    slot = start[..., None] + m                                                 # [E, N*9, M]
-    ok = slot < end[..., None]                                  # outside cells: start == end
+    slot = start[..., None] + m  # [E, N*9, M]
+    ok = slot < end[..., None]  # outside cells: start == end
     rows = order.gather(1, slot.clamp(max=N - 1).reshape(E, -1)).reshape(E, N, -1)
     ok = ok.reshape(E, N, -1) & (rows != torch.arange(N, device=dev)[None, :, None])
     return rows, ok & present[..., None]
@@ -120,11 +121,11 @@ def _robot_contacts_cells(pos, vel, radius, mass, present, params: WorldParams):
     inv_m = 1.0 / mass
     for it in range(params.collision_iters):
         # candidates are re-binned every pass: a push may carry a robot into another cell
-        rows, valid = neighbour_candidates(pos, present, params)                 # [E, N, K]
+        rows, valid = neighbour_candidates(pos, present, params)  # [E, N, K]
         inv_sum = inv_m[..., None] + _gather_rows(inv_m, rows)
         w = inv_m[..., None] / inv_sum
         rsum = radius[..., None] + _gather_rows(radius, rows)
-        pj = _gather_rows(pos, rows)                                            # [E, N, K, 2]
+        pj = _gather_rows(pos, rows)  # [E, N, K, 2]
         diff = pos[:, :, None, :] - pj
         d = diff.norm(dim=-1)
         inv_d = 1.0 / d.clamp_min(1e-6)
@@ -144,8 +145,9 @@ def _static_contacts(pos, vel, radius, o_pos, o_radius, o_present, params: World
     diff = pos[:, :, None, :] - o_pos[:, None, :, :]
     d = diff.norm(dim=-1)
     n = diff / d.clamp_min(1e-6)[..., None]
-    overlap = torch.where(o_present[:, None, :],
-                          (radius[:, :, None] + o_radius[:, None, :] - d).clamp_min(0), 0.0)
+    overlap = torch.where(
+        o_present[:, None, :], (radius[:, :, None] + o_radius[:, None, :] - d).clamp_min(0), 0.0
+    )
     pos = pos + (n * overlap[..., None]).sum(2)
     vn = (vel[:, :, None, :] * n).sum(-1)
     hit = (overlap > 0) & (vn < 0)

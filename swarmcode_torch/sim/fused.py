@@ -53,8 +53,13 @@ def load_extension(verbose: bool = False):
             from torch.utils.cpp_extension import load
 
             flags = ["-O3", "-ffp-contract=off", "-fopenmp"]
-            _module = load(name="swarmcode_tick", sources=[str(_SOURCE)], extra_cflags=flags,
-                           extra_ldflags=["-fopenmp"], verbose=verbose)
+            _module = load(
+                name="swarmcode_tick",
+                sources=[str(_SOURCE)],
+                extra_cflags=flags,
+                extra_ldflags=["-fopenmp"],
+                verbose=verbose,
+            )
         except Exception as e:  # noqa: BLE001 - any build failure means: the Python tick
             _error = e
         return _module
@@ -68,21 +73,44 @@ def available() -> bool:
     return load_extension() is not None
 
 
-_STATE_DTYPES = (torch.long, torch.float32, torch.float32, torch.float32, torch.long, torch.long,
-                 torch.long, torch.float32, torch.float32, torch.float32, torch.long, torch.long,
-                 torch.bool, torch.long)
+_STATE_DTYPES = (
+    torch.long,
+    torch.float32,
+    torch.float32,
+    torch.float32,
+    torch.long,
+    torch.long,
+    torch.long,
+    torch.float32,
+    torch.float32,
+    torch.float32,
+    torch.long,
+    torch.long,
+    torch.bool,
+    torch.long,
+)
 
 
 def _inputs(inputs: TickInputs) -> list[torch.Tensor] | None:
     layout, robots, compat, keys, tables = inputs
-    want = [(layout.p_present, torch.bool), (layout.g_effector, torch.long),
-            (layout.g_offset, torch.float32), (layout.p_mass, torch.float32),
-            (layout.o_pos, torch.float32), (layout.o_radius, torch.float32),
-            (layout.o_present, torch.bool), (robots.radius, torch.float32),
-            (robots.mass, torch.float32), (robots.force, torch.float32),
-            (robots.efficiency, torch.float32), (robots.present, torch.bool),
-            (robots.program, torch.long), (compat, torch.bool), (keys, torch.float32),
-            (tables, torch.int32)]
+    want = [
+        (layout.p_present, torch.bool),
+        (layout.g_effector, torch.long),
+        (layout.g_offset, torch.float32),
+        (layout.p_mass, torch.float32),
+        (layout.o_pos, torch.float32),
+        (layout.o_radius, torch.float32),
+        (layout.o_present, torch.bool),
+        (robots.radius, torch.float32),
+        (robots.mass, torch.float32),
+        (robots.force, torch.float32),
+        (robots.efficiency, torch.float32),
+        (robots.present, torch.bool),
+        (robots.program, torch.long),
+        (compat, torch.bool),
+        (keys, torch.float32),
+        (tables, torch.int32),
+    ]
     out = []
     for t, dt in want:
         if t.device.type != "cpu" or t.dtype != dt:
@@ -95,11 +123,31 @@ def _params(p: WorldParams) -> tuple[list[float], list[int]]:
     import math
 
     lo, hi = 0.5, p.arena - 0.5
-    fp = [p.arena, p.base_radius, p.dt, p.drag, p.v_cap, p.kp, p.kv, p.reach, p.near,
-          p.idle_power, p.stuck_speed * p.dt, p.anchor_mass, p.rest_speed, p.cell_size, lo,
-          hi - lo, p.arena / 2]
-    ip = [p.stuck_ticks, p.waypoint_period, p.collision_iters,
-          max(1, math.ceil(p.arena / p.cell_size))]
+    fp = [
+        p.arena,
+        p.base_radius,
+        p.dt,
+        p.drag,
+        p.v_cap,
+        p.kp,
+        p.kv,
+        p.reach,
+        p.near,
+        p.idle_power,
+        p.stuck_speed * p.dt,
+        p.anchor_mass,
+        p.rest_speed,
+        p.cell_size,
+        lo,
+        hi - lo,
+        p.arena / 2,
+    ]
+    ip = [
+        p.stuck_ticks,
+        p.waypoint_period,
+        p.collision_iters,
+        max(1, math.ceil(p.arena / p.cell_size)),
+    ]
     return fp, ip
 
 
@@ -125,8 +173,11 @@ class FusedTicks:
             self.warned = True
             lines = [ln.strip() for ln in str(_error).splitlines() if ln.strip()]
             why = f"{type(_error).__name__}: {lines[-1][:200]}" if lines else type(_error).__name__
-            warnings.warn(f"the fused C++ tick could not be built ({why}); running the Python "
-                          "tick", RuntimeWarning, stacklevel=3)
+            warnings.warn(
+                f"the fused C++ tick could not be built ({why}); running the Python tick",
+                RuntimeWarning,
+                stacklevel=3,
+            )
         return False
 
     def _native(self, state: State, inputs: TickInputs):
@@ -139,8 +190,7 @@ class FusedTicks:
             return None
         return _module, ins
 
-    def run_ticks(self, state: State, inputs: TickInputs, params: WorldParams,
-                  ticks: int) -> State:
+    def run_ticks(self, state: State, inputs: TickInputs, params: WorldParams, ticks: int) -> State:
         inputs = TickInputs(*inputs)
         native = self._native(state, inputs)
         if native is None:

@@ -84,15 +84,20 @@ CATALOG_SECTIONS = ("base", "chassis", "motor", "battery")
 
 def _catalog_value(v, where: str, per_tier: bool, bounds: tuple[float, float, bool]):
     lo, hi, lo_ok = bounds
-    want = (f"a list of {NUM_TIERS} numbers (tiers 1, 2, 3)" if per_tier else "a number")
+    want = f"a list of {NUM_TIERS} numbers (tiers 1, 2, 3)" if per_tier else "a number"
     items = v if per_tier and isinstance(v, list) else [v]
-    if per_tier and (not isinstance(v, list) or len(v) != NUM_TIERS) or not all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) for x in items):
+    if (
+        per_tier
+        and (not isinstance(v, list) or len(v) != NUM_TIERS)
+        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in items)
+    ):
         raise CatalogError(f"{where}: expected {want}, got {v!r}")
     for x in items:
         if not (math.isfinite(x) and (lo < x or lo_ok and x == lo) and x <= hi):
-            raise CatalogError(f"{where}: expected {'' if per_tier else 'a value '}in "
-                               f"{'[' if lo_ok else '('}{lo:g}, {hi:g}], got {v!r}")
+            raise CatalogError(
+                f"{where}: expected {'' if per_tier else 'a value '}in "
+                f"{'[' if lo_ok else '('}{lo:g}, {hi:g}], got {v!r}"
+            )
     return tuple(float(x) for x in items) if per_tier else float(v)
 
 
@@ -104,24 +109,28 @@ def catalog_from_dict(d, source: str = "hardware catalog") -> Catalog:
         raise CatalogError(f"{source}: expected a table")
     for section in d:
         if section not in CATALOG_SECTIONS:
-            raise CatalogError(f"{source}: {section}: unknown section (known: "
-                               f"{', '.join(CATALOG_SECTIONS)})")
+            raise CatalogError(
+                f"{source}: {section}: unknown section (known: {', '.join(CATALOG_SECTIONS)})"
+            )
     values = {}
     for section in CATALOG_SECTIONS:
         table = d.get(section)
         if not isinstance(table, dict):
-            raise CatalogError(f"{source}: [{section}]: "
-                               f"{'missing' if table is None else 'expected a table'}")
+            raise CatalogError(
+                f"{source}: [{section}]: {'missing' if table is None else 'expected a table'}"
+            )
         keys = [k for s, k, *_ in _CATALOG_FIELDS if s == section]
         for k in table:
             if k not in keys:
-                raise CatalogError(f"{source}: {section}.{k}: unknown field (known: "
-                                   f"{', '.join(keys)})")
+                raise CatalogError(
+                    f"{source}: {section}.{k}: unknown field (known: {', '.join(keys)})"
+                )
     for section, key, name, per_tier, bounds in _CATALOG_FIELDS:
         if key not in d[section]:
             raise CatalogError(f"{source}: {section}.{key}: missing")
-        values[name] = _catalog_value(d[section][key], f"{source}: {section}.{key}", per_tier,
-                                      bounds)
+        values[name] = _catalog_value(
+            d[section][key], f"{source}: {section}.{key}", per_tier, bounds
+        )
     return Catalog(**values)
 
 
@@ -130,12 +139,14 @@ def parse_catalog(data: bytes, source: str) -> Catalog:
     try:
         text = data.decode("utf-8-sig")
         if nesting_depth(text) > MAX_NESTING:
-            raise CatalogError(f"{source}: nested {nesting_depth(text)} levels deep (at most "
-                               f"{MAX_NESTING})")
+            raise CatalogError(
+                f"{source}: nested {nesting_depth(text)} levels deep (at most {MAX_NESTING})"
+            )
         d = tomllib.loads(text)
     except UnicodeDecodeError as e:
-        raise CatalogError(f"{source}: not UTF-8 text (byte 0x{data[e.start]:02x} at offset "
-                           f"{e.start})") from None
+        raise CatalogError(
+            f"{source}: not UTF-8 text (byte 0x{data[e.start]:02x} at offset {e.start})"
+        ) from None
     except tomllib.TOMLDecodeError as e:
         raise CatalogError(f"{source}: not valid TOML ({e})") from None
     except RecursionError:
@@ -181,8 +192,10 @@ def catalog_toml_lines(cat: Catalog, prefix: str = "") -> list[str]:
     to `cat`."""
     import tomli_w
 
-    tables: dict = {s: {k: [float(x) for x in v] if isinstance(v, list) else float(v)
-                        for k, v in t.items()} for s, t in catalog_tables(cat).items()}
+    tables: dict = {
+        s: {k: [float(x) for x in v] if isinstance(v, list) else float(v) for k, v in t.items()}
+        for s, t in catalog_tables(cat).items()
+    }
     for part in reversed([p for p in prefix.split(".") if p]):
         tables = {part: tables}
     return [""] + tomli_w.dumps(tables).splitlines()
@@ -202,14 +215,14 @@ def default_catalog() -> Catalog:
 class Phenotype(NamedTuple):
     """Physical robot properties, each a tensor of the genes' batch shape."""
 
-    radius: torch.Tensor      # m
-    mass: torch.Tensor        # kg (empty robot)
-    force: torch.Tensor       # N, maximum drive force
-    payload: torch.Tensor     # kg the chassis can carry
-    capacity: torch.Tensor    # J, full battery
+    radius: torch.Tensor  # m
+    mass: torch.Tensor  # kg (empty robot)
+    force: torch.Tensor  # N, maximum drive force
+    payload: torch.Tensor  # kg the chassis can carry
+    capacity: torch.Tensor  # J, full battery
     efficiency: torch.Tensor  # electrical -> mechanical
-    effector: torch.Tensor    # long, 0 suction / 1 pincher
-    cost: torch.Tensor        # $
+    effector: torch.Tensor  # long, 0 suction / 1 pincher
+    cost: torch.Tensor  # $
 
 
 def _tier(values: tuple[float, ...], idx: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
@@ -217,9 +230,16 @@ def _tier(values: tuple[float, ...], idx: torch.Tensor, like: torch.Tensor) -> t
     return table[idx.long()]
 
 
-def phenotype(radius: torch.Tensor, chassis: torch.Tensor, battery: torch.Tensor,
-              motor: torch.Tensor, torque_point: torch.Tensor, battery_point: torch.Tensor,
-              effector: torch.Tensor, catalog: Catalog | None = None) -> Phenotype:
+def phenotype(
+    radius: torch.Tensor,
+    chassis: torch.Tensor,
+    battery: torch.Tensor,
+    motor: torch.Tensor,
+    torque_point: torch.Tensor,
+    battery_point: torch.Tensor,
+    effector: torch.Tensor,
+    catalog: Catalog | None = None,
+) -> Phenotype:
     """Phenotype of robots given their hardware genes (tiers as indices 0..2)."""
     cat = catalog or default_catalog()
     r = radius.float()
@@ -231,15 +251,17 @@ def phenotype(radius: torch.Tensor, chassis: torch.Tensor, battery: torch.Tensor
     payload = _tier(cat.chassis_strength, chassis, r) * area
     chassis_cost = _tier(cat.chassis_cost_per_area, chassis, r) * area
 
-    force = _tier(cat.motor_force, motor, r) * (cat.motor_force_floor
-                                                + (1 - cat.motor_force_floor) * u_m)
+    force = _tier(cat.motor_force, motor, r) * (
+        cat.motor_force_floor + (1 - cat.motor_force_floor) * u_m
+    )
     efficiency = _tier(cat.motor_efficiency, motor, r)
     motor_scale = 0.5 + 0.5 * u_m
     motor_mass = _tier(cat.motor_mass, motor, r) * motor_scale
     motor_cost = _tier(cat.motor_cost, motor, r) * motor_scale
 
     capacity = _tier(cat.battery_capacity, battery, r) * (
-        cat.battery_capacity_floor + (1 - cat.battery_capacity_floor) * u_b)
+        cat.battery_capacity_floor + (1 - cat.battery_capacity_floor) * u_b
+    )
     battery_mass = capacity / _tier(cat.battery_density, battery, r)
     battery_cost = capacity / 1000.0 * _tier(cat.battery_cost_per_kj, battery, r)
 

@@ -21,19 +21,19 @@ _CANDIDATES = 32  # rejection sampling: candidate positions drawn per object
 class Layout(NamedTuple):
     """Robot-independent part of E environments (leading dimension E)."""
 
-    p_present: torch.Tensor   # [E, Q] bool
-    p_pos: torch.Tensor       # [E, Q, 2] initial package positions
-    p_mass: torch.Tensor      # [E, Q]
-    p_band: torch.Tensor      # [E, Q, 2] robot radii that may lift it
-    p_size: torch.Tensor      # [E, Q] package radius
-    p_collab: torch.Tensor    # [E, Q] bool
+    p_present: torch.Tensor  # [E, Q] bool
+    p_pos: torch.Tensor  # [E, Q, 2] initial package positions
+    p_mass: torch.Tensor  # [E, Q]
+    p_band: torch.Tensor  # [E, Q, 2] robot radii that may lift it
+    p_size: torch.Tensor  # [E, Q] package radius
+    p_collab: torch.Tensor  # [E, Q] bool
     g_effector: torch.Tensor  # [E, Q, G] long, -1 where the grip does not exist
-    g_offset: torch.Tensor    # [E, Q, G, 2] grip point relative to the package centre
-    o_pos: torch.Tensor       # [E, O, 2]
-    o_radius: torch.Tensor    # [E, O]
-    o_present: torch.Tensor   # [E, O] bool
-    start: torch.Tensor       # [E, N, 2] robot start positions
-    seed: torch.Tensor        # [E] long, seeds the in-episode hash random numbers
+    g_offset: torch.Tensor  # [E, Q, G, 2] grip point relative to the package centre
+    o_pos: torch.Tensor  # [E, O, 2]
+    o_radius: torch.Tensor  # [E, O]
+    o_present: torch.Tensor  # [E, O] bool
+    start: torch.Tensor  # [E, N, 2] robot start positions
+    seed: torch.Tensor  # [E] long, seeds the in-episode hash random numbers
 
     def select(self, idx: torch.Tensor) -> Layout:
         """Environments `idx` (e.g. the same layout repeated for focal and baseline trials)."""
@@ -44,8 +44,10 @@ def spawn_slots(n: int, spacing: float, device=None) -> torch.Tensor:
     """[n, 2] points of a sunflower spiral around the origin, at least `spacing` apart."""
     k = torch.arange(n, dtype=torch.float64, device=device)
     golden = math.pi * (3.0 - math.sqrt(5.0))
-    pts = torch.stack([torch.sqrt(k + 0.5) * torch.cos(k * golden),
-                       torch.sqrt(k + 0.5) * torch.sin(k * golden)], -1)
+    pts = torch.stack(
+        [torch.sqrt(k + 0.5) * torch.cos(k * golden), torch.sqrt(k + 0.5) * torch.sin(k * golden)],
+        -1,
+    )
     if n > 1:
         d = torch.cdist(pts, pts) + torch.eye(n, dtype=pts.dtype, device=device) * 1e9
         pts = pts * (spacing / d.min())
@@ -68,8 +70,9 @@ def _first_valid(cand: torch.Tensor, ok: torch.Tensor) -> torch.Tensor:
     return cand.gather(1, pick[:, None, :, None].expand(-1, 1, -1, 2)).squeeze(1)
 
 
-def make_layouts(scenario: Scenario, num: int, generator: torch.Generator,
-                 device: torch.device | str = "cpu") -> Layout:
+def make_layouts(
+    scenario: Scenario, num: int, generator: torch.Generator, device: torch.device | str = "cpu"
+) -> Layout:
     """Draw `num` random environments of `scenario` (on the generator's device, then moved)."""
     g, gdev = generator, generator.device
     E, N, W = num, scenario.num_robots, scenario.arena
@@ -114,12 +117,15 @@ def make_layouts(scenario: Scenario, num: int, generator: torch.Generator,
     m_hi = torch.tensor([c.mass[1] for c in cls_rows], device=gdev)
     weighted = torch.tensor([c.distance_weighting for c in cls_rows], device=gdev)
     frac = ((d0 - d_lo) / (d_hi - d_lo).clamp_min(1e-6)).clamp(0, 1)
-    mass = torch.where(weighted, m_hi - (m_hi - m_lo) * frac,
-                       m_lo + (m_hi - m_lo) * torch.rand(E, Q, generator=g, device=gdev))
+    mass = torch.where(
+        weighted,
+        m_hi - (m_hi - m_lo) * frac,
+        m_lo + (m_hi - m_lo) * torch.rand(E, Q, generator=g, device=gdev),
+    )
 
     band = torch.tensor([c.radius_band for c in cls_rows], device=gdev).expand(E, Q, 2)
     collab = torch.tensor([c.kind == "collab" for c in cls_rows], device=gdev).expand(E, Q)
-    g_eff = torch.full((Q, G), -1, dtype=torch.long)      # per-class constants, built on the CPU
+    g_eff = torch.full((Q, G), -1, dtype=torch.long)  # per-class constants, built on the CPU
     g_off = torch.zeros(Q, G, 2)
     for i, c in enumerate(cls_rows):
         k = len(c.grips)
@@ -136,9 +142,18 @@ def make_layouts(scenario: Scenario, num: int, generator: torch.Generator,
 
     seed = torch.randint(0, 2**31 - 1, (E,), generator=g, device=gdev)
     out = Layout(
-        p_present=torch.ones(E, Q, dtype=torch.bool, device=gdev), p_pos=p_pos, p_mass=mass,
-        p_band=band.contiguous(), p_size=size.expand(E, Q).contiguous(),
-        p_collab=collab.contiguous(), g_effector=g_eff.expand(E, Q, G).contiguous(),
-        g_offset=g_off, o_pos=o_pos, o_radius=o_r,
-        o_present=torch.ones(E, O, dtype=torch.bool, device=gdev), start=start, seed=seed)
+        p_present=torch.ones(E, Q, dtype=torch.bool, device=gdev),
+        p_pos=p_pos,
+        p_mass=mass,
+        p_band=band.contiguous(),
+        p_size=size.expand(E, Q).contiguous(),
+        p_collab=collab.contiguous(),
+        g_effector=g_eff.expand(E, Q, G).contiguous(),
+        g_offset=g_off,
+        o_pos=o_pos,
+        o_radius=o_r,
+        o_present=torch.ones(E, O, dtype=torch.bool, device=gdev),
+        start=start,
+        seed=seed,
+    )
     return Layout(*(t.to(device) for t in out))

@@ -44,10 +44,17 @@ def episode_metrics(state: State, layout: Layout, robots: Robots, params: WorldP
     }
 
 
-def rollout(layout: Layout, robots: Robots, tables: torch.Tensor, params: WorldParams,
-            ticks: int, step_fn: Callable | None = None, return_state: bool = False,
-            observe: Callable[[int, State], None] | None = None,
-            observe_leaf: Callable[[int, torch.Tensor], None] | None = None):
+def rollout(
+    layout: Layout,
+    robots: Robots,
+    tables: torch.Tensor,
+    params: WorldParams,
+    ticks: int,
+    step_fn: Callable | None = None,
+    return_state: bool = False,
+    observe: Callable[[int, State], None] | None = None,
+    observe_leaf: Callable[[int, torch.Tensor], None] | None = None,
+):
     """Run `ticks` ticks of every environment; the per-environment metrics (and final state).
 
     `observe(t, state)`, if given, sees the state after reset (t = 0) and after every tick

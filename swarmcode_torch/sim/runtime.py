@@ -25,7 +25,7 @@ class CompiledStep:
 
     def __init__(self, **compile_kwargs: Any) -> None:
         self.compiled = torch.compile(step, dynamic=False, **compile_kwargs)
-        self.fn: Callable | None = None     # the compiled or, once compiling failed, eager tick
+        self.fn: Callable | None = None  # the compiled or, once compiling failed, eager tick
         self.error: Exception | None = None
 
     def __call__(self, *args):
@@ -38,13 +38,23 @@ class CompiledStep:
                 import warnings
 
                 self.error, self.fn = e, step
-                lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()
-                         and not ln.strip().startswith(("Set TORCH", "For even more developer"))]
+                lines = [
+                    ln.strip()
+                    for ln in str(e).splitlines()
+                    if ln.strip()
+                    and not ln.strip().startswith(("Set TORCH", "For even more developer"))
+                ]
                 parts = [lines[0]] + ([lines[-1]] if len(lines) > 1 else []) if lines else []
-                why = f"{type(e).__name__}: {' ... '.join(p[:160] for p in parts)}" \
-                    if parts else type(e).__name__
-                warnings.warn(f"torch.compile failed ({why}); running the tick eagerly",
-                              RuntimeWarning, stacklevel=2)
+                why = (
+                    f"{type(e).__name__}: {' ... '.join(p[:160] for p in parts)}"
+                    if parts
+                    else type(e).__name__
+                )
+                warnings.warn(
+                    f"torch.compile failed ({why}); running the tick eagerly",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
         return self.fn(*args)
 
 
@@ -59,8 +69,9 @@ class CudaGraphTicks:
     Pass it as `step_fn` to `rollout`. CUDA only.
     """
 
-    def __init__(self, step_fn: Callable | None = None, ticks_per_graph: int = 10,
-                 required: bool = True):
+    def __init__(
+        self, step_fn: Callable | None = None, ticks_per_graph: int = 10, required: bool = True
+    ):
         if not torch.cuda.is_available():
             raise RuntimeError("CUDA graphs need a CUDA device")
         if ticks_per_graph < 1:
@@ -70,7 +81,7 @@ class CudaGraphTicks:
             step_fn = CompiledStep()
         self.step_fn: Callable = step_fn
         self.k = ticks_per_graph
-        self.key: tuple | None = None   # the shapes and params of the captured graph
+        self.key: tuple | None = None  # the shapes and params of the captured graph
         self.graph: torch.cuda.CUDAGraph | None = None
         # required: a tick that fails to compile is an error; otherwise the ticks run one by one
         # with the step's eager fallback
@@ -90,9 +101,13 @@ class CudaGraphTicks:
             raise ValueError("CudaGraphTicks needs every state and input tensor on the GPU")
         layout, robots, compat, keys, tables = inputs
         self.state = State(*(t.clone() for t in state))
-        self.inputs = TickInputs(Layout(*(t.clone() for t in layout)),
-                                 Robots(*(t.clone() for t in robots)),
-                                 compat.clone(), keys.clone(), tables.clone())
+        self.inputs = TickInputs(
+            Layout(*(t.clone() for t in layout)),
+            Robots(*(t.clone() for t in robots)),
+            compat.clone(),
+            keys.clone(),
+            tables.clone(),
+        )
 
         def ticks(n: int) -> None:
             for _ in range(n):
@@ -104,20 +119,21 @@ class CudaGraphTicks:
         side = torch.cuda.Stream()
         side.wait_stream(torch.cuda.current_stream())
         with torch.cuda.stream(side):
-            ticks(2)                        # compile and allocate outside the capture
+            ticks(2)  # compile and allocate outside the capture
         torch.cuda.current_stream().wait_stream(side)
         if isinstance(self.step_fn, CompiledStep) and self.step_fn.error is not None:
             if self.required:
-                raise RuntimeError("CudaGraphTicks needs the compiled tick, and compiling "
-                                   f"failed: {self.step_fn.error}")
+                raise RuntimeError(
+                    "CudaGraphTicks needs the compiled tick, and compiling "
+                    f"failed: {self.step_fn.error}"
+                )
             self.disabled = True
             return
         self.graph = torch.cuda.CUDAGraph()
         with torch.cuda.graph(self.graph):
             ticks(self.k)
 
-    def run_ticks(self, state: State, inputs: TickInputs, params: WorldParams,
-                  ticks: int) -> State:
+    def run_ticks(self, state: State, inputs: TickInputs, params: WorldParams, ticks: int) -> State:
         """`ticks` ticks from `state` (`inputs`: a `TickInputs` or a tuple in its order)."""
         key = (tuple((t.shape, t.dtype, t.device) for t in self._tensors(state, inputs)), params)
         if key != self.key and not self.disabled:
@@ -129,7 +145,7 @@ class CudaGraphTicks:
             return state
         for a, b in zip(self._tensors(self.state, self.inputs), self._tensors(state, inputs)):
             a.copy_(b)
-        assert self.graph is not None       # captured above or by an earlier call
+        assert self.graph is not None  # captured above or by an earlier call
         for _ in range(ticks // self.k):
             self.graph.replay()
         out = State(*(t.clone() for t in self.state))
@@ -149,13 +165,18 @@ def resolve_device(name: str) -> torch.device:
     except RuntimeError:
         raise ValueError(f"device must be auto, cpu, cuda or cuda:N, got {name!r}") from None
     if dev.type == "cuda" and dev.index is not None and dev.index >= torch.cuda.device_count():
-        raise ValueError(f"device {name!r}: there are only {torch.cuda.device_count()} CUDA "
-                         "devices")
+        raise ValueError(
+            f"device {name!r}: there are only {torch.cuda.device_count()} CUDA devices"
+        )
     return dev
 
 
-def tick_function(device: torch.device, compile: bool | None = None,
-                  cuda_graphs: bool | None = None, generations: int = 0) -> tuple[Callable, bool]:
+def tick_function(
+    device: torch.device,
+    compile: bool | None = None,
+    cuda_graphs: bool | None = None,
+    generations: int = 0,
+) -> tuple[Callable, bool]:
     """The tick function of a run on `device` and whether it is compiled. On the CPU, unless
     `compile` is true or ``SWARMCODE_TICK=reference``: the fused C++ tick (`FusedTicks`, which
     is built on first use; where it cannot be, a warning and the choice below), not compiled.
@@ -163,20 +184,26 @@ def tick_function(device: torch.device, compile: bool | None = None,
     tick: `compile` unset compiles it on CUDA, or for runs of at least COMPILE_MIN_GENERATIONS
     generations; `cuda_graphs` unset: on CUDA with the compiled tick, and a tick that fails to
     compile then runs eagerly."""
-    if device.type == "cpu" and compile is not True and not cuda_graphs \
-            and tick_choice() == "fused":
+    if (
+        device.type == "cpu"
+        and compile is not True
+        and not cuda_graphs
+        and tick_choice() == "fused"
+    ):
         fused = FusedTicks()
         if fused.ready(warn=True):
             return fused, False
-    use_compile = compile if compile is not None else (
-        device.type == "cuda" or generations >= COMPILE_MIN_GENERATIONS)
+    use_compile = (
+        compile
+        if compile is not None
+        else (device.type == "cuda" or generations >= COMPILE_MIN_GENERATIONS)
+    )
     if cuda_graphs and (device.type != "cuda" or not use_compile):
         raise ValueError("cuda_graphs needs device cuda and the compiled tick (compile)")
     step_fn: Callable = step
     if use_compile:
         step_fn = CompiledStep()
-    graphs = cuda_graphs if cuda_graphs is not None else (
-        device.type == "cuda" and use_compile)
+    graphs = cuda_graphs if cuda_graphs is not None else (device.type == "cuda" and use_compile)
     if graphs:  # unset (auto): a tick that fails to compile runs eagerly, as without graphs
         step_fn = CudaGraphTicks(step_fn, required=cuda_graphs is not None)
     return step_fn, use_compile

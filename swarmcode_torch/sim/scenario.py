@@ -32,11 +32,11 @@ MAX_GRIPS = 3
 #: Robot radii the hardware genes can take.
 ROBOT_RADII = (R_MIN, R_MAX)
 #: Upper bounds of a scenario's sizes: beyond them a world is certainly not what was meant.
-MAX_ARENA = 10_000.0          # m
+MAX_ARENA = 10_000.0  # m
 MAX_EPISODE_TICKS = 1_000_000
-MAX_NUMBER = 1e15             # any number of a scenario: float32 holds it with room to spare
+MAX_NUMBER = 1e15  # any number of a scenario: float32 holds it with room to spare
 #: The most bytes read from a scenario file or the hardware catalog file it names.
-MAX_FILE_BYTES = 16 * 2 ** 20
+MAX_FILE_BYTES = 16 * 2**20
 #: The longest scenario name, description and --scenario name or path (characters).
 MAX_NAME = 200
 MAX_DESCRIPTION = 10_000
@@ -55,14 +55,14 @@ class ScenarioError(ValueError):
 class PackageClass:
     """A group of packages that share a spec; `count` of them are placed in every environment."""
 
-    kind: str                      # "individual" or "collab"
+    kind: str  # "individual" or "collab"
     count: int
     distance: tuple[float, float]  # from the base centre (m)
-    mass: tuple[float, float]      # kg; heavier near the base when distance_weighting
-    grips: tuple[int, ...]         # effector of each grip point (one for an individual package)
+    mass: tuple[float, float]  # kg; heavier near the base when distance_weighting
+    grips: tuple[int, ...]  # effector of each grip point (one for an individual package)
     radius_band: tuple[float, float] = (0.0, 10.0)  # robot radii that can lift it (m)
     distance_weighting: bool = False
-    size: float = 0.2              # package radius (m); grip points lie just outside it
+    size: float = 0.2  # package radius (m); grip points lie just outside it
 
     @property
     def label(self) -> str:
@@ -82,11 +82,11 @@ class Scenario:
 
     name: str
     description: str
-    arena: float                   # side of the square arena (m); the base is at its centre
+    arena: float  # side of the square arena (m); the base is at its centre
     base_radius: float
     num_robots: int
     episode_ticks: int
-    species_overhead: float        # $ fabrication overhead per distinct species in a team
+    species_overhead: float  # $ fabrication overhead per distinct species in a team
     obstacle_count: int
     obstacle_radius: tuple[float, float]
     packages: tuple[PackageClass, ...]
@@ -115,11 +115,13 @@ def _get(d: dict, key: str, where: str, kind, default=None, required: bool = Tru
         raise ScenarioError(f"{where}{key}: expected {kind.__name__}, got {v!r}")
     if kind is int and abs(v) > MAX_NUMBER:
         text = str(v) if len(str(v)) <= 30 else f"{str(v)[:12]}... ({len(str(v))} digits)"
-        raise ScenarioError(f"{where}{key}: expected an integer of at most {MAX_NUMBER:g}, "
-                            f"got {text}")
+        raise ScenarioError(
+            f"{where}{key}: expected an integer of at most {MAX_NUMBER:g}, got {text}"
+        )
     if kind is float and not (math.isfinite(v) and abs(v) <= MAX_NUMBER):
-        raise ScenarioError(f"{where}{key}: expected a finite number (at most {MAX_NUMBER:g} in "
-                            f"size), got {v!r}")
+        raise ScenarioError(
+            f"{where}{key}: expected a finite number (at most {MAX_NUMBER:g} in size), got {v!r}"
+        )
     return v
 
 
@@ -127,13 +129,18 @@ def _range(d: dict, key: str, where: str, default=None, lo: float = 0.0) -> tupl
     v = d.get(key, default)
     if v is None:
         raise ScenarioError(f"{where}{key}: missing")
-    if (not isinstance(v, (list, tuple)) or len(v) != 2
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+    if (
+        not isinstance(v, (list, tuple))
+        or len(v) != 2
+        or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+    ):
         raise ScenarioError(f"{where}{key}: expected [low, high], got {v!r}")
     a, b = float(v[0]), float(v[1])
     if not all(math.isfinite(x) and abs(x) <= MAX_NUMBER for x in (a, b)):
-        raise ScenarioError(f"{where}{key}: expected finite numbers [low, high] (at most "
-                            f"{MAX_NUMBER:g} in size), got {v!r}")
+        raise ScenarioError(
+            f"{where}{key}: expected finite numbers [low, high] (at most "
+            f"{MAX_NUMBER:g} in size), got {v!r}"
+        )
     if a < lo or b < a:
         raise ScenarioError(f"{where}{key}: expected {lo} <= low <= high, got {v!r}")
     return a, b
@@ -145,8 +152,9 @@ def _effector(name, where: str) -> int:
     return EFFECTORS[name]
 
 
-def scenario_from_dict(d: dict, source: str = "scenario", folder: Path | None = None,
-                       hardware: Catalog | None = None) -> Scenario:
+def scenario_from_dict(
+    d: dict, source: str = "scenario", folder: Path | None = None, hardware: Catalog | None = None
+) -> Scenario:
     """Build and validate a :class:`Scenario` from a parsed TOML table: every field's type and
     range (finite numbers only), and whether its packages can be placed (`check_placement`).
     ScenarioError names the source and the field. `folder`: where a `hardware` file name is
@@ -164,8 +172,10 @@ def _hardware(v, folder: Path | None) -> Catalog:
     caller has checked that it is one of the two)."""
     if isinstance(v, str):
         if folder is None:
-            raise ScenarioError(f"hardware: {v!r} is a file name, but this scenario has no "
-                                "folder to find it in (give the catalog inline as a table)")
+            raise ScenarioError(
+                f"hardware: {v!r} is a file name, but this scenario has no "
+                "folder to find it in (give the catalog inline as a table)"
+            )
         if len(v) > MAX_PATH or "\0" in v:
             raise ScenarioError(f"hardware: not a file name ({len(v)} characters)")
         path = folder / v
@@ -174,11 +184,15 @@ def _hardware(v, folder: Path | None) -> Catalog:
         try:
             real, home = path.resolve(), folder.resolve()
         except (OSError, RuntimeError) as e:
-            raise ScenarioError(f"hardware: {v!r:.100} cannot be resolved "
-                                f"({getattr(e, 'strerror', None) or type(e).__name__})") from None
+            raise ScenarioError(
+                f"hardware: {v!r:.100} cannot be resolved "
+                f"({getattr(e, 'strerror', None) or type(e).__name__})"
+            ) from None
         if not real.is_relative_to(home):
-            raise ScenarioError(f"hardware: {v!r:.100} is outside the scenario's folder {home}; "
-                                "the catalog file must lie in that folder")
+            raise ScenarioError(
+                f"hardware: {v!r:.100} is outside the scenario's folder {home}; "
+                "the catalog file must lie in that folder"
+            )
         if not real.is_file():
             raise ScenarioError(f"hardware: catalog file not found: {path}")
         data = read_limited(real, f"hardware: {path}")
@@ -192,19 +206,32 @@ def _hardware(v, folder: Path | None) -> Catalog:
         raise ScenarioError(str(e)) from None
 
 
-def _scenario_from_dict(d: dict, source: str, folder: Path | None = None,
-                        hardware: Catalog | None = None) -> Scenario:
+def _scenario_from_dict(
+    d: dict, source: str, folder: Path | None = None, hardware: Catalog | None = None
+) -> Scenario:
     if not isinstance(d, dict):
         raise ScenarioError(f"{source}: expected a table")
-    known = {"name", "description", "arena", "base_radius", "num_robots", "episode_ticks",
-             "species_overhead", "obstacles", "packages", "hardware"}
+    known = {
+        "name",
+        "description",
+        "arena",
+        "base_radius",
+        "num_robots",
+        "episode_ticks",
+        "species_overhead",
+        "obstacles",
+        "packages",
+        "hardware",
+    }
     for k in d:
         if k not in known:
             raise ScenarioError(f"{k}: unknown field (known: {', '.join(sorted(known))})")
     name = _get(d, "name", "", str)
     if not name.strip() or len(name) > MAX_NAME or not name.isprintable():
-        raise ScenarioError(f"name: expected 1 to {MAX_NAME} printable characters, got "
-                            f"{len(name)} characters {name[:40]!r}")
+        raise ScenarioError(
+            f"name: expected 1 to {MAX_NAME} printable characters, got "
+            f"{len(name)} characters {name[:40]!r}"
+        )
     arena = _get(d, "arena", "", float)
     base_radius = _get(d, "base_radius", "", float)
     num_robots = _get(d, "num_robots", "", int)
@@ -264,28 +291,51 @@ def _scenario_from_dict(d: dict, source: str, folder: Path | None = None,
             raise ScenarioError(f"{w}size: must be > 0, got {size}")
         dw = _get(p, "distance_weighting", w, bool, default=False, required=False)
         for k in p:
-            if k not in {"kind", "count", "distance", "mass", "effector", "grips", "radius_band",
-                         "size", "distance_weighting"}:
+            if k not in {
+                "kind",
+                "count",
+                "distance",
+                "mass",
+                "effector",
+                "grips",
+                "radius_band",
+                "size",
+                "distance_weighting",
+            }:
                 raise ScenarioError(f"{w}{k}: unknown field")
         classes.append(PackageClass(kind, count, dist, mass, grips, band, dw, size))
     if sum(c.count for c in classes) < 1:
         raise ScenarioError("packages: the scenario places no package")
     if sum(c.count for c in classes) > MAX_PACKAGES:
-        raise ScenarioError(f"packages: {sum(c.count for c in classes)} packages, more than "
-                            f"{MAX_PACKAGES} (each is placed one by one in every environment)")
+        raise ScenarioError(
+            f"packages: {sum(c.count for c in classes)} packages, more than "
+            f"{MAX_PACKAGES} (each is placed one by one in every environment)"
+        )
     description = d.get("description", "")
     if not isinstance(description, str):
         raise ScenarioError(f"description: expected str, got {description!r:.60}")
     if len(description) > MAX_DESCRIPTION:
-        raise ScenarioError(f"description: {len(description)} characters, at most "
-                            f"{MAX_DESCRIPTION}")
+        raise ScenarioError(
+            f"description: {len(description)} characters, at most {MAX_DESCRIPTION}"
+        )
     named = d.get("hardware")
     if named is not None and not (isinstance(named, dict) or isinstance(named, str) and named):
         raise ScenarioError(f"hardware: expected a file name or a table, got {named!r}")
-    if hardware is None:       # else the given catalog stands in for the one the key names
+    if hardware is None:  # else the given catalog stands in for the one the key names
         hardware = default_catalog() if named is None else _hardware(named, folder)
-    scenario = Scenario(name, description, arena, base_radius, num_robots, ticks,
-                        overhead, obs_count, obs_radius, tuple(classes), hardware)
+    scenario = Scenario(
+        name,
+        description,
+        arena,
+        base_radius,
+        num_robots,
+        ticks,
+        overhead,
+        obs_count,
+        obs_radius,
+        tuple(classes),
+        hardware,
+    )
     check_placement(scenario)
     return scenario
 
@@ -308,42 +358,58 @@ def check_placement(s: Scenario) -> None:
     lo_r, hi_r = s.obstacle_radius
     if s.obstacle_count:
         if 2 * hi_r >= W:
-            raise ScenarioError(f"obstacles.radius: an obstacle of radius {hi_r:g} m does not fit "
-                                f"in a {W:g} m arena")
-        if s.obstacle_count * math.pi * lo_r ** 2 > W * W / 2:
-            raise ScenarioError(f"obstacles: {s.obstacle_count} obstacles of radius >= {lo_r:g} m "
-                                f"cover more than half of the {W:g} m arena; packages could not "
-                                "be placed clear of them")
-    used = s.obstacle_count * math.pi * lo_r ** 2
+            raise ScenarioError(
+                f"obstacles.radius: an obstacle of radius {hi_r:g} m does not fit "
+                f"in a {W:g} m arena"
+            )
+        if s.obstacle_count * math.pi * lo_r**2 > W * W / 2:
+            raise ScenarioError(
+                f"obstacles: {s.obstacle_count} obstacles of radius >= {lo_r:g} m "
+                f"cover more than half of the {W:g} m arena; packages could not "
+                "be placed clear of them"
+            )
+    used = s.obstacle_count * math.pi * lo_r**2
     for i, c in enumerate(s.packages):
         w = f"packages[{i}]."
         band_lo, band_hi = c.radius_band
         if band_hi < ROBOT_RADII[0] or band_lo > ROBOT_RADII[1]:
-            raise ScenarioError(f"{w}radius_band: [{band_lo:g}, {band_hi:g}] m holds no robot "
-                                f"radius (robots are {ROBOT_RADII[0]:g}-{ROBOT_RADII[1]:g} m)")
+            raise ScenarioError(
+                f"{w}radius_band: [{band_lo:g}, {band_hi:g}] m holds no robot "
+                f"radius (robots are {ROBOT_RADII[0]:g}-{ROBOT_RADII[1]:g} m)"
+            )
         clear = c.size + PACKAGE_CLEARANCE
         d_lo, d_hi = c.distance
         if d_lo < base + c.size:
-            raise ScenarioError(f"{w}distance: packages at {d_lo:g} m lie inside the base "
-                                f"(base_radius {base:g} m + size {c.size:g} m)")
+            raise ScenarioError(
+                f"{w}distance: packages at {d_lo:g} m lie inside the base "
+                f"(base_radius {base:g} m + size {c.size:g} m)"
+            )
         if d_lo > W / 2 - clear:
-            raise ScenarioError(f"{w}distance: {d_lo:g} m from the base centre lies outside the "
-                                f"arena in most directions (at most {W / 2 - clear:g} m: arena/2 "
-                                f"- size - {PACKAGE_CLEARANCE:g})")
+            raise ScenarioError(
+                f"{w}distance: {d_lo:g} m from the base centre lies outside the "
+                f"arena in most directions (at most {W / 2 - clear:g} m: arena/2 "
+                f"- size - {PACKAGE_CLEARANCE:g})"
+            )
         if d_hi > (W / 2 - clear) * math.sqrt(2):
-            raise ScenarioError(f"{w}distance: {d_hi:g} m lies outside the arena (at most "
-                                f"{(W / 2 - clear) * math.sqrt(2):.3g} m)")
-        need = c.count * math.pi * clear ** 2
+            raise ScenarioError(
+                f"{w}distance: {d_hi:g} m lies outside the arena (at most "
+                f"{(W / 2 - clear) * math.sqrt(2):.3g} m)"
+            )
+        need = c.count * math.pi * clear**2
         ring = min(math.pi * ((d_hi + clear) ** 2 - max(d_lo - clear, 0.0) ** 2), W * W)
         if need > ring:
-            raise ScenarioError(f"{w}count: {c.count} packages of size {c.size:g} m do not fit "
-                                f"at {d_lo:g}-{d_hi:g} m from the base (they need {need:.4g} m2, "
-                                f"the ring holds {ring:.4g} m2)")
+            raise ScenarioError(
+                f"{w}count: {c.count} packages of size {c.size:g} m do not fit "
+                f"at {d_lo:g}-{d_hi:g} m from the base (they need {need:.4g} m2, "
+                f"the ring holds {ring:.4g} m2)"
+            )
         used += need
-    if used > W * W - math.pi * base ** 2:
-        raise ScenarioError(f"packages: the packages and obstacles need {used:.4g} m2, more than "
-                            f"the {W * W - math.pi * base ** 2:.4g} m2 of the arena outside the "
-                            "base")
+    if used > W * W - math.pi * base**2:
+        raise ScenarioError(
+            f"packages: the packages and obstacles need {used:.4g} m2, more than "
+            f"the {W * W - math.pi * base**2:.4g} m2 of the arena outside the "
+            "base"
+        )
 
 
 def builtin_names() -> list[str]:
@@ -362,15 +428,19 @@ def read_limited(path: Path, source: str, limit: int = MAX_FILE_BYTES) -> bytes:
             if not stat.S_ISREG(st.st_mode):
                 raise ScenarioError(f"{source}: not a regular file")
             if st.st_size > limit:
-                raise ScenarioError(f"{source}: {st.st_size} bytes, more than the {limit} a "
-                                    "scenario or catalog file may have")
+                raise ScenarioError(
+                    f"{source}: {st.st_size} bytes, more than the {limit} a "
+                    "scenario or catalog file may have"
+                )
             data = f.read(limit + 1)
     except OSError as e:
-        raise ScenarioError(f"{source}: cannot be read ({e.strerror or type(e).__name__})") \
-            from None
+        raise ScenarioError(
+            f"{source}: cannot be read ({e.strerror or type(e).__name__})"
+        ) from None
     if len(data) > limit:
-        raise ScenarioError(f"{source}: more than the {limit} bytes a scenario or catalog file "
-                            "may have")
+        raise ScenarioError(
+            f"{source}: more than the {limit} bytes a scenario or catalog file may have"
+        )
     return data
 
 
@@ -380,16 +450,19 @@ def decode_text(data: bytes, source: str) -> str:
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
-        raise ScenarioError(f"{source}: not UTF-8 text (byte 0x{data[e.start]:02x} at offset "
-                            f"{e.start})") from None
+        raise ScenarioError(
+            f"{source}: not UTF-8 text (byte 0x{data[e.start]:02x} at offset {e.start})"
+        ) from None
 
 
-def parse_scenario(data: bytes, source: str, folder: Path | None = None,
-                   hardware: Catalog | None = None) -> Scenario:
+def parse_scenario(
+    data: bytes, source: str, folder: Path | None = None, hardware: Catalog | None = None
+) -> Scenario:
     """A scenario from the bytes of its TOML file (`folder`, `hardware`: `scenario_from_dict`)."""
     if len(data) > MAX_FILE_BYTES:
-        raise ScenarioError(f"{source}: {len(data)} bytes, more than a scenario file may have "
-                            f"({MAX_FILE_BYTES})")
+        raise ScenarioError(
+            f"{source}: {len(data)} bytes, more than a scenario file may have ({MAX_FILE_BYTES})"
+        )
     text = decode_text(data, source)
     depth = nesting_depth(text)
     if depth > MAX_NESTING:
@@ -410,11 +483,16 @@ def read_scenario(name_or_path: str, hardware: Catalog | None = None) -> tuple[S
     if not isinstance(name_or_path, str) or not name_or_path:
         raise ScenarioError(f"scenario: expected a name or a path, got {name_or_path!r:.60}")
     if len(name_or_path) > MAX_PATH or "\0" in name_or_path:
-        raise ScenarioError(f"scenario: a name or path of {len(name_or_path)} characters "
-                            f"{name_or_path[:40]!r}... (at most {MAX_PATH}, no NUL)")
+        raise ScenarioError(
+            f"scenario: a name or path of {len(name_or_path)} characters "
+            f"{name_or_path[:40]!r}... (at most {MAX_PATH}, no NUL)"
+        )
     if name_or_path in builtin_names():
-        data = resources.files("swarmcode_torch").joinpath(
-            f"scenarios/{name_or_path}.toml").read_bytes()
+        data = (
+            resources.files("swarmcode_torch")
+            .joinpath(f"scenarios/{name_or_path}.toml")
+            .read_bytes()
+        )
         return parse_scenario(data, name_or_path, None, hardware), data
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
@@ -422,8 +500,10 @@ def read_scenario(name_or_path: str, hardware: Catalog | None = None) -> tuple[S
             raise ScenarioError(f"scenario file not found: {path}")
         data = read_limited(path, str(path))
         return parse_scenario(data, str(path), path.parent, hardware), data
-    raise ScenarioError(f"unknown scenario {name_or_path!r} (known: {', '.join(builtin_names())}; "
-                        "or give a path to a .toml file)")
+    raise ScenarioError(
+        f"unknown scenario {name_or_path!r} (known: {', '.join(builtin_names())}; "
+        "or give a path to a .toml file)"
+    )
 
 
 def load_scenario(name_or_path: str, hardware: Catalog | None = None) -> Scenario:

@@ -14,27 +14,36 @@ _INF = 1e9
 
 
 class Senses(NamedTuple):
-    leaf: torch.Tensor      # [E, N, 14] leaf statuses
-    best: torch.Tensor      # [E, N] flat grip index of the nearest takeable grip
-    best_d: torch.Tensor    # [E, N] its distance (_INF if none)
-    rand: torch.Tensor      # [E, N] flat grip index of the robot's randomly preferred grip
-    rand_d: torch.Tensor    # [E, N] its distance
-    gpos: torch.Tensor      # [E, H, 2] grip point positions, H = Q * G
-    d_base: torch.Tensor    # [E, N]
+    leaf: torch.Tensor  # [E, N, 14] leaf statuses
+    best: torch.Tensor  # [E, N] flat grip index of the nearest takeable grip
+    best_d: torch.Tensor  # [E, N] its distance (_INF if none)
+    rand: torch.Tensor  # [E, N] flat grip index of the robot's randomly preferred grip
+    rand_d: torch.Tensor  # [E, N] its distance
+    gpos: torch.Tensor  # [E, H, 2] grip point positions, H = Q * G
+    d_base: torch.Tensor  # [E, N]
 
 
-def sense(state: State, layout: Layout, robots: Robots, compat: torch.Tensor,
-          keys: torch.Tensor, params: WorldParams) -> Senses:
+def sense(
+    state: State,
+    layout: Layout,
+    robots: Robots,
+    compat: torch.Tensor,
+    keys: torch.Tensor,
+    params: WorldParams,
+) -> Senses:
     """Leaf statuses of every robot from the current state (`keys`: see :func:`random_keys`)."""
     E, N = robots.radius.shape
     Q, G = layout.g_effector.shape[1:]
     H = Q * G
     base = state.pos.new_tensor([params.arena / 2, params.arena / 2])
     gpos = (state.p_pos[:, :, None, :] + layout.g_offset).reshape(E, H, 2)
-    dist = (gpos[:, None, :, :] - state.pos[:, :, None, :]).norm(dim=-1)       # [E, N, H]
-    avail = ((layout.g_effector >= 0) & (state.holder < 0)
-             & (state.p_status != DELIVERED)[..., None]
-             & layout.p_present[..., None]).reshape(E, 1, H)
+    dist = (gpos[:, None, :, :] - state.pos[:, :, None, :]).norm(dim=-1)  # [E, N, H]
+    avail = (
+        (layout.g_effector >= 0)
+        & (state.holder < 0)
+        & (state.p_status != DELIVERED)[..., None]
+        & layout.p_present[..., None]
+    ).reshape(E, 1, H)
     alive = robots.present & (state.energy > 0)
     free = alive & (state.holding < 0)
     valid = compat & avail & free[..., None]
@@ -42,8 +51,11 @@ def sense(state: State, layout: Layout, robots: Robots, compat: torch.Tensor,
     best_d, best = dm.min(-1)
     score = torch.where(valid, keys, -1.0)
     rand = score.argmax(-1)
-    rand_d = torch.where(valid.gather(-1, rand[..., None]).squeeze(-1),
-                         dist.gather(-1, rand[..., None]).squeeze(-1), _INF)
+    rand_d = torch.where(
+        valid.gather(-1, rand[..., None]).squeeze(-1),
+        dist.gather(-1, rand[..., None]).squeeze(-1),
+        _INF,
+    )
 
     d_base = (state.pos - base).norm(dim=-1)
     has_target = best_d < _INF

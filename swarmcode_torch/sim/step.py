@@ -15,8 +15,12 @@ from .layout import Layout
 from .sense import _INF, sense
 from .state import DELIVERED, GROUND, HELD, Robots, State, WorldParams, _waypoints
 
-_MOVE_ACTIONS = (bt.ACT_MOVE_TO_PACK, bt.ACT_MOVE_TO_BASE, bt.ACT_RANDOM_WALK,
-                 bt.ACT_MOVE_TO_RANDOM_PACK)
+_MOVE_ACTIONS = (
+    bt.ACT_MOVE_TO_PACK,
+    bt.ACT_MOVE_TO_BASE,
+    bt.ACT_RANDOM_WALK,
+    bt.ACT_MOVE_TO_RANDOM_PACK,
+)
 
 
 def _scatter_sum(values: torch.Tensor, index: torch.Tensor, size: int) -> torch.Tensor:
@@ -34,8 +38,15 @@ def _cap(v: torch.Tensor, vmax: float, vmin: float = 0.0) -> torch.Tensor:
 
 
 # ---------------------------------------------------------------- one tick
-def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, keys: torch.Tensor,
-         tables: torch.Tensor, params: WorldParams) -> State:
+def step(
+    state: State,
+    layout: Layout,
+    robots: Robots,
+    compat: torch.Tensor,
+    keys: torch.Tensor,
+    tables: torch.Tensor,
+    params: WorldParams,
+) -> State:
     """Advance every environment by one tick."""
     E, N = robots.radius.shape
     Q, G = layout.g_effector.shape[1:]
@@ -57,10 +68,10 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     # --- drop: release the grip; inside the base the package is delivered
     drop = fired[..., bt.ACT_DROP] & (holding >= 0)
     my_grip = torch.where(holding >= 0, holding * G + grip, H)
-    released = _scatter_sum(drop.float(), torch.where(drop, my_grip, H), H) > 0      # [E, H]
+    released = _scatter_sum(drop.float(), torch.where(drop, my_grip, H), H) > 0  # [E, H]
     deliver = drop & (s.d_base <= params.base_radius)
     delivered_now = _scatter_sum(deliver.float(), torch.where(deliver, holding, Q), Q) > 0
-    delivered = (state.p_status == DELIVERED) | delivered_now                       # [E, Q]
+    delivered = (state.p_status == DELIVERED) | delivered_now  # [E, Q]
     gone = delivered.repeat_interleave(G, dim=1)
     holder = torch.where(released | gone, -1, holder)
     lost = (holding >= 0) & _gather(delivered.long(), holding).bool()
@@ -70,10 +81,12 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     pick = fired[..., bt.ACT_PICK_UP] & (holding < 0) & (s.best_d <= params.reach)
     claim = torch.where(pick, s.best, H)
     winner = torch.full((E, H + 1), N, dtype=torch.long, device=dev).scatter_reduce(
-        1, claim, robot_ids, reduce="amin")
+        1, claim, robot_ids, reduce="amin"
+    )
     got = pick & (winner.gather(1, claim) == robot_ids)
     holder = torch.cat([holder, holder.new_full((E, 1), -1)], 1).scatter(
-        1, torch.where(got, s.best, H), robot_ids)[:, :H]
+        1, torch.where(got, s.best, H), robot_ids
+    )[:, :H]
     holding = torch.where(got, s.best // G, holding)
     grip = torch.where(got, s.best % G, grip)
 
@@ -86,10 +99,16 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
 
     # --- where each robot wants to go
     target = state.pos
-    target = torch.where((action == bt.ACT_MOVE_TO_PACK)[..., None] & (s.best_d < _INF)[..., None],
-                         _gather(s.gpos, s.best), target)
-    target = torch.where((action == bt.ACT_MOVE_TO_RANDOM_PACK)[..., None]
-                         & (s.rand_d < _INF)[..., None], _gather(s.gpos, s.rand), target)
+    target = torch.where(
+        (action == bt.ACT_MOVE_TO_PACK)[..., None] & (s.best_d < _INF)[..., None],
+        _gather(s.gpos, s.best),
+        target,
+    )
+    target = torch.where(
+        (action == bt.ACT_MOVE_TO_RANDOM_PACK)[..., None] & (s.rand_d < _INF)[..., None],
+        _gather(s.gpos, s.rand),
+        target,
+    )
     target = torch.where((action == bt.ACT_MOVE_TO_BASE)[..., None], base.expand(E, N, 2), target)
     target = torch.where((action == bt.ACT_RANDOM_WALK)[..., None], state.waypoint, target)
 
@@ -104,8 +123,11 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     f_cmd = f_cmd * (f_max / f_cmd.norm(dim=-1, keepdim=True).clamp_min(1e-9)).clamp(max=1.0)
 
     # --- free robots: semi-implicit Euler
-    vel = _cap(state.vel + params.dt * (f_cmd / robots.mass[..., None] - params.drag * state.vel),
-               params.v_cap, params.rest_speed)
+    vel = _cap(
+        state.vel + params.dt * (f_cmd / robots.mass[..., None] - params.drag * state.vel),
+        params.v_cap,
+        params.rest_speed,
+    )
     pos = state.pos + params.dt * vel
 
     # --- lifted packages move as one rigid body with their carriers
@@ -113,10 +135,15 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     pidx = torch.where(in_lifted, holding, Q)
     f_pkg = _scatter_sum(f_cmd, pidx, Q)
     m_pkg = layout.p_mass + _scatter_sum(robots.mass, pidx, Q)
-    p_vel = torch.where(lifted[..., None],
-                        _cap(state.p_vel
-                             + params.dt * (f_pkg / m_pkg[..., None] - params.drag * state.p_vel),
-                             params.v_cap, params.rest_speed), 0.0)
+    p_vel = torch.where(
+        lifted[..., None],
+        _cap(
+            state.p_vel + params.dt * (f_pkg / m_pkg[..., None] - params.drag * state.p_vel),
+            params.v_cap,
+            params.rest_speed,
+        ),
+        0.0,
+    )
     p_pos = state.p_pos + params.dt * p_vel
     g_off = _gather(layout.g_offset.reshape(E, H, 2), holding * G + grip)
     pos = torch.where(carrying[..., None], _gather(p_pos, holding) + g_off, pos)
@@ -125,8 +152,17 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     # --- contacts; carriers pass their correction on to the package they hold
     waiting = carrying & ~in_lifted
     m_col = torch.where(waiting, params.anchor_mass, robots.mass + share)
-    pos_c, vel_c = collide(pos, vel, robots.radius, m_col, robots.present, layout.o_pos,
-                           layout.o_radius, layout.o_present, params)
+    pos_c, vel_c = collide(
+        pos,
+        vel,
+        robots.radius,
+        m_col,
+        robots.present,
+        layout.o_pos,
+        layout.o_radius,
+        layout.o_present,
+        params,
+    )
     cnt = _scatter_sum(torch.ones_like(robots.mass), pidx, Q).clamp_min(1)[..., None]
     p_pos = p_pos + torch.where(lifted[..., None], _scatter_sum(pos_c - pos, pidx, Q) / cnt, 0.0)
     p_vel = torch.where(lifted[..., None], _scatter_sum(vel_c, pidx, Q) / cnt, p_vel)
@@ -146,11 +182,26 @@ def step(state: State, layout: Layout, robots: Robots, compat: torch.Tensor, key
     slow = (pos - state.pos).norm(dim=-1) < params.stuck_speed * params.dt
     stuck = torch.where(trying & slow, state.stuck + 1, 0)
     t = state.t + 1
-    redraw = (((state.waypoint - pos).norm(dim=-1) <= params.reach)
-              | (t % params.waypoint_period == 0))
+    redraw = ((state.waypoint - pos).norm(dim=-1) <= params.reach) | (
+        t % params.waypoint_period == 0
+    )
     waypoint = torch.where(redraw[..., None], _waypoints(state.wp_key, t, params), state.waypoint)
 
     # contiguous, like reset()'s holder: a strided view here would make a compiled step (which
     # guards on input strides) compile a second time on its second call
-    return State(t, pos, vel, energy, holding, grip, stuck, waypoint, p_pos, p_vel, p_status,
-                 holder.reshape(E, Q, G).contiguous(), p_picked, state.wp_key)
+    return State(
+        t,
+        pos,
+        vel,
+        energy,
+        holding,
+        grip,
+        stuck,
+        waypoint,
+        p_pos,
+        p_vel,
+        p_status,
+        holder.reshape(E, Q, G).contiguous(),
+        p_picked,
+        state.wp_key,
+    )

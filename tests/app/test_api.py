@@ -16,17 +16,48 @@ from typer.testing import CliRunner
 import swarmcode_torch as sc
 from swarmcode_torch.app.api import scenario_to_toml
 from swarmcode_torch.app.cli import app
-from swarmcode_torch.app.reporting import (HPARAM_METRICS, METRICS_FILE, SCALAR_TAGS, CsvReporter,
-                                           read_metrics_csv)
+from swarmcode_torch.app.reporting import (
+    HPARAM_METRICS,
+    METRICS_FILE,
+    SCALAR_TAGS,
+    CsvReporter,
+    read_metrics_csv,
+)
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.sim.scenario import builtin_names, load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
-SETTINGS = dict(scenario="one-niche", population=4, swarm_size=3, trials=1, ticks=6, seed=3,
-                budget=900.0, device="cpu", compile=False)
-CLI_ARGS = ["--scenario", "one-niche", "--population", "4", "--swarm-size", "3", "--trials", "1",
-            "--ticks", "6", "--seed", "3", "--budget", "900", "--device", "cpu", "--no-compile"]
+SETTINGS = dict(
+    scenario="one-niche",
+    population=4,
+    swarm_size=3,
+    trials=1,
+    ticks=6,
+    seed=3,
+    budget=900.0,
+    device="cpu",
+    compile=False,
+)
+CLI_ARGS = [
+    "--scenario",
+    "one-niche",
+    "--population",
+    "4",
+    "--swarm-size",
+    "3",
+    "--trials",
+    "1",
+    "--ticks",
+    "6",
+    "--seed",
+    "3",
+    "--budget",
+    "900",
+    "--device",
+    "cpu",
+    "--no-compile",
+]
 
 
 def only_dir(logdir: Path) -> Path:
@@ -50,8 +81,19 @@ def untimed(row: dict) -> dict:
 def runs(tmp_path_factory):
     """The same 2-generation run by the CLI and by the API."""
     base = tmp_path_factory.mktemp("runs")
-    r = CliRunner().invoke(app, ["evolve", *CLI_ARGS, "--generations", "2", "--render-every", "0",
-                                 "--logdir", str(base / "cli")])
+    r = CliRunner().invoke(
+        app,
+        [
+            "evolve",
+            *CLI_ARGS,
+            "--generations",
+            "2",
+            "--render-every",
+            "0",
+            "--logdir",
+            str(base / "cli"),
+        ],
+    )
     assert r.exit_code == 0, r.output
     result = sc.evolve(generations=2, logdir=base / "api", render_every=0, **SETTINGS)
     return only_dir(base / "cli"), result
@@ -64,15 +106,17 @@ def test_api_run_directory_is_the_clis(runs):
     for f in ("config.toml", "summary.json", "teams.jsonl", "checkpoint.pt", METRICS_FILE):
         assert (api_dir / f).is_file(), f
     assert list(api_dir.glob("events.out.tfevents.*"))
+
     def files(d):
         return {f.name for f in d.iterdir() if not f.name.startswith("events.out.tfevents.")}
 
-    assert files(api_dir) - files(cli_dir) <= {METRICS_FILE}     # until the CLI writes it too
+    assert files(api_dir) - files(cli_dir) <= {METRICS_FILE}  # until the CLI writes it too
     assert files(cli_dir) <= files(api_dir)
     for f in ("config.toml", "scenario.toml", "hardware.toml"):
         assert (api_dir / f).read_bytes() == (cli_dir / f).read_bytes(), f
-    assert (api_dir / "teams.jsonl").read_text().splitlines() == \
-        (cli_dir / "teams.jsonl").read_text().splitlines()
+    assert (api_dir / "teams.jsonl").read_text().splitlines() == (
+        cli_dir / "teams.jsonl"
+    ).read_text().splitlines()
 
     def summary(d):
         s = json.loads((d / "summary.json").read_text())
@@ -80,7 +124,7 @@ def test_api_run_directory_is_the_clis(runs):
         return s
 
     assert summary(api_dir) == summary(cli_dir)
-    if (cli_dir / METRICS_FILE).is_file():          # once the CLI writes metrics.csv too
+    if (cli_dir / METRICS_FILE).is_file():  # once the CLI writes metrics.csv too
         cli_rows, api_rows = (read_metrics_csv(d / METRICS_FILE)[0] for d in (cli_dir, api_dir))
         assert [untimed(r) for r in cli_rows] == [untimed(r) for r in api_rows]
 
@@ -98,8 +142,11 @@ def test_run_result_holds_history_species_and_best_team(runs):
     summary = json.loads((result.run_dir / "summary.json").read_text())
     best = result.best_team
     assert {"fitness", "cost", "species", "niches", "designs"} <= set(best)
-    assert (best["fitness"], best["cost"], best["species"]) == \
-        (summary["best_fitness"], summary["team_cost"], summary["num_species"])
+    assert (best["fitness"], best["cost"], best["species"]) == (
+        summary["best_fitness"],
+        summary["team_cost"],
+        summary["num_species"],
+    )
     assert sum(d["count"] for d in best["designs"]) == 3
     assert "2/2 generations" in repr(result)
 
@@ -141,12 +188,16 @@ def test_in_memory_run_writes_nothing_and_matches_the_files(runs, tmp_path, monk
     _, on_disk = runs
     monkeypatch.chdir(tmp_path)
     seen = []
-    result = sc.evolve(sc.SwarmCoDeConfig(**SETTINGS, generations=2), logdir=None,
-                       callback=lambda r: seen.append(r.generation))
+    result = sc.evolve(
+        sc.SwarmCoDeConfig(**SETTINGS, generations=2),
+        logdir=None,
+        callback=lambda r: seen.append(r.generation),
+    )
     assert result.run_dir is None and list(tmp_path.iterdir()) == []
     assert seen == [0, 1]
-    assert all(same(a[k], b[k]) for a, b in zip(result.history, on_disk.history)
-               for k in untimed(a))
+    assert all(
+        same(a[k], b[k]) for a, b in zip(result.history, on_disk.history) for k in untimed(a)
+    )
     assert result.best_team == on_disk.best_team and result.species == on_disk.species
 
 
@@ -156,16 +207,17 @@ def test_to_pandas_and_its_error_without_pandas(runs, monkeypatch):
     df = result.to_pandas()
     assert isinstance(df, pd.DataFrame) and list(df.index) == [0, 1]
     assert df["fitness/best"].iloc[-1] == result.history[-1]["fitness/best"]
-    monkeypatch.setitem(sys.modules, "pandas", None)       # as if it were not installed
+    monkeypatch.setitem(sys.modules, "pandas", None)  # as if it were not installed
     with pytest.raises(ImportError, match="pip install pandas"):
         result.to_pandas()
 
 
 def test_resume_and_load(tmp_path):
-    first = sc.evolve(generations=2, logdir=tmp_path, checkpoint_every=1, render_every=0,
-                      **SETTINGS)
+    first = sc.evolve(
+        generations=2, logdir=tmp_path, checkpoint_every=1, render_every=0, **SETTINGS
+    )
     before = {f.name: f.stat().st_mtime_ns for f in first.run_dir.iterdir()}
-    done = sc.resume(first.run_dir, render_every=0)         # nothing to do: no file changes
+    done = sc.resume(first.run_dir, render_every=0)  # nothing to do: no file changes
     assert done.generations == 2 and len(done.history) == 2
     assert {f.name: f.stat().st_mtime_ns for f in first.run_dir.iterdir()} == before
     result = sc.resume(first.run_dir, generations=3, render_every=0)
@@ -180,24 +232,38 @@ def test_resume_and_load(tmp_path):
     assert loaded.species == result.species and len(loaded.history) == 3
     # the same seed straight through: the same teams
     straight = sc.evolve(generations=3, logdir=tmp_path / "straight", render_every=0, **SETTINGS)
-    assert (straight.run_dir / "teams.jsonl").read_text() == \
-        (first.run_dir / "teams.jsonl").read_text()
+    assert (straight.run_dir / "teams.jsonl").read_text() == (
+        first.run_dir / "teams.jsonl"
+    ).read_text()
 
 
 def test_csv_reporter_drops_repeated_generations_on_resume(tmp_path):
     path = tmp_path / METRICS_FILE
     path.write_text("generation,fitness/best\n0,1.0\n1,2.0\n2,3.0\n3,4.0\n4,5")  # cut short
     rep = CsvReporter(tmp_path)
-    rep.on_start(SimpleNamespace(state=SimpleNamespace(generation=2)))     # checkpoint at 2
+    rep.on_start(SimpleNamespace(state=SimpleNamespace(generation=2)))  # checkpoint at 2
     assert path.read_text() == "generation,fitness/best\n0,1.0\n1,2.0\n"
     from dataclasses import fields
 
     from swarmcode_torch.coevo.evolve import GenerationResult
-    team = dict.fromkeys(("fitness", "species", "niches", "cost", "deliveries",
-                          "deliveries_individual", "deliveries_collab", "energy_used"), 1.5)
-    result = GenerationResult(**{**{f.name: 1.5 for f in fields(GenerationResult)},
-                                 "generation": 2, "team": team})
-    rep.on_generation(None, result)                # a header without the new tags gets them
+
+    team = dict.fromkeys(
+        (
+            "fitness",
+            "species",
+            "niches",
+            "cost",
+            "deliveries",
+            "deliveries_individual",
+            "deliveries_collab",
+            "energy_used",
+        ),
+        1.5,
+    )
+    result = GenerationResult(
+        **{**{f.name: 1.5 for f in fields(GenerationResult)}, "generation": 2, "team": team}
+    )
+    rep.on_generation(None, result)  # a header without the new tags gets them
     rows, columns = read_metrics_csv(path)
     assert columns == ["generation", "fitness/best", *SCALAR_TAGS[1:]]
     assert [r["generation"] for r in rows] == [0, 1, 2]
@@ -215,8 +281,9 @@ def test_settings_are_checked_before_anything_is_written(tmp_path):
         sc.evolve(scenario="no-such-world", logdir=tmp_path)
     with pytest.raises(ValueError, match="checkpoint_every"):
         sc.evolve(checkpoint_every=0, logdir=tmp_path, **SETTINGS)
-    with pytest.raises(ValueError, match="memory.*use a smaller population, trials or "
-                                         "swarm_size$"):   # the API's names, not the flags
+    with pytest.raises(
+        ValueError, match="memory.*use a smaller population, trials or swarm_size$"
+    ):  # the API's names, not the flags
         sc.evolve(**{**SETTINGS, "population": 10**6, "trials": 1000}, logdir=tmp_path)
     with pytest.raises(ValueError, match="not a run directory"):
         sc.resume(tmp_path / "absent")
@@ -241,7 +308,7 @@ def test_custom_scenario_from_a_file_and_as_an_object(tmp_path):
     result = sc.evolve(scenario=s, generations=1, logdir=tmp_path, render_every=0, **tiny)
     assert result.run_dir.name.startswith("three-niche-wide__b900__3__")
     assert result.config.scenario == "three-niche-wide"
-    assert load_scenario(str(result.run_dir / "scenario.toml")) == s     # the run's own copy
+    assert load_scenario(str(result.run_dir / "scenario.toml")) == s  # the run's own copy
     resumed = sc.resume(result.run_dir, generations=2, render_every=0)
     assert resumed.generations == 2 and resumed.scenario == s
     assert sc.load(result.run_dir).scenario == s
@@ -255,9 +322,23 @@ def test_custom_scenario_from_a_file_and_as_an_object(tmp_path):
 
 
 def test_examples_script_runs_its_scenario(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(sys, "argv", ["custom_scenario.py", "--generations", "1", "--population",
-                                      "4", "--swarm-size", "3", "--ticks", "6",
-                                      "--logdir", str(tmp_path)])
+    monkeypatch.setattr(
+        sys,
+        "argv",
+        [
+            "custom_scenario.py",
+            "--generations",
+            "1",
+            "--population",
+            "4",
+            "--swarm-size",
+            "3",
+            "--ticks",
+            "6",
+            "--logdir",
+            str(tmp_path),
+        ],
+    )
     runpy.run_path(str(EXAMPLES / "custom_scenario.py"), run_name="__main__")
     out = capsys.readouterr().out
     assert "three-niche" in out and "best team: fitness" in out
@@ -267,27 +348,44 @@ def test_examples_script_runs_its_scenario(tmp_path, monkeypatch, capsys):
 
 @pytest.mark.subprocess
 def test_package_exports_and_cheap_import():
-    code = ("import sys, swarmcode_torch as sc; "
-            "heavy = sorted({m.split('.')[0] for m in sys.modules} & "
-            "{'matplotlib', 'tensorboard', 'typer', 'rich', 'pandas', 'PIL'}); "
-            "import swarmcode_torch.coevo.evolve as E; "
-            "print(heavy, callable(sc.evolve), sc.evolve.__module__, hasattr(E, 'generation'), "
-            "sc.__version__)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=300, check=True).stdout.split()
+    code = (
+        "import sys, swarmcode_torch as sc; "
+        "heavy = sorted({m.split('.')[0] for m in sys.modules} & "
+        "{'matplotlib', 'tensorboard', 'typer', 'rich', 'pandas', 'PIL'}); "
+        "import swarmcode_torch.coevo.evolve as E; "
+        "print(heavy, callable(sc.evolve), sc.evolve.__module__, hasattr(E, 'generation'), "
+        "sc.__version__)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True
+    ).stdout.split()
     assert out[:4] == ["[]", "True", "swarmcode_torch.app.api", "True"], out
     assert out[4] == sc.__version__
-    for name in ("evolve", "resume", "load", "RunResult", "SwarmCoDeConfig", "Evolution",
-                 "load_scenario", "Scenario", "__version__"):
+    for name in (
+        "evolve",
+        "resume",
+        "load",
+        "RunResult",
+        "SwarmCoDeConfig",
+        "Evolution",
+        "load_scenario",
+        "Scenario",
+        "__version__",
+    ):
         assert name in sc.__all__ and hasattr(sc, name)
     from swarmcode_torch.coevo.config import SwarmCoDeConfig
-    assert SwarmCoDeConfig is sc.SwarmCoDeConfig is sc.EvolveConfig   # the name before 0.3
+
+    assert SwarmCoDeConfig is sc.SwarmCoDeConfig is sc.EvolveConfig  # the name before 0.3
 
 
 @pytest.mark.subprocess
 def test_python_dash_m_runs_the_cli():
-    r = subprocess.run([sys.executable, "-m", "swarmcode_torch", "--help"], capture_output=True,
-                       text=True, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-m", "swarmcode_torch", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
     assert "evolve" in r.stdout and "Usage" in r.stdout
 
@@ -295,14 +393,22 @@ def test_python_dash_m_runs_the_cli():
 def test_run_names_say_what_differs():
     from swarmcode_torch.app.runs import run_dir_name
 
-    when = 1767225600.0                     # a fixed time: only the fields before it matter
+    when = 1767225600.0  # a fixed time: only the fields before it matter
     stamp = run_dir_name(SwarmCoDeConfig(), when).rsplit("__", 1)[1]
-    assert run_dir_name(SwarmCoDeConfig(scenario="four-niche", seed=3), when) == \
-        f"four-niche__3__{stamp}"
-    assert run_dir_name(SwarmCoDeConfig(scenario="budget", budget=4000.0, seed=1), when) == \
-        f"budget__b4000__1__{stamp}"
-    assert run_dir_name(SwarmCoDeConfig(scenario="examples/x.toml", budget=2500.5,
-                                        objective="roi"), when) == f"x__b2500.5__roi__0__{stamp}"
+    assert (
+        run_dir_name(SwarmCoDeConfig(scenario="four-niche", seed=3), when)
+        == f"four-niche__3__{stamp}"
+    )
+    assert (
+        run_dir_name(SwarmCoDeConfig(scenario="budget", budget=4000.0, seed=1), when)
+        == f"budget__b4000__1__{stamp}"
+    )
+    assert (
+        run_dir_name(
+            SwarmCoDeConfig(scenario="examples/x.toml", budget=2500.5, objective="roi"), when
+        )
+        == f"x__b2500.5__roi__0__{stamp}"
+    )
 
 
 def test_a_run_records_its_software_device_and_commit(tmp_path):
@@ -316,26 +422,50 @@ def test_a_run_records_its_software_device_and_commit(tmp_path):
     sw = json.loads((result.run_dir / "summary.json").read_text())["software"]
     assert sw["swarmcode-torch"] == sc.__version__ and sw["torch"] == torch.__version__
     assert sw["device"] == f"cpu ({platform.machine()})"
-    if (ROOT / ".git").exists() and shutil.which("git"):   # run from this checkout: its commit
-        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short=12", "HEAD"],
-                              capture_output=True, text=True, check=True).stdout.strip()
+    if (ROOT / ".git").exists() and shutil.which("git"):  # run from this checkout: its commit
+        head = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "--short=12", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
         assert sw["commit"].removesuffix("+dirty") == head
     config = (result.run_dir / "config.toml").read_text().splitlines()
-    assert config[1] == f"# written by swarmcode-torch {sc.__version__}, torch {torch.__version__}, " \
+    assert (
+        config[1] == f"# written by swarmcode-torch {sc.__version__}, torch {torch.__version__}, "
         f"device cpu ({platform.machine()})" + (f", commit {sw['commit']}" if sw["commit"] else "")
-    assert sc.load(result.run_dir).config.budget == 3000.0   # the comment is no setting
+    )
+    assert sc.load(result.run_dir).config.budget == 3000.0  # the comment is no setting
 
 
 def test_api_preset_sets_the_papers_rules_under_explicit_settings(tmp_path):
-    r = sc.evolve(preset="paper", scenario="one-niche", generations=1, population=6, swarm_size=4,
-                  trials=1, ticks=10, seed=1, logdir=None, partner_admission="substitute")
+    r = sc.evolve(
+        preset="paper",
+        scenario="one-niche",
+        generations=1,
+        population=6,
+        swarm_size=4,
+        trials=1,
+        ticks=10,
+        seed=1,
+        logdir=None,
+        partner_admission="substitute",
+    )
     cfg = r.config
     assert (cfg.preset, cfg.partners_per_niche, cfg.quota_size_exponent) == ("paper", "all", None)
     assert cfg.partner_admission == "substitute"  # an explicit setting goes on top of the preset
-    given = sc.evolve(SwarmCoDeConfig(quota_size_exponent=0.5), preset="paper",
-                      scenario="one-niche", generations=1, population=6, swarm_size=4, trials=1,
-                      ticks=10, logdir=None).config
-    assert given.quota_size_exponent is None     # the preset's settings replace the config's
+    given = sc.evolve(
+        SwarmCoDeConfig(quota_size_exponent=0.5),
+        preset="paper",
+        scenario="one-niche",
+        generations=1,
+        population=6,
+        swarm_size=4,
+        trials=1,
+        ticks=10,
+        logdir=None,
+    ).config
+    assert given.quota_size_exponent is None  # the preset's settings replace the config's
     with pytest.raises(ValueError, match="unknown preset"):
         sc.evolve(preset="fast", logdir=tmp_path)
     assert not any(tmp_path.iterdir())
@@ -352,7 +482,7 @@ def test_progress_true_prints_a_line_per_generation_and_false_prints_nothing(tmp
     assert capsys.readouterr() == ("", "")
     sc.resume(run.run_dir, generations=3, render_every=0, progress=True)
     assert [ln.split("  ")[0] for ln in capsys.readouterr().out.splitlines()] == ["done 3/3"]
-    sc.evolve(generations=1, logdir=None, **SETTINGS)     # the default: not on a pipe or file
+    sc.evolve(generations=1, logdir=None, **SETTINGS)  # the default: not on a pipe or file
     assert capsys.readouterr() == ("", "")
     with pytest.raises(TypeError, match="progress"):
         sc.evolve(generations=1, logdir=None, progress="yes", **SETTINGS)
@@ -367,7 +497,7 @@ def test_progress_on_a_terminal_or_in_a_notebook_is_one_line_redrawn(monkeypatch
 
     screen = Terminal()
     monkeypatch.setattr(sys, "stdout", screen)
-    sc.evolve(generations=3, logdir=None, **SETTINGS)        # the default shows it here
+    sc.evolve(generations=3, logdir=None, **SETTINGS)  # the default shows it here
     text = screen.getvalue()
     assert text.endswith("\n") and text.count("\n") == 1, repr(text)
     frames = text.rstrip("\n").split("\r")[1:]

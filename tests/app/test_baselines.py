@@ -5,24 +5,31 @@ from dataclasses import replace
 import pytest
 import torch
 
-from swarmcode_torch.baselines import (ALGORITHMS, FixedSpeciesCCEA, HomogeneousGA, SwarmCoDeRun,
-
-                                       compare, distinct_per_row, evaluate_team,
-
-                                       fixed_species_ccea, homogeneous_ga, plan_generations,
-
-                                       reproduce_groups, split_evenly, summarize, swarmcode,
-
-                                       swarmcode_no_dominance)
-from swarmcode_torch.coevo.evolve import random_population
-from swarmcode_torch.coevo.population import design_record
+from swarmcode_torch.baselines import (
+    ALGORITHMS,
+    FixedSpeciesCCEA,
+    HomogeneousGA,
+    SwarmCoDeRun,
+    compare,
+    distinct_per_row,
+    evaluate_team,
+    fixed_species_ccea,
+    homogeneous_ga,
+    plan_generations,
+    reproduce_groups,
+    split_evenly,
+    summarize,
+    swarmcode,
+    swarmcode_no_dominance,
+)
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
-from swarmcode_torch.coevo.population import Population
-from swarmcode_torch.coevo.population import genome_phenotype
+from swarmcode_torch.coevo.evolve import random_population
+from swarmcode_torch.coevo.population import Population, design_record, genome_phenotype
 from swarmcode_torch.sim.step import step as world_step
 
-TINY = SwarmCoDeConfig(scenario="four-niche", population=8, swarm_size=5, trials=2, ticks=12,
-                    seed=3, device="cpu")
+TINY = SwarmCoDeConfig(
+    scenario="four-niche", population=8, swarm_size=5, trials=2, ticks=12, seed=3, device="cpu"
+)
 CPU = torch.device("cpu")
 
 
@@ -53,16 +60,18 @@ def test_distinct_per_row_ignores_empty_slots():
 def test_elites_survive_unchanged_first_in_each_group():
     pop = random_population(13, TINY, gen(1), CPU)
     fit = torch.rand(13, generator=gen(2))
-    sizes = [8, 5]                                    # elite_count: 8 -> 2, 5 -> 2 (max_elite 3)
+    sizes = [8, 5]  # elite_count: 8 -> 2, 5 -> 2 (max_elite 3)
     children, is_elite, parent = reproduce_groups(pop, fit, sizes, 3, gen(3))
     assert children.size == 13
     for start, n in ((0, 8), (8, 5)):
-        top = (torch.sort(fit[start:start + n], descending=True, stable=True).indices + start)[:2]
-        assert parent[start:start + 2].tolist() == top.tolist()
-        assert is_elite[start:start + n].tolist() == [True, True] + [False] * (n - 2)
+        top = (torch.sort(fit[start : start + n], descending=True, stable=True).indices + start)[:2]
+        assert parent[start : start + 2].tolist() == top.tolist()
+        assert is_elite[start : start + n].tolist() == [True, True] + [False] * (n - 2)
         assert same_genome(children.index(slice(start, start + 2)), pop.index(top))
         # offspring descend from a parent of their own group
-        assert ((parent[start:start + n] >= start) & (parent[start:start + n] < start + n)).all()
+        assert (
+            (parent[start : start + n] >= start) & (parent[start : start + n] < start + n)
+        ).all()
 
 
 def test_offspring_are_mutated_not_copies():
@@ -105,7 +114,7 @@ def test_ga_one_batch_per_generation_and_episode_count():
     for i in range(1, 3):
         m = ga.step()
         assert m["episodes"] == ga.episodes == i * TINY.population * TINY.trials
-    assert len(shapes) == 2 * TINY.ticks                       # one tick loop per generation
+    assert len(shapes) == 2 * TINY.ticks  # one tick loop per generation
     assert set(shapes) == {(TINY.population * TINY.trials, 5, 2)}
 
 
@@ -146,9 +155,9 @@ def test_ccea_slot_split_and_teams(k, slots):
     teams = cc.teams()
     for i in range(10):
         s = int(cc.species[i])
-        assert int((teams[i] == i).sum()) == slots[s]          # its own species' slots
+        assert int((teams[i] == i).sum()) == slots[s]  # its own species' slots
         for j in range(k):
-            if j != s:                                         # the others' representatives
+            if j != s:  # the others' representatives
                 sel = cc.slot_species == j
                 assert (teams[i][sel] == cc.representatives[j]).all()
                 assert int(cc.species[cc.representatives[j]]) == j
@@ -164,7 +173,7 @@ def test_ccea_steps_episodes_and_representatives():
         # next representatives: the first row of each block, the best of the generation
         assert cc.representatives.tolist() == [0, 4]
         for j, start in enumerate((0, 4)):
-            block = cc.last_scores[start:start + 4]
+            block = cc.last_scores[start : start + 4]
             assert int(cc.species[start]) == j and block.numel() == 4
     ms = list(fixed_species_ccea(TINY, 2, 1, gen()))
     assert ms[-1]["episodes"] == TINY.population * TINY.trials
@@ -172,7 +181,7 @@ def test_ccea_steps_episodes_and_representatives():
 
 def test_ccea_rejects_bad_species_counts():
     with pytest.raises(ValueError):
-        FixedSpeciesCCEA(TINY, 6, gen())                       # more species than slots
+        FixedSpeciesCCEA(TINY, 6, gen())  # more species than slots
     with pytest.raises(ValueError):
         FixedSpeciesCCEA(replace(TINY, population=6), 4, gen())  # < 2 individuals per species
 
@@ -195,8 +204,10 @@ def test_swarmcode_wrapper_matches_evolution_and_counts_episodes():
     assert run.best.species == best["species"] and run.best.team.numel() == 5
     counts = torch.bincount(run.best.team, minlength=run.best.genome.size).tolist()
     cost = genome_phenotype(run.best.genome).cost
-    got = sorted((design_record(run.best.genome, r, 0, float(cost[r]))["bt"], counts[r])
-                 for r in range(run.best.genome.size))
+    got = sorted(
+        (design_record(run.best.genome, r, 0, float(cost[r]))["bt"], counts[r])
+        for r in range(run.best.genome.size)
+    )
     want = sorted((d["bt"], d["count"]) for d in best["designs"])
     assert got == want
 
@@ -218,8 +229,18 @@ def test_plan_gives_equal_budgets():
         plan_generations(2 * 8 * 2 * 5 + 1, 8, 2)
 
 
-COMPARE = dict(scenario="four-niche", seeds=[1], generations=1, population=4, swarm_size=3,
-               trials=1, ticks=6, device="cpu", num_species=2, eval_trials=2)
+COMPARE = dict(
+    scenario="four-niche",
+    seeds=[1],
+    generations=1,
+    population=4,
+    swarm_size=3,
+    trials=1,
+    ticks=6,
+    device="cpu",
+    num_species=2,
+    eval_trials=2,
+)
 
 
 def test_compare_equal_episodes_and_deterministic():
@@ -231,7 +252,7 @@ def test_compare_equal_episodes_and_deterministic():
     by = {r["algorithm"]: r for r in rows}
     assert by["homogeneous-ga"]["species"] == 1 and by["ccea"]["species"] == 2
     assert all(r["seed"] == 1 for r in rows)
-    again = compare(**COMPARE)                                 # same seed: the same results
+    again = compare(**COMPARE)  # same seed: the same results
     strip = lambda r: {k: v for k, v in r.items() if k != "seconds"}  # noqa: E731
     assert [strip(r) for r in again] == [strip(r) for r in rows]
 
@@ -246,9 +267,21 @@ def test_ga_and_ccea_same_seed_same_run_different_seed_differs():
 
 
 def test_summarize_mean_and_sample_std():
-    rows = [dict(algorithm="a", seed=s, episodes=8, generations=1, best_fitness=v,
-                 heldout_fitness=v, heldout_deliveries=0.0, species=1, team_cost=10.0,
-                 seconds=1.0) for s, v in ((0, 1.0), (1, 3.0))]
+    rows = [
+        dict(
+            algorithm="a",
+            seed=s,
+            episodes=8,
+            generations=1,
+            best_fitness=v,
+            heldout_fitness=v,
+            heldout_deliveries=0.0,
+            species=1,
+            team_cost=10.0,
+            seconds=1.0,
+        )
+        for s, v in ((0, 1.0), (1, 3.0))
+    ]
     (t,) = summarize(rows)
-    assert t["best_fitness"] == 2.0 and t["best_fitness_std"] == pytest.approx(2 ** 0.5)
+    assert t["best_fitness"] == 2.0 and t["best_fitness_std"] == pytest.approx(2**0.5)
     assert t["seeds"] == 2 and t["species_std"] == 0.0

@@ -16,8 +16,16 @@ from swarmcode_torch.coevo.config import EvalConfig
 from swarmcode_torch.coevo.evaluation import team_scores
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY = dict(scenario="one-niche", population=4, swarm_size=3, trials=2, ticks=6, seed=3,
-            device="cpu", compile=False)
+TINY = dict(
+    scenario="one-niche",
+    population=4,
+    swarm_size=3,
+    trials=2,
+    ticks=6,
+    seed=3,
+    device="cpu",
+    compile=False,
+)
 CALLS = []
 
 
@@ -39,7 +47,7 @@ def test_a_user_fitness_replaces_the_team_score_and_the_rest_applies_to_it():
     assert len(CALLS) == 3
     keys, shape, kind = CALLS[0]
     assert "delivered_individual" in keys and "closeness" in keys and kind is EvalConfig
-    assert shape == (2 * 4 * 2,)                   # E = 2 (focal, baseline) * B * trials
+    assert shape == (2 * 4 * 2,)  # E = 2 (focal, baseline) * B * trials
     for a, b in zip(base.history, twice.history):
         assert b["fitness/best"] == 2 * a["fitness/best"]
         assert b["team/fitness"] == 2 * a["team/fitness"]
@@ -53,12 +61,20 @@ def test_a_user_fitness_replaces_the_team_score_and_the_rest_applies_to_it():
 
 
 def test_a_custom_run_records_its_function_and_resume_needs_it(tmp_path):
-    first = sc.evolve(generations=2, logdir=tmp_path / "a", checkpoint_every=1, render_every=0,
-                      fitness=deliveries, **TINY)
+    first = sc.evolve(
+        generations=2,
+        logdir=tmp_path / "a",
+        checkpoint_every=1,
+        render_every=0,
+        fitness=deliveries,
+        **TINY,
+    )
     run = first.run_dir
     summary = json.loads((run / "summary.json").read_text())
     assert summary["fitness"] == "custom: test_custom_fitness.deliveries"
-    assert 'fitness_function = "test_custom_fitness.deliveries"' in (run / "config.toml").read_text()
+    assert (
+        'fitness_function = "test_custom_fitness.deliveries"' in (run / "config.toml").read_text()
+    )
     with pytest.raises(RunError, match="custom fitness function .*deliveries.*fitness=fn"):
         sc.resume(run, generations=3)
     r = CliRunner().invoke(app, ["evolve", "--resume", str(run), "--generations", "3"])
@@ -66,8 +82,9 @@ def test_a_custom_run_records_its_function_and_resume_needs_it(tmp_path):
     assert "Traceback" not in r.output
     resumed = sc.resume(run, generations=3, render_every=0, fitness=deliveries)
     assert resumed.generations == 3
-    straight = sc.evolve(generations=3, logdir=tmp_path / "b", render_every=0,
-                         fitness=deliveries, **TINY)
+    straight = sc.evolve(
+        generations=3, logdir=tmp_path / "b", render_every=0, fitness=deliveries, **TINY
+    )
     assert (run / "teams.jsonl").read_text() == (straight.run_dir / "teams.jsonl").read_text()
     assert sc.load(run).config.fitness_function == "test_custom_fitness.deliveries"
     # a run of the built-in fitness does not say so, and keeps it
@@ -78,41 +95,76 @@ def test_a_custom_run_records_its_function_and_resume_needs_it(tmp_path):
         sc.resume(plain.run_dir, generations=2, fitness=deliveries)
 
 
-@pytest.mark.parametrize("fn, error, needle", [
-    (lambda m, c, cfg: c[:3], ValueError, "shape \\(16,\\), got \\(3,\\)"),
-    (lambda m, c, cfg: [1.0] * c.numel(), TypeError, "must return a tensor"),
-    (lambda m, c, cfg: c * float("nan"), ValueError, "NaN or infinite"),
-    ("not a function", TypeError, "must be a function"),
-])
+@pytest.mark.parametrize(
+    "fn, error, needle",
+    [
+        (lambda m, c, cfg: c[:3], ValueError, "shape \\(16,\\), got \\(3,\\)"),
+        (lambda m, c, cfg: [1.0] * c.numel(), TypeError, "must return a tensor"),
+        (lambda m, c, cfg: c * float("nan"), ValueError, "NaN or infinite"),
+        ("not a function", TypeError, "must be a function"),
+    ],
+)
 def test_a_bad_fitness_function_is_a_clear_error(fn, error, needle):
     with pytest.raises(error, match=needle):
         sc.evolve(generations=1, logdir=None, fitness=fn, **TINY)
 
 
 def test_the_command_line_cannot_name_a_fitness_function(tmp_path):
-    r = CliRunner().invoke(app, ["evolve", "--set", "fitness_function=x.y", "--logdir",
-                                 str(tmp_path)])
+    r = CliRunner().invoke(
+        app, ["evolve", "--set", "fitness_function=x.y", "--logdir", str(tmp_path)]
+    )
     assert r.exit_code == 2 and "evolve(fitness=fn)" in r.output, r.output
     with pytest.raises(ValueError, match="give the function again"):
         sc.evolve(generations=1, logdir=None, fitness_function="x.y", **TINY)
 
 
 def test_examples_custom_fitness_runs(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(sys, "argv", ["custom_fitness.py", "--generations", "1", "--population",
-                                      "4", "--swarm-size", "3", "--ticks", "6",
-                                      "--logdir", str(tmp_path)])
+    monkeypatch.setattr(
+        sys,
+        "argv",
+        [
+            "custom_fitness.py",
+            "--generations",
+            "1",
+            "--population",
+            "4",
+            "--swarm-size",
+            "3",
+            "--ticks",
+            "6",
+            "--logdir",
+            str(tmp_path),
+        ],
+    )
     runpy.run_path(str(ROOT / "examples" / "custom_fitness.py"), run_name="__main__")
     out = capsys.readouterr().out
     assert "fitness function: __main__.deliveries_only" in out and "best team: score" in out
     (run_dir,) = [d for d in tmp_path.iterdir() if d.is_dir()]
-    assert json.loads((run_dir / "summary.json").read_text())["fitness"] == \
-        "custom: __main__.deliveries_only"
+    assert (
+        json.loads((run_dir / "summary.json").read_text())["fitness"]
+        == "custom: __main__.deliveries_only"
+    )
 
 
 def test_examples_custom_fitness_by_weights_sets_the_table_iv_keys(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(sys, "argv", ["custom_fitness.py", "--weights", "--generations", "1",
-                                      "--population", "4", "--swarm-size", "3", "--ticks", "6",
-                                      "--logdir", str(tmp_path)])
+    monkeypatch.setattr(
+        sys,
+        "argv",
+        [
+            "custom_fitness.py",
+            "--weights",
+            "--generations",
+            "1",
+            "--population",
+            "4",
+            "--swarm-size",
+            "3",
+            "--ticks",
+            "6",
+            "--logdir",
+            str(tmp_path),
+        ],
+    )
     runpy.run_path(str(ROOT / "examples" / "custom_fitness.py"), run_name="__main__")
     out = capsys.readouterr().out
     assert "fitness function: built-in, weights w_delivery=100 w_pickup=0 w_closeness=0" in out
@@ -122,8 +174,14 @@ def test_examples_custom_fitness_by_weights_sets_the_table_iv_keys(tmp_path, mon
 
 
 def test_resume_with_another_fitness_function_is_refused_and_changes_nothing(tmp_path):
-    first = sc.evolve(generations=1, logdir=tmp_path, checkpoint_every=1, render_every=0,
-                      fitness=deliveries, **TINY)
+    first = sc.evolve(
+        generations=1,
+        logdir=tmp_path,
+        checkpoint_every=1,
+        render_every=0,
+        fitness=deliveries,
+        **TINY,
+    )
     run = first.run_dir
     before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
     with pytest.raises(RunError) as e:
@@ -132,7 +190,7 @@ def test_resume_with_another_fitness_function_is_refused_and_changes_nothing(tmp
     assert "\n" not in msg
     assert "test_custom_fitness.deliveries" in msg and "test_custom_fitness.doubled" in msg
     after = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
-    assert after == before                          # config.toml still names deliveries
+    assert after == before  # config.toml still names deliveries
     assert sc.resume(run, generations=2, render_every=0, fitness=deliveries).generations == 2
 
 

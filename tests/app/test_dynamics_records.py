@@ -18,10 +18,30 @@ FOUR = load_scenario("four-niche")
 @pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
     logdir = tmp_path_factory.mktemp("runs")
-    r = CliRunner().invoke(app, ["evolve", "--scenario", "four-niche", "--population", "8",
-                                 "--swarm-size", "5", "--trials", "1", "--ticks", "10",
-                                 "--generations", "4", "--seed", "2", "--logdir", str(logdir),
-                                 "--render-every", "0"])
+    r = CliRunner().invoke(
+        app,
+        [
+            "evolve",
+            "--scenario",
+            "four-niche",
+            "--population",
+            "8",
+            "--swarm-size",
+            "5",
+            "--trials",
+            "1",
+            "--ticks",
+            "10",
+            "--generations",
+            "4",
+            "--seed",
+            "2",
+            "--logdir",
+            str(logdir),
+            "--render-every",
+            "0",
+        ],
+    )
     assert r.exit_code == 0, r.output
     (run,) = list(logdir.iterdir())
     return run
@@ -33,13 +53,19 @@ def test_a_run_records_niches_and_dynamics_everywhere(tiny_run):
     recs = [json.loads(x) for x in (tiny_run / "teams.jsonl").read_text().splitlines()]
     for rec in recs:
         # the recorded niches are those of the recorded designs' genes
-        caps = design_capabilities([{k: v for k, v in d.items() if k != "capability"}
-                                    for d in rec["designs"]], FOUR)
+        caps = design_capabilities(
+            [{k: v for k, v in d.items() if k != "capability"} for d in rec["designs"]], FOUR
+        )
         assert caps == [d["capability"] for d in rec["designs"]]
         assert rec["niches"] == niche_count(caps)
     last = summary["last_generation"]
-    for key in ("species/founded", "species/extinct", "species/median_age", "team/niches",
-                "team/median_age"):
+    for key in (
+        "species/founded",
+        "species/extinct",
+        "species/median_age",
+        "team/niches",
+        "team/median_age",
+    ):
         assert key in last
     # generation 0 founds every species of the population
     history = load_checkpoint(tiny_run)["history"]

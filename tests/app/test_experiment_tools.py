@@ -17,8 +17,20 @@ from swarmcode_torch.app.cli import app
 from swarmcode_torch.app.runs import load_checkpoint, read_config, read_summary, read_teams
 
 TOOLS = Path(__file__).resolve().parents[2] / "experiments" / "tools"
-TINY = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
-        "--ticks", "15", "--render-every", "0"]
+TINY = [
+    "--scenario",
+    "one-niche",
+    "--population",
+    "6",
+    "--swarm-size",
+    "4",
+    "--trials",
+    "1",
+    "--ticks",
+    "15",
+    "--render-every",
+    "0",
+]
 GENERATIONS = 4
 
 
@@ -37,8 +49,21 @@ def runs(tmp_path_factory) -> dict[tuple[int, int], Path]:
     out = {}
     for budget, seed in ((900, 0), (900, 1), (300, 0)):
         logdir = tmp_path_factory.mktemp(f"b{budget}s{seed}")
-        r = CliRunner().invoke(app, ["evolve", *TINY, "--seed", str(seed), "--budget", str(budget),
-                                     "--generations", str(GENERATIONS), "--logdir", str(logdir)])
+        r = CliRunner().invoke(
+            app,
+            [
+                "evolve",
+                *TINY,
+                "--seed",
+                str(seed),
+                "--budget",
+                str(budget),
+                "--generations",
+                str(GENERATIONS),
+                "--logdir",
+                str(logdir),
+            ],
+        )
         assert r.exit_code == 0, r.output
         (run,) = list(logdir.iterdir())
         out[budget, seed] = run
@@ -49,8 +74,12 @@ def test_compact_run_copies_the_run_and_writes_its_windows(runs, tmp_path):
     run = runs[900, 0]
     out = tmp_path / "compact"
     tool("compact_run").main([str(run), str(out)])
-    assert sorted(p.name for p in out.iterdir()) == ["composition.png", "config.toml",
-                                                      "dynamics.json", "summary.json"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "composition.png",
+        "config.toml",
+        "dynamics.json",
+        "summary.json",
+    ]
     for name in ("config.toml", "summary.json"):
         assert (out / name).read_bytes() == (run / name).read_bytes()
     assert (out / "composition.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -62,7 +91,7 @@ def test_compact_run_copies_the_run_and_writes_its_windows(runs, tmp_path):
     assert [(r["from"], r["to"], r["generations"]) for r in rows] == [(0, 4, 4), (-46, 4, 4)]
     expected = run_dynamics(run, [(0, 4), (-46, 4)])
     for row, exp in zip(rows, expected):
-        exp = json.loads(json.dumps(exp))            # as written: a NaN window value stays NaN
+        exp = json.loads(json.dumps(exp))  # as written: a NaN window value stays NaN
         assert row.keys() == exp.keys()
         for k, v in exp.items():
             assert row[k] == v or (isinstance(v, float) and math.isnan(v) and math.isnan(row[k])), k
@@ -83,8 +112,10 @@ def test_speciation_table_rows_and_cells_are_the_runs_dynamics(runs, tmp_path, c
     out = tmp_path / "table.json"
     st.main([f"tiny={a},{b}", "--last", "2", "--founding-from", "1", "--json", str(out)])
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0] == ("| group | runs | team sp | pop sp | niches | score | founded/gen | "
-                        "lasting/gen | lifetime | age |")
+    assert lines[0] == (
+        "| group | runs | team sp | pop sp | niches | score | founded/gen | "
+        "lasting/gen | lifetime | age |"
+    )
     assert len(lines) == 3 and lines[2].startswith("| tiny | 2 | ")
     stored = json.loads(out.read_text())
     assert list(stored) == ["tiny"] and len(stored["tiny"]) == 2
@@ -127,18 +158,30 @@ def test_budget_cost_windows_and_table_iii_columns(runs, tmp_path, capsys):
             assert (w["over"]["n"], w["within"]["n"]) == (len(over), len(window) - len(over))
             assert w["over_share"] == round(len(over) / len(window), 2)
             assert w["cost"] == round(statistics.median(t["cost"] for t in window), 1)
-            if w["within"]["n"]:         # no penalty within the budget
+            if w["within"]["n"]:  # no penalty within the budget
                 assert w["within"]["score_before_penalty"] == w["within"]["score"]
-            if w["over"]["n"]:           # the penalty lowers the score over it
+            if w["over"]["n"]:  # the penalty lowers the score over it
                 assert w["over"]["score_before_penalty"] > w["over"]["score"]
-        assert res["best"] == {k: summary[k] for k in (
-            "best_fitness", "team_cost", "deliveries", "deliveries_individual",
-            "deliveries_collab", "num_species", "niches")}
+        assert res["best"] == {
+            k: summary[k]
+            for k in (
+                "best_fitness",
+                "team_cost",
+                "deliveries",
+                "deliveries_individual",
+                "deliveries_collab",
+                "num_species",
+                "niches",
+            )
+        }
         tail = run_dynamics(run, [(GENERATIONS - 2, GENERATIONS)])[0]
-        assert res["last"] == {k: tail[k] for k in ("team_species", "population_species",
-                                                    "niches", "team_score")}
-        assert (res["last_cost"], res["last_over_share"]) == (res["windows"][-1]["cost"],
-                                                             res["windows"][-1]["over_share"])
+        assert res["last"] == {
+            k: tail[k] for k in ("team_species", "population_species", "niches", "team_score")
+        }
+        assert (res["last_cost"], res["last_over_share"]) == (
+            res["windows"][-1]["cost"],
+            res["windows"][-1]["over_share"],
+        )
     # the tiny teams cost about $560: all within $900, all over $300
     assert {w["over_share"] for r in result[:2] for w in r["windows"]} == {0.0}
     assert {w["over_share"] for w in result[2]["windows"]} == {1.0}
@@ -161,8 +204,9 @@ def test_budget_cost_refuses_a_run_without_a_budget_or_a_directory_that_is_not_a
         bc.main([str(tmp_path)])
     assert str(e.value).startswith("error: ") and "\n" not in str(e.value)
     logdir = tmp_path / "free"
-    r = CliRunner().invoke(app, ["evolve", *TINY, "--seed", "0", "--generations", "1",
-                                 "--logdir", str(logdir)])
+    r = CliRunner().invoke(
+        app, ["evolve", *TINY, "--seed", "0", "--generations", "1", "--logdir", str(logdir)]
+    )
     assert r.exit_code == 0, r.output
     (run,) = list(logdir.iterdir())
     with pytest.raises(SystemExit, match="has no budget"):

@@ -5,22 +5,35 @@ from dataclasses import replace
 import pytest
 import torch
 
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.evolve import Evolution
 
-from swarmcode_torch.coevo.config import SwarmCoDeConfig
+pytestmark = [
+    pytest.mark.gpu,
+    pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA"),
+]
 
-pytestmark = [pytest.mark.gpu,
-              pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")]
+TINY = SwarmCoDeConfig(
+    scenario="budget",
+    budget=4000.0,
+    population=12,
+    swarm_size=10,
+    trials=2,
+    ticks=40,
+    generations=3,
+    seed=0,
+    device="cuda",
+)
 
-TINY = SwarmCoDeConfig(scenario="budget", budget=4000.0, population=12, swarm_size=10, trials=2,
-                    ticks=40, generations=3, seed=0, device="cuda")
 
-
-@pytest.mark.parametrize("compiled, graphs, mode", [
-    (False, None, "eager"),
-    (True, None, "compiled, CUDA graphs"),       # the default on CUDA
-    (True, False, "compiled"),
-])
+@pytest.mark.parametrize(
+    "compiled, graphs, mode",
+    [
+        (False, None, "eager"),
+        (True, None, "compiled, CUDA graphs"),  # the default on CUDA
+        (True, False, "compiled"),
+    ],
+)
 def test_evolve_runs_on_cuda(compiled, graphs, mode):
     ev = Evolution(replace(TINY, compile=compiled, cuda_graphs=graphs))
     assert ev.ctx.device.type == "cuda" and ev.ctx.compiled == compiled
@@ -57,9 +70,10 @@ def test_cuda_graph_ticks_match_compiled_rollout():
     compiled = CompiledStep()
     graphs = CudaGraphTicks(CompiledStep(), ticks_per_graph=10)
     captured = []
-    for E, seed in ((6, 0), (6, 1), (4, 2)):                     # reuse, then recapture
-        _, layout, robots, tables, params = random_world("four-niche", E=E, seed=seed,
-                                                         device="cuda")
+    for E, seed in ((6, 0), (6, 1), (4, 2)):  # reuse, then recapture
+        _, layout, robots, tables, params = random_world(
+            "four-niche", E=E, seed=seed, device="cuda"
+        )
         ref = rollout(layout, robots, tables, params, 25, compiled)  # 2 replays + 5 ticks
         got = rollout(layout, robots, tables, params, 25, graphs)
         captured.append(graphs.graph)
@@ -85,8 +99,12 @@ def test_build_tables_on_cuda_match_the_cpu():
     from swarmcode_torch.sim import bt
 
     g = torch.Generator().manual_seed(0)
-    ops = torch.cat([bt.random_programs(60, 32, g),
-                     torch.stack([bt.template_tensor(n, 32) for n in bt.TEMPLATES])])
+    ops = torch.cat(
+        [
+            bt.random_programs(60, 32, g),
+            torch.stack([bt.template_tensor(n, 32) for n in bt.TEMPLATES]),
+        ]
+    )
     assert torch.equal(bt.build_tables(ops.cuda()).cpu(), bt.build_tables(ops))
 
 

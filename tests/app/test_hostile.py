@@ -17,14 +17,31 @@ from pathlib import Path
 
 import pytest
 import torch
+from test_reliability import _copy_run  # the same copy of a run directory
 from typer.testing import CliRunner
 
 from swarmcode_torch.app.cli import app
-from test_reliability import _copy_run  # the same copy of a run directory
 
 runner = CliRunner()
-TINY = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
-        "--ticks", "10", "--seed", "3", "--render-every", "0", "--no-compile", "--device", "cpu"]
+TINY = [
+    "--scenario",
+    "one-niche",
+    "--population",
+    "6",
+    "--swarm-size",
+    "4",
+    "--trials",
+    "1",
+    "--ticks",
+    "10",
+    "--seed",
+    "3",
+    "--render-every",
+    "0",
+    "--no-compile",
+    "--device",
+    "cpu",
+]
 RFAST = ["--render-every", "0", "--device", "cpu"]
 
 
@@ -53,16 +70,25 @@ def finished_run(tmp_path_factory):
     return run
 
 
-
-
 def _snapshot(run: Path) -> dict[str, bytes]:
     return {f.name: f.read_bytes() for f in run.iterdir() if f.is_file() and not f.is_symlink()}
 
 
 # ====================================================================== links and paths
-@pytest.mark.parametrize("name", ["run.lock", "teams.jsonl", "metrics.csv", "checkpoint.pt",
-                                  "summary.json", "config.toml", "scenario.toml",
-                                  "hardware.toml", "teams.jsonl.partial"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "run.lock",
+        "teams.jsonl",
+        "metrics.csv",
+        "checkpoint.pt",
+        "summary.json",
+        "config.toml",
+        "scenario.toml",
+        "hardware.toml",
+        "teams.jsonl.partial",
+    ],
+)
 def test_links_planted_in_a_run_directory_are_never_followed(finished_run, tmp_path, name):
     run = _copy_run(finished_run, tmp_path / "run")
     outside = tmp_path / f"outside-{name}"
@@ -73,7 +99,7 @@ def test_links_planted_in_a_run_directory_are_never_followed(finished_run, tmp_p
     real.symlink_to(outside)
     r = invoke("evolve", "--resume", run, "--generations", 3, *RFAST)
     one_line_error(r, str(real), "symbolic link")
-    assert outside.read_bytes() == before                 # not truncated, appended or replaced
+    assert outside.read_bytes() == before  # not truncated, appended or replaced
     assert real.is_symlink()
 
 
@@ -95,8 +121,9 @@ def test_run_files_open_without_following_links(tmp_path):
     assert target.read_bytes() == b"keep\n"
 
 
-def test_replay_replaces_a_planted_team_gif_link_and_never_writes_through_it(finished_run,
-                                                                             tmp_path):
+def test_replay_replaces_a_planted_team_gif_link_and_never_writes_through_it(
+    finished_run, tmp_path
+):
     run = _copy_run(finished_run, tmp_path / "run")
     victim = tmp_path / "victim.txt"
     victim.write_text("precious")
@@ -122,14 +149,15 @@ mass = [1.0, 2.0]
 """
 
 
-@pytest.mark.parametrize("where", ["/etc/passwd", "/proc/self/environ", "../outside.toml",
-                                   "link.toml"])
+@pytest.mark.parametrize(
+    "where", ["/etc/passwd", "/proc/self/environ", "../outside.toml", "link.toml"]
+)
 def test_a_scenarios_catalog_path_must_stay_in_its_folder(tmp_path, where):
     from swarmcode_torch.sim.hardware import default_catalog_bytes
 
     folder = tmp_path / "scen"
     folder.mkdir()
-    (tmp_path / "outside.toml").write_bytes(default_catalog_bytes())     # a valid catalog
+    (tmp_path / "outside.toml").write_bytes(default_catalog_bytes())  # a valid catalog
     (folder / "link.toml").symlink_to(tmp_path / "outside.toml")
     (folder / "s.toml").write_text(SCEN.format(hardware=f'hardware = "{where}"'))
     r = invoke("evolve", "--scenario", folder / "s.toml", "--logdir", tmp_path / "runs")
@@ -149,8 +177,8 @@ def test_a_catalog_beside_the_scenario_is_still_read(tmp_path):
 @pytest.mark.parametrize("which", ["scenario", "catalog"])
 def test_oversized_scenario_and_catalog_files_are_refused_unread(tmp_path, which):
     big = tmp_path / ("s.toml" if which == "scenario" else "hw.toml")
-    with open(big, "wb") as f:                 # a sparse 1 GiB file: reading it whole would hang
-        f.truncate(2 ** 30)
+    with open(big, "wb") as f:  # a sparse 1 GiB file: reading it whole would hang
+        f.truncate(2**30)
     if which == "catalog":
         (tmp_path / "s.toml").write_text(SCEN.format(hardware='hardware = "hw.toml"'))
     t = time.monotonic()
@@ -162,11 +190,17 @@ def test_oversized_scenario_and_catalog_files_are_refused_unread(tmp_path, which
 # ====================================================================== bounds
 def test_a_megabyte_scenario_name_is_one_line_at_once(tmp_path):
     t = time.monotonic()
-    one_line_error(invoke("evolve", "--scenario", "x" * 2 ** 20, "--logdir", tmp_path / "r"),
-                   "scenario: a name or path of 1048576 characters")
-    (tmp_path / "s.toml").write_text(SCEN.format(hardware="").replace('"mine"', '"' + "n" * 2 ** 20 + '"'))
-    one_line_error(invoke("evolve", "--scenario", tmp_path / "s.toml", "--logdir",
-                          tmp_path / "r"), "name: expected 1 to 200 printable characters")
+    one_line_error(
+        invoke("evolve", "--scenario", "x" * 2**20, "--logdir", tmp_path / "r"),
+        "scenario: a name or path of 1048576 characters",
+    )
+    (tmp_path / "s.toml").write_text(
+        SCEN.format(hardware="").replace('"mine"', '"' + "n" * 2**20 + '"')
+    )
+    one_line_error(
+        invoke("evolve", "--scenario", tmp_path / "s.toml", "--logdir", tmp_path / "r"),
+        "name: expected 1 to 200 printable characters",
+    )
     assert time.monotonic() - t < 20
     assert not (tmp_path / "r").exists()
 
@@ -175,8 +209,9 @@ DEEP_TOML = "x = " + "[" * 5000 + "]" * 5000 + "\n"
 DEEP_JSON = "[" * 100_000 + "]" * 100_000
 
 
-@pytest.mark.parametrize("name", ["scenario", "config.toml", "hardware.toml", "summary.json",
-                                  "teams.jsonl"])
+@pytest.mark.parametrize(
+    "name", ["scenario", "config.toml", "hardware.toml", "summary.json", "teams.jsonl"]
+)
 def test_deeply_nested_toml_and_json_are_one_line(finished_run, tmp_path, name):
     if name == "scenario":
         (tmp_path / "s.toml").write_text(SCEN.format(hardware=DEEP_TOML))
@@ -199,37 +234,53 @@ def test_deeply_nested_toml_and_json_are_one_line(finished_run, tmp_path, name):
 
 
 def test_the_memory_check_counts_the_start_slots_and_packages_are_bounded(tmp_path):
-    from swarmcode_torch.coevo.config import SwarmCoDeConfig
     from swarmcode_torch.app.runs import estimate_bytes
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
     from swarmcode_torch.sim.scenario import load_scenario
 
-    many = SCEN.format(hardware="").replace("num_robots = 4", "num_robots = 100000") \
+    many = (
+        SCEN.format(hardware="")
+        .replace("num_robots = 4", "num_robots = 100000")
         .replace("arena = 14.0", "arena = 5000.0")
+    )
     (tmp_path / "many.toml").write_text(many)
     scen = load_scenario(str(tmp_path / "many.toml"))
     cfg = SwarmCoDeConfig(scenario=str(tmp_path / "many.toml"), population=2, trials=1)
-    assert estimate_bytes(cfg, scen) >= 3 * 8 * 100_000 ** 2        # spawn_slots' cdist
-    r = invoke("evolve", "--scenario", tmp_path / "many.toml", "--population", 2, "--trials",
-               1, "--logdir", tmp_path / "r")
+    assert estimate_bytes(cfg, scen) >= 3 * 8 * 100_000**2  # spawn_slots' cdist
+    r = invoke(
+        "evolve",
+        "--scenario",
+        tmp_path / "many.toml",
+        "--population",
+        2,
+        "--trials",
+        1,
+        "--logdir",
+        tmp_path / "r",
+    )
     one_line_error(r, "would need about")
-    pk = SCEN.format(hardware="").replace("count = 2", "count = 1000000") \
-        .replace("arena = 14.0", "arena = 10000.0").replace("distance = [3.0, 5.0]",
-                                                            "distance = [3.0, 4000.0]")
+    pk = (
+        SCEN.format(hardware="")
+        .replace("count = 2", "count = 1000000")
+        .replace("arena = 14.0", "arena = 10000.0")
+        .replace("distance = [3.0, 5.0]", "distance = [3.0, 4000.0]")
+    )
     (tmp_path / "pk.toml").write_text(pk)
     r = invoke("evolve", "--scenario", tmp_path / "pk.toml", "--logdir", tmp_path / "r")
     one_line_error(r, "packages: 1000000 packages, more than 10000")
     assert not (tmp_path / "r").exists()
 
 
-@pytest.mark.parametrize("count,needle", [(10 ** 12, "more than any run can have"),
-                                          (5_000_000, "would need about")])
+@pytest.mark.parametrize(
+    "count,needle", [(10**12, "more than any run can have"), (5_000_000, "would need about")]
+)
 def test_design_counts_are_bounded_before_replay_allocates(finished_run, tmp_path, count, needle):
     run = _copy_run(finished_run, tmp_path / "run")
     s = json.loads((run / "summary.json").read_text())
     s["designs"][0]["count"] = count
     (run / "summary.json").write_text(json.dumps(s))
     one_line_error(invoke("replay", run, "--ticks", 2, "--out", tmp_path / "t.gif"), needle)
-    if count > 10 ** 7:
+    if count > 10**7:
         one_line_error(invoke("inspect", run), needle)
 
 
@@ -244,57 +295,68 @@ def _edit_checkpoint(run: Path, edit) -> None:
 def _set(key, value):
     def edit(d):
         d[key] = value
+
     return edit
 
 
 def _genome(field, fn):
     def edit(d):
         d["genome"][field] = fn(d["genome"][field])
+
     return edit
 
 
-@pytest.mark.parametrize("edit,needle", [
-    (_genome("radius", lambda t: t[:3]), "radius has shape"),
-    (_genome("bt", lambda t: t.fill_(99)), "bt holds values outside 0..13"),
-    (_genome("radius", lambda t: t.fill_(float("nan"))), "radius holds values outside"),
-    (_genome("tag", lambda t: t.long()), "tag has dtype"),
-    (_genome("effector", lambda t: t.fill_(7)), "effector holds values outside"),
-    (_set("rng_state", torch.zeros(7, dtype=torch.uint8)), "another kind of device"),
-    (_set("rng_state", torch.zeros(5056, dtype=torch.float32)), "rng_state has dtype"),
-    (_set("fitness", torch.zeros(3)), "fitness has shape"),
-    (_set("fitness", torch.full((6,), float("nan"))), "fitness holds NaN"),
-    (_set("generation", -5), "generation must be an integer >= 0"),
-    (_set("species_hint", torch.full((6,), 10 ** 6)), "species_hint holds ids"),
-    (_set("history", []), "history must hold one record per generation"),
-])
+@pytest.mark.parametrize(
+    "edit,needle",
+    [
+        (_genome("radius", lambda t: t[:3]), "radius has shape"),
+        (_genome("bt", lambda t: t.fill_(99)), "bt holds values outside 0..13"),
+        (_genome("radius", lambda t: t.fill_(float("nan"))), "radius holds values outside"),
+        (_genome("tag", lambda t: t.long()), "tag has dtype"),
+        (_genome("effector", lambda t: t.fill_(7)), "effector holds values outside"),
+        (_set("rng_state", torch.zeros(7, dtype=torch.uint8)), "another kind of device"),
+        (_set("rng_state", torch.zeros(5056, dtype=torch.float32)), "rng_state has dtype"),
+        (_set("fitness", torch.zeros(3)), "fitness has shape"),
+        (_set("fitness", torch.full((6,), float("nan"))), "fitness holds NaN"),
+        (_set("generation", -5), "generation must be an integer >= 0"),
+        (_set("species_hint", torch.full((6,), 10**6)), "species_hint holds ids"),
+        (_set("history", []), "history must hold one record per generation"),
+    ],
+)
 def test_checkpoint_tensors_are_checked_against_the_config(finished_run, tmp_path, edit, needle):
     run = _copy_run(finished_run, tmp_path / "run")
     _edit_checkpoint(run, edit)
     before = _snapshot(run)
-    one_line_error(invoke("evolve", "--resume", run, "--generations", 4, *RFAST),
-                   "checkpoint.pt", needle)
-    assert _snapshot(run) == before                       # nothing written
+    one_line_error(
+        invoke("evolve", "--resume", run, "--generations", 4, *RFAST), "checkpoint.pt", needle
+    )
+    assert _snapshot(run) == before  # nothing written
 
 
-@pytest.mark.parametrize("damage,needle", [
-    (lambda t: t.replace("generation", "gen", 1), "not a metrics.csv header"),
-    (lambda t: t.encode("utf-8")[:-1] + b"\xff\xfe\n", "is not UTF-8 text"),
-    (lambda t: t + '"' + "x" * 200_000 + '"\n', "malformed CSV"),
-])
+@pytest.mark.parametrize(
+    "damage,needle",
+    [
+        (lambda t: t.replace("generation", "gen", 1), "not a metrics.csv header"),
+        (lambda t: t.encode("utf-8")[:-1] + b"\xff\xfe\n", "is not UTF-8 text"),
+        (lambda t: t + '"' + "x" * 200_000 + '"\n', "malformed CSV"),
+    ],
+)
 def test_a_damaged_metrics_csv_is_one_line_and_kept(finished_run, tmp_path, damage, needle):
     run = _copy_run(finished_run, tmp_path / "run")
     data = damage((run / "metrics.csv").read_text())
     (run / "metrics.csv").write_bytes(data if isinstance(data, bytes) else data.encode())
     before = _snapshot(run)
-    one_line_error(invoke("evolve", "--resume", run, "--generations", 3, *RFAST),
-                   "metrics.csv", needle)
-    assert _snapshot(run) == before                       # its rows are not lost
+    one_line_error(
+        invoke("evolve", "--resume", run, "--generations", 3, *RFAST), "metrics.csv", needle
+    )
+    assert _snapshot(run) == before  # its rows are not lost
 
 
 def test_non_utf8_path_bytes_and_nul_in_paths_are_one_line(tmp_path):
     bad = os.fsdecode(bytes(tmp_path) + b"/caf\xe9")
-    one_line_error(invoke("evolve", *TINY, "--generations", 1, "--logdir", bad),
-                   "--logdir", "not UTF-8")
+    one_line_error(
+        invoke("evolve", *TINY, "--generations", 1, "--logdir", bad), "--logdir", "not UTF-8"
+    )
     one_line_error(invoke("inspect", bad), "RUN_DIR", "not UTF-8")
 
 
@@ -305,24 +367,44 @@ def _free_port() -> int:
 
 
 @pytest.mark.parametrize("command", ["evolve", "sweep"])
-def test_a_ray_address_that_is_closed_or_silent_is_one_line_in_time(tmp_path, monkeypatch,
-                                                                    command):
+def test_a_ray_address_that_is_closed_or_silent_is_one_line_in_time(tmp_path, monkeypatch, command):
     pytest.importorskip("ray")
     monkeypatch.setenv("SWARMCODE_RAY_CONNECT_TIMEOUT", "2")
-    args = (["evolve", *TINY, "--generations", 1, "--logdir", tmp_path / "r"]
-            if command == "evolve" else
-            ["sweep", "--budgets", "1000", "--generations", 1, "--population", 6, "--trials", 1,
-             "--ticks", 5, "--device", "cpu", "--out", tmp_path / "s"])
+    args = (
+        ["evolve", *TINY, "--generations", 1, "--logdir", tmp_path / "r"]
+        if command == "evolve"
+        else [
+            "sweep",
+            "--budgets",
+            "1000",
+            "--generations",
+            1,
+            "--population",
+            6,
+            "--trials",
+            1,
+            "--ticks",
+            5,
+            "--device",
+            "cpu",
+            "--out",
+            tmp_path / "s",
+        ]
+    )
     t = time.monotonic()
-    one_line_error(invoke(*args, "--ray-address", f"127.0.0.1:{_free_port()}"),
-                   "cannot join the Ray cluster at 127.0.0.1:")
-    silent = socket.socket()                 # accepts (the backlog) and never answers
+    one_line_error(
+        invoke(*args, "--ray-address", f"127.0.0.1:{_free_port()}"),
+        "cannot join the Ray cluster at 127.0.0.1:",
+    )
+    silent = socket.socket()  # accepts (the backlog) and never answers
     silent.bind(("127.0.0.1", 0))
     silent.listen(4)
     try:
         port = silent.getsockname()[1]
-        one_line_error(invoke(*args, "--ray-address", f"127.0.0.1:{port}"),
-                       f"cannot join the Ray cluster at 127.0.0.1:{port}")
+        one_line_error(
+            invoke(*args, "--ray-address", f"127.0.0.1:{port}"),
+            f"cannot join the Ray cluster at 127.0.0.1:{port}",
+        )
     finally:
         silent.close()
     assert time.monotonic() - t < 30
@@ -341,13 +423,16 @@ def test_empty_logdir_and_out_are_refused(tmp_path, monkeypatch):
 def test_resume_to_zero_or_negative_generations_is_refused(finished_run, tmp_path, gens):
     run = _copy_run(finished_run, tmp_path / "run")
     before = _snapshot(run)
-    one_line_error(invoke("evolve", "--resume", run, "--generations", gens, *RFAST),
-                   "--generations must be >= 1")
+    one_line_error(
+        invoke("evolve", "--resume", run, "--generations", gens, *RFAST),
+        "--generations must be >= 1",
+    )
     assert _snapshot(run) == before
 
 
-@pytest.mark.parametrize("name,edit", [("scenario.toml", "edit"), ("hardware.toml", "edit"),
-                                       ("scenario.toml", "delete")])
+@pytest.mark.parametrize(
+    "name,edit", [("scenario.toml", "edit"), ("hardware.toml", "edit"), ("scenario.toml", "delete")]
+)
 def test_an_edited_or_missing_copy_is_refused_on_resume(finished_run, tmp_path, name, edit):
     run = _copy_run(finished_run, tmp_path / "run")
     if edit == "delete":
@@ -355,15 +440,19 @@ def test_an_edited_or_missing_copy_is_refused_on_resume(finished_run, tmp_path, 
     else:
         with open(run / name, "a") as f:
             f.write("\n# edited\n")
-    one_line_error(invoke("evolve", "--resume", run, "--generations", 3, *RFAST), name,
-                   "is missing" if edit == "delete" else "was changed")
+    one_line_error(
+        invoke("evolve", "--resume", run, "--generations", 3, *RFAST),
+        name,
+        "is missing" if edit == "delete" else "was changed",
+    )
 
 
 def test_an_empty_config_toml_is_refused_not_read_as_defaults(finished_run, tmp_path):
     run = _copy_run(finished_run, tmp_path / "run")
     (run / "config.toml").write_text("")
-    one_line_error(invoke("replay", run, "--out", tmp_path / "t.gif"), "config.toml",
-                   "empty config")
+    one_line_error(
+        invoke("replay", run, "--out", tmp_path / "t.gif"), "config.toml", "empty config"
+    )
     one_line_error(invoke("evolve", "--resume", run, *RFAST), "config.toml", "empty config")
 
 
@@ -379,23 +468,65 @@ def test_a_sweep_table_with_a_null_figure_is_written(tmp_path):
     from swarmcode_torch.app.sweep import markdown, table_rows
 
     out = tmp_path / "s"
-    r = invoke("sweep", "--budgets", "1000", "--generations", 1, "--population", 6, "--trials",
-               1, "--ticks", 5, "--device", "cpu", "--no-compile", "--out", out)
+    r = invoke(
+        "sweep",
+        "--budgets",
+        "1000",
+        "--generations",
+        1,
+        "--population",
+        6,
+        "--trials",
+        1,
+        "--ticks",
+        5,
+        "--device",
+        "cpu",
+        "--no-compile",
+        "--out",
+        out,
+    )
     assert r.exit_code == 0, r.output
     (run,) = [d for d in out.iterdir() if d.is_dir()]
     s = json.loads((run / "summary.json").read_text())
-    s["deliveries"] = None                       # a figure that was not finite
+    s["deliveries"] = None  # a figure that was not finite
     (run / "summary.json").write_text(json.dumps(s))
     rows = table_rows([(1000.0, 0, run)])
     assert rows[0]["deliveries"] is None and "none" in markdown(rows)
-    r = invoke("sweep", "--budgets", "1000", "--generations", 1, "--population", 6, "--trials",
-               1, "--ticks", 5, "--device", "cpu", "--no-compile", "--out", out)
+    r = invoke(
+        "sweep",
+        "--budgets",
+        "1000",
+        "--generations",
+        1,
+        "--population",
+        6,
+        "--trials",
+        1,
+        "--ticks",
+        5,
+        "--device",
+        "cpu",
+        "--no-compile",
+        "--out",
+        out,
+    )
     assert r.exit_code == 0, r.output
 
 
 # ====================================================================== the API
-API = dict(scenario="one-niche", population=6, swarm_size=4, trials=1, ticks=10, seed=3,
-           generations=2, device="cpu", compile=False, render_every=0)
+API = dict(
+    scenario="one-niche",
+    population=6,
+    swarm_size=4,
+    trials=1,
+    ticks=10,
+    seed=3,
+    generations=2,
+    device="cpu",
+    compile=False,
+    render_every=0,
+)
 
 
 def _api(tmp_path, **kw):
@@ -404,14 +535,17 @@ def _api(tmp_path, **kw):
     return sc.evolve(logdir=tmp_path / "runs", **{**API, **kw})
 
 
-@pytest.mark.parametrize("kw,error", [
-    (dict(callback=42), "callback must be a function"),
-    (dict(reporters=[object()]), "has no on_start, on_generation, on_end"),
-    (dict(reporters=5), "reporters must be a list"),
-    (dict(checkpoint_every=2.5), "checkpoint_every must be an integer"),
-    (dict(figure_every="3"), "figure_every must be an integer"),
-    (dict(fitness="f"), "fitness must be a function"),
-])
+@pytest.mark.parametrize(
+    "kw,error",
+    [
+        (dict(callback=42), "callback must be a function"),
+        (dict(reporters=[object()]), "has no on_start, on_generation, on_end"),
+        (dict(reporters=5), "reporters must be a list"),
+        (dict(checkpoint_every=2.5), "checkpoint_every must be an integer"),
+        (dict(figure_every="3"), "figure_every must be an integer"),
+        (dict(fitness="f"), "fitness must be a function"),
+    ],
+)
 def test_the_api_checks_its_arguments_before_any_file_is_written(tmp_path, kw, error):
     with pytest.raises(TypeError, match=error):
         _api(tmp_path, **kw)
@@ -435,7 +569,7 @@ def huge(metrics, cost, cfg):
 
 
 def spend(metrics, cost, cfg):
-    cost.mul_(1000.0)                               # an in-place edit of what it was given
+    cost.mul_(1000.0)  # an in-place edit of what it was given
     metrics["delivered_individual"].add_(50.0)
     return -cost
 
@@ -451,7 +585,7 @@ def test_a_user_fitness_with_huge_scores_is_refused(tmp_path):
 
 def test_a_user_fitness_that_edits_its_arguments_in_place_changes_no_record(tmp_path):
     a = _api(tmp_path / "a", fitness=spend)
-    b = _api(tmp_path / "b", fitness=plain)       # the same scores without the edits
+    b = _api(tmp_path / "b", fitness=plain)  # the same scores without the edits
     assert a.best_team["cost"] == b.best_team["cost"]
     assert a.best_team["deliveries"] == b.best_team["deliveries"]
     assert [h["team/cost"] for h in a.history] == [h["team/cost"] for h in b.history]

@@ -7,28 +7,47 @@ import pytest
 import torch
 from PIL import Image
 
-from swarmcode_torch.sim import bt
+from swarmcode_torch.app.analysis import replay_run
+from swarmcode_torch.app.render import (
+    Episode,
+    frame_image,
+    record_episode,
+    save_gif,
+    save_png,
+    team_genome,
+)
+from swarmcode_torch.app.runs import write_config
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.population import PINCHER, SUCTION
-from swarmcode_torch.app.analysis import replay_run
-from swarmcode_torch.app.render import (Episode, frame_image, record_episode, save_gif,
-                                        save_png, team_genome)
-from swarmcode_torch.app.runs import write_config
+from swarmcode_torch.sim import bt
 from swarmcode_torch.sim.scenario import load_scenario
 from swarmcode_torch.sim.state import HELD
 
 
 def design(effector="pincher", radius=0.4, tiers=(3, 3, 3), count=3, program="forage", **kw):
-    d = dict(species=1, effector=effector, radius=radius, chassis_tier=tiers[0],
-             battery_tier=tiers[1], motor_tier=tiers[2], torque_point=1.0, battery_point=1.0,
-             dominance=0.6, selectivity=0.3, cost=123.0,
-             bt=bt.template_tensor(program, 32).tolist(), count=count)
+    d = dict(
+        species=1,
+        effector=effector,
+        radius=radius,
+        chassis_tier=tiers[0],
+        battery_tier=tiers[1],
+        motor_tier=tiers[2],
+        torque_point=1.0,
+        battery_point=1.0,
+        dominance=0.6,
+        selectivity=0.3,
+        cost=123.0,
+        bt=bt.template_tensor(program, 32).tolist(),
+        count=count,
+    )
     d.update(kw)
     return d
 
 
-DESIGNS = [design("pincher", 0.42, (3, 2, 3), count=4),
-           design("suction", 0.2, (1, 3, 2), count=2, program="forage_random", species=7)]
+DESIGNS = [
+    design("pincher", 0.42, (3, 2, 3), count=4),
+    design("suction", 0.2, (1, 3, 2), count=2, program="forage_random", species=7),
+]
 
 
 def test_team_genome_round_trip():
@@ -36,7 +55,9 @@ def test_team_genome_round_trip():
     assert g.size == 2 and g.tag.shape == (2, 8) and not g.tag.any()
     assert team.tolist() == [0, 0, 0, 0, 1, 1]
     assert g.effector.tolist() == [PINCHER, SUCTION]
-    assert g.chassis.tolist() == [2, 0] and g.battery.tolist() == [1, 2] and g.motor.tolist() == [2, 1]
+    assert (
+        g.chassis.tolist() == [2, 0] and g.battery.tolist() == [1, 2] and g.motor.tolist() == [2, 1]
+    )
     assert torch.allclose(g.radius, torch.tensor([0.42, 0.2]))
     assert g.bt.shape == (2, 32) and g.bt[1].tolist() == DESIGNS[1]["bt"]
     assert torch.allclose(g.dominance, torch.tensor([0.6, 0.6]))
@@ -83,7 +104,7 @@ def test_frame_image_and_png(forage_episode, tmp_path):
     img = frame_image(forage_episode, 60)
     assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3
     assert img.shape[0] > 200 and img.shape[1] > 200
-    assert img.min() < 50 and img.max() > 200      # something is drawn on a white background
+    assert img.min() < 50 and img.max() > 200  # something is drawn on a white background
     path = save_png(forage_episode, tmp_path / "f.png")
     with Image.open(path) as im:
         assert im.format == "PNG"
@@ -94,20 +115,21 @@ def test_robots_show_their_effector_and_light_packages_are_not_grip_white():
 
     from swarmcode_torch.app.render import _mass_colors, draw_frame
 
-    g, team = team_genome(DESIGNS)                         # 4 pinchers, 2 suction robots
+    g, team = team_genome(DESIGNS)  # 4 pinchers, 2 suction robots
     ep = record_episode(g, team, load_scenario("budget"), seed=2, ticks=4, every=2)
     ax = Figure().add_subplot()
     draw_frame(ax, ep, ep.snapshots[0])
     (marks,) = [c for c in ax.collections if c.get_zorder() == 4.5]
-    assert all(c[3] == 0 for c in marks.get_facecolor())     # outlines, over the robot colour
+    assert all(c[3] == 0 for c in marks.get_facecolor())  # outlines, over the robot colour
     corners = sorted(len(path.vertices) for path in marks.get_paths())
-    assert corners[:4] == [5] * 4 and min(corners[4:]) > 8   # 4 squares (pincher), 2 rings
+    assert corners[:4] == [5] * 4 and min(corners[4:]) > 8  # 4 squares (pincher), 2 rings
     # the legend shows each design with its mark
     legend = ax.get_legend()
     assert [t.get_text() for t in legend.get_texts()][:2] == ep.labels[:2]
     # the lightest package is a clear colour, not the white of a free grip marker
-    lightest = min(_mass_colors(ep, ep.layout.p_mass[0][ep.layout.p_present[0]]),
-                   key=lambda c: -sum(c[:3]))
+    lightest = min(
+        _mass_colors(ep, ep.layout.p_mass[0][ep.layout.p_present[0]]), key=lambda c: -sum(c[:3])
+    )
     assert sum(lightest[:3]) < 2.6 and lightest[2] < 0.7, lightest
 
 

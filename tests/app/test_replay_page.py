@@ -6,13 +6,19 @@ import re
 
 import pytest
 import torch
+from replaykit import DESIGNS, design
 from typer.testing import CliRunner
 
 from swarmcode_torch.app.analysis import replay_run
 from swarmcode_torch.app.cli import app
 from swarmcode_torch.app.render import team_genome
-from swarmcode_torch.app.replay_page import (decode_page, final_counts, focal_and_baseline,
-                                             page_data, render_html)
+from swarmcode_torch.app.replay_page import (
+    decode_page,
+    final_counts,
+    focal_and_baseline,
+    page_data,
+    render_html,
+)
 from swarmcode_torch.app.runs import write_config
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.evaluation import simulate_teams, team_scores
@@ -21,8 +27,6 @@ from swarmcode_torch.sim import bt
 from swarmcode_torch.sim.layout import make_layouts
 from swarmcode_torch.sim.scenario import load_scenario
 from swarmcode_torch.sim.state import WorldParams
-
-from replaykit import DESIGNS, design
 
 
 @pytest.fixture(scope="module")
@@ -36,10 +40,10 @@ def test_focal_is_the_largest_design_and_its_slots_are_refilled_by_partners():
     focal, team, base, recorded = focal_and_baseline(DESIGNS, seed=4)
     assert not recorded
     assert focal == 0 and team.tolist() == [0] * 12 + [1] * 6 + [2] * 2
-    assert torch.equal(base[12:], team[12:])                   # partner slots stay
+    assert torch.equal(base[12:], team[12:])  # partner slots stay
     assert set(base[:12].tolist()) <= {1, 2} and len(set(base[:12].tolist())) == 2
     again = focal_and_baseline(DESIGNS, seed=4)[2]
-    assert torch.equal(base, again)                            # deterministic from the seed
+    assert torch.equal(base, again)  # deterministic from the seed
     draws = torch.cat([focal_and_baseline(DESIGNS, seed=s)[2][:12] for s in range(30)])
     # by dominance: design 2 (0.9) drawn about 0.9 / 1.1 of the time
     assert 0.7 < float((draws == 2).float().mean()) < 0.95
@@ -51,21 +55,23 @@ def test_a_record_that_names_its_focal_and_a_team_without_partners():
     focal, team, base, _ = focal_and_baseline(marked, seed=0)
     assert focal == 2 and set(base[18:].tolist()) <= {0, 1} and torch.equal(base[:18], team[:18])
     focal, team, base, _ = focal_and_baseline(DESIGNS[:1], seed=0)
-    assert focal == 0 and (base == -1).all()                   # no partner: no robot
+    assert focal == 0 and (base == -1).all()  # no partner: no robot
     # equal counts: the first design
     assert focal_and_baseline([design(count=2), design(count=2, species=5)])[0] == 0
 
 
 def test_a_record_with_its_baseline_counts_gives_that_baseline():
-    rec = [dict(d, focal=i == 1, baseline_count=b) for i, (d, b) in
-           enumerate(zip(DESIGNS, (15, 0, 5)))]
+    rec = [
+        dict(d, focal=i == 1, baseline_count=b) for i, (d, b) in enumerate(zip(DESIGNS, (15, 0, 5)))
+    ]
     focal, team, base, recorded = focal_and_baseline(rec, seed=0)
     assert recorded and focal == 1
     assert torch.equal(base[:12], team[:12]) and torch.equal(base[18:], team[18:])
     assert sorted(base[12:18].tolist()) == [0, 0, 0, 2, 2, 2]
     # counts that do not fit the team: reconstructed instead
-    bad = [dict(d, focal=i == 1, baseline_count=b) for i, (d, b) in
-           enumerate(zip(DESIGNS, (15, 0, 1)))]
+    bad = [
+        dict(d, focal=i == 1, baseline_count=b) for i, (d, b) in enumerate(zip(DESIGNS, (15, 0, 1)))
+    ]
     assert focal_and_baseline(bad, seed=0)[3] is False
     alone = [dict(DESIGNS[0], focal=True, baseline_count=0)]
     f, team, base, recorded = focal_and_baseline(alone)
@@ -75,8 +81,18 @@ def test_a_record_with_its_baseline_counts_gives_that_baseline():
 def test_evolution_records_the_focal_design_and_its_baseline_team():
     from swarmcode_torch.app.api import evolve
 
-    res = evolve(scenario="two-niche", generations=2, population=8, swarm_size=6, trials=1,
-                 ticks=10, seed=0, logdir=None, device="cpu", compile=False)
+    res = evolve(
+        scenario="two-niche",
+        generations=2,
+        population=8,
+        swarm_size=6,
+        trials=1,
+        ticks=10,
+        seed=0,
+        logdir=None,
+        device="cpu",
+        compile=False,
+    )
     for d in res.best_team["designs"]:
         assert isinstance(d["focal"], bool) and isinstance(d["baseline_count"], int)
     assert sum(d["focal"] for d in res.best_team["designs"]) == 1
@@ -91,17 +107,29 @@ def test_page_counts_equal_episode_metrics_of_the_evaluation_rollout(two_niche):
     genome, _ = team_genome(DESIGNS, cfg.tag_length)
     _, team, base, _ = focal_and_baseline(DESIGNS, seed=1)
     # the evaluation's own rollout of both teams in the page's environment
-    layouts = make_layouts(s.__class__(**{**s.__dict__, "num_robots": 20}), 1,
-                           torch.Generator().manual_seed(1))
-    m = simulate_teams(torch.stack([team, base]), genome, bt.build_tables(genome.bt),
-                       torch.zeros(2, dtype=torch.long), layouts, WorldParams.for_scenario(s),
-                       s.episode_ticks, catalog=s.hardware)
-    assert float(m["delivered_individual"][0]) > 0                  # a meaningful episode
+    layouts = make_layouts(
+        s.__class__(**{**s.__dict__, "num_robots": 20}), 1, torch.Generator().manual_seed(1)
+    )
+    m = simulate_teams(
+        torch.stack([team, base]),
+        genome,
+        bt.build_tables(genome.bt),
+        torch.zeros(2, dtype=torch.long),
+        layouts,
+        WorldParams.for_scenario(s),
+        s.episode_ticks,
+        catalog=s.hardware,
+    )
+    assert float(m["delivered_individual"][0]) > 0  # a meaningful episode
     for k, name in enumerate(("focal", "baseline")):
         counts = final_counts(data, name)
         page_m = data["panels"][name]["metrics"]
-        for key in ("delivered_individual", "delivered_collab", "picked_individual",
-                    "picked_collab"):
+        for key in (
+            "delivered_individual",
+            "delivered_collab",
+            "picked_individual",
+            "picked_collab",
+        ):
             assert counts[key] == page_m[key] == float(m[key][k]), (name, key)
         assert counts["energy_used"] == pytest.approx(float(m["energy_used"][k]), abs=1e-4)
         assert page_m["energy_used"] == pytest.approx(float(m["energy_used"][k]), abs=1e-5)
@@ -115,12 +143,15 @@ def test_scores_terms_and_marginal(two_niche):
         mt = {k: torch.tensor([v]) for k, v in p["metrics"].items()}
         terms = raw_fitness_terms(mt, ecfg.weights)
         assert p["terms"] == {k: pytest.approx(float(v[0]), rel=1e-5) for k, v in terms.items()}
-        assert max(p["raw"], p["floor"]) == pytest.approx(float(raw_fitness(mt, ecfg.weights)[0]),
-                                                          rel=1e-5)
-        assert p["score"] == pytest.approx(float(team_scores(mt, torch.tensor([p["cost"]]), ecfg)[0]),
-                                           rel=1e-5)
-    assert data["marginal"] == pytest.approx(data["panels"]["focal"]["score"]
-                                             - data["panels"]["baseline"]["score"], abs=1e-5)
+        assert max(p["raw"], p["floor"]) == pytest.approx(
+            float(raw_fitness(mt, ecfg.weights)[0]), rel=1e-5
+        )
+        assert p["score"] == pytest.approx(
+            float(team_scores(mt, torch.tensor([p["cost"]]), ecfg)[0]), rel=1e-5
+        )
+    assert data["marginal"] == pytest.approx(
+        data["panels"]["focal"]["score"] - data["panels"]["baseline"]["score"], abs=1e-5
+    )
     # cost: robots plus the species overhead (the baseline has the partners' species only)
     assert data["panels"]["focal"]["species"] == 3 and data["panels"]["baseline"]["species"] == 2
 
@@ -148,7 +179,7 @@ def test_every_tick_of_every_robot_has_the_trace_of_its_tree(two_niche):
 def test_the_file_is_self_contained_and_small(two_niche):
     data, _ = two_niche
     text = render_html(data)
-    assert len(text.encode()) < 1_000_000                       # 20 robots x 200 ticks
+    assert len(text.encode()) < 1_000_000  # 20 robots x 200 ticks
     assert not re.search(r"""(src|href)\s*=\s*["']?(https?:)?//""", text)
     assert "<link" not in text and "import(" not in text and "fetch(" not in text
     assert text.count("<script") == 2 and "/*SCRIPT*/" not in text and "@DATA@" not in text
@@ -157,13 +188,16 @@ def test_the_file_is_self_contained_and_small(two_niche):
 
 def test_swarm200_page_stays_small():
     s = load_scenario("swarm200")
-    designs = [design("pincher", 0.3, count=150, species=1),
-               design("suction", 0.3, count=50, program="forage_random", species=2)]
+    designs = [
+        design("pincher", 0.3, count=150, species=1),
+        design("suction", 0.3, count=50, program="forage_random", species=2),
+    ]
     data = page_data(designs, s, SwarmCoDeConfig(scenario="swarm200"), seed=0, ticks=60)
     per_tick = len(render_html(data).encode()) / 60
-    assert per_tick * s.episode_ticks < 4_000_000, per_tick   # the whole episode: a few MB
+    assert per_tick * s.episode_ticks < 4_000_000, per_tick  # the whole episode: a few MB
     assert final_counts(data, "focal")["energy_used"] == pytest.approx(
-        data["panels"]["focal"]["metrics"]["energy_used"], abs=1e-4)
+        data["panels"]["focal"]["metrics"]["energy_used"], abs=1e-4
+    )
 
 
 # ------------------------------------------------------------------ command and API
@@ -171,10 +205,12 @@ def _run(tmp_path):
     run = tmp_path / "run"
     run.mkdir()
     write_config(run, SwarmCoDeConfig(scenario="two-niche", ticks=30))
-    (run / "summary.json").write_text(json.dumps({"designs": DESIGNS, "best_fitness": 12.5,
-                                                  "best_generation": 4}))
-    (run / "teams.jsonl").write_text(json.dumps({"generation": 2, "fitness": 3.0,
-                                                 "designs": DESIGNS[:2]}) + "\n")
+    (run / "summary.json").write_text(
+        json.dumps({"designs": DESIGNS, "best_fitness": 12.5, "best_generation": 4})
+    )
+    (run / "teams.jsonl").write_text(
+        json.dumps({"generation": 2, "fitness": 3.0, "designs": DESIGNS[:2]}) + "\n"
+    )
     return run
 
 
@@ -183,12 +219,30 @@ def test_replay_run_html_and_the_command(tmp_path):
     path, m = replay_run(run, html=True)
     assert path == run / "team.html" and path.is_file()
     data = decode_page(path.read_text())
-    assert data["ticks"] == 30 and data["record"] == {"run": "run", "fitness": 12.5,
-                                                      "generation": 4}
+    assert data["ticks"] == 30 and data["record"] == {
+        "run": "run",
+        "fitness": 12.5,
+        "generation": 4,
+    }
     assert m == data["panels"]["focal"]["metrics"] or all(
-        m[k] == pytest.approx(v, abs=1e-5) for k, v in data["panels"]["focal"]["metrics"].items())
-    res = CliRunner().invoke(app, ["replay", str(run), "--html", "--generation", "2", "--out",
-                                   str(tmp_path / "g2.html"), "--ticks", "12", "--seed", "3"])
+        m[k] == pytest.approx(v, abs=1e-5) for k, v in data["panels"]["focal"]["metrics"].items()
+    )
+    res = CliRunner().invoke(
+        app,
+        [
+            "replay",
+            str(run),
+            "--html",
+            "--generation",
+            "2",
+            "--out",
+            str(tmp_path / "g2.html"),
+            "--ticks",
+            "12",
+            "--seed",
+            "3",
+        ],
+    )
     assert res.exit_code == 0, res.output
     data = decode_page((tmp_path / "g2.html").read_text())
     assert data["ticks"] == 12 and data["seed"] == 3 and len(data["designs"]) == 2
@@ -200,17 +254,26 @@ def test_replay_run_html_and_the_command(tmp_path):
 
 def test_html_into_a_missing_folder_or_a_directory_is_one_line(tmp_path):
     run = _run(tmp_path)
-    for out, msg in ((tmp_path / "nope" / "t.html", "does not exist"),
-                     (tmp_path, "is a directory")):
+    for out, msg in (
+        (tmp_path / "nope" / "t.html", "does not exist"),
+        (tmp_path, "is a directory"),
+    ):
         res = CliRunner().invoke(app, ["replay", str(run), "--html", "--out", str(out)])
         assert res.exit_code != 0 and msg in res.output and "Traceback" not in res.output
-    assert "team.html" in CliRunner().invoke(app, ["replay", str(run), "--html", "--out",
-                                                   str(tmp_path)]).output
+    assert (
+        "team.html"
+        in CliRunner().invoke(app, ["replay", str(run), "--html", "--out", str(tmp_path)]).output
+    )
 
 
 def test_a_team_of_one_design_has_an_empty_baseline():
-    data = page_data(DESIGNS[:1], load_scenario("one-niche"), SwarmCoDeConfig(scenario="one-niche"),
-                     seed=0, ticks=20)
+    data = page_data(
+        DESIGNS[:1],
+        load_scenario("one-niche"),
+        SwarmCoDeConfig(scenario="one-niche"),
+        seed=0,
+        ticks=20,
+    )
     base = data["panels"]["baseline"]
     assert set(base["robots"]["design"]) == {-1} and base["species"] == 0
     assert set(base["combo"]) == {-1} and final_counts(data, "baseline")["picked_individual"] == 0

@@ -15,9 +15,30 @@ from swarmcode_torch.app.reporting import CUSTOM_SCALARS, HPARAM_METRICS, SCALAR
 
 GENERATIONS = 3
 # the default --render-every (50) is longer than the run
-RUN = ["evolve", "--scenario", "four-niche", "--population", "6", "--swarm-size", "4",
-       "--trials", "1", "--ticks", "6", "--seed", "2", "--device", "cpu", "--no-compile",
-       "--budget", "1500", "--set", "delta=0.5", "--generations", str(GENERATIONS)]
+RUN = [
+    "evolve",
+    "--scenario",
+    "four-niche",
+    "--population",
+    "6",
+    "--swarm-size",
+    "4",
+    "--trials",
+    "1",
+    "--ticks",
+    "6",
+    "--seed",
+    "2",
+    "--device",
+    "cpu",
+    "--no-compile",
+    "--budget",
+    "1500",
+    "--set",
+    "delta=0.5",
+    "--generations",
+    str(GENERATIONS),
+]
 
 
 @pytest.fixture(scope="module")
@@ -26,8 +47,9 @@ def acc(tmp_path_factory):
     r = CliRunner().invoke(app, [*RUN, "--logdir", str(logdir)])
     assert r.exit_code == 0, r.output
     (run_dir,) = logdir.iterdir()
-    acc = EventAccumulator(str(run_dir), size_guidance={"images": 0, "histograms": 0,
-                                                        "scalars": 0, "tensors": 0})
+    acc = EventAccumulator(
+        str(run_dir), size_guidance={"images": 0, "histograms": 0, "scalars": 0, "tensors": 0}
+    )
     acc.Reload()
     return acc
 
@@ -52,10 +74,19 @@ def test_custom_scalars_layout_names_tags_the_run_wrote(acc):
             assert chart.multiline.tag, chart.title
             for rx in chart.multiline.tag:
                 hits = [t for t in scalars if re.search(rx, t)]
-                assert len(hits) == 1, (chart.title, rx, hits)   # each names one written tag
+                assert len(hits) == 1, (chart.title, rx, hits)  # each names one written tag
                 named.update(hits)
-    assert {"species/count", "team/species", "team/niches", "best/niches", "fitness/best",
-            "team/fitness", "team/cost", "team/budget", "best/cost"} <= named
+    assert {
+        "species/count",
+        "team/species",
+        "team/niches",
+        "best/niches",
+        "fitness/best",
+        "team/fitness",
+        "team/cost",
+        "team/budget",
+        "best/cost",
+    } <= named
     assert acc.Scalars("team/budget")[0].value == 1500.0
 
 
@@ -68,11 +99,9 @@ def test_species_and_team_counts_come_before_the_histograms(acc):
     tags = acc.Tags()
     histograms = tags["histograms"]
     assert len(histograms) == 3
-    groups = sorted({_group(t) for kind in ("scalars", "histograms", "images")
-                     for t in tags[kind]})
+    groups = sorted({_group(t) for kind in ("scalars", "histograms", "images") for t in tags[kind]})
     first_histogram = min(groups.index(_group(t)) for t in histograms)
-    for tag in ("species/count", "team/species", "team/niches", "best/species",
-                "best/niches"):
+    for tag in ("species/count", "team/species", "team/niches", "best/species", "best/niches"):
         assert tag in tags["scalars"], tag
         assert groups.index(_group(tag)) < first_histogram, (tag, groups)
 
@@ -86,7 +115,7 @@ def test_every_scalar_has_a_point_per_generation(acc):
         assert [e.step for e in acc.Scalars(tag)] == list(range(GENERATIONS)), tag
     assert not [t for t in scalars if t.startswith("hparams/")]
     best = acc.Scalars("best/fitness")
-    assert all(a.value <= b.value for a, b in zip(best, best[1:]))   # the best so far
+    assert all(a.value <= b.value for a, b in zip(best, best[1:]))  # the best so far
 
 
 def test_hparams_lists_what_matters_and_what_differs_from_the_preset(acc):
@@ -99,8 +128,16 @@ def test_hparams_lists_what_matters_and_what_differs_from_the_preset(acc):
     names = [i.name for i in exp.hparam_infos]
     # the fixed keys, then the keys this run changed from the default preset (delta; and
     # --trials, --ticks, --device ... which set the run's size and where it computes)
-    assert names[:8] == ["preset", "scenario", "budget", "objective", "seed", "population",
-                         "swarm_size", "generations"]
+    assert names[:8] == [
+        "preset",
+        "scenario",
+        "budget",
+        "objective",
+        "seed",
+        "population",
+        "swarm_size",
+        "generations",
+    ]
     assert {"delta", "trials", "ticks", "device"} <= set(names[8:])
     assert not {"p_marginal", "alpha", "tag_length", "max_elite"} & set(names)  # constants
     assert len(names) < 16
@@ -114,8 +151,7 @@ def test_hparams_lists_what_matters_and_what_differs_from_the_preset(acc):
 
 
 def test_a_run_shorter_than_the_replay_interval_ends_with_its_best_teams_replay(acc):
-    images = acc.Tags()["images"]
     assert [e.step for e in acc.Images("team/replay")] == [0]
     (end,) = acc.Images("best/replay")
     assert end.step == GENERATIONS - 1
-    assert end.width > 3 * end.height > 0          # three frames side by side
+    assert end.width > 3 * end.height > 0  # three frames side by side

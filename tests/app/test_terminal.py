@@ -18,10 +18,14 @@ from swarmcode_torch.app import terminal
 def _generation(g: int, total: int):
     """An (Evolution, GenerationResult) pair as the progress reporter reads them."""
     team = {"fitness": 120.25, "species": 3, "niches": 2, "cost": 3950.0}
-    ev = SimpleNamespace(state=SimpleNamespace(generation=g + 1),
-                         cfg=SimpleNamespace(generations=total), done=g + 1 == total)
-    r = SimpleNamespace(generation=g, team=team, best={"fitness": 123.5}, num_species=7,
-                        seconds=1.25)
+    ev = SimpleNamespace(
+        state=SimpleNamespace(generation=g + 1),
+        cfg=SimpleNamespace(generations=total),
+        done=g + 1 == total,
+    )
+    r = SimpleNamespace(
+        generation=g, team=team, best={"fitness": 123.5}, num_species=7, seconds=1.25
+    )
     return ev, r
 
 
@@ -48,13 +52,12 @@ def _progress_lines(monkeypatch, columns: int) -> list[str]:
 
 
 @pytest.mark.parametrize("columns", [80, 40])
-def test_the_progress_line_fits_the_window_with_the_count_and_time_left_first(
-        monkeypatch, columns):
+def test_the_progress_line_fits_the_window_with_the_count_and_time_left_first(monkeypatch, columns):
     lines = _progress_lines(monkeypatch, columns)
     assert lines, "no progress line"
     last = lines[-1]
     assert all(len(ln) <= columns for ln in lines), lines
-    assert last.startswith("done 2/3 left "), lines      # the essential fields, in view
+    assert last.startswith("done 2/3 left "), lines  # the essential fields, in view
     assert "generation 1" in last or last.endswith("…"), lines
 
 
@@ -69,14 +72,40 @@ def test_commands_and_paths_are_never_wrapped_off_a_terminal(tmp_path):
     # a log (stdout a pipe) is 120 columns wide; a long --logdir must still print whole
     logdir = tmp_path / ("a-long-directory-name-" * 4) / ("and-another-one-" * 4)
     r = subprocess.run(
-        [sys.executable, "-m", "swarmcode_torch", "evolve", "--scenario", "one-niche",
-         "--population", "6", "--swarm-size", "4", "--trials", "1", "--ticks", "8",
-         "--generations", "1", "--render-every", "0", "--device", "cpu", "--no-compile",
-         "--threads", "1", "--logdir", str(logdir)],
-        capture_output=True, text=True, timeout=300)
+        [
+            sys.executable,
+            "-m",
+            "swarmcode_torch",
+            "evolve",
+            "--scenario",
+            "one-niche",
+            "--population",
+            "6",
+            "--swarm-size",
+            "4",
+            "--trials",
+            "1",
+            "--ticks",
+            "8",
+            "--generations",
+            "1",
+            "--render-every",
+            "0",
+            "--device",
+            "cpu",
+            "--no-compile",
+            "--threads",
+            "1",
+            "--logdir",
+            str(logdir),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
     (run,) = list(logdir.iterdir())
-    assert len(str(run)) > 120                      # longer than the log's width
+    assert len(str(run)) > 120  # longer than the log's width
     lines = r.stdout.splitlines()
     assert f"Watch: tensorboard --logdir {logdir}" in lines, r.stdout
     assert f"Inspect: swarmcode-torch inspect {run}" in lines, r.stdout

@@ -16,8 +16,15 @@ def test_cli_and_api_take_threads(tmp_path):
         assert r.exit_code != 0 and "--threads must be >= 1" in r.output
         r = CliRunner().invoke(app, ["sweep", "--threads", "0", "--out", str(tmp_path / "s")])
         assert r.exit_code != 0 and "--threads must be >= 1" in r.output
-        res = api.evolve(scenario="one-niche", population=4, generations=1, trials=1, ticks=10,
-                         logdir=None, threads=1)
+        res = api.evolve(
+            scenario="one-niche",
+            population=4,
+            generations=1,
+            trials=1,
+            ticks=10,
+            logdir=None,
+            threads=1,
+        )
         assert torch.get_num_threads() == 1 and len(res.history) == 1
         with pytest.raises(ValueError, match="threads"):
             api.evolve(scenario="one-niche", population=4, generations=1, logdir=None, threads=0)

@@ -16,9 +16,30 @@ from swarmcode_torch.app.reporting import HPARAM_METRICS, SCALAR_TAGS, read_metr
 from swarmcode_torch.app.runs import METRICS_FILE
 
 GENERATIONS = 3
-RUN = ["evolve", "--scenario", "one-niche", "--population", "6", "--swarm-size", "3",
-       "--trials", "1", "--ticks", "6", "--seed", "4", "--device", "cpu", "--no-compile",
-       "--budget", "700", "--generations", str(GENERATIONS), "--render-every", "2"]
+RUN = [
+    "evolve",
+    "--scenario",
+    "one-niche",
+    "--population",
+    "6",
+    "--swarm-size",
+    "3",
+    "--trials",
+    "1",
+    "--ticks",
+    "6",
+    "--seed",
+    "4",
+    "--device",
+    "cpu",
+    "--no-compile",
+    "--budget",
+    "700",
+    "--generations",
+    str(GENERATIONS),
+    "--render-every",
+    "2",
+]
 
 
 def _records(path):
@@ -35,11 +56,11 @@ def _records(path):
         if left < 7:
             pos += left
             continue
-        _, length, kind = struct.unpack("<IHB", data[pos:pos + 7])
-        if length == 0 and kind == 0:       # padding to the end of the block
+        _, length, kind = struct.unpack("<IHB", data[pos : pos + 7])
+        if length == 0 and kind == 0:  # padding to the end of the block
             pos += left
             continue
-        chunk, pos = data[pos + 7:pos + 7 + length], pos + 7 + length
+        chunk, pos = data[pos + 7 : pos + 7 + length], pos + 7 + length
         if kind == 1:
             chunks.append(chunk)
         elif kind == 2:
@@ -61,8 +82,9 @@ def _history(records) -> dict[int, dict]:
     rows: dict[int, dict] = {}
     for x in records:
         if x.WhichOneof("record_type") == "history":
-            row = {i.key or "/".join(i.nested_key): json.loads(i.value_json)
-                   for i in x.history.item}
+            row = {
+                i.key or "/".join(i.nested_key): json.loads(i.value_json) for i in x.history.item
+            }
             rows.setdefault(row["_step"], {}).update(row)
     return rows
 
@@ -76,13 +98,14 @@ def offline(tmp_path, monkeypatch):
     monkeypatch.setenv("WANDB_CONSOLE", "off")
     (tmp_path / "wb").mkdir()
     yield tmp_path / "wb"
-    wandb.teardown()           # the next run reads the environment again (its WANDB_DIR)
+    wandb.teardown()  # the next run reads the environment again (its WANDB_DIR)
 
 
 @pytest.mark.subprocess
 def test_evolve_wandb_logs_the_config_scalars_and_replays_offline(tmp_path, offline):
-    r = CliRunner().invoke(app, [*RUN, "--logdir", str(tmp_path / "runs"), "--wandb",
-                                 "--wandb-project", "swarm-test"])
+    r = CliRunner().invoke(
+        app, [*RUN, "--logdir", str(tmp_path / "runs"), "--wandb", "--wandb-project", "swarm-test"]
+    )
     assert r.exit_code == 0, r.output
     (run_dir,) = (tmp_path / "runs").iterdir()
     (wb_run,) = (offline / "wandb").glob("offline-run-*")
@@ -100,7 +123,7 @@ def test_evolve_wandb_logs_the_config_scalars_and_replays_offline(tmp_path, offl
     for g, csv_row in enumerate(csv_rows):
         for tag in SCALAR_TAGS:
             if tag.startswith("perf/"):
-                continue                    # timings: measured, not recorded twice the same
+                continue  # timings: measured, not recorded twice the same
             assert rows[g][tag] == pytest.approx(csv_row[tag], nan_ok=True), (g, tag)
         assert set(HPARAM_METRICS) <= set(rows[g])
         assert rows[g]["traits/radius/_type"] == "histogram"
@@ -116,26 +139,37 @@ def test_evolve_wandb_logs_the_config_scalars_and_replays_offline(tmp_path, offl
 
 @pytest.mark.subprocess
 def test_the_api_logs_to_wandb_offline(tmp_path, offline):
-    result = sc.evolve(scenario="one-niche", population=4, swarm_size=3, trials=1, ticks=6,
-                       generations=2, device="cpu", compile=False, logdir=tmp_path / "runs",
-                       render_every=0, wandb="api-test")
+    result = sc.evolve(
+        scenario="one-niche",
+        population=4,
+        swarm_size=3,
+        trials=1,
+        ticks=6,
+        generations=2,
+        device="cpu",
+        compile=False,
+        logdir=tmp_path / "runs",
+        render_every=0,
+        wandb="api-test",
+    )
     (wb_run,) = (offline / "wandb").glob("offline-run-*")
     records = _records(next(wb_run.glob("run-*.wandb")))
     (run,) = [x.run for x in records if x.WhichOneof("record_type") == "run"]
     assert run.project == "api-test" and run.display_name == result.run_dir.name
     rows = _history(records)
-    assert sorted(rows) == [0, 1] and "team/replay/path" not in rows[1]   # render_every=0
+    assert sorted(rows) == [0, 1] and "team/replay/path" not in rows[1]  # render_every=0
     assert rows[1]["best/fitness"] == pytest.approx(result.best_team["fitness"])
 
 
 def test_without_wandb_a_one_line_error_names_the_extra(tmp_path, monkeypatch):
-    monkeypatch.setitem(sys.modules, "wandb", None)       # `import wandb` raises ImportError
+    monkeypatch.setitem(sys.modules, "wandb", None)  # `import wandb` raises ImportError
     r = CliRunner().invoke(app, [*RUN, "--logdir", str(tmp_path / "runs"), "--wandb"])
     assert r.exit_code != 0
     lines = [x for x in r.output.splitlines() if x.strip()]
     assert len(lines) == 1 and "[wandb]" in lines[0], r.output
     assert "Traceback" not in r.output and not (tmp_path / "runs").exists()
     with pytest.raises(ImportError, match=r"\[wandb\]"):
-        sc.evolve(scenario="one-niche", population=4, generations=1, logdir=tmp_path / "api",
-                  wandb="p")
+        sc.evolve(
+            scenario="one-niche", population=4, generations=1, logdir=tmp_path / "api", wandb="p"
+        )
     assert not (tmp_path / "api").exists()

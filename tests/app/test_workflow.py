@@ -4,12 +4,10 @@ command line and the API."""
 
 import csv
 import json
-import os
-import sys
-import tomllib
 from pathlib import Path
 
 import pytest
+import tomllib
 import torch
 from typer.testing import CliRunner
 
@@ -20,10 +18,35 @@ from swarmcode_torch.app.cli import app
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 
 runner = CliRunner()
-TINY = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
-        "--ticks", "15", "--seed", "3", "--device", "cpu", "--no-compile", "--render-every", "0"]
-API_TINY = dict(scenario="one-niche", population=6, swarm_size=4, trials=1, ticks=15, seed=3,
-                device="cpu", compile=False)
+TINY = [
+    "--scenario",
+    "one-niche",
+    "--population",
+    "6",
+    "--swarm-size",
+    "4",
+    "--trials",
+    "1",
+    "--ticks",
+    "15",
+    "--seed",
+    "3",
+    "--device",
+    "cpu",
+    "--no-compile",
+    "--render-every",
+    "0",
+]
+API_TINY = dict(
+    scenario="one-niche",
+    population=6,
+    swarm_size=4,
+    trials=1,
+    ticks=15,
+    seed=3,
+    device="cpu",
+    compile=False,
+)
 
 
 def invoke(*args):
@@ -51,8 +74,10 @@ def new_run(logdir: Path, *args) -> Path:
 def rows(run_dir: Path) -> dict[int, dict]:
     """metrics.csv by generation, less the timings."""
     with open(run_dir / "metrics.csv", newline="") as f:
-        return {int(r["generation"]): {k: v for k, v in r.items() if not k.startswith("perf/")}
-                for r in csv.DictReader(f)}
+        return {
+            int(r["generation"]): {k: v for k, v in r.items() if not k.startswith("perf/")}
+            for r in csv.DictReader(f)
+        }
 
 
 def teams(run_dir: Path) -> dict[int, str]:
@@ -93,8 +118,10 @@ def test_snapshots_are_checkpoints_of_their_generation(parent):
         d = read_checkpoint(parent / "snapshots" / f"generation-{g:06d}.pt")
         assert d["generation"] == g and len(d["history"]) == g
     # the latest checkpoint stays where it was, and is the last snapshot's state
-    assert same_state(read_checkpoint(parent / "checkpoint.pt"),
-                      read_checkpoint(parent / "snapshots" / "generation-000006.pt"))
+    assert same_state(
+        read_checkpoint(parent / "checkpoint.pt"),
+        read_checkpoint(parent / "snapshots" / "generation-000006.pt"),
+    )
 
 
 def test_branch_without_changes_continues_as_the_parent(parent, tmp_path):
@@ -105,10 +132,14 @@ def test_branch_without_changes_continues_as_the_parent(parent, tmp_path):
     assert sorted(rows(child)) == [2, 3, 4, 5]
     assert rows(child) == {g: r for g, r in rows(parent).items() if g >= 2}
     assert teams(child) == {g: t for g, t in teams(parent).items() if g >= 2}
-    assert same_state(read_checkpoint(child / "checkpoint.pt"),
-                      read_checkpoint(parent / "checkpoint.pt"))
-    want = {"run": str(parent.absolute()), "generation": 2,
-            "checkpoint": "snapshots/generation-000002.pt"}
+    assert same_state(
+        read_checkpoint(child / "checkpoint.pt"), read_checkpoint(parent / "checkpoint.pt")
+    )
+    want = {
+        "run": str(parent.absolute()),
+        "generation": 2,
+        "checkpoint": "snapshots/generation-000002.pt",
+    }
     assert config_toml(child)["parent"] == want
     assert json.loads((child / "summary.json").read_text())["parent"] == want
     assert (child / "scenario.toml").read_bytes() == (parent / "scenario.toml").read_bytes()
@@ -134,8 +165,9 @@ def test_branch_with_set_changes_exactly_that_setting(parent, tmp_path):
         def on_end(self, ev):
             pass
 
-    res = sc.evolve(from_run=f"{parent}@4", logdir=tmp_path, generations=6, delta=0.55,
-                    reporters=[First()])
+    res = sc.evolve(
+        from_run=f"{parent}@4", logdir=tmp_path, generations=6, delta=0.55, reporters=[First()]
+    )
     a, b = config_toml(parent), config_toml(res.run_dir)
     assert b.pop("parent")["generation"] == 4
     assert {k for k in a if a[k] != b.get(k)} | {k for k in b if b[k] != a.get(k)} == {"delta"}
@@ -175,16 +207,18 @@ def test_branch_errors_are_one_line(parent, tmp_path):
     assert_clean_error(r, "is not a run directory")
     r = invoke("evolve", "--from", f"{parent}@-1")
     assert_clean_error(r, "must be an integer >= 0")
-    for option, value, key in (("--population", 8, "--population"),
-                               ("--scenario", "two-niche", "--scenario"),
-                               ("--set", "tag_length=8", "--set tag_length")):
+    for option, value, key in (
+        ("--population", 8, "--population"),
+        ("--scenario", "two-niche", "--scenario"),
+        ("--set", "tag_length=8", "--set tag_length"),
+    ):
         r = invoke("evolve", "--from", f"{parent}@2", option, value, "--logdir", tmp_path)
         assert_clean_error(r, f"{key} cannot change when branching")
     r = invoke("evolve", "--from", f"{parent}@4", "--generations", 4, "--logdir", tmp_path)
     assert_clean_error(r, "must be more than the snapshot's 4 generations")
     r = invoke("evolve", "--from", parent, "--resume", parent)
     assert_clean_error(r, "--resume uses the run's saved config", "--from")
-    assert list(tmp_path.iterdir()) == []            # no run directory made by any of them
+    assert list(tmp_path.iterdir()) == []  # no run directory made by any of them
 
 
 def test_branch_refuses_linked_and_corrupt_snapshots(parent, tmp_path):
@@ -193,7 +227,7 @@ def test_branch_refuses_linked_and_corrupt_snapshots(parent, tmp_path):
     run = tmp_path / "run"
     shutil.copytree(parent, run)
     snap = run / "snapshots" / "generation-000002.pt"
-    snap.write_bytes(snap.read_bytes()[:500])          # cut short
+    snap.write_bytes(snap.read_bytes()[:500])  # cut short
     r = invoke("evolve", "--from", f"{run}@2", "--logdir", tmp_path / "out")
     assert_clean_error(r, "is corrupt or not a checkpoint")
     snap.unlink()
@@ -234,8 +268,12 @@ def test_max_time_stops_cleanly_and_resume_continues_identically(monkeypatch, tm
     # is reached after the third generation
     stopped = new_run(run, "--generations", 6, "--max-time", "30s")
     r_out = json.loads((stopped / "summary.json").read_text())
-    assert r_out["stop"] == {"reason": "max_time", "generation": 3, "max_time_seconds": 30.0,
-                             "elapsed_seconds": 30.0}
+    assert r_out["stop"] == {
+        "reason": "max_time",
+        "generation": 3,
+        "max_time_seconds": 30.0,
+        "elapsed_seconds": 30.0,
+    }
     assert read_checkpoint(stopped / "checkpoint.pt")["generation"] == 3
     assert sorted(rows(stopped)) == [0, 1, 2]
     monkeypatch.setattr(session, "clock", FakeClock())
@@ -244,8 +282,9 @@ def test_max_time_stops_cleanly_and_resume_continues_identically(monkeypatch, tm
     straight = new_run(tmp_path / "b", "--generations", 6)
     assert rows(stopped) == rows(straight)
     assert teams(stopped) == teams(straight)
-    assert same_state(read_checkpoint(stopped / "checkpoint.pt"),
-                      read_checkpoint(straight / "checkpoint.pt"))
+    assert same_state(
+        read_checkpoint(stopped / "checkpoint.pt"), read_checkpoint(straight / "checkpoint.pt")
+    )
     assert json.loads((stopped / "summary.json").read_text())["stop"]["reason"] == "generations"
 
 
@@ -254,9 +293,11 @@ def test_max_time_message_and_exit(monkeypatch, tmp_path):
     r = invoke("evolve", *TINY, "--generations", 5, "--max-time", "0.5m", "--logdir", tmp_path)
     assert r.exit_code == 0, r.output
     (run,) = tmp_path.iterdir()
-    assert (f"Stopped after 3 generations: --max-time reached (30.0s of 30s); checkpoint of "
-            f"generation 3 is in {run}; continue with: swarmcode-torch evolve --resume {run}"
-            in " ".join(r.output.split()))
+    assert (
+        f"Stopped after 3 generations: --max-time reached (30.0s of 30s); checkpoint of "
+        f"generation 3 is in {run}; continue with: swarmcode-torch evolve --resume {run}"
+        in " ".join(r.output.split())
+    )
 
 
 def test_patience_stops_when_the_best_team_stalls(tmp_path):
@@ -271,11 +312,11 @@ def test_patience_stops_when_the_best_team_stalls(tmp_path):
     # no earlier generation had gone 2 generations without a better best team
     team = {g: json.loads(t)["fitness"] for g, t in teams(res.run_dir).items()}
     assert sorted(team) == list(range(last + 1))
-    found = 0                                     # where the run's best team was found
+    found = 0  # where the run's best team was found
     for g in range(1, last + 1):
         if team[g] > team[found]:
             found = g
-        assert g - found < 2 or g == last, g      # no earlier stall of 2 generations
+        assert g - found < 2 or g == last, g  # no earlier stall of 2 generations
     assert found == stop["best_generation"]
     assert read_checkpoint(res.run_dir / "checkpoint.pt")["generation"] == res.generations
 
@@ -301,7 +342,9 @@ def test_api_max_time_with_resume(monkeypatch, tmp_path):
     res = sc.evolve(logdir=tmp_path, generations=5, max_time=20, snapshot_every=1, **API_TINY)
     assert res.stopped == "max_time" and res.generations == 2
     assert sorted(p.name for p in (res.run_dir / "snapshots").iterdir()) == [
-        "generation-000001.pt", "generation-000002.pt"]
+        "generation-000001.pt",
+        "generation-000002.pt",
+    ]
     more = sc.resume(res.run_dir)
     assert more.stopped is None and more.generations == 5
 
@@ -312,8 +355,16 @@ def test_print_config_of_a_runs_own_config_reads_back_the_same(parent, tmp_path)
     assert r.exit_code == 0, r.output
     printed = tomllib.loads(r.output)
     assert printed == config_toml(parent)
-    r = invoke("evolve", "--config", parent / "config.toml", "--population", 9, "--set",
-               "delta=0.7", "--print-config")
+    r = invoke(
+        "evolve",
+        "--config",
+        parent / "config.toml",
+        "--population",
+        9,
+        "--set",
+        "delta=0.7",
+        "--print-config",
+    )
     changed = tomllib.loads(r.output)
     assert {k for k in printed if printed[k] != changed[k]} == {"population", "delta"}
     assert changed["population"] == 9 and changed["delta"] == 0.7
@@ -329,15 +380,30 @@ def test_print_config_defaults_and_branch():
 
 def test_config_file_starts_a_run(tmp_path):
     cfg = tmp_path / "run.toml"
-    cfg.write_text('scenario = "one-niche"\npopulation = 6\nswarm_size = 4\ntrials = 1\n'
-                   'ticks = 15\ngenerations = 2\ndelta = 0.6\ndevice = "cpu"\ncompile = false\n')
-    r = invoke("evolve", "--config", cfg, "--generations", 3, "--logdir", tmp_path / "runs",
-               "--render-every", 0)
+    cfg.write_text(
+        'scenario = "one-niche"\npopulation = 6\nswarm_size = 4\ntrials = 1\n'
+        'ticks = 15\ngenerations = 2\ndelta = 0.6\ndevice = "cpu"\ncompile = false\n'
+    )
+    r = invoke(
+        "evolve",
+        "--config",
+        cfg,
+        "--generations",
+        3,
+        "--logdir",
+        tmp_path / "runs",
+        "--render-every",
+        0,
+    )
     assert r.exit_code == 0, r.output
     (run,) = (tmp_path / "runs").iterdir()
     got = config_toml(run)
-    assert (got["population"], got["delta"], got["generations"], got["swarm_size"]) == \
-        (6, 0.6, 3, 4)
+    assert (got["population"], got["delta"], got["generations"], got["swarm_size"]) == (
+        6,
+        0.6,
+        3,
+        4,
+    )
     res = sc.evolve(config=cfg, logdir=None, generations=1)
     assert res.config.delta == 0.6 and res.config.population == 6
 
@@ -356,5 +422,7 @@ def test_config_file_errors_are_one_line(tmp_path):
     assert_clean_error(invoke("evolve", "--config", link), "symbolic link")
     ok = tmp_path / "ok.toml"
     ok.write_text("population = 8\n")
-    assert_clean_error(invoke("evolve", "--config", ok, "--from", tmp_path),
-                       "--config and --from cannot be used together")
+    assert_clean_error(
+        invoke("evolve", "--config", ok, "--from", tmp_path),
+        "--config and --from cannot be used together",
+    )

@@ -18,11 +18,11 @@ def _none(k):
 
 
 def test_a_new_species_is_admitted_after_calm_generations_only():
-    adm = Admission.empty().grow(2, partner=True).grow(3, partner=False)   # 0, 1 old; 2 new
+    adm = Admission.empty().grow(2, partner=True).grow(3, partner=False)  # 0, 1 old; 2 new
     assert adm.partner.tolist() == [True, True, False]
     species = torch.tensor([0, 0, 1, 1, 2])
     ids = torch.tensor([0, 1, 2])
-    for gen in range(P.admit_generations):
+    for _gen in range(P.admit_generations):
         assert not adm.allowed(ids)[2]
         adm = update(adm, species, ids, _gated(species.tolist(), set()), _none(3))
     assert adm.allowed(ids).tolist() == [True, True, True] and adm.calm[2] == 0
@@ -39,8 +39,13 @@ def test_a_mostly_gated_species_stays_on_probation():
 
 
 def test_admission_state_round_trips_and_malformed_state_is_refused():
-    adm = update(Admission.empty().grow(3, True), torch.tensor([0, 1, 2, 2]),
-                 torch.tensor([0, 1, 2]), torch.tensor([True, False, False, True]), _none(3))
+    adm = update(
+        Admission.empty().grow(3, True),
+        torch.tensor([0, 1, 2, 2]),
+        torch.tensor([0, 1, 2]),
+        torch.tensor([True, False, False, True]),
+        _none(3),
+    )
     back = Admission.from_state_dict(adm.state_dict())
     for k in ("partner", "gated", "calm", "clash"):
         assert torch.equal(getattr(adm, k), getattr(back, k))
@@ -80,13 +85,15 @@ def test_a_gated_partner_whose_nearest_partner_is_another_design_is_not_a_substi
     holder whose job does not pay yet, as early in a run)."""
     from swarmcode_torch.coevo.admission import SUBSTITUTE, nearest_partner
 
-    dd = torch.tensor([[0.0, 0.9], [0.9, 0.0]])          # two far designs
+    dd = torch.tensor([[0.0, 0.9], [0.9, 0.0]])  # two far designs
     nearest = nearest_partner(dd, torch.tensor([True, True]))
     ids = torch.tensor([0, 1])
-    species = torch.tensor([0, 0, 0, 1, 1])              # 0 the larger, 1 gated every time
+    species = torch.tensor([0, 0, 0, 1, 1])  # 0 the larger, 1 gated every time
     gated = torch.tensor([False, False, False, True, True])
-    for near, want in ((torch.tensor([False, False]), [True, True]),
-                       (torch.tensor([True, True]), [True, False])):
+    for near, want in (
+        (torch.tensor([False, False]), [True, True]),
+        (torch.tensor([True, True]), [True, False]),
+    ):
         adm = Admission.empty().grow(2, True)
         for _ in range(SUBSTITUTE.clash_generations + 1):
             adm = update(adm, species, ids, gated, nearest, SUBSTITUTE, near=near)
@@ -99,8 +106,16 @@ def test_a_checkpoint_with_a_damaged_admission_state_is_refused():
     from swarmcode_torch.coevo.config import SwarmCoDeConfig
     from swarmcode_torch.coevo.evolve import Evolution
 
-    cfg = SwarmCoDeConfig(scenario="one-niche", population=8, swarm_size=4, trials=1, ticks=10,
-                          generations=2, device="cpu", compile=False)
+    cfg = SwarmCoDeConfig(
+        scenario="one-niche",
+        population=8,
+        swarm_size=4,
+        trials=1,
+        ticks=10,
+        generations=2,
+        device="cpu",
+        compile=False,
+    )
     ev = Evolution(cfg)
     ev.step()
     d = ev.state_dict()

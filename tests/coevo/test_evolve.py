@@ -6,14 +6,15 @@ from dataclasses import replace
 import pytest
 import torch
 
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.evaluation import EvalConfig, evaluate
 from swarmcode_torch.coevo.evolve import Evolution, random_population
-from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.sim.scenario import load_scenario
 from swarmcode_torch.sim.step import step as world_step
 
-TINY = SwarmCoDeConfig(scenario="one-niche", population=8, swarm_size=5, trials=2, ticks=15,
-                    generations=4, seed=1)
+TINY = SwarmCoDeConfig(
+    scenario="one-niche", population=8, swarm_size=5, trials=2, ticks=15, generations=4, seed=1
+)
 
 
 def _two_identical(cfg=TINY):
@@ -34,10 +35,19 @@ def test_all_focal_and_baseline_trials_run_as_one_batch():
         return world_step(state, *args)
 
     cfg = EvalConfig(swarm_size=5, trials=3, ticks=7)
-    evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
-             torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"), cfg,
-             torch.Generator().manual_seed(0), step_fn=spy)
-    assert len(seen) == 7                       # one tick loop
+    evaluate(
+        pop,
+        torch.tensor([0, 1]),
+        torch.tensor([0, 1]),
+        torch.tensor([0, 1]),
+        torch.zeros(2),
+        torch.zeros(2, dtype=torch.bool),
+        load_scenario("one-niche"),
+        cfg,
+        torch.Generator().manual_seed(0),
+        step_fn=spy,
+    )
+    assert len(seen) == 7  # one tick loop
     assert all(s == (2 * 2 * 3, 5, 2) for s in seen)  # 2 individuals x (focal, baseline) x 3 trials
 
 
@@ -46,9 +56,17 @@ def test_identical_partner_gives_zero_marginal_and_gated_fitness():
     # environments, so both teams score exactly the same and the gate applies to both
     pop = _two_identical()
     cfg = EvalConfig(swarm_size=6, trials=2, ticks=60)
-    res = evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
-                   torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"),
-                   cfg, torch.Generator().manual_seed(4))
+    res = evaluate(
+        pop,
+        torch.tensor([0, 1]),
+        torch.tensor([0, 1]),
+        torch.tensor([0, 1]),
+        torch.zeros(2),
+        torch.zeros(2, dtype=torch.bool),
+        load_scenario("one-niche"),
+        cfg,
+        torch.Generator().manual_seed(4),
+    )
     assert (res.swarms.baseline_team[0] == 1).all() and (res.swarms.baseline_team[1] == 0).all()
     assert torch.equal(res.focal, res.baseline)
     assert torch.allclose(res.fitness, res.focal * cfg.p_marginal)
@@ -58,9 +76,17 @@ def test_alone_an_individual_beats_an_empty_baseline():
     pop = _two_identical()
     pop.selectivity[:] = 0.0  # no partners: the baseline team is empty
     cfg = EvalConfig(swarm_size=4, trials=1, ticks=30)
-    res = evaluate(pop, torch.tensor([0, 1]), torch.tensor([0, 1]), torch.tensor([0, 1]),
-                   torch.zeros(2), torch.zeros(2, dtype=torch.bool), load_scenario("one-niche"),
-                   cfg, torch.Generator().manual_seed(4))
+    res = evaluate(
+        pop,
+        torch.tensor([0, 1]),
+        torch.tensor([0, 1]),
+        torch.tensor([0, 1]),
+        torch.zeros(2),
+        torch.zeros(2, dtype=torch.bool),
+        load_scenario("one-niche"),
+        cfg,
+        torch.Generator().manual_seed(4),
+    )
     assert (res.swarms.baseline_team == -1).all() and (res.swarms.focal_team >= 0).all()
     assert torch.allclose(res.baseline, torch.full((2,), 0.1))  # floor of an empty team's score
     assert (res.fitness == res.focal).all()
@@ -77,7 +103,7 @@ def test_generations_keep_population_and_report_metrics():
         assert torch.equal(t.rows, torch.unique(m.team_rows[m.team_rows >= 0]))
         assert m.best_fitness >= m.mean_fitness > 0
         assert t.cost > 0 and int(t.focal.sum()) == 1
-        assert m.team is None and m.best is None       # the algorithm builds no records
+        assert m.team is None and m.best is None  # the algorithm builds no records
     assert ev.state.generation == 3 and len(ev.state.history) == 3
 
 
@@ -108,10 +134,23 @@ def test_best_team_is_the_team_of_the_fittest_individual():
         if e.generation % 2:
             e.evaluation.fitness.copy_(-e.evaluation.focal)
 
-    ev = Evolution(SwarmCoDeConfig(scenario="two-niche", population=12, swarm_size=6, trials=1,
-                                ticks=40, generations=6, seed=1, device="cpu", compile=False,
-                                bt_mutation_rate=1.0, p_gene_mutation=1.0,
-                                partners_per_niche="all", quota_size_exponent=None))
+    ev = Evolution(
+        SwarmCoDeConfig(
+            scenario="two-niche",
+            population=12,
+            swarm_size=6,
+            trials=1,
+            ticks=40,
+            generations=6,
+            seed=1,
+            device="cpu",
+            compile=False,
+            bt_mutation_rate=1.0,
+            p_gene_mutation=1.0,
+            partners_per_niche="all",
+            quota_size_exponent=None,
+        )
+    )
     ev.hooks.after_evaluation.append(plant)
     while not ev.done:
         m = ev.step()
@@ -129,18 +168,22 @@ def test_cuda_graphs_need_cuda_and_the_compiled_tick():
     from swarmcode_torch.coevo.evolve import make_context
 
     with pytest.raises(ValueError, match="cuda_graphs needs device cuda"):
-        make_context(SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu",
-                                  cuda_graphs=True))
+        make_context(
+            SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu", cuda_graphs=True)
+        )
     # unset (the default) is "on where the tick runs compiled on CUDA": off on the CPU
     from swarmcode_torch.sim.fused import available
+
     # not compiled on the CPU: the fused C++ tick where it builds (sim/fused.py)
     for compiled, mode in ((False, "fused" if available() else "eager"), (True, "compiled")):
-        ctx = make_context(SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu",
-                                        compile=compiled))
+        ctx = make_context(
+            SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu", compile=compiled)
+        )
         assert ctx.cfg.cuda_graphs is None and ctx.tick_mode == mode
     # a compiled tick that fell back to eager says so
-    ctx = make_context(SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu",
-                                    compile=True))
+    ctx = make_context(
+        SwarmCoDeConfig(scenario="one-niche", population=4, device="cpu", compile=True)
+    )
     ctx.step_fn.error = RuntimeError("no compiler")
     assert ctx.tick_mode == "eager (compiling failed)"
 
@@ -168,13 +211,22 @@ def _patch_niche_knowledge(monkeypatch):
 def test_the_presets_algorithm_reads_no_capabilities_or_niches(monkeypatch, preset, settings):
     from swarmcode_torch.coevo.config import preset_config
 
-    cfg = preset_config(preset, scenario="two-niche", population=12, swarm_size=6, trials=1,
-                        ticks=20, generations=4, seed=3, **settings)
+    cfg = preset_config(
+        preset,
+        scenario="two-niche",
+        population=12,
+        swarm_size=6,
+        trials=1,
+        ticks=20,
+        generations=4,
+        seed=3,
+        **settings,
+    )
     assert _patch_niche_knowledge(monkeypatch) >= 3
     ev = Evolution(cfg)
     while not ev.done:
         r = ev.step()
-    assert r.team is None and r.best_team.rows.numel() > 0     # the application's records
+    assert r.team is None and r.best_team.rows.numel() > 0  # the application's records
     # the diagnostic oracle does read them, so the patch is where the algorithm would look
     oracle = Evolution(replace(cfg, partners_per_niche="one"))
     with pytest.raises(AssertionError, match="capabilities"):
@@ -190,7 +242,7 @@ def test_presets_set_the_papers_rules_and_record_their_name():
     assert (paper.quota_size_exponent, paper.p_effector) == (None, None)
     default = preset_config()
     assert default == SwarmCoDeConfig() and default.partner_admission == "substitute"
-    assert default.partners_per_niche == "all"          # no niche oracle by default
+    assert default.partners_per_niche == "all"  # no niche oracle by default
     assert paper.partner_admission == "open"
     assert preset_config("paper", seed=4).seed == 4 and set(PRESETS) == {"default", "paper"}
     with pytest.raises(ValueError, match="unknown preset 'nope'"):

@@ -4,11 +4,24 @@ import torch
 
 from swarmcode_torch.coevo import evaluation, evolve, population
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
-from swarmcode_torch.coevo.evolve import (AfterEvaluation, AfterReproduction, AfterSpeciation,
-                                          Evolution)
+from swarmcode_torch.coevo.evolve import (
+    AfterEvaluation,
+    AfterReproduction,
+    AfterSpeciation,
+    Evolution,
+)
 
-TINY = SwarmCoDeConfig(scenario="two-niche", population=10, swarm_size=4, trials=1, ticks=12,
-                       generations=3, seed=2, device="cpu", compile=False)
+TINY = SwarmCoDeConfig(
+    scenario="two-niche",
+    population=10,
+    swarm_size=4,
+    trials=1,
+    ticks=12,
+    generations=3,
+    seed=2,
+    device="cpu",
+    compile=False,
+)
 
 
 def test_hooks_are_called_in_order_once_a_generation_with_what_the_step_has():
@@ -16,14 +29,14 @@ def test_hooks_are_called_in_order_once_a_generation_with_what_the_step_has():
     calls = []
 
     def after_speciation(e):
-        assert type(e) is AfterSpeciation and e.state is ev.state      # before the step ends
+        assert type(e) is AfterSpeciation and e.state is ev.state  # before the step ends
         assert e.generation == e.state.generation
         assert e.speciation.species.shape == (TINY.population,)
         calls.append(("speciation", e.generation, e))
 
     def after_evaluation(e):
         assert type(e) is AfterEvaluation and e.state is ev.state
-        assert e.speciation is calls[-1][2].speciation                # the same species
+        assert e.speciation is calls[-1][2].speciation  # the same species
         assert e.evaluation.fitness.shape == e.fitness.shape == (TINY.population,)
         calls.append(("evaluation", e.generation, e))
 
@@ -43,7 +56,8 @@ def test_hooks_are_called_in_order_once_a_generation_with_what_the_step_has():
         # the next state the last hook saw is the state the step left
         assert calls[-1][2].next_state is ev.state
     assert [(what, g) for what, g, _ in calls] == [
-        (what, g) for g in range(3) for what in ("speciation", "evaluation", "reproduction")]
+        (what, g) for g in range(3) for what in ("speciation", "evaluation", "reproduction")
+    ]
     for g, r in enumerate(results):
         spec, evaluated, _ = (e for what, gg, e in calls if gg == g)
         # what the hooks got is what the generation reported

@@ -19,13 +19,15 @@ def reference(group, fitness, first=None):
 
 def random_shape(gen):
     """(P, K): up to 39 rows in 1..5 groups."""
-    return (int(torch.randint(0, 40, (1,), generator=gen)),
-            int(torch.randint(1, 6, (1,), generator=gen)))
+    return (
+        int(torch.randint(0, 40, (1,), generator=gen)),
+        int(torch.randint(1, 6, (1,), generator=gen)),
+    )
 
 
 def random_case(gen, p, k):
     group = torch.randint(0, k, (p,), generator=gen)
-    fitness = torch.randint(0, 4, (p,), generator=gen).float()       # few values: many ties
+    fitness = torch.randint(0, 4, (p,), generator=gen).float()  # few values: many ties
     fitness[torch.rand(p, generator=gen) < 0.2] = -torch.inf
     first = torch.rand(p, generator=gen) < 0.5
     n = torch.randint(0, 4, (k,), generator=gen)
@@ -52,7 +54,7 @@ def test_top_per_group_and_table_match_reference(seed):
     group, fitness, first, n = random_case(gen, p, k)
     order, rank = rank_within_groups(group, fitness)
     ref, _ = reference(group.tolist(), fitness.tolist())
-    best = [[i for i in ref if group[i] == g][:int(n[g])] for g in range(k)]
+    best = [[i for i in ref if group[i] == g][: int(n[g])] for g in range(k)]
     assert top_per_group(order, rank, group, n).tolist() == [i for rows in best for i in rows]
 
     # rows of group k (no group) never enter the table
@@ -64,7 +66,7 @@ def test_top_per_group_and_table_match_reference(seed):
     table = top_table(order, rank, none, n)
     assert table.shape == (k, m)
     for g in range(k):
-        rows = [i for i in ref if none[i] == g][:int(n[g])]
+        rows = [i for i in ref if none[i] == g][: int(n[g])]
         assert table[g].tolist() == rows + [-1] * (m - len(rows))
 
 

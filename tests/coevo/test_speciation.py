@@ -1,22 +1,27 @@
 import pytest
 import torch
+from genomekit import random_genomes as _random_genomes
 
-from swarmcode_torch.sim.bt import ACT_DROP, ACT_PICK_UP, NOP, SEQ
 from swarmcode_torch.coevo.population import R_MAX, R_MIN, Population
 from swarmcode_torch.coevo.speciation import DistanceWeights, distance, hamming, speciate
-
-from genomekit import random_genomes as _random_genomes
+from swarmcode_torch.sim.bt import ACT_DROP, ACT_PICK_UP, NOP, SEQ
 
 
 def make(n, l_tag=8, l_bt=6, **kw):
     """n identical default genomes, with fields overridden by kw (tensors or lists)."""
     g = dict(
-        tag=torch.zeros(n, l_tag, dtype=torch.bool), selectivity=torch.full((n,), 0.5),
-        dominance=torch.full((n,), 0.5), bt=torch.full((n, l_bt), NOP, dtype=torch.long),
-        radius=torch.full((n,), R_MIN), chassis=torch.zeros(n, dtype=torch.long),
-        battery=torch.zeros(n, dtype=torch.long), motor=torch.zeros(n, dtype=torch.long),
-        torque_point=torch.zeros(n), battery_point=torch.zeros(n),
-        effector=torch.zeros(n, dtype=torch.long))
+        tag=torch.zeros(n, l_tag, dtype=torch.bool),
+        selectivity=torch.full((n,), 0.5),
+        dominance=torch.full((n,), 0.5),
+        bt=torch.full((n, l_bt), NOP, dtype=torch.long),
+        radius=torch.full((n,), R_MIN),
+        chassis=torch.zeros(n, dtype=torch.long),
+        battery=torch.zeros(n, dtype=torch.long),
+        motor=torch.zeros(n, dtype=torch.long),
+        torque_point=torch.zeros(n),
+        battery_point=torch.zeros(n),
+        effector=torch.zeros(n, dtype=torch.long),
+    )
     for k, v in kw.items():
         g[k] = torch.as_tensor(v, dtype=g[k].dtype)
     return Population(**g)
@@ -33,16 +38,25 @@ ONLY = dict(w_tag=0.0, w_hw=0.0, w_bt=0.0, w_tool=0.0, w_size=0.0)
 def pair():
     a = make(1)
     tag = torch.zeros(1, 8, dtype=torch.bool)
-    tag[0, [1, 5]] = True                                  # H = 2, L = 8
+    tag[0, [1, 5]] = True  # H = 2, L = 8
     bt = torch.full((1, 6), NOP)
     bt[0, :3] = torch.tensor([SEQ, ACT_PICK_UP, ACT_DROP])  # 3 of 6 slots differ
-    b = make(1, tag=tag, bt=bt, chassis=[2], torque_point=[0.5], effector=[1],
-             radius=[R_MIN + 0.4 * (R_MAX - R_MIN)])
+    b = make(
+        1,
+        tag=tag,
+        bt=bt,
+        chassis=[2],
+        torque_point=[0.5],
+        effector=[1],
+        radius=[R_MIN + 0.4 * (R_MAX - R_MIN)],
+    )
     return a, b
 
 
-@pytest.mark.parametrize("term,expected", [
-    ("w_tag", 0.0625), ("w_hw", 0.5 / 2 ** 0.5), ("w_bt", 0.5), ("w_tool", 1.0), ("w_size", 0.4)])
+@pytest.mark.parametrize(
+    "term,expected",
+    [("w_tag", 0.0625), ("w_hw", 0.5 / 2**0.5), ("w_bt", 0.5), ("w_tool", 1.0), ("w_size", 0.4)],
+)
 def test_distance_each_term(term, expected):
     a, b = pair()
     w = DistanceWeights(**{**ONLY, term: 1.0})
@@ -51,10 +65,10 @@ def test_distance_each_term(term, expected):
 
 
 def test_d_hw_is_over_the_continuous_genes():
-    a, b = pair()                          # torque point 0 vs 0.5, chassis tier 1 vs 3
+    a, b = pair()  # torque point 0 vs 0.5, chassis tier 1 vs 3
     hw_only = {**ONLY, "w_hw": 1.0}
     # the paper: the two continuous operating points only, sqrt(0.5^2) / sqrt(2)
-    assert distance(a, b, DistanceWeights(**hw_only)).item() == pytest.approx(0.5 / 2 ** 0.5)
+    assert distance(a, b, DistanceWeights(**hw_only)).item() == pytest.approx(0.5 / 2**0.5)
     # a tier change alone is not a hardware distance
     c = make(1, chassis=[2], battery=[1], motor=[2])
     assert distance(a, c, DistanceWeights(**hw_only)).item() == 0.0
@@ -62,9 +76,10 @@ def test_d_hw_is_over_the_continuous_genes():
 
 def test_distance_gamma_and_weighted_sum():
     a, b = pair()
-    assert distance(a, b, DistanceWeights(**{**ONLY, "w_tag": 1.0}, gamma=1.0)).item() == \
-        pytest.approx(0.25)
-    total = 1.0 * 0.0625 + 0.5 * 0.5 / 2 ** 0.5 + 0.3 * 0.5 + 0.35 * 1.0 + 0.7 * 0.4
+    assert distance(
+        a, b, DistanceWeights(**{**ONLY, "w_tag": 1.0}, gamma=1.0)
+    ).item() == pytest.approx(0.25)
+    total = 1.0 * 0.0625 + 0.5 * 0.5 / 2**0.5 + 0.3 * 0.5 + 0.35 * 1.0 + 0.7 * 0.4
     assert distance(a, b).item() == pytest.approx(total, abs=1e-6)
 
 
@@ -78,9 +93,9 @@ def test_distance_pairwise_shape_and_properties():
     # pairwise entries equal the one-by-one computation
     for i in range(7):
         for j in range(4):
-            assert d[i, j].item() == pytest.approx(distance(x.index(slice(i, i + 1)),
-                                                            y.index(slice(j, j + 1))).item(),
-                                                   abs=1e-6)
+            assert d[i, j].item() == pytest.approx(
+                distance(x.index(slice(i, i + 1)), y.index(slice(j, j + 1))).item(), abs=1e-6
+            )
 
 
 def test_hamming_exact():
@@ -107,7 +122,7 @@ def clusters():
             tag[i] = True
         if k == "C":
             eff[i], rad[i] = 1, R_MAX
-        bt[i, i % 6] = ACT_PICK_UP                        # D within a cluster <= 2 * 0.3 / 6
+        bt[i, i % 6] = ACT_PICK_UP  # D within a cluster <= 2 * 0.3 / 6
     return make(n, tag=tag, effector=eff, radius=rad, bt=bt)
 
 
@@ -143,9 +158,9 @@ def test_speciate_sequential_founding():
 
 
 def test_speciate_carry_over_and_extinction():
-    prev = line([0.0, 0.9])                                     # old prototypes of 5 and 7
+    prev = line([0.0, 0.9])  # old prototypes of 5 and 7
     g = line([0.5, 0.3, 0.1, 0.35, 0.2])
-    hint = torch.tensor([-1, 5, 9, 5, -1])                      # nobody carries 7; 9 unknown
+    hint = torch.tensor([-1, 5, 9, 5, -1])  # nobody carries 7; 9 unknown
     r = speciate(g, hint, prev, torch.tensor([5, 7]), next_species_id=10, w=SIZE_ONLY)
     # species 5: members by hint rows 1 (0.3) and 3 (0.35) -> row 1 is closest to 0.0
     assert r.proto_ids.tolist()[0] == 5 and r.proto_index.tolist()[0] == 1
@@ -175,7 +190,7 @@ def test_speciate_carried_members_reassigned():
 def reference_speciate(g, hint, prev, prev_ids, next_id, delta, w):
     """Straightforward sequential NEAT speciation (Python loop) used as the oracle."""
     p = g.size
-    protos: list[tuple[int, int]] = []                  # (id, row)
+    protos: list[tuple[int, int]] = []  # (id, row)
     if prev is not None:
         dprev = distance(g, prev, w)
         for k, sid in enumerate(prev_ids.tolist()):
@@ -235,7 +250,7 @@ def test_design_distance_is_d_without_the_tag_and_tree_terms():
     d = design_distance(g)
     assert torch.allclose(d, t["hw"] + t["tool"] + t["size"])
     flipped = g.index(torch.arange(6))
-    flipped.tag[:] = ~flipped.tag                    # another tag, another tree: same designs
+    flipped.tag[:] = ~flipped.tag  # another tag, another tree: same designs
     flipped.bt[:] = flipped.bt.roll(1, 0)
     assert torch.equal(design_distance(flipped), d)
     assert (d.diagonal() == 0).all() and torch.equal(d, d.T)

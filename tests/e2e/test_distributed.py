@@ -23,17 +23,29 @@ import torch
 from typer.testing import CliRunner
 
 from swarmcode_torch.app import distributed
-
-from swarmcode_torch.coevo import evaluation
 from swarmcode_torch.app.cli import app
-from swarmcode_torch.coevo.evolve import Evolution
-from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.app.runs import RunLock, read_checkpoint
+from swarmcode_torch.coevo import evaluation
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.coevo.evolve import Evolution
 from swarmcode_torch.coevo.speciation import speciate
 
 runner = CliRunner()
-SIZE = ["--scenario", "one-niche", "--population", "7", "--swarm-size", "3", "--trials", "1",
-        "--ticks", "6", "--no-compile", "--device", "cpu"]
+SIZE = [
+    "--scenario",
+    "one-niche",
+    "--population",
+    "7",
+    "--swarm-size",
+    "3",
+    "--trials",
+    "1",
+    "--ticks",
+    "6",
+    "--no-compile",
+    "--device",
+    "cpu",
+]
 SWEEP = ["sweep", *SIZE, "--generations", "2", "--budgets", "300,600"]
 RAY_EXTRA = 'pip install -e ".[ray]" in the source tree'
 
@@ -51,8 +63,9 @@ def ok(result):
 def ray_cluster():
     ray = pytest.importorskip("ray")
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
-             _node_ip_address="127.0.0.1")              # loopback only
+    ray.init(
+        num_cpus=2, include_dashboard=False, log_to_driver=False, _node_ip_address="127.0.0.1"
+    )  # loopback only
     yield ray
     ray.shutdown()
 
@@ -91,14 +104,14 @@ def test_failed_run_is_reported_the_others_finish(ray_cluster, in_process_sweep,
     out = tmp_path / "sweep"
     held = out / "budget-300_seed-0"
     held.mkdir(parents=True)
-    with RunLock(held):              # a live holder: that run's worker cannot lock it
+    with RunLock(held):  # a live holder: that run's worker cannot lock it
         r = invoke(*SWEEP, "--seeds", "0", "--out", out, "--workers", 2)
     assert r.exit_code == 2, r.output
     assert "budget-300_seed-0: failed:" in r.output and "in use by a live run" in r.output
     assert "1 of 2 runs failed (budget-300_seed-0)" in " ".join(r.output.split())
     assert "Traceback" not in r.output
     table = (out / "table.csv").read_text().splitlines()
-    assert len(table) == 2 and table[1].startswith("600.0,1,")     # the run that finished
+    assert len(table) == 2 and table[1].startswith("600.0,1,")  # the run that finished
     ref = in_process_sweep / "budget-600_seed-0" / "teams.jsonl"
     assert (out / "budget-600_seed-0" / "teams.jsonl").read_bytes() == ref.read_bytes()
     r = ok(invoke(*SWEEP, "--seeds", "0", "--out", out, "--workers", 2))
@@ -115,15 +128,26 @@ def _last_records(path: Path) -> dict:
 
 def _summary(run: Path) -> dict:
     s = json.loads((run / "summary.json").read_text())
-    s["last_generation"] = {k: v for k, v in s["last_generation"].items()
-                            if not k.startswith("perf/")}
+    s["last_generation"] = {
+        k: v for k, v in s["last_generation"].items() if not k.startswith("perf/")
+    }
     return s
 
 
 @pytest.mark.subprocess
 def test_killed_worker_run_resumes_on_rerun(ray_cluster, tmp_path):
-    args = ["sweep", *SIZE, "--generations", 20, "--budgets", "300", "--seeds", "0",
-            "--checkpoint-every", 2]
+    args = [
+        "sweep",
+        *SIZE,
+        "--generations",
+        20,
+        "--budgets",
+        "300",
+        "--seeds",
+        "0",
+        "--checkpoint-every",
+        2,
+    ]
     out = tmp_path / "sweep"
     run = out / "budget-300_seed-0"
     killed: list[int] = []
@@ -138,7 +162,7 @@ def test_killed_worker_run_resumes_on_rerun(ray_cluster, tmp_path):
                 lines, holder = 0, ""
             if lines >= 3 and "pid=" in holder:
                 pid = int(holder.split("pid=")[1].split()[0])
-                assert pid != os.getpid()            # the run is in a Ray worker
+                assert pid != os.getpid()  # the run is in a Ray worker
                 os.kill(pid, signal.SIGKILL)
                 killed.append(lines)
                 return
@@ -201,8 +225,12 @@ class _InProcessShards:
         for lo, hi in distributed.shard_bounds(plan.size, self.shards):
             data = distributed.pack_batch(evaluation.sim_batch(plan, genome, lo, hi))
             self.sent += len(data)
-            m, s = evaluation.simulate_batch(distributed.unpack_batch(data), self.ctx.params,
-                                             self.ctx.eval_cfg.ticks, self.ctx.step_fn)
+            m, s = evaluation.simulate_batch(
+                distributed.unpack_batch(data),
+                self.ctx.params,
+                self.ctx.eval_cfg.ticks,
+                self.ctx.step_fn,
+            )
             m, s = distributed.unpack_metrics(distributed.pack_metrics(m, s))
             parts.append(m)
             secs.append(s)
@@ -210,20 +238,46 @@ class _InProcessShards:
 
 
 def test_shards_score_exactly_like_one_batch():
-    ev = Evolution(SwarmCoDeConfig(scenario="four-niche", population=8, swarm_size=4, trials=2,
-                                ticks=10, generations=3, device="cpu", compile=False,
-                                budget=500.0))
-    ev.step()                                  # species, elites and fitness to choose from
+    ev = Evolution(
+        SwarmCoDeConfig(
+            scenario="four-niche",
+            population=8,
+            swarm_size=4,
+            trials=2,
+            ticks=10,
+            generations=3,
+            device="cpu",
+            compile=False,
+            budget=500.0,
+        )
+    )
+    ev.step()  # species, elites and fitness to choose from
     st, ctx = ev.state, ev.ctx
-    sp = speciate(st.genome, st.species_hint, st.proto, st.proto_ids, st.next_species_id,
-                  ctx.speciation.delta, w=ctx.speciation.weights)
-    call = (st.genome, sp.species, sp.proto_ids, sp.proto_index, st.fitness, st.has_fitness,
-            ctx.scenario, ctx.eval_cfg)
+    sp = speciate(
+        st.genome,
+        st.species_hint,
+        st.proto,
+        st.proto_ids,
+        st.next_species_id,
+        ctx.speciation.delta,
+        w=ctx.speciation.weights,
+    )
+    call = (
+        st.genome,
+        sp.species,
+        sp.proto_ids,
+        sp.proto_index,
+        st.fitness,
+        st.has_fitness,
+        ctx.scenario,
+        ctx.eval_cfg,
+    )
     whole = evaluation.evaluate(*call, torch.Generator().manual_seed(1), ctx.params, ctx.step_fn)
-    for shards in (2, 3):                      # 3: shards of 2, 3 and 3 evaluations
+    for shards in (2, 3):  # 3: shards of 2, 3 and 3 evaluations
         ev_shards = _InProcessShards(ctx, shards)
-        res = evaluation.evaluate(*call, torch.Generator().manual_seed(1), ctx.params,
-                                  evaluator=ev_shards)
+        res = evaluation.evaluate(
+            *call, torch.Generator().manual_seed(1), ctx.params, evaluator=ev_shards
+        )
         for f in ("fitness", "focal", "baseline", "team_cost"):
             assert torch.equal(getattr(res, f), getattr(whole, f)), (shards, f)
         for k, v in whole.team_metrics.items():
@@ -236,33 +290,43 @@ def test_shards_score_exactly_like_one_batch():
 
 def test_pack_is_lossless():
     g = torch.Generator().manual_seed(0)
-    t = {"same_float": torch.tensor([[0.0, -0.0], [0.0, -0.0], [0.0, -0.0]]),
-         "signed_zero": torch.tensor([[0.0], [-0.0]]),         # equal, not the same bits
-         "nan": torch.tensor([float("nan"), float("nan")]),
-         "long": torch.tensor([-1, 5, 300]), "big": torch.tensor([2 ** 40, -3]),
-         "bool": torch.rand(4, 3, generator=g) < 0.5, "empty": torch.zeros(0, 2, dtype=torch.long),
-         "rows": torch.arange(6).reshape(2, 3).repeat(4, 1)}
+    t = {
+        "same_float": torch.tensor([[0.0, -0.0], [0.0, -0.0], [0.0, -0.0]]),
+        "signed_zero": torch.tensor([[0.0], [-0.0]]),  # equal, not the same bits
+        "nan": torch.tensor([float("nan"), float("nan")]),
+        "long": torch.tensor([-1, 5, 300]),
+        "big": torch.tensor([2**40, -3]),
+        "bool": torch.rand(4, 3, generator=g) < 0.5,
+        "empty": torch.zeros(0, 2, dtype=torch.long),
+        "rows": torch.arange(6).reshape(2, 3).repeat(4, 1),
+    }
     for name, x in t.items():
         y = distributed._unpack_tensor(distributed._pack_tensor(x))
         assert y.dtype == x.dtype and y.shape == x.shape, name
-        assert torch.equal(x.view(torch.int32) if x.is_floating_point() else x,
-                           y.view(torch.int32) if y.is_floating_point() else y), name
+        assert torch.equal(
+            x.view(torch.int32) if x.is_floating_point() else x,
+            y.view(torch.int32) if y.is_floating_point() else y,
+        ), name
 
 
 def test_ray_options_without_ray_name_the_extra(monkeypatch, tmp_path):
-    monkeypatch.setitem(sys.modules, "ray", None)      # `import ray` raises ImportError
-    for args in (["sweep", *SIZE, "--workers", 2, "--out", tmp_path / "s"],
-                 ["sweep", *SIZE, "--ray-address", "auto", "--out", tmp_path / "s"],
-                 ["evolve", *SIZE, "--eval-workers", 2, "--logdir", tmp_path / "e"],
-                 ["evolve", *SIZE, "--ray-address", "auto", "--logdir", tmp_path / "e"]):
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
+    for args in (
+        ["sweep", *SIZE, "--workers", 2, "--out", tmp_path / "s"],
+        ["sweep", *SIZE, "--ray-address", "auto", "--out", tmp_path / "s"],
+        ["evolve", *SIZE, "--eval-workers", 2, "--logdir", tmp_path / "e"],
+        ["evolve", *SIZE, "--ray-address", "auto", "--logdir", tmp_path / "e"],
+    ):
         r = invoke(*args)
         assert r.exit_code == 2, r.output
         lines = [line for line in r.output.splitlines() if line.strip()]
         assert len(lines) == 1 and RAY_EXTRA in lines[0] and "needs Ray" in lines[0], r.output
     assert not (tmp_path / "s").exists() and not (tmp_path / "e").exists()
-    for args, needle in ((["sweep", "--workers", 0], "--workers must be >= 1"),
-                         (["sweep", "--gpus-per-run", 0.5], "for runs on Ray"),
-                         (["evolve", "--eval-workers", 0], "--eval-workers must be >= 1"),
-                         (["evolve", "--cpus-per-eval-worker", 2], "evaluation shards on Ray")):
+    for args, needle in (
+        (["sweep", "--workers", 0], "--workers must be >= 1"),
+        (["sweep", "--gpus-per-run", 0.5], "for runs on Ray"),
+        (["evolve", "--eval-workers", 0], "--eval-workers must be >= 1"),
+        (["evolve", "--cpus-per-eval-worker", 2], "evaluation shards on Ray"),
+    ):
         r = invoke(*args)
         assert r.exit_code == 2 and needle in r.output, r.output

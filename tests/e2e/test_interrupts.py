@@ -24,9 +24,25 @@ from swarmcode_torch.app.runs import load_checkpoint
 
 runner = CliRunner()
 GENERATIONS = 4
-BASE = ["--scenario", "one-niche", "--population", "6", "--swarm-size", "4", "--trials", "1",
-        "--ticks", "8", "--render-every", "0", "--figure-every", "1000", "--no-compile",
-        "--device", "cpu"]
+BASE = [
+    "--scenario",
+    "one-niche",
+    "--population",
+    "6",
+    "--swarm-size",
+    "4",
+    "--trials",
+    "1",
+    "--ticks",
+    "8",
+    "--render-every",
+    "0",
+    "--figure-every",
+    "1000",
+    "--no-compile",
+    "--device",
+    "cpu",
+]
 RFAST = ["--render-every", "0", "--figure-every", "1000", "--device", "cpu"]
 
 
@@ -59,8 +75,9 @@ def _named_checkpoint(line: str) -> int:
     """The last finished generation a stop message names (-1: before generation 0)."""
     if "checkpoint before generation 0 (no generation finished yet) is in" in line:
         return -1
-    m = re.search(r"checkpoint after generation (\d+) \(generations? 0(?:-(\d+))? finished\) is in",
-                  line)
+    m = re.search(
+        r"checkpoint after generation (\d+) \(generations? 0(?:-(\d+))? finished\) is in", line
+    )
     assert m, line
     assert int(m.group(2) or 0) == int(m.group(1)), line
     return int(m.group(1))
@@ -73,8 +90,9 @@ def _rows(path: Path) -> list[dict]:
 
 def _summary(path: Path) -> dict:
     s = json.loads(path.read_text())
-    s["last_generation"] = {k: v for k, v in s["last_generation"].items()
-                            if not k.startswith("perf/")}
+    s["last_generation"] = {
+        k: v for k, v in s["last_generation"].items() if not k.startswith("perf/")
+    }
     return s
 
 
@@ -105,19 +123,31 @@ def straight(tmp_path_factory):
             mp = pytest.MonkeyPatch()
             mp.setattr(files_module, "interrupt_point", counter)
             try:
-                r = invoke("evolve", *BASE, "--seed", seed, "--generations", GENERATIONS,
-                           "--checkpoint-every", every, "--logdir", logdir)
+                r = invoke(
+                    "evolve",
+                    *BASE,
+                    "--seed",
+                    seed,
+                    "--generations",
+                    GENERATIONS,
+                    "--checkpoint-every",
+                    every,
+                    "--logdir",
+                    logdir,
+                )
             finally:
                 mp.undo()
             assert r.exit_code == 0, r.output
             (run,) = list(logdir.iterdir())
             made[seed, every] = run, counter.count
         return made[seed, every]
+
     return get
 
 
-def _interrupted_then_resumed(tmp_path: Path, straight, seed: int, every: int, nth: int,
-                              how: str) -> None:
+def _interrupted_then_resumed(
+    tmp_path: Path, straight, seed: int, every: int, nth: int, how: str
+) -> None:
     ref, steps = straight(seed, every)
     assert nth <= steps
     stop = StopAt(nth, how)
@@ -125,10 +155,20 @@ def _interrupted_then_resumed(tmp_path: Path, straight, seed: int, every: int, n
     mp.setattr(files_module, "interrupt_point", stop)
     r = None
     try:
-        r = invoke("evolve", *BASE, "--seed", seed, "--generations", GENERATIONS,
-                   "--checkpoint-every", every, "--logdir", tmp_path)
+        r = invoke(
+            "evolve",
+            *BASE,
+            "--seed",
+            seed,
+            "--generations",
+            GENERATIONS,
+            "--checkpoint-every",
+            every,
+            "--logdir",
+            tmp_path,
+        )
     except Killed:
-        pass                                  # the process is gone: nothing more ran
+        pass  # the process is gone: nothing more ran
     finally:
         mp.undo()
     assert stop.fired
@@ -146,31 +186,55 @@ def _interrupted_then_resumed(tmp_path: Path, straight, seed: int, every: int, n
         if (run / "checkpoint.pt").exists():
             held = load_checkpoint(run)["generation"]
             assert _named_checkpoint(line[0]) == held - 1, r.output
-            if held:      # the message numbers generations as summary.json does
+            if held:  # the message numbers generations as summary.json does
                 assert json.loads((run / "summary.json").read_text())["generation"] == held - 1
         else:
             assert "no checkpoint was written yet" in line[0], r.output
-    if not (run / "checkpoint.pt").exists():        # stopped before generation 0 was saved
-        r = invoke("evolve", *BASE, "--seed", seed, "--generations", GENERATIONS,
-                   "--checkpoint-every", every, "--logdir", tmp_path / "again")
+    if not (run / "checkpoint.pt").exists():  # stopped before generation 0 was saved
+        r = invoke(
+            "evolve",
+            *BASE,
+            "--seed",
+            seed,
+            "--generations",
+            GENERATIONS,
+            "--checkpoint-every",
+            every,
+            "--logdir",
+            tmp_path / "again",
+        )
         assert r.exit_code == 0, r.output
         (run,) = list((tmp_path / "again").iterdir())
     else:
-        teams = [json.loads(x)["generation"] for x in (run / "teams.jsonl").read_text().splitlines()] \
-            if (run / "teams.jsonl").exists() else []
+        teams = (
+            [json.loads(x)["generation"] for x in (run / "teams.jsonl").read_text().splitlines()]
+            if (run / "teams.jsonl").exists()
+            else []
+        )
         held = load_checkpoint(run)["generation"]
-        assert teams[:held] == list(range(held))     # every checkpointed generation recorded
+        assert teams[:held] == list(range(held))  # every checkpointed generation recorded
         r = invoke("evolve", "--resume", run, *RFAST)
         assert r.exit_code == 0, r.output
     _same_run(ref, run)
 
 
 # the default suite: a few points of each kind; the sweep below covers every point
-@pytest.mark.parametrize("how,seed,every,nth", [
-    ("int", 0, 2, 1), ("int", 0, 2, 4), ("int", 0, 2, 7), ("term", 0, 2, 9),
-    ("kill", 0, 2, 3), ("kill", 0, 2, 6), ("int", 1, 3, 12), ("kill", 1, 3, 13)])
+@pytest.mark.parametrize(
+    "how,seed,every,nth",
+    [
+        ("int", 0, 2, 1),
+        ("int", 0, 2, 4),
+        ("int", 0, 2, 7),
+        ("term", 0, 2, 9),
+        ("kill", 0, 2, 3),
+        ("kill", 0, 2, 6),
+        ("int", 1, 3, 12),
+        ("kill", 1, 3, 13),
+    ],
+)
 def test_a_run_stopped_after_a_write_step_resumes_to_the_straight_run(
-        tmp_path, straight, how, seed, every, nth):
+    tmp_path, straight, how, seed, every, nth
+):
     _interrupted_then_resumed(tmp_path, straight, seed, every, nth, how)
 
 
@@ -208,8 +272,18 @@ def test_a_signal_in_the_end_of_run_work_names_the_checkpoint_the_file_holds(tmp
     mp = pytest.MonkeyPatch()
     mp.setattr(TensorBoardReporter, "on_end", on_end)
     try:
-        r = invoke("evolve", *BASE, "--seed", 0, "--generations", 3, "--checkpoint-every", 2,
-                   "--logdir", tmp_path)
+        r = invoke(
+            "evolve",
+            *BASE,
+            "--seed",
+            0,
+            "--generations",
+            3,
+            "--checkpoint-every",
+            2,
+            "--logdir",
+            tmp_path,
+        )
     finally:
         mp.undo()
     (run,) = list(tmp_path.iterdir())
@@ -228,7 +302,7 @@ def test_deferred_signals_hold_ctrl_c_until_the_step_is_done():
     with pytest.raises(KeyboardInterrupt):
         with deferred_signals() as held:
             signal.raise_signal(signal.SIGINT)
-            done.append("records")                 # the step goes on
+            done.append("records")  # the step goes on
             done.append("checkpoint")
     assert done == ["records", "checkpoint"] and held == [signal.SIGINT]
     with deferred_signals(deliver=False) as held:  # a stop under way: a second one is dropped
@@ -245,8 +319,18 @@ def test_the_stop_message_names_the_generation_summary_json_holds(tmp_path, how,
     mp = pytest.MonkeyPatch()
     mp.setattr(files_module, "interrupt_point", stop)
     try:
-        r = invoke("evolve", *BASE, "--seed", 0, "--generations", GENERATIONS,
-                   "--checkpoint-every", 1, "--logdir", tmp_path)
+        r = invoke(
+            "evolve",
+            *BASE,
+            "--seed",
+            0,
+            "--generations",
+            GENERATIONS,
+            "--checkpoint-every",
+            1,
+            "--logdir",
+            tmp_path,
+        )
     finally:
         mp.undo()
     assert stop.fired and r.exit_code == (130 if how == "int" else 143), r.output
@@ -260,5 +344,7 @@ def test_the_stop_message_names_the_generation_summary_json_holds(tmp_path, how,
     else:
         last = json.loads(summary.read_text())["generation"]
         assert named == last >= 0
-        teams = [json.loads(x)["generation"] for x in (run / "teams.jsonl").read_text().splitlines()]
+        teams = [
+            json.loads(x)["generation"] for x in (run / "teams.jsonl").read_text().splitlines()
+        ]
         assert teams[-1] == last

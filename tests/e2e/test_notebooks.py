@@ -12,9 +12,9 @@ NOTEBOOKS = sorted((Path(__file__).parents[2] / "notebooks").glob("*.ipynb"))
 #: tag -> (mime type its cell must output); and per notebook, how many cells carry each tag
 IMAGE_TAGS = {"png": "image/png", "gif": "image/gif"}
 EXPECTED_IMAGES = {
-    "01_quickstart": {"png": 2, "gif": 1},    # metrics plots, species composition; the replay
-    "02_analyze_run": {"png": 3},             # fitness curves, species composition, morphology
-    "03_budget_sweep": {"png": 1},            # side by side with the paper
+    "01_quickstart": {"png": 2, "gif": 1},  # metrics plots, species composition; the replay
+    "02_analyze_run": {"png": 3},  # fitness curves, species composition, morphology
+    "03_budget_sweep": {"png": 1},  # side by side with the paper
 }
 
 
@@ -49,23 +49,29 @@ def test_notebook_runs(path, tmp_path, monkeypatch):
     monkeypatch.setenv("SWARMCODE_SWEEP", str(tmp_path / "no-sweep"))
     monkeypatch.delenv("SWARMCODE_RUN", raising=False)
     nb = nbformat.read(path, as_version=4)
-    nbclient.NotebookClient(nb, timeout=600, kernel_name="python3",
-                            resources={"metadata": {"path": str(path.parent)}}).execute()
-    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
-              if o.get("output_type") == "error"]
+    nbclient.NotebookClient(
+        nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(path.parent)}}
+    ).execute()
+    errors = [
+        o
+        for c in nb.cells
+        if c.cell_type == "code"
+        for o in c.get("outputs", [])
+        if o.get("output_type") == "error"
+    ]
     assert not errors
     for tag, cells in image_cells(nb).items():
         mime = IMAGE_TAGS[tag]
         for c in cells:
             shown = [o for o in c.get("outputs", []) if mime in o.get("data", {})]
             assert shown, f"{path.name}: no {mime} output in the cell\n{c.source}"
-    made = [c for c in nb.cells if c.cell_type == "code"
-            and "TemporaryDirectory(" in c.source]
+    made = [c for c in nb.cells if c.cell_type == "code" and "TemporaryDirectory(" in c.source]
     assert made, f"{path.name} makes no temporary folder"
     left = sorted(p.name for p in tmp.iterdir() if p.name.startswith("swarmcode-"))
     assert not left, f"{path.name} left {left} behind"
-    for c in nb.cells:                # a run made in a notebook shows its progress
+    for c in nb.cells:  # a run made in a notebook shows its progress
         if c.cell_type == "code" and "sc.evolve(" in c.source:
-            text = "".join(o.get("text", "") for o in c.get("outputs", [])
-                           if o.get("output_type") == "stream")
+            text = "".join(
+                o.get("text", "") for o in c.get("outputs", []) if o.get("output_type") == "stream"
+            )
             assert "done " in text and " left " in text, f"{path.name}: no progress\n{text}"

@@ -8,19 +8,19 @@ import shutil
 import time
 
 import pytest
+from replaykit import DESIGNS
 
 from swarmcode_torch.app.replay_page import page_data, write_page
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.sim.scenario import load_scenario
 
-from replaykit import DESIGNS
-
 pytestmark = [pytest.mark.browser, pytest.mark.subprocess]
 
 webdriver = pytest.importorskip("selenium.webdriver", reason="selenium is not installed")
 
-CHROMIUM = next((p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome"))
-                 if p), None)
+CHROMIUM = next(
+    (p for p in map(shutil.which, ("chromium", "chromium-browser", "google-chrome")) if p), None
+)
 DRIVER = shutil.which("chromedriver")
 if CHROMIUM is None or DRIVER is None:
     pytest.skip("chromium and chromedriver are not installed", allow_module_level=True)
@@ -28,8 +28,13 @@ if CHROMIUM is None or DRIVER is None:
 
 @pytest.fixture(scope="module")
 def page(tmp_path_factory):
-    data = page_data(DESIGNS, load_scenario("two-niche"), SwarmCoDeConfig(scenario="two-niche"),
-                     seed=1, title="browser test")
+    data = page_data(
+        DESIGNS,
+        load_scenario("two-niche"),
+        SwarmCoDeConfig(scenario="two-niche"),
+        seed=1,
+        title="browser test",
+    )
     return write_page(data, tmp_path_factory.mktemp("page") / "team.html"), data
 
 
@@ -39,17 +44,25 @@ def browser(page):
     from selenium.webdriver.chrome.service import Service
 
     opts = Options()
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-              "--window-size=1280,800"):
+    for a in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--window-size=1280,800",
+    ):
         opts.add_argument(a)
     opts.binary_location = CHROMIUM
     opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     try:
         drv = webdriver.Chrome(service=Service(DRIVER), options=opts)
-    except Exception as e:   # a browser that does not start is not a failure of the page
+    except Exception as e:  # a browser that does not start is not a failure of the page
         pytest.skip(f"headless chromium does not start here: {e}")
     drv.get(page[0].resolve().as_uri())
-    _wait(drv, "return document.body.dataset.ready === '1' || !document.getElementById('error').hidden")
+    _wait(
+        drv,
+        "return document.body.dataset.ready === '1' || !document.getElementById('error').hidden",
+    )
     yield drv
     drv.quit()
 
@@ -69,8 +82,12 @@ def _text(drv, testid):
 
 def _scrub(drv, t):
     el = drv.find_element("id", "scrub")
-    drv.execute_script("arguments[0].value = arguments[1];"
-                       "arguments[0].dispatchEvent(new Event('input', {bubbles: true}));", el, t)
+    drv.execute_script(
+        "arguments[0].value = arguments[1];"
+        "arguments[0].dispatchEvent(new Event('input', {bubbles: true}));",
+        el,
+        t,
+    )
 
 
 def test_loads_without_console_errors(browser):
@@ -87,7 +104,10 @@ def test_scrubbing_to_the_last_tick_shows_the_recorded_counts(browser, page):
     assert browser.find_element("id", "tick").text == f"tick {data['ticks']} / {data['ticks']}"
     for name in ("focal", "baseline"):
         m = data["panels"][name]["metrics"]
-        assert int(_text(browser, f"delivered-{name}")) == m["delivered_individual"] + m["delivered_collab"]
+        assert (
+            int(_text(browser, f"delivered-{name}"))
+            == m["delivered_individual"] + m["delivered_collab"]
+        )
         assert int(_text(browser, f"picked-{name}")) == m["picked_individual"] + m["picked_collab"]
         assert float(_text(browser, f"energy-{name}")) == pytest.approx(m["energy_used"], abs=0.006)
     assert int(_text(browser, "delivered-focal")) > 0
@@ -99,12 +119,13 @@ def test_clicking_a_robot_shows_its_design_and_tree(browser, page):
     data = page[1]
     _scrub(browser, 40)
     canvas = browser.find_element("id", "canvas-baseline")
-    robot = 15                                     # a partner slot: design 1 (suction)
+    robot = 15  # a partner slot: design 1 (suction)
     pos = browser.execute_script("return window.replay.screenPos('baseline', arguments[0])", robot)
     size = canvas.size
     ActionChains(browser).move_to_element_with_offset(
-        canvas, pos["cx"] - size["width"] / 2, pos["cy"] - size["height"] / 2).click().perform()
-    tip = browser.find_element("id", "tooltip")            # the pointer rests on it: hover
+        canvas, pos["cx"] - size["width"] / 2, pos["cy"] - size["height"] / 2
+    ).click().perform()
+    tip = browser.find_element("id", "tooltip")  # the pointer rests on it: hover
     assert tip.is_displayed() and tip.text.startswith(f"robot {robot}: ")
     title = _text(browser, "robot-title")
     d = data["designs"][data["panels"]["baseline"]["robots"]["design"][robot]]
@@ -116,26 +137,29 @@ def test_clicking_a_robot_shows_its_design_and_tree(browser, page):
     assert tree.splitlines()[0].startswith("SEQ (root)")
     acting = browser.find_elements("css selector", "pre.tree .acting")
     assert len(acting) <= 1 and "tick 40" in _text(browser, "acting")
-    if acting:                                     # the highlighted line names the acting node
+    if acting:  # the highlighted line names the acting node
         assert acting[0].text.split()[0] in _text(browser, "acting")
 
 
 def test_focal_and_baseline_advance_together(browser, page):
     data = page[1]
     _scrub(browser, 0)
-    shots0 = {n: browser.execute_script(f"return document.getElementById('canvas-{n}').toDataURL()")
-              for n in ("focal", "baseline")}
+    shots0 = {
+        n: browser.execute_script(f"return document.getElementById('canvas-{n}').toDataURL()")
+        for n in ("focal", "baseline")
+    }
     from selenium.webdriver.support.select import Select
+
     Select(browser.find_element("id", "speed")).select_by_value("8")
     browser.find_element("id", "play").click()
     _wait(browser, "return window.replay.tick >= 30")
-    browser.find_element("id", "play").click()            # pause
+    browser.find_element("id", "play").click()  # pause
     t = browser.execute_script("return window.replay.tick")
     assert 30 <= t <= data["ticks"]
     assert browser.find_element("id", "tick").text == f"tick {t} / {data['ticks']}"
     for n in ("focal", "baseline"):
         shot = browser.execute_script(f"return document.getElementById('canvas-{n}').toDataURL()")
-        assert shot != shots0[n], n                        # both arenas moved on
+        assert shot != shots0[n], n  # both arenas moved on
         counts = browser.execute_script(f"return window.replay.data.panels.{n}.counts[{t}]")
         assert int(_text(browser, f"delivered-{n}")) == counts["di"] + counts["dc"]
     # one step on moves both

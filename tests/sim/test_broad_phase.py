@@ -5,8 +5,8 @@ from dataclasses import replace
 import pytest
 import torch
 
-from swarmcode_torch.sim.hardware import R_MAX, R_MIN
 from swarmcode_torch.sim.contacts import cell_overflow, collide, neighbour_candidates
+from swarmcode_torch.sim.hardware import R_MAX, R_MIN
 from swarmcode_torch.sim.state import WorldParams
 
 
@@ -32,13 +32,13 @@ def test_candidates_hold_every_touching_pair_exactly_once():
     listed = torch.zeros(E, N, N + 1, dtype=torch.long)
     listed.scatter_add_(2, torch.where(valid, rows, N), torch.ones_like(rows))
     listed = listed[..., :N]
-    assert listed.max() <= 1                                     # no partner listed twice
+    assert listed.max() <= 1  # no partner listed twice
     d = (pos[:, :, None] - pos[:, None]).norm(dim=-1)
     touching = (d < radius[:, :, None] + radius[:, None]) & present[:, :, None] & present[:, None]
     touching &= ~torch.eye(N, dtype=torch.bool)
-    assert touching.sum() > 1000                                 # the test is crowded enough
-    assert torch.all(listed.bool() | ~touching)                  # every contact is a candidate
-    assert torch.equal(listed, listed.transpose(1, 2))           # lists are symmetric
+    assert touching.sum() > 1000  # the test is crowded enough
+    assert torch.all(listed.bool() | ~touching)  # every contact is a candidate
+    assert torch.equal(listed, listed.transpose(1, 2))  # lists are symmetric
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -48,14 +48,14 @@ def test_cells_match_dense_solver(seed):
     cells = replace(dense, broad_phase_min_robots=1)
     p1, v1 = collide(pos, vel, radius, mass, present, *NO_OBSTACLES, dense)
     p2, v2 = collide(pos, vel, radius, mass, present, *NO_OBSTACLES, cells)
-    assert (p1 - pos).abs().max() > 0.05                         # contacts really moved robots
-    torch.testing.assert_close(p2, p1, atol=1e-4, rtol=0)   # float32 sums in another order
+    assert (p1 - pos).abs().max() > 0.05  # contacts really moved robots
+    torch.testing.assert_close(p2, p1, atol=1e-4, rtol=0)  # float32 sums in another order
     torch.testing.assert_close(v2, v1, atol=1e-4, rtol=0)
 
 
 def test_cells_conserve_momentum_of_robot_contacts():
-    pos, vel, radius, mass, present = crowd(arena=40.0)          # walls far: few wall contacts
-    pos = pos * 0.5 + 10.0                                       # crowd in the middle
+    pos, vel, radius, mass, present = crowd(arena=40.0)  # walls far: few wall contacts
+    pos = pos * 0.5 + 10.0  # crowd in the middle
     params = WorldParams(arena=40.0, broad_phase_min_robots=1)
     _, v = collide(pos, vel, radius, mass, present, *NO_OBSTACLES, params)
     m = torch.where(present, mass, 0.0)[..., None]
@@ -67,7 +67,7 @@ def hex_pack(spacing, n_side, origin=(5.0, 5.0)):
     """[1, n_side**2, 2] centres of a hexagonal packing."""
     i, j = torch.meshgrid(torch.arange(n_side), torch.arange(n_side), indexing="ij")
     x = origin[0] + spacing * (i + 0.5 * (j % 2))
-    y = origin[1] + spacing * j * (3 ** 0.5 / 2)
+    y = origin[1] + spacing * j * (3**0.5 / 2)
     return torch.stack([x.flatten(), y.flatten()], -1)[None].float()
 
 
@@ -75,20 +75,23 @@ def test_touching_min_size_robots_fit_the_cell_capacity():
     # the densest legal crowd: touching R_MIN discs (a hexagonal packing puts ~20 in a cell)
     pos = hex_pack(2 * R_MIN, 16)
     present = torch.ones(pos.shape[:2], dtype=torch.bool)
-    radius = torch.full(pos.shape[:2], R_MIN + 0.01)              # every neighbour touches
+    radius = torch.full(pos.shape[:2], R_MIN + 0.01)  # every neighbour touches
     params = WorldParams(arena=12.0)
     assert not cell_overflow(pos, present, params).any()
     rows, valid = neighbour_candidates(pos, present, params)
     N = pos.shape[1]
-    seen = torch.zeros(1, N, N + 1, dtype=torch.long).scatter_add_(
-        2, torch.where(valid, rows, N), torch.ones_like(rows))[..., :N].bool()
+    seen = (
+        torch.zeros(1, N, N + 1, dtype=torch.long)
+        .scatter_add_(2, torch.where(valid, rows, N), torch.ones_like(rows))[..., :N]
+        .bool()
+    )
     d = (pos[:, :, None] - pos[:, None]).norm(dim=-1)
     touching = (d < radius[:, :, None] + radius[:, None]) & ~torch.eye(N, dtype=torch.bool)
     assert touching.sum() > 5 * N and torch.all(seen | ~touching)
 
 
 def test_cell_overflow_is_reported():
-    pos = hex_pack(0.05, 8)                                      # 64 centres in one cell
+    pos = hex_pack(0.05, 8)  # 64 centres in one cell
     present = torch.ones(pos.shape[:2], dtype=torch.bool)
     params = WorldParams(arena=12.0)
     assert cell_overflow(pos, present, params).tolist() == [True]

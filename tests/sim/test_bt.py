@@ -4,17 +4,44 @@ from __future__ import annotations
 
 import pytest
 import torch
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from swarmcode_torch.sim import bt
-from swarmcode_torch.sim.bt import (ACT_DROP, ACT_MOVE_TO_BASE, ACT_MOVE_TO_PACK,
-                                    ACT_MOVE_TO_RANDOM_PACK, ACT_PICK_UP, ACT_RANDOM_WALK,
-                                    COND_AM_I_STUCK, COND_HAS_PACKAGE, COND_NEAR_BASE,
-                                    COND_NEAR_PACKAGE, END, FAILURE, NOP, NUM_COMBOS, NUM_OPCODES,
-                                    RUNNING, SEL, SEQ, SUCCESS, TEMPLATES, build_tables,
-                                    combo_index, combo_statuses, compute_jumps, encode,
-                                    format_tree, interpret, interpret_reference, lookup,
-                                    random_programs, template_tensor, unpack)
+from swarmcode_torch.sim.bt import (
+    ACT_DROP,
+    ACT_MOVE_TO_BASE,
+    ACT_MOVE_TO_PACK,
+    ACT_MOVE_TO_RANDOM_PACK,
+    ACT_PICK_UP,
+    ACT_RANDOM_WALK,
+    COND_AM_I_STUCK,
+    COND_HAS_PACKAGE,
+    COND_NEAR_BASE,
+    COND_NEAR_PACKAGE,
+    END,
+    FAILURE,
+    NOP,
+    NUM_COMBOS,
+    NUM_OPCODES,
+    RUNNING,
+    SEL,
+    SEQ,
+    SUCCESS,
+    TEMPLATES,
+    build_tables,
+    combo_index,
+    combo_statuses,
+    compute_jumps,
+    encode,
+    format_tree,
+    interpret,
+    interpret_reference,
+    lookup,
+    random_programs,
+    template_tensor,
+    unpack,
+)
 
 S, F, R = SUCCESS, FAILURE, RUNNING
 A, B, C = ACT_MOVE_TO_PACK, ACT_MOVE_TO_BASE, ACT_RANDOM_WALK  # short names for actions
@@ -57,6 +84,7 @@ def jumps_reference(program: list[int]) -> list[int]:
 
 # --- compute_jumps ------------------------------------------------------------------------------
 
+
 def test_jumps_hand_made() -> None:
     cases = {
         # SEL( SEQ(H, A) , C )
@@ -87,6 +115,7 @@ def test_jumps_batched_and_shapes() -> None:
 
 # --- interpret on hand-made programs --------------------------------------------------------------
 
+
 def test_interpret_hand_made() -> None:
     seq_h_a = [SEQ, H, A, END]
     # SEQ short-circuits on FAILURE; A is never visited.
@@ -98,7 +127,11 @@ def test_interpret_hand_made() -> None:
     # SEL stops at the first SUCCESS.
     sel = [SEL, A, B, C, END]
     assert run(sel, statuses(ACT_MOVE_TO_PACK=F)) == (NOP, {B}, S)
-    assert run(sel, statuses(ACT_MOVE_TO_PACK=F, ACT_MOVE_TO_BASE=F, ACT_RANDOM_WALK=F)) == (NOP, set(), F)
+    assert run(sel, statuses(ACT_MOVE_TO_PACK=F, ACT_MOVE_TO_BASE=F, ACT_RANDOM_WALK=F)) == (
+        NOP,
+        set(),
+        F,
+    )
     assert run(sel, statuses(ACT_MOVE_TO_PACK=F, ACT_MOVE_TO_BASE=R)) == (B, set(), R)
     # Empty blocks: SEQ succeeds, SEL fails; a failing top-level node fails the root.
     assert run([SEQ, END, A], statuses()) == (NOP, {A}, S)
@@ -107,15 +140,20 @@ def test_interpret_hand_made() -> None:
     assert run([], statuses()) == (NOP, set(), S)
     assert run([NOP, END, NOP], statuses()) == (NOP, set(), S)
     # NOPs are skipped wherever they are; stray ENDs are ignored.
-    assert run([NOP, SEL, NOP, A, NOP, B, END, END, C], statuses(ACT_MOVE_TO_PACK=F)) == (NOP, {B, C}, S)
+    assert run([NOP, SEL, NOP, A, NOP, B, END, END, C], statuses(ACT_MOVE_TO_PACK=F)) == (
+        NOP,
+        {B, C},
+        S,
+    )
     # Unclosed blocks close at the array end: C is a child of the SEL.
     assert run([SEL, A, C], statuses()) == (NOP, {A}, S)
     assert run([SEL, A, C], statuses(ACT_MOVE_TO_PACK=F, ACT_RANDOM_WALK=F)) == (NOP, set(), F)
     # Conditions never fire; actions that fail do not fire.
     assert run([H, N, A], statuses(ACT_MOVE_TO_PACK=F)) == (NOP, set(), F)
     # A RUNNING deep inside a failing SEL still halts everything.
-    assert run([SEL, SEQ, H, END, SEQ, B, END, END], statuses(COND_HAS_PACKAGE=F, ACT_MOVE_TO_BASE=R)) \
-        == (B, set(), R)
+    assert run(
+        [SEL, SEQ, H, END, SEQ, B, END, END], statuses(COND_HAS_PACKAGE=F, ACT_MOVE_TO_BASE=R)
+    ) == (B, set(), R)
     # Nodes outside the program's opcode range are ignored: control / END / NOP statuses don't matter.
     ls = statuses()
     ls[SEQ] = ls[SEL] = ls[END] = ls[NOP] = R
@@ -130,7 +168,9 @@ def test_interpret_batch_dims() -> None:
     assert action.shape == (4, 5) and fired.shape == (4, 5, NUM_OPCODES) and status.shape == (4, 5)
     assert fired.dtype == torch.bool
     flat = as_tuples(action.reshape(-1), fired.reshape(-1, NUM_OPCODES), status.reshape(-1))
-    for prog, st_row, got in zip(ops.reshape(-1, 12).tolist(), ls.reshape(-1, NUM_OPCODES).tolist(), flat):
+    for prog, st_row, got in zip(
+        ops.reshape(-1, 12).tolist(), ls.reshape(-1, NUM_OPCODES).tolist(), flat
+    ):
         assert got == interpret_reference(prog, st_row)
 
 
@@ -156,8 +196,9 @@ def program_batches(draw) -> tuple[list[list[int]], list[list[int]]]:
     for _ in range(n):
         mix = draw(st.sampled_from(OPCODE_MIXES))
         programs.append(draw(st.lists(st.sampled_from(mix), min_size=length, max_size=length)))
-        status_rows.append(draw(st.lists(st.sampled_from([S, F, R]), min_size=NUM_OPCODES,
-                                         max_size=NUM_OPCODES)))
+        status_rows.append(
+            draw(st.lists(st.sampled_from([S, F, R]), min_size=NUM_OPCODES, max_size=NUM_OPCODES))
+        )
     return programs, status_rows
 
 
@@ -182,7 +223,9 @@ def test_interpret_matches_reference_hypothesis(batch) -> None:
 
 def test_interpret_matches_reference_bulk() -> None:
     g = torch.Generator().manual_seed(3)
-    ops = torch.cat([random_programs(3000, 24, g, p_nop=0.2), random_programs(2000, 24, g, p_nop=0.6)])
+    ops = torch.cat(
+        [random_programs(3000, 24, g, p_nop=0.2), random_programs(2000, 24, g, p_nop=0.6)]
+    )
     ls = torch.randint(0, 3, (ops.shape[0], NUM_OPCODES), generator=g)
     got = as_tuples(*interpret(ops, compute_jumps(ops), ls))
     seen = set()
@@ -200,6 +243,7 @@ def test_worst_case_step_count() -> None:
 
 
 # --- lookup tables -------------------------------------------------------------------------------
+
 
 def test_combo_roundtrip() -> None:
     table = combo_statuses()
@@ -219,10 +263,35 @@ def test_combo_roundtrip() -> None:
 
 def test_build_tables_all_combos_match_interpret() -> None:
     g = torch.Generator().manual_seed(4)
-    long_walk = [SEQ, SEL, H, A, END, SEL, N, B, END, C, ACT_PICK_UP, SEL, ACT_DROP, COND_NEAR_BASE,
-                 ACT_MOVE_TO_RANDOM_PACK, COND_AM_I_STUCK, END, SEQ, A, B]  # many leaves on one path
-    ops = torch.cat([random_programs(2, 20, g), template_tensor("collaborative", 20)[None],
-                     encode(long_walk, 20)[None]])
+    long_walk = [
+        SEQ,
+        SEL,
+        H,
+        A,
+        END,
+        SEL,
+        N,
+        B,
+        END,
+        C,
+        ACT_PICK_UP,
+        SEL,
+        ACT_DROP,
+        COND_NEAR_BASE,
+        ACT_MOVE_TO_RANDOM_PACK,
+        COND_AM_I_STUCK,
+        END,
+        SEQ,
+        A,
+        B,
+    ]  # many leaves on one path
+    ops = torch.cat(
+        [
+            random_programs(2, 20, g),
+            template_tensor("collaborative", 20)[None],
+            encode(long_walk, 20)[None],
+        ]
+    )
     tables = build_tables(ops)
     assert tables.shape == (4, NUM_COMBOS) and tables.dtype == torch.int32
     combos = combo_statuses()
@@ -237,8 +306,9 @@ def test_build_tables_all_combos_match_interpret() -> None:
 def test_lookup_matches_interpret_random() -> None:
     g = torch.Generator().manual_seed(5)
     P, L, robots = 40, 20, 6000
-    ops = torch.cat([random_programs(P - 4, L, g),
-                     torch.stack([template_tensor(n, L) for n in TEMPLATES])])
+    ops = torch.cat(
+        [random_programs(P - 4, L, g), torch.stack([template_tensor(n, L) for n in TEMPLATES])]
+    )
     tables = build_tables(ops, chunk=7)  # odd chunk size exercises chunking
     assert torch.equal(tables, build_tables(ops))
     # the GPU's walk (no compaction, no device sync) gives the same tables
@@ -247,7 +317,9 @@ def test_lookup_matches_interpret_random() -> None:
     ls = torch.randint(0, 3, (2, robots // 2, NUM_OPCODES), generator=g)
     cond = ls[..., 2:6] == R
     ls_fixed = ls.clone()
-    ls_fixed[..., 2:6] = torch.where(cond, F, ls[..., 2:6])  # lookup treats RUNNING conditions as FAILURE
+    ls_fixed[..., 2:6] = torch.where(
+        cond, F, ls[..., 2:6]
+    )  # lookup treats RUNNING conditions as FAILURE
     want = interpret(ops[prog_idx], compute_jumps(ops)[prog_idx], ls_fixed)
     got = lookup(tables, prog_idx, ls)
     for w, x in zip(want, got):
@@ -257,9 +329,15 @@ def test_lookup_matches_interpret_random() -> None:
 
 @pytest.mark.parametrize("compact", [True, False])
 def test_build_tables_edge_cases(compact) -> None:
-    assert build_tables(torch.zeros(0, 8, dtype=torch.long), compact=compact).shape == \
-        (0, NUM_COMBOS)
-    for ops in (torch.zeros(2, 0, dtype=torch.long), torch.full((2, 5), NOP), torch.full((2, 5), END)):
+    assert build_tables(torch.zeros(0, 8, dtype=torch.long), compact=compact).shape == (
+        0,
+        NUM_COMBOS,
+    )
+    for ops in (
+        torch.zeros(2, 0, dtype=torch.long),
+        torch.full((2, 5), NOP),
+        torch.full((2, 5), END),
+    ):
         action, fired, status = unpack(build_tables(ops, compact=compact))
         assert (action == NOP).all() and not fired.any() and (status == S).all()
     action, _, status = unpack(build_tables(torch.full((1, 6), SEL), compact=compact))
@@ -320,8 +398,9 @@ def test_templates_parse() -> None:
     for name, tree in EXPECTED_TREES.items():
         assert format_tree(TEMPLATES[name]) == tree
         assert format_tree(template_tensor(name, 32)) == tree
-        assert TEMPLATES[name][-1] == END and TEMPLATES[name].count(END) == TEMPLATES[name].count(SEL) \
-            + TEMPLATES[name].count(SEQ)
+        assert TEMPLATES[name][-1] == END and TEMPLATES[name].count(END) == TEMPLATES[name].count(
+            SEL
+        ) + TEMPLATES[name].count(SEQ)
 
 
 def test_format_tree_rules() -> None:
@@ -329,8 +408,10 @@ def test_format_tree_rules() -> None:
     assert format_tree(prog) == "SEQ\n  SEL\n  COND_NEAR_BASE\nSEL\n  ACT_PICK_UP\n  SEQ"
     assert format_tree([NOP, END]) == ""
     # the implicit root: the top-level nodes are its children
-    assert format_tree(prog, root=True) == \
-        "SEQ (root)\n  SEQ\n    SEL\n    COND_NEAR_BASE\n  SEL\n    ACT_PICK_UP\n    SEQ"
+    assert (
+        format_tree(prog, root=True)
+        == "SEQ (root)\n  SEQ\n    SEL\n    COND_NEAR_BASE\n  SEL\n    ACT_PICK_UP\n    SEQ"
+    )
     assert format_tree([NOP], root=True) == "SEQ (root)"
 
 
@@ -356,7 +437,10 @@ def tick(name: str, **kw: int) -> tuple[int, set[int], int]:
 
 
 def test_template_behavior() -> None:
-    for name, fetch in (("forage", "ACT_MOVE_TO_PACK"), ("forage_random", "ACT_MOVE_TO_RANDOM_PACK")):
+    for name, fetch in (
+        ("forage", "ACT_MOVE_TO_PACK"),
+        ("forage_random", "ACT_MOVE_TO_RANDOM_PACK"),
+    ):
         fetch_op = getattr(bt, fetch)
         # Holding, not at base: head home.
         assert tick(name, ACT_MOVE_TO_BASE=R) == (B, set(), R)
@@ -369,16 +453,27 @@ def test_template_behavior() -> None:
         # Not holding, no package left: random walk.
         assert tick(name, COND_HAS_PACKAGE=F, ACT_RANDOM_WALK=R, **{fetch: F}) == (C, set(), R)
         # The pick-up failed: random walk.
-        assert tick(name, COND_HAS_PACKAGE=F, ACT_PICK_UP=F, ACT_RANDOM_WALK=R) == (C, {fetch_op}, R)
+        assert tick(name, COND_HAS_PACKAGE=F, ACT_PICK_UP=F, ACT_RANDOM_WALK=R) == (
+            C,
+            {fetch_op},
+            R,
+        )
     # Collaborative: a stuck robot holding a package lets go.
     assert tick("collaborative", ACT_MOVE_TO_BASE=R) == (NOP, {ACT_DROP}, S)
     assert tick("collaborative", COND_AM_I_STUCK=F, ACT_MOVE_TO_BASE=R) == (B, set(), R)
-    assert tick("collaborative", COND_HAS_PACKAGE=F, ACT_MOVE_TO_RANDOM_PACK=R) \
-        == (ACT_MOVE_TO_RANDOM_PACK, set(), R)
+    assert tick("collaborative", COND_HAS_PACKAGE=F, ACT_MOVE_TO_RANDOM_PACK=R) == (
+        ACT_MOVE_TO_RANDOM_PACK,
+        set(),
+        R,
+    )
     # Cautious: a stuck robot walks away first, else forages.
     assert tick("cautious", ACT_RANDOM_WALK=R) == (C, set(), R)
     assert tick("cautious", COND_AM_I_STUCK=F, ACT_MOVE_TO_BASE=R) == (B, set(), R)
-    assert tick("cautious", COND_AM_I_STUCK=F, COND_HAS_PACKAGE=F, ACT_MOVE_TO_PACK=R) == (A, set(), R)
+    assert tick("cautious", COND_AM_I_STUCK=F, COND_HAS_PACKAGE=F, ACT_MOVE_TO_PACK=R) == (
+        A,
+        set(),
+        R,
+    )
 
 
 def test_random_programs() -> None:
@@ -394,7 +489,9 @@ def test_no_graph_breaks() -> None:
     torch._dynamo.reset()
     ops = torch.tensor([[SEL, SEQ, H, B, END, C, END], [SEQ, END, NOP, A, SEL, END, END]])
     ls = torch.tensor([statuses(ACT_MOVE_TO_BASE=R), statuses(ACT_MOVE_TO_PACK=R)])
-    f = torch.compile(lambda o, s: interpret(o, compute_jumps(o), s), backend="eager", fullgraph=True)
+    f = torch.compile(
+        lambda o, s: interpret(o, compute_jumps(o), s), backend="eager", fullgraph=True
+    )
     for w, x in zip(interpret(ops, compute_jumps(ops), ls), f(ops, ls)):
         assert torch.equal(w, x)
     tables = build_tables(ops)
@@ -418,8 +515,12 @@ def test_tree_lines_are_format_tree_with_slots() -> None:
 
 def test_trace_agrees_with_the_interpreter_and_the_tables() -> None:
     g = torch.Generator().manual_seed(9)
-    ops = torch.cat([random_programs(1500, 24, g, p_nop=0.2),
-                     torch.stack([bt.template_tensor(k, 24) for k in bt.TEMPLATES])])
+    ops = torch.cat(
+        [
+            random_programs(1500, 24, g, p_nop=0.2),
+            torch.stack([bt.template_tensor(k, 24) for k in bt.TEMPLATES]),
+        ]
+    )
     ls = bt.combo_statuses()[torch.randint(0, bt.NUM_COMBOS, (ops.shape[0],), generator=g)]
     tables = bt.build_tables(ops)
     action, fired, status = bt.lookup(tables, torch.arange(ops.shape[0]), ls)
@@ -430,7 +531,7 @@ def test_trace_agrees_with_the_interpreter_and_the_tables() -> None:
         leaves = [(s, st) for s, st in visited if s >= 0 and prog[s] in bt.LEAF_OPS]
         assert {prog[s] for s, st in leaves if st == S and prog[s] in bt.ACTION_OPS} == ref_fired
         assert ref_fired == {k for k in range(NUM_OPCODES) if fired[i, k]}
-        assert len({s for s, _ in visited}) == len(visited)   # each node ticks at most once
+        assert len({s for s, _ in visited}) == len(visited)  # each node ticks at most once
         if ref_status == R:
             assert prog[acting] == ref_action == int(action[i])
             assert leaves[-1] == (acting, R)
@@ -442,11 +543,17 @@ def test_trace_agrees_with_the_interpreter_and_the_tables() -> None:
 
 
 def test_trace_hand_made() -> None:
-    prog = bt.TEMPLATES["forage"]   # SEL(SEQ(HAS, TO_BASE, DROP), SEQ(TO_PACK, PICK), WALK)
+    prog = bt.TEMPLATES["forage"]  # SEL(SEQ(HAS, TO_BASE, DROP), SEQ(TO_PACK, PICK), WALK)
     acting, visited = bt.trace(prog, statuses(COND_HAS_PACKAGE=F, ACT_MOVE_TO_PACK=R))
     assert prog[acting] == ACT_MOVE_TO_PACK
     assert [prog[s] if s >= 0 else "root" for s, _ in visited] == [
-        COND_HAS_PACKAGE, bt.SEQ, ACT_MOVE_TO_PACK, bt.SEQ, bt.SEL, "root"]
+        COND_HAS_PACKAGE,
+        bt.SEQ,
+        ACT_MOVE_TO_PACK,
+        bt.SEQ,
+        bt.SEL,
+        "root",
+    ]
     assert [st for _, st in visited] == [F, F, R, R, R, R]
-    acting, visited = bt.trace(prog, statuses())            # holding, at the base: drop fires
+    acting, visited = bt.trace(prog, statuses())  # holding, at the base: drop fires
     assert prog[acting] == ACT_DROP and visited[-1] == (-1, S)

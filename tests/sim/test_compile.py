@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import pytest
 import torch
+from worldkit import random_world
 
 from swarmcode_torch.sim.rollout import rollout
 from swarmcode_torch.sim.step import step
-
-from worldkit import random_world
 
 TICKS = 20
 DISCRETE = ("t", "holding", "grip", "stuck", "p_status", "holder", "p_picked")
@@ -25,11 +24,21 @@ def _assert_close(want, got, pos_atol=1e-3):
         a, b = getattr(want, name), getattr(got, name).to(getattr(want, name).device)
         assert torch.equal(a, b), f"{name}: {(a != b).sum().item()} entries differ"
     for name in ("pos", "waypoint", "p_pos"):
-        torch.testing.assert_close(getattr(got, name).cpu(), getattr(want, name),
-                                   atol=pos_atol, rtol=0, msg=lambda m: f"{name}: {m}")
+        torch.testing.assert_close(
+            getattr(got, name).cpu(),
+            getattr(want, name),
+            atol=pos_atol,
+            rtol=0,
+            msg=lambda m: f"{name}: {m}",  # noqa: B023 - called inside this iteration
+        )
     for name in ("vel", "p_vel"):
-        torch.testing.assert_close(getattr(got, name).cpu(), getattr(want, name),
-                                   atol=1e-3, rtol=0, msg=lambda m: f"{name}: {m}")
+        torch.testing.assert_close(
+            getattr(got, name).cpu(),
+            getattr(want, name),
+            atol=1e-3,
+            rtol=0,
+            msg=lambda m: f"{name}: {m}",  # noqa: B023 - called inside this iteration
+        )
     torch.testing.assert_close(got.energy.cpu(), want.energy, atol=1e-2, rtol=1e-4)
 
 
@@ -44,8 +53,9 @@ def test_compiled_step_matches_eager_on_cpu():
     compiled = torch.compile(step, dynamic=False, fullgraph=True)
     m_eager, want = rollout(layout, rob, tables, params, TICKS, return_state=True)
     with torch._dynamo.config.patch(error_on_recompile=True):
-        m_comp, got = rollout(layout, rob, tables, params, TICKS, step_fn=compiled,
-                              return_state=True)
+        m_comp, got = rollout(
+            layout, rob, tables, params, TICKS, step_fn=compiled, return_state=True
+        )
     _assert_close(want, got)
     for k in m_eager:
         torch.testing.assert_close(m_comp[k], m_eager[k], atol=1e-3, rtol=1e-4)

@@ -11,6 +11,7 @@ import warnings
 
 import pytest
 import torch
+from worldkit import random_world
 
 from swarmcode_torch.sim import fused as fused_mod
 from swarmcode_torch.sim.fused import FusedTicks
@@ -18,16 +19,17 @@ from swarmcode_torch.sim.rollout import rollout
 from swarmcode_torch.sim.runtime import tick_function, tick_mode
 from swarmcode_torch.sim.state import Robots, State, TickInputs, compatible, random_keys, reset
 from swarmcode_torch.sim.step import step
-from worldkit import random_world
 
 fused = FusedTicks()
-needs_build = pytest.mark.skipif(not fused.ready(warn=False),
-                                 reason="the fused C++ tick cannot be built here")
+needs_build = pytest.mark.skipif(
+    not fused.ready(warn=False), reason="the fused C++ tick cannot be built here"
+)
 
 
 def _inputs(layout, rob, tables, p):
-    return TickInputs(layout, rob, compatible(layout, rob, p), random_keys(layout, rob.radius.shape[1]),
-                      tables)
+    return TickInputs(
+        layout, rob, compatible(layout, rob, p), random_keys(layout, rob.radius.shape[1]), tables
+    )
 
 
 def _world(name, E, seed, absent=0.0):
@@ -48,8 +50,10 @@ def _compare(a: State, b: State, what: str):
 
 
 @needs_build
-@pytest.mark.parametrize("name,E,absent", [("four-niche", 8, 0.0), ("budget", 6, 0.3),
-                                            ("two-niche", 4, 0.0), ("swarm200", 2, 0.1)])
+@pytest.mark.parametrize(
+    "name,E,absent",
+    [("four-niche", 8, 0.0), ("budget", 6, 0.3), ("two-niche", 4, 0.0), ("swarm200", 2, 0.1)],
+)
 def test_one_tick_agrees_with_the_python_tick_from_every_state(name, E, absent):
     layout, rob, tables, p = _world(name, E, seed=4, absent=absent)
     inp = _inputs(layout, rob, tables, p)
@@ -107,7 +111,9 @@ def test_rollout_and_tick_function_use_it_on_the_cpu(monkeypatch):
 
 def test_without_a_compiler_the_python_tick_runs(monkeypatch):
     monkeypatch.setattr(fused_mod, "_module", None)
-    monkeypatch.setattr(fused_mod, "_error", RuntimeError("Error building extension\nc++: not found"))
+    monkeypatch.setattr(
+        fused_mod, "_error", RuntimeError("Error building extension\nc++: not found")
+    )
     fn, compiled = tick_function(torch.device("cpu"), generations=5)
     assert fn is step and not compiled  # with a warning, the choice as before
     f = FusedTicks()
@@ -165,4 +171,3 @@ def test_set_threads(monkeypatch):
                 set_threads(bad)
     finally:
         torch.set_num_threads(before)
-

@@ -5,29 +5,54 @@ import math
 import pytest
 import torch
 
-from swarmcode_torch.sim.hardware import R_MAX, R_MIN
-from swarmcode_torch.sim.hardware import default_catalog, phenotype
+from swarmcode_torch.sim.hardware import R_MAX, R_MIN, default_catalog, phenotype
 from swarmcode_torch.sim.layout import make_layouts, spawn_slots
-from swarmcode_torch.sim.scenario import (ScenarioError, builtin_names, load_scenario,
-                                          scenario_from_dict)
+from swarmcode_torch.sim.scenario import (
+    ScenarioError,
+    builtin_names,
+    load_scenario,
+    scenario_from_dict,
+)
 
 GOOD = {
-    "name": "t", "arena": 20.0, "base_radius": 1.5, "num_robots": 4, "episode_ticks": 10,
+    "name": "t",
+    "arena": 20.0,
+    "base_radius": 1.5,
+    "num_robots": 4,
+    "episode_ticks": 10,
     "obstacles": {"count": 2, "radius": [0.3, 0.5]},
-    "packages": [{"kind": "individual", "effector": "pincher", "count": 3,
-                  "distance": [3.0, 6.0], "mass": [2.0, 4.0]},
-                 {"kind": "collab", "grips": ["pincher", "suction"], "count": 1,
-                  "distance": [4.0, 5.0], "mass": [10.0, 20.0]}],
+    "packages": [
+        {
+            "kind": "individual",
+            "effector": "pincher",
+            "count": 3,
+            "distance": [3.0, 6.0],
+            "mass": [2.0, 4.0],
+        },
+        {
+            "kind": "collab",
+            "grips": ["pincher", "suction"],
+            "count": 1,
+            "distance": [4.0, 5.0],
+            "mass": [10.0, 20.0],
+        },
+    ],
 }
 
 
 def test_registry_holds_the_papers_scenarios():
-    assert set(builtin_names()) == {"one-niche", "two-niche", "four-niche", "budget", "swarm200",
-                                    "swarm1000"}
+    assert set(builtin_names()) == {
+        "one-niche",
+        "two-niche",
+        "four-niche",
+        "budget",
+        "swarm200",
+        "swarm1000",
+    }
     s = {n: load_scenario(n) for n in builtin_names()}
     for n in ("one-niche", "two-niche", "four-niche"):
         assert s[n].num_robots == 20 and s[n].num_packages == 16
-    assert {p.grips for p in s["one-niche"].packages} == {(1,)}              # pinchers only
+    assert {p.grips for p in s["one-niche"].packages} == {(1,)}  # pinchers only
     assert {p.grips for p in s["two-niche"].packages} == {(0,), (1,)}
     assert s["budget"].species_overhead == 500.0
     assert any(p.kind == "collab" for p in s["budget"].packages)
@@ -40,31 +65,80 @@ def test_registry_holds_the_papers_scenarios():
 
 def test_a_scenario_file_loads(tmp_path):
     f = tmp_path / "mine.toml"
-    f.write_text('name = "mine"\narena = 12\nbase_radius = 1\nnum_robots = 3\nepisode_ticks = 5\n'
-                 '[[packages]]\nkind = "individual"\neffector = "suction"\ncount = 2\n'
-                 'distance = [2, 4]\nmass = [1, 2]\n')
+    f.write_text(
+        'name = "mine"\narena = 12\nbase_radius = 1\nnum_robots = 3\nepisode_ticks = 5\n'
+        '[[packages]]\nkind = "individual"\neffector = "suction"\ncount = 2\n'
+        "distance = [2, 4]\nmass = [1, 2]\n"
+    )
     s = load_scenario(str(f))
     assert s.name == "mine" and s.arena == 12.0 and s.packages[0].grips == (0,)
 
 
-@pytest.mark.parametrize("patch,field", [
-    ({"arena": -1.0}, "arena"),
-    ({"num_robots": "x"}, "num_robots"),
-    ({"base_radius": 50.0}, "base_radius"),
-    ({"colour": "red"}, "colour"),
-    ({"obstacles": {"count": -1}}, "obstacles.count"),
-    ({"packages": []}, "packages"),
-    ({"packages": [{"kind": "crate", "count": 1, "distance": [1, 2], "mass": [1, 2]}]},
-     "packages[0].kind"),
-    ({"packages": [{"kind": "individual", "effector": "magnet", "count": 1,
-                    "distance": [1, 2], "mass": [1, 2]}]}, "packages[0].effector"),
-    ({"packages": [{"kind": "individual", "effector": "pincher", "count": 1,
-                    "distance": [5, 2], "mass": [1, 2]}]}, "packages[0].distance"),
-    ({"packages": [{"kind": "collab", "grips": ["pincher"], "count": 1,
-                    "distance": [1, 2], "mass": [1, 2]}]}, "packages[0].grips"),
-    ({"packages": [{"kind": "individual", "effector": "pincher", "count": 1,
-                    "distance": [1, 2]}]}, "packages[0].mass"),
-])
+@pytest.mark.parametrize(
+    "patch,field",
+    [
+        ({"arena": -1.0}, "arena"),
+        ({"num_robots": "x"}, "num_robots"),
+        ({"base_radius": 50.0}, "base_radius"),
+        ({"colour": "red"}, "colour"),
+        ({"obstacles": {"count": -1}}, "obstacles.count"),
+        ({"packages": []}, "packages"),
+        (
+            {"packages": [{"kind": "crate", "count": 1, "distance": [1, 2], "mass": [1, 2]}]},
+            "packages[0].kind",
+        ),
+        (
+            {
+                "packages": [
+                    {
+                        "kind": "individual",
+                        "effector": "magnet",
+                        "count": 1,
+                        "distance": [1, 2],
+                        "mass": [1, 2],
+                    }
+                ]
+            },
+            "packages[0].effector",
+        ),
+        (
+            {
+                "packages": [
+                    {
+                        "kind": "individual",
+                        "effector": "pincher",
+                        "count": 1,
+                        "distance": [5, 2],
+                        "mass": [1, 2],
+                    }
+                ]
+            },
+            "packages[0].distance",
+        ),
+        (
+            {
+                "packages": [
+                    {
+                        "kind": "collab",
+                        "grips": ["pincher"],
+                        "count": 1,
+                        "distance": [1, 2],
+                        "mass": [1, 2],
+                    }
+                ]
+            },
+            "packages[0].grips",
+        ),
+        (
+            {
+                "packages": [
+                    {"kind": "individual", "effector": "pincher", "count": 1, "distance": [1, 2]}
+                ]
+            },
+            "packages[0].mass",
+        ),
+    ],
+)
 def test_malformed_scenarios_name_the_bad_field(patch, field):
     with pytest.raises(ScenarioError, match=field.replace("[", r"\[").replace("]", r"\]")):
         scenario_from_dict({**GOOD, **patch})
@@ -83,8 +157,10 @@ def test_premium_tiers_are_better_and_dearer():
     assert cat.motor_efficiency[0] < cat.motor_efficiency[1] < cat.motor_efficiency[2]
     assert cat.battery_density[0] < cat.battery_density[1] < cat.battery_density[2]
     one = lambda v: torch.tensor([v])  # noqa: E731
-    costs = [phenotype(one(0.3), one(t), one(t), one(t), one(0.5), one(0.5), one(0)).cost.item()
-             for t in range(3)]
+    costs = [
+        phenotype(one(0.3), one(t), one(t), one(t), one(0.5), one(0.5), one(0)).cost.item()
+        for t in range(3)
+    ]
     assert costs[0] < costs[1] < costs[2]
     # the catalog spans the cost scale the paper's budgets imply (~$75-$350 a robot)
     lo = phenotype(one(R_MIN), one(0), one(0), one(0), one(0.0), one(0.0), one(0)).cost.item()

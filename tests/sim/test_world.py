@@ -5,6 +5,7 @@ import sys
 
 import pytest
 import torch
+from worldkit import build, package, random_world, robot
 
 from swarmcode_torch.sim import bt
 from swarmcode_torch.sim.contacts import collide
@@ -13,10 +14,16 @@ from swarmcode_torch.sim.layout import make_layouts
 from swarmcode_torch.sim.rollout import episode_metrics, rollout
 from swarmcode_torch.sim.runtime import CompiledStep
 from swarmcode_torch.sim.scenario import builtin_names, load_scenario
-from swarmcode_torch.sim.state import (DELIVERED, GROUND, Robots, WorldParams, compatible,
-                                       random_keys, reset)
+from swarmcode_torch.sim.state import (
+    DELIVERED,
+    GROUND,
+    Robots,
+    WorldParams,
+    compatible,
+    random_keys,
+    reset,
+)
 from swarmcode_torch.sim.step import step
-from worldkit import build, package, random_world, robot
 
 
 @pytest.fixture(autouse=True, params=["reference", "fused"])
@@ -36,12 +43,14 @@ def tick(request, monkeypatch):
 
 def run(layout, rob, tables, params, ticks, each=None):
     """The state after `ticks` ticks; `each(state)` after every tick (not after the reset)."""
+
     def observe(t, s):
         if t > 0:
             each(s)
 
-    return rollout(layout, rob, tables, params, ticks, return_state=True,
-                   observe=observe if each else None)[1]
+    return rollout(
+        layout, rob, tables, params, ticks, return_state=True, observe=observe if each else None
+    )[1]
 
 
 # ------------------------------------------------------------------ physics invariants
@@ -73,7 +82,7 @@ def test_head_on_elastic_collision_conserves_momentum_and_energy():
     empty = torch.zeros(1, 0, 2), torch.zeros(1, 0), torch.zeros(1, 0, dtype=torch.bool)
     pos1, vel1 = collide(pos + 50, vel, radius, mass, torch.ones(1, 2, dtype=torch.bool), *empty, p)
     mom0, mom1 = (mass[..., None] * vel).sum(1), (mass[..., None] * vel1).sum(1)
-    ke0, ke1 = (mass * (vel ** 2).sum(-1)).sum(), (mass * (vel1 ** 2).sum(-1)).sum()
+    ke0, ke1 = (mass * (vel**2).sum(-1)).sum(), (mass * (vel1**2).sum(-1)).sum()
     assert torch.allclose(mom0, mom1, atol=1e-5)
     assert torch.allclose(ke0, ke1, rtol=1e-5)
     # 1-D elastic collision formula
@@ -86,8 +95,11 @@ def test_head_on_elastic_collision_conserves_momentum_and_energy():
 def test_head_on_collision_through_the_tick_conserves_momentum():
     # two robots with empty batteries coast into each other on a frictionless floor
     layout, rob, tables, p = build(
-        [robot((3.0, 5.0)), robot((7.0, 5.0), radius=0.4)], [package((9.0, 9.0))],
-        drag=0.0, base_radius=0.5)
+        [robot((3.0, 5.0)), robot((7.0, 5.0), radius=0.4)],
+        [package((9.0, 9.0))],
+        drag=0.0,
+        base_radius=0.5,
+    )
     s = reset(layout, rob, p)
     s = s._replace(vel=torch.tensor([[[0.6, 0.0], [-0.3, 0.0]]]), energy=torch.zeros(1, 2))
     compat, keys = compatible(layout, rob, p), random_keys(layout, 2)
@@ -150,8 +162,9 @@ def test_collab_package_moves_only_with_all_grips_held():
     assert s.holding[0, 0] == 0 and not s.p_picked.any()
     assert torch.allclose(s.p_pos, torch.tensor([[[7.0, 5.0]]]))
     # with a suction partner at the other grip the package travels to the base and is delivered
-    layout, rob, tables, p = build([robot((8.0, 5.0), effector=1, **strong),
-                                    robot((6.0, 5.5), effector=0, **strong)], [pk])
+    layout, rob, tables, p = build(
+        [robot((8.0, 5.0), effector=1, **strong), robot((6.0, 5.5), effector=0, **strong)], [pk]
+    )
     s = run(layout, rob, tables, p, 250)
     assert s.p_picked.all()
     m = episode_metrics(s, layout, rob, p)
@@ -160,8 +173,10 @@ def test_collab_package_moves_only_with_all_grips_held():
 
 
 def test_a_package_is_delivered_once():
-    layout, rob, tables, p = build([robot((5.8, 5.0)), robot((4.0, 5.0))],
-                                   [package((6.5, 5.0)), package((9.0, 9.0), grips=(0,))])
+    layout, rob, tables, p = build(
+        [robot((5.8, 5.0)), robot((4.0, 5.0))],
+        [package((6.5, 5.0)), package((9.0, 9.0), grips=(0,))],
+    )
     delivered_at = []
 
     def each(st):
@@ -226,11 +241,19 @@ def test_forage_template_delivers_packages():
     g = torch.Generator().manual_seed(5)
     layout = make_layouts(s, E, g)
     full = lambda v: torch.full((E, N), v)  # noqa: E731
-    ph = phenotype(full(0.3), full(1), full(1), full(2), full(0.8), full(0.7),
-                   (torch.arange(N) % 2).expand(E, N))
+    ph = phenotype(
+        full(0.3),
+        full(1),
+        full(1),
+        full(2),
+        full(0.8),
+        full(0.7),
+        (torch.arange(N) % 2).expand(E, N),
+    )
     tables = bt.build_tables(bt.template_tensor("forage", 32)[None])
-    rob = Robots.from_phenotype(ph, torch.ones(E, N, dtype=torch.bool),
-                                torch.zeros(E, N, dtype=torch.long))
+    rob = Robots.from_phenotype(
+        ph, torch.ones(E, N, dtype=torch.bool), torch.zeros(E, N, dtype=torch.long)
+    )
     m = rollout(layout, rob, tables, WorldParams.for_scenario(s), s.episode_ticks)
     assert (m["delivered_individual"] >= 4).all()
     assert (m["picked_individual"] >= m["delivered_individual"]).all()
@@ -240,10 +263,14 @@ def test_forage_template_delivers_packages():
 def test_compiled_step_falls_back_to_eager_when_compiling_fails(monkeypatch, tick):
     if tick == "fused":
         pytest.skip("compares the compiled Python tick's fallback with the Python tick")
+
     def broken_compile(fn, **kw):
         def compiled(*args):
-            raise RuntimeError("InvalidCxxCompiler: No working C++ compiler found\n\n"
-                               "Set TORCHDYNAMO_VERBOSE=1 for the internal stack trace")
+            raise RuntimeError(
+                "InvalidCxxCompiler: No working C++ compiler found\n\n"
+                "Set TORCHDYNAMO_VERBOSE=1 for the internal stack trace"
+            )
+
         return compiled
 
     monkeypatch.setattr(torch, "compile", broken_compile)
@@ -283,8 +310,15 @@ def test_observe_leaf_changes_nothing_and_sees_what_the_trees_read():
     s, layout, rob, tables, p = random_world("two-niche", E=2, seed=3)
     m0, s0 = rollout(layout, rob, tables, p, 40, return_state=True)
     seen = []
-    m1, s1 = rollout(layout, rob, tables, p, 40, return_state=True,
-                     observe_leaf=lambda t, leaf: seen.append((t, leaf.clone())))
+    m1, s1 = rollout(
+        layout,
+        rob,
+        tables,
+        p,
+        40,
+        return_state=True,
+        observe_leaf=lambda t, leaf: seen.append((t, leaf.clone())),
+    )
     for a, b in zip(s0, s1):
         assert torch.equal(a, b)
     for k in m0:
@@ -293,7 +327,14 @@ def test_observe_leaf_changes_nothing_and_sees_what_the_trees_read():
     assert all(leaf.shape == (2, s.num_robots, bt.NUM_OPCODES) for _, leaf in seen)
     # both observers at once: the state seen before tick t is the one the leaves came from
     states = {}
-    rollout(layout, rob, tables, p, 3, observe=lambda t, st: states.setdefault(t, st),
-            observe_leaf=lambda t, leaf: states.setdefault(-t, leaf))
+    rollout(
+        layout,
+        rob,
+        tables,
+        p,
+        3,
+        observe=lambda t, st: states.setdefault(t, st),
+        observe_leaf=lambda t, leaf: states.setdefault(-t, leaf),
+    )
     assert sorted(states) == [-3, -2, -1, 0, 1, 2, 3]
     assert torch.equal(states[-1], seen[0][1])
