@@ -13,7 +13,7 @@ heterogeneous robot swarms.
 algorithm, not matplotlib, TensorBoard or the CLI's libraries: they load when first used.
 """
 
-__version__ = "0.6.0"
+__version__ = "0.7.0"
 
 from .app.analysis import replay_run, run_dynamics
 from .app.api import RunResult, evolve, load, resume
