@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import json
 import sys
-from contextlib import ExitStack
-from enum import Enum
 from typing import Annotated
 
 import typer
@@ -19,28 +17,13 @@ from rich.markup import escape
 from rich.table import Table
 from typer.core import TyperGroup
 
-from ..coevo.config import SwarmCoDeConfig
 from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 from . import evolve_start
 from .inspect_view import capabilities, inspect_sweep, print_lineage
-from .signals import TERMINATED, terminate_as_interrupt
-from .terminal import (
-    THREADS_HELP,
-    Where,
-    attach_shards,
-    check_path,
-    console,
-    err,
-    eval_shards_option,
-    execute,
-    fail,
-    os_fail,
-    print_shard_traffic,
-    print_team,
-    set_threads_option,
-    stopped,
-)
+from .options import Dynamics, Evolve, Replay, Sweep, objective_value
+from .signals import TERMINATED
+from .terminal import check_path, console, err, fail, os_fail, print_team
 
 
 class _OneLineErrors(TyperGroup):
@@ -81,32 +64,6 @@ app = typer.Typer(
     help="SwarmCoDe: co-design the behavior trees and hardware of robot swarms.",
 )
 # off a terminal (logs, pipes) Rich would wrap at 80 columns; tables need a little more
-
-
-#: The defaults --help shows for the options that leave them to the run's config.
-_DEFAULT = SwarmCoDeConfig()
-
-
-class Objective(str, Enum):
-    """--objective: its choices, in --help and in shell completion."""
-
-    fitness = "fitness"
-    roi = "roi"
-
-
-#: --device: shown in --help as its choices; the value is checked with the run's other settings
-#: (`SwarmCoDeConfig.validate`), so that its error reads as theirs.
-DEVICE_METAVAR = "[auto|cpu|cuda|cuda:N]"
-DEVICES = ("auto", "cpu", "cuda", "cuda:0")
-
-
-def _complete_device(incomplete: str) -> list[str]:
-    """Shell completion of --device."""
-    return [d for d in DEVICES if d.startswith(incomplete)]
-
-
-def _objective(value: Objective | None) -> str | None:
-    return None if value is None else Objective(value).value
 
 
 def _print_version(value: bool) -> None:
@@ -170,355 +127,66 @@ def scenarios() -> None:
 
 @app.command()
 def evolve(
-    scenario: Annotated[
-        str | None,
-        typer.Option(
-            help=f"Built-in scenario name or a scenario .toml file [default: {_DEFAULT.scenario}]."
-        ),
-    ] = None,
-    budget: Annotated[
-        float | None, typer.Option(help="Fabrication budget in $ (default: none, no penalty).")
-    ] = None,
-    objective: Annotated[
-        Objective | None,
-        typer.Option(help="fitness, or roi: fitness / team cost [default: fitness]."),
-    ] = None,
-    generations: Annotated[
-        int | None,
-        typer.Option(
-            help=f"Total generations [default: {_DEFAULT.generations}; with --resume: the run's, or extend to this many]."
-        ),
-    ] = None,
-    population: Annotated[
-        int | None, typer.Option(help="Individuals in the population [default: 100].")
-    ] = None,
-    swarm_size: Annotated[
-        int | None, typer.Option(help="Robots per team [default: the scenario's].")
-    ] = None,
-    trials: Annotated[
-        int | None, typer.Option(help="Random environments per team evaluation [default: 3].")
-    ] = None,
-    ticks: Annotated[
-        int | None, typer.Option(help="Episode length in ticks [default: the scenario's].")
-    ] = None,
-    seed: Annotated[int | None, typer.Option(help="Random seed [default: 0].")] = None,
-    device: Annotated[
-        str | None,
-        typer.Option(
-            metavar=DEVICE_METAVAR,
-            autocompletion=_complete_device,
-            help="Where the run computes: auto (cuda if available), cpu, cuda or cuda:N [default: auto].",
-        ),
-    ] = None,
-    compile: Annotated[
-        bool | None,
-        typer.Option(
-            "--compile/--no-compile",
-            help="torch.compile the tick [default: on CUDA, and on CPU for >= 50 generations].",
-        ),
-    ] = None,
-    logdir: Annotated[
-        str | None,
-        typer.Option(metavar="PATH", help="Directory that holds run directories [default: runs]."),
-    ] = None,
-    checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
-    log_every: Annotated[
-        int, typer.Option(help="Generations between log lines when not on a terminal.")
-    ] = 10,
-    render_every: Annotated[
-        int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")
-    ] = 50,
-    figure_every: Annotated[
-        int,
-        typer.Option(
-            help="Generations between species-composition figures in TensorBoard (one is also drawn at the end of every run)."
-        ),
-    ] = 50,
-    resume: Annotated[
-        str | None, typer.Option(metavar="PATH", help="Continue the run in this directory.")
-    ] = None,
-    preset: Annotated[
-        str | None,
-        typer.Option(
-            help="Algorithm settings to start from: default, or paper (the paper's text and nothing beyond it); --set goes on top [default: default]."
-        ),
-    ] = None,
-    settings: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--set",
-            metavar="KEY=VALUE",
-            help="Set an algorithm config key, e.g. --set p_tag_flip=0.0625 (repeatable; keys as in the run's config.toml).",
-        ),
-    ] = None,
-    eval_workers: Annotated[
-        int,
-        typer.Option(
-            help="Evaluate each generation in this many shards on Ray actors, one GPU each on CUDA, else CPUs (needs Ray; same results as 1)."
-        ),
-    ] = 1,
-    cpus_per_eval_worker: Annotated[
-        float | None,
-        typer.Option(
-            help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1]."
-        ),
-    ] = None,
-    ray_address: Annotated[
-        str | None,
-        typer.Option(
-            help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one]."
-        ),
-    ] = None,
-    threads: Annotated[int | None, typer.Option(help=THREADS_HELP)] = None,
-    config: Annotated[
-        str | None,
-        typer.Option(
-            "--config",
-            metavar="FILE",
-            help="Start a new run from this settings file, in the format of a run's config.toml (a run's own will do); --preset, the options and --set go on top.",
-        ),
-    ] = None,
-    print_config: Annotated[
-        bool,
-        typer.Option(
-            "--print-config",
-            help="Print the resolved config as TOML (with --config, --from, the options and --set applied) and exit without running.",
-        ),
-    ] = False,
-    from_run: Annotated[
-        str | None,
-        typer.Option(
-            "--from",
-            metavar="RUN[@GENERATION]",
-            help="Start a new run from this run's snapshot of GENERATION (--snapshot-every), or its latest checkpoint, with the options and --set changed; it is recorded as the new run's parent. The scenario, population, tag_length and bt_length stay the parent's [default --logdir: the parent's].",
-        ),
-    ] = None,
-    snapshot_every: Annotated[
-        int,
-        typer.Option(
-            help="Keep a copy of the checkpoint every N generations in RUN_DIR/snapshots/ (0: none), to branch from with --from RUN@GENERATION."
-        ),
-    ] = 0,
-    max_time: Annotated[
-        str | None,
-        typer.Option(
-            metavar="DURATION",
-            help="Stop cleanly with a checkpoint (resumable) after the generation that ends past this time: 3600 (seconds), 90m, 2h, 1h30m.",
-        ),
-    ] = None,
-    patience: Annotated[
-        int | None,
-        typer.Option(
-            metavar="K",
-            help="Stop cleanly with a checkpoint (resumable) when the best team has not improved for K generations.",
-        ),
-    ] = None,
-    wandb: Annotated[
-        bool,
-        typer.Option(
-            "--wandb",
-            help="Also log to Weights & Biases (the scalars, the config, the replays; needs the wandb extra: pip install -e '.[wandb]'; WANDB_MODE=offline for no network).",
-        ),
-    ] = False,
-    wandb_project: Annotated[
-        str, typer.Option(help="Weights & Biases project of --wandb.")
-    ] = "swarmcode-torch",
+    scenario: Evolve.scenario = None,
+    budget: Evolve.budget = None,
+    objective: Evolve.objective = None,
+    generations: Evolve.generations = None,
+    population: Evolve.population = None,
+    swarm_size: Evolve.swarm_size = None,
+    trials: Evolve.trials = None,
+    ticks: Evolve.ticks = None,
+    seed: Evolve.seed = None,
+    device: Evolve.device = None,
+    compile: Evolve.compile = None,
+    logdir: Evolve.logdir = None,
+    checkpoint_every: Evolve.checkpoint_every = 10,
+    log_every: Evolve.log_every = 10,
+    render_every: Evolve.render_every = 50,
+    figure_every: Evolve.figure_every = 50,
+    resume: Evolve.resume = None,
+    preset: Evolve.preset = None,
+    settings: Evolve.settings = None,
+    eval_workers: Evolve.eval_workers = 1,
+    cpus_per_eval_worker: Evolve.cpus_per_eval_worker = None,
+    ray_address: Evolve.ray_address = None,
+    threads: Evolve.threads = None,
+    config: Evolve.config = None,
+    print_config: Evolve.print_config = False,
+    from_run: Evolve.from_run = None,
+    snapshot_every: Evolve.snapshot_every = 0,
+    max_time: Evolve.max_time = None,
+    patience: Evolve.patience = None,
+    wandb: Evolve.wandb = False,
+    wandb_project: Evolve.wandb_project = "swarmcode-torch",
 ) -> None:
     """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
-    logdir, resume = check_path(logdir, "--logdir"), check_path(resume, "--resume")
-    config_file = check_path(config, "--config")
-    wandb_project = evolve_start.wandb_option(wandb, wandb_project)
-    TERMINATED.clear()  # this command's SIGTERM, not an earlier one's
-    bounds = evolve_start.bounds_option(max_time, patience, snapshot_every)
-    if print_config:
-        evolve_start.print_config(
-            config_file,
-            from_run,
-            resume,
-            preset,
-            settings,
-            generations=generations,
-            device=device,
-            scenario=scenario,
-            budget=budget,
-            objective=_objective(objective),
-            population=population,
-            swarm_size=swarm_size,
-            trials=trials,
-            ticks=ticks,
-            seed=seed,
-            compile=compile,
-        )
-        return
-    set_threads_option(threads)
-    shards = eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
-    where = Where()
-    with terminate_as_interrupt() as terminated:
-        try:
-            with ExitStack() as stack:
-                attach = None if shards is None else (lambda ev: attach_shards(stack, ev, *shards))
-                ev, run_dir, saved = evolve_start.start_evolve(
-                    stack,
-                    scenario=scenario,
-                    budget=budget,
-                    objective=_objective(objective),
-                    generations=generations,
-                    population=population,
-                    swarm_size=swarm_size,
-                    trials=trials,
-                    ticks=ticks,
-                    seed=seed,
-                    device=device,
-                    compile=compile,
-                    logdir=logdir,
-                    checkpoint_every=checkpoint_every,
-                    log_every=log_every,
-                    render_every=render_every,
-                    resume=resume,
-                    settings=settings,
-                    attach=attach,
-                    figure_every=figure_every,
-                    where=where,
-                    preset=preset,
-                    config_file=config_file,
-                    from_run=from_run,
-                )
-                if ev is None:
-                    return
-                execute(
-                    ev,
-                    run_dir,
-                    checkpoint_every,
-                    log_every,
-                    render_every,
-                    saved=saved,
-                    figure_every=figure_every,
-                    where=where,
-                    snapshot_every=snapshot_every,
-                    bounds=bounds,
-                    wandb_project=wandb_project,
-                )
-                if shards is not None:
-                    print_shard_traffic(ev.ctx.evaluator)
-            if bounds is not None and bounds.reason is not None:
-                console.print(
-                    evolve_start.bound_line(bounds, ev, run_dir),
-                    markup=False,
-                    highlight=False,
-                    soft_wrap=True,
-                )
-            else:
-                console.print(
-                    f"Done: {ev.state.generation} generations in {escape(str(run_dir))}",
-                    soft_wrap=True,
-                )
-            print_team(run_dir)
-            # commands and paths are never wrapped (soft_wrap): each stays one line to copy
-            console.print(
-                f"Inspect: swarmcode-torch inspect {run_dir}",
-                markup=False,
-                highlight=False,
-                soft_wrap=True,
-            )
-            console.print(
-                f"Watch: tensorboard --logdir {run_dir.parent}",
-                markup=False,
-                highlight=False,
-                soft_wrap=True,
-            )
-        except KeyboardInterrupt:
-            stopped(where, bool(terminated))
+    evolve_start.evolve_command(**locals())
 
 
 @app.command()
 def sweep(
-    budgets: Annotated[
-        str, typer.Option(help="Comma-separated budgets in $.")
-    ] = "2500,3000,4000,5000,6000,8000",
-    seeds: Annotated[
-        str, typer.Option(help="Comma-separated seeds; one run per budget and seed.")
-    ] = "0",
-    objective: Annotated[
-        Objective | None,
-        typer.Option(help="fitness, or roi: fitness / team cost [default: fitness]."),
-    ] = None,
-    scenario: Annotated[
-        str | None, typer.Option(help=f"Scenario [default: {_DEFAULT.scenario}].")
-    ] = None,
-    generations: Annotated[
-        int | None, typer.Option(help=f"Generations per run [default: {_DEFAULT.generations}].")
-    ] = None,
-    population: Annotated[int | None, typer.Option(help="Population [default: 100].")] = None,
-    swarm_size: Annotated[
-        int | None, typer.Option(help="Robots per team [default: the scenario's].")
-    ] = None,
-    trials: Annotated[
-        int | None, typer.Option(help="Environments per evaluation [default: 3].")
-    ] = None,
-    ticks: Annotated[
-        int | None, typer.Option(help="Episode length [default: the scenario's].")
-    ] = None,
-    device: Annotated[
-        str | None,
-        typer.Option(
-            metavar=DEVICE_METAVAR,
-            autocompletion=_complete_device,
-            help="auto (cuda if available), cpu, cuda or cuda:N [default: auto].",
-        ),
-    ] = None,
-    compile: Annotated[
-        bool | None, typer.Option("--compile/--no-compile", help="torch.compile the tick.")
-    ] = None,
-    logdir: Annotated[
-        str | None,
-        typer.Option(
-            metavar="PATH",
-            help="Directory that holds the new sweep directory, sweep-<time>, as evolve's --logdir holds run directories [default: runs].",
-        ),
-    ] = None,
-    out: Annotated[
-        str | None,
-        typer.Option(
-            metavar="PATH",
-            help="The sweep directory itself [default: LOGDIR/sweep-<time>]; run again with the same --out to resume.",
-        ),
-    ] = None,
-    checkpoint_every: Annotated[int, typer.Option(help="Generations between checkpoints.")] = 10,
-    log_every: Annotated[
-        int, typer.Option(help="Generations between log lines off a terminal.")
-    ] = 50,
-    preset: Annotated[
-        str | None,
-        typer.Option(help="Algorithm settings to start from, as in evolve [default: default]."),
-    ] = None,
-    settings: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--set",
-            metavar="KEY=VALUE",
-            help="Set an algorithm config key of every run (repeatable), as in evolve.",
-        ),
-    ] = None,
-    workers: Annotated[
-        int, typer.Option(help="Runs at once; > 1 runs them as Ray tasks (needs Ray).")
-    ] = 1,
-    cpus_per_run: Annotated[
-        float | None,
-        typer.Option(help="Ray: CPUs (and torch threads) each run reserves [default: 1]."),
-    ] = None,
-    gpus_per_run: Annotated[
-        float | None,
-        typer.Option(
-            help="Ray: GPUs each run reserves; 0.25 packs four runs on a GPU [default: 0]."
-        ),
-    ] = None,
-    ray_address: Annotated[
-        str | None,
-        typer.Option(
-            help="Ray: join the cluster at auto or HOST:PORT [default: start a local one]; the runs go to Ray."
-        ),
-    ] = None,
-    threads: Annotated[int | None, typer.Option(help=THREADS_HELP)] = None,
+    budgets: Sweep.budgets = "2500,3000,4000,5000,6000,8000",
+    seeds: Sweep.seeds = "0",
+    objective: Sweep.objective = None,
+    scenario: Sweep.scenario = None,
+    generations: Sweep.generations = None,
+    population: Sweep.population = None,
+    swarm_size: Sweep.swarm_size = None,
+    trials: Sweep.trials = None,
+    ticks: Sweep.ticks = None,
+    device: Sweep.device = None,
+    compile: Sweep.compile = None,
+    logdir: Sweep.logdir = None,
+    out: Sweep.out = None,
+    checkpoint_every: Sweep.checkpoint_every = 10,
+    log_every: Sweep.log_every = 50,
+    preset: Sweep.preset = None,
+    settings: Sweep.settings = None,
+    workers: Sweep.workers = 1,
+    cpus_per_run: Sweep.cpus_per_run = None,
+    gpus_per_run: Sweep.gpus_per_run = None,
+    ray_address: Sweep.ray_address = None,
+    threads: Sweep.threads = None,
 ) -> None:
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
     from .sweep_run import run_sweep
@@ -526,7 +194,7 @@ def sweep(
     run_sweep(
         budgets,
         seeds,
-        _objective(objective),
+        objective_value(objective),
         scenario,
         generations,
         population,
@@ -587,14 +255,7 @@ def inspect(
 
 @app.command()
 def dynamics(
-    run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")],
-    window: Annotated[
-        list[str] | None,
-        typer.Option(
-            help="Generations A:B (from A to before B); repeatable [default: every 100, and the last 50]."
-        ),
-    ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    run_dir: Dynamics.run_dir, window: Dynamics.window = None, as_json: Dynamics.as_json = False
 ) -> None:
     """Species dynamics of a run: species in the best team and the population, niches, founding
     and extinction per generation, ages and lifetimes, over windows of generations."""
@@ -651,27 +312,13 @@ def dynamics(
 
 @app.command()
 def replay(
-    run_dir: Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")],
-    out: Annotated[
-        str | None,
-        typer.Option(
-            metavar="PATH",
-            help="Output file [default: RUN_DIR/team.gif, with --html RUN_DIR/team.html].",
-        ),
-    ] = None,
-    generation: Annotated[
-        int | None, typer.Option(help="Replay this generation's best team instead of the run's.")
-    ] = None,
-    seed: Annotated[int, typer.Option(help="Seed of the random environment.")] = 0,
-    ticks: Annotated[int | None, typer.Option(help="Episode length [default: the run's].")] = None,
-    every: Annotated[int, typer.Option(help="Draw every k-th tick (GIF).")] = 2,
-    html: Annotated[
-        bool,
-        typer.Option(
-            "--html",
-            help="Write an interactive page instead: one self-contained HTML file with the team and its baseline team side by side, every tick, each robot's design and behavior tree.",
-        ),
-    ] = False,
+    run_dir: Replay.run_dir,
+    out: Replay.out = None,
+    generation: Replay.generation = None,
+    seed: Replay.seed = 0,
+    ticks: Replay.ticks = None,
+    every: Replay.every = 2,
+    html: Replay.html = False,
 ) -> None:
     """Render a rollout of the best team headless, as an animated GIF (or, --html, an
     interactive page)."""

@@ -15,8 +15,23 @@ from rich.markup import escape
 from ..coevo.config import with_overrides
 from ..sim.scenario import ScenarioError
 from . import session
+from .options import objective_value
 from .settings import parse_settings
-from .terminal import Where, check_path, console, fail, os_fail
+from .signals import TERMINATED, terminate_as_interrupt
+from .terminal import (
+    Where,
+    attach_shards,
+    check_path,
+    console,
+    eval_shards_option,
+    execute,
+    fail,
+    os_fail,
+    print_shard_traffic,
+    print_team,
+    set_threads_option,
+    stopped,
+)
 
 
 def wandb_option(on: bool, project: str) -> str | None:
@@ -101,7 +116,7 @@ def new_config(config_file: Path | None, from_run: str | None, preset, settings,
     return replace(with_overrides(base, **given), **parse_settings(settings or [], names)), branch
 
 
-def print_config(config_file, from_run, resume, preset, settings, **given) -> None:
+def print_resolved_config(config_file, from_run, resume, preset, settings, **given) -> None:
     """--print-config: the resolved config of a new run (checked), as TOML, on stdout."""
     from .files import RunError
     from .runconfig import config_to_toml
@@ -283,3 +298,141 @@ def start_evolve(
         fail(str(e))
     except OSError as e:
         os_fail(e, "cannot start the run")
+
+
+def evolve_command(
+    *,
+    scenario,
+    budget,
+    objective,
+    generations,
+    population,
+    swarm_size,
+    trials,
+    ticks,
+    seed,
+    device,
+    compile,
+    logdir,
+    checkpoint_every,
+    log_every,
+    render_every,
+    figure_every,
+    resume,
+    preset,
+    settings,
+    eval_workers,
+    cpus_per_eval_worker,
+    ray_address,
+    threads,
+    config,
+    print_config,
+    from_run,
+    snapshot_every,
+    max_time,
+    patience,
+    wandb,
+    wandb_project,
+) -> None:
+    """The `evolve` command's work, with its options as `cli.evolve` parsed them: the run
+    started (new, resumed or branched), run with progress, and its end printed."""
+    logdir, resume = check_path(logdir, "--logdir"), check_path(resume, "--resume")
+    config_file = check_path(config, "--config")
+    wandb_project = wandb_option(wandb, wandb_project)
+    TERMINATED.clear()  # this command's SIGTERM, not an earlier one's
+    bounds = bounds_option(max_time, patience, snapshot_every)
+    if print_config:
+        print_resolved_config(
+            config_file,
+            from_run,
+            resume,
+            preset,
+            settings,
+            generations=generations,
+            device=device,
+            scenario=scenario,
+            budget=budget,
+            objective=objective_value(objective),
+            population=population,
+            swarm_size=swarm_size,
+            trials=trials,
+            ticks=ticks,
+            seed=seed,
+            compile=compile,
+        )
+        return
+    set_threads_option(threads)
+    shards = eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
+    where = Where()
+    with terminate_as_interrupt() as terminated:
+        try:
+            with ExitStack() as stack:
+                attach = None if shards is None else (lambda ev: attach_shards(stack, ev, *shards))
+                ev, run_dir, saved = start_evolve(
+                    stack,
+                    scenario=scenario,
+                    budget=budget,
+                    objective=objective_value(objective),
+                    generations=generations,
+                    population=population,
+                    swarm_size=swarm_size,
+                    trials=trials,
+                    ticks=ticks,
+                    seed=seed,
+                    device=device,
+                    compile=compile,
+                    logdir=logdir,
+                    checkpoint_every=checkpoint_every,
+                    log_every=log_every,
+                    render_every=render_every,
+                    resume=resume,
+                    settings=settings,
+                    attach=attach,
+                    figure_every=figure_every,
+                    where=where,
+                    preset=preset,
+                    config_file=config_file,
+                    from_run=from_run,
+                )
+                if ev is None:
+                    return
+                execute(
+                    ev,
+                    run_dir,
+                    checkpoint_every,
+                    log_every,
+                    render_every,
+                    saved=saved,
+                    figure_every=figure_every,
+                    where=where,
+                    snapshot_every=snapshot_every,
+                    bounds=bounds,
+                    wandb_project=wandb_project,
+                )
+                if shards is not None:
+                    print_shard_traffic(ev.ctx.evaluator)
+            if bounds is not None and bounds.reason is not None:
+                console.print(
+                    bound_line(bounds, ev, run_dir), markup=False, highlight=False, soft_wrap=True
+                )
+            else:
+                console.print(
+                    f"Done: {ev.state.generation} generations in {escape(str(run_dir))}",
+                    soft_wrap=True,
+                )
+            print_team(run_dir)
+            # commands and paths are never wrapped (soft_wrap): each stays one line to copy
+            console.print(
+                f"Inspect: swarmcode-torch inspect {run_dir}",
+                markup=False,
+                highlight=False,
+                soft_wrap=True,
+            )
+            console.print(
+                f"Watch: tensorboard --logdir {run_dir.parent}",
+                markup=False,
+                highlight=False,
+                soft_wrap=True,
+            )
+        except KeyboardInterrupt:
+            stopped(where, bool(terminated))

@@ -131,7 +131,7 @@ CUSTOM_SCALARS = {
             "perf/generation_seconds",
             "perf/eval_seconds",
             "perf/sim_seconds",
-        ],
+        ]
     },
 }
 
