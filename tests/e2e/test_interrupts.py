@@ -46,6 +46,17 @@ BASE = [
 RFAST = ["--render-every", "0", "--figure-every", "1000", "--device", "cpu"]
 
 
+@pytest.fixture(autouse=True)
+def _ctrl_c_is_delivered():
+    """These tests deliver Ctrl-C for real. A process started with SIGINT ignored (a background
+    job of a non-interactive shell) has no KeyboardInterrupt handler, so install Python's for
+    each test and put back what was there."""
+    old = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
 class Killed(BaseException):
     """What SIGKILL leaves: nothing after the kill point runs (no handler, no checkpoint)."""
 
