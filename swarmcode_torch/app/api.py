@@ -443,21 +443,38 @@ def evolve(
     history = _History(callback)
     with ExitStack() as stack:
         start = session.start_new(stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness)
-        for r in wandb_reporters:  # named after the run directory, if there is one
-            r.run_dir = start.run_dir
-        reps = (
-            []
-            if logdir is None
-            else session.file_reporters(
-                start.run_dir,
-                checkpoint_every,
-                render_every,
-                figure_every,
-                snapshot_every=snapshot_every,
-            )
+        return _run_started(
+            start,
+            history,
+            reporters,
+            wandb_reporters,
+            shown,
+            bounds,
+            (checkpoint_every, render_every, figure_every, snapshot_every),
         )
-        with _closing(shown):
-            session.run(start.ev, start.run_dir, [*reps, history, *reporters], bounds=bounds)
+
+
+def _run_started(start, history, reporters, wandb_reporters, shown, bounds, every) -> RunResult:
+    """Run a new or branched run that `session` started (its directory locked by the caller's
+    stack): the W&B reporters named after its directory, its file reporters (`every`: the
+    checkpoint, render, figure and snapshot intervals; none for a run in memory), the progress
+    line closed however the run ends. Its `RunResult`."""
+    for r in wandb_reporters:  # named after the run directory, if there is one
+        r.run_dir = start.run_dir
+    checkpoint_every, render_every, figure_every, snapshot_every = every
+    reps = (
+        []
+        if start.run_dir is None
+        else session.file_reporters(
+            start.run_dir,
+            checkpoint_every,
+            render_every,
+            figure_every,
+            snapshot_every=snapshot_every,
+        )
+    )
+    with _closing(shown):
+        session.run(start.ev, start.run_dir, [*reps, history, *reporters], bounds=bounds)
     return _result(start.ev, start.run_dir, history.rows, bounds)
 
 
@@ -499,22 +516,15 @@ def _branch(
     history = _History(callback)
     with ExitStack() as stack:
         start = session.start_branch(stack, branch, cfg, make_dir, fitness=fitness)
-        for r in wandb_reporters:
-            r.run_dir = start.run_dir
-        reps = (
-            []
-            if logdir is None
-            else session.file_reporters(
-                start.run_dir,
-                checkpoint_every,
-                render_every,
-                figure_every,
-                snapshot_every=snapshot_every,
-            )
+        return _run_started(
+            start,
+            history,
+            reporters,
+            wandb_reporters,
+            shown,
+            bounds,
+            (checkpoint_every, render_every, figure_every, snapshot_every),
         )
-        with _closing(shown):
-            session.run(start.ev, start.run_dir, [*reps, history, *reporters], bounds=bounds)
-    return _result(start.ev, start.run_dir, history.rows, bounds)
 
 
 def start_evolution(
