@@ -421,10 +421,7 @@ def evolve(
             reporters,
             callback,
             bounds,
-            checkpoint_every,
-            render_every,
-            figure_every,
-            snapshot_every,
+            (checkpoint_every, render_every, figure_every, snapshot_every),
             wandb_reporters,
             shown,
         )
@@ -488,14 +485,12 @@ def _branch(
     reporters,
     callback,
     bounds,
-    checkpoint_every,
-    render_every,
-    figure_every,
-    snapshot_every,
-    wandb_reporters=(),
-    shown=None,
+    every,
+    wandb_reporters,
+    shown,
 ) -> RunResult:
-    """`evolve(from_run=...)`: a new run from a run's snapshot (`session.start_branch`)."""
+    """`evolve(from_run=...)`: a new run from a run's snapshot (`session.start_branch`); `every`,
+    `wandb_reporters`, `shown` as `_run_started` takes them."""
     from .checkpoints import load_branch, parse_run_ref
 
     if config is not None:
@@ -516,15 +511,7 @@ def _branch(
     history = _History(callback)
     with ExitStack() as stack:
         start = session.start_branch(stack, branch, cfg, make_dir, fitness=fitness)
-        return _run_started(
-            start,
-            history,
-            reporters,
-            wandb_reporters,
-            shown,
-            bounds,
-            (checkpoint_every, render_every, figure_every, snapshot_every),
-        )
+        return _run_started(start, history, reporters, wandb_reporters, shown, bounds, every)
 
 
 def start_evolution(
