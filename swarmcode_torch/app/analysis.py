@@ -5,6 +5,7 @@ each team design, and a replay of its best team as a GIF (`swarmcode-torch repla
 from __future__ import annotations
 
 import io
+import math
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -12,12 +13,16 @@ from pathlib import Path
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..sim.scenario import Scenario
 from .checkpoints import load_checkpoint
-from .files import REPLAY_FILE, RunError, atomic_write_bytes
+from .files import REPLAY_FILE, RunError, atomic_write_bytes, check_output_path
 from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
 from .replay_page import HTML_FILE, page_data, write_page
 from .runconfig import _size, estimate_bytes, memory_limit, read_config, run_scenario
 from .summary import generation_team, read_summary, read_teams
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
 def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:
@@ -98,10 +103,9 @@ def replay_run(
     run_dir = Path(run_dir)
     default = run_dir / (HTML_FILE if html else REPLAY_FILE)
     out = Path(out) if out is not None else default
-    if out.is_dir():
+    if out.is_dir() and not out.is_symlink():
         raise RunError(f"--out {out} is a directory; give a file name such as {out / default.name}")
-    if not out.parent.is_dir():
-        raise RunError(f"--out {out}: the folder {out.parent} does not exist")
+    check_output_path(out)
     cfg = read_config(run_dir)
     if generation is not None:
         record = generation_team(run_dir, generation)
@@ -121,10 +125,12 @@ def replay_run(
         ticks = cfg.ticks or scenario.episode_ticks
     if html:
         fitness = record.get("fitness") if generation is not None else record.get("best_fitness")
+        shown = generation if generation is not None else record.get("best_generation")
+        # only numbers reach the page from the run's records (the page escapes text as well)
         rec = {
             "run": run_dir.name,
-            "fitness": fitness if isinstance(fitness, (int, float)) else None,
-            "generation": generation if generation is not None else record.get("best_generation"),
+            "fitness": float(fitness) if _finite(fitness) else None,
+            "generation": shown if isinstance(shown, int) and not isinstance(shown, bool) else None,
         }
         what = f"generation {generation}" if generation is not None else "best team"
         data = page_data(

@@ -12,6 +12,7 @@ import errno
 import json
 import os
 import re
+import stat
 import tempfile
 import time
 from pathlib import Path
@@ -138,6 +139,31 @@ def _write_all(fd: int, data: bytes) -> None:
     while view:
         n = os.write(fd, view)
         view = view[n:]
+
+
+def check_output_path(path: Path, what: str = "--out") -> Path:
+    """`path` as an output file, refused (RunError) when something other than a regular file is
+    there: a symbolic link (never written through or replaced), a directory, a device node such as
+    /dev/null, a FIFO or a socket; also when its folder does not exist."""
+    path = Path(path)
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        st = None
+    except OSError as e:
+        raise RunError(f"{what} {path}: {os_error_text(e)}") from None
+    if st is not None:
+        if stat.S_ISLNK(st.st_mode):
+            raise RunError(f"{what} {path} is a symbolic link; give the path of a regular file")
+        if stat.S_ISDIR(st.st_mode):
+            raise RunError(f"{what} {path} is a directory; give a file name")
+        if not stat.S_ISREG(st.st_mode):
+            raise RunError(
+                f"{what} {path} is not a regular file (a device, FIFO or socket); give a file path"
+            )
+    if not path.parent.is_dir():
+        raise RunError(f"{what} {path}: the folder {path.parent} does not exist")
+    return path
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:

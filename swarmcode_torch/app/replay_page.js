@@ -6,7 +6,8 @@
   const STATUS = ["SUCCESS", "FAILURE", "RUNNING"];
   const PANELS = ["focal", "baseline"];
   const $ = (id) => document.getElementById(id);
-  const esc = (s) => String(s).replace(/[&<>"]/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"}[c]));
+  // every run-data value that reaches innerHTML goes through esc (the page's CSP forbids inline handlers too)
+  const esc = (s) => String(s).replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c]));
   const fmt = (x, d) => (x === null || x === undefined || Number.isNaN(x)) ? "–" : Number(x).toFixed(d);
   // scores: one decimal, more for the small scores of the roi objective
   const fmtS = (x) => fmt(x, x !== null && x !== undefined && Math.abs(x) < 10 ? 3 : 1);
@@ -193,16 +194,16 @@
     const mark = g.effector === "pincher"
       ? `<rect x="${c - 0.42 * r}" y="${c - 0.42 * r}" width="${0.84 * r}" height="${0.84 * r}" fill="none" stroke="#1a1a1a"/>`
       : `<circle cx="${c}" cy="${c}" r="${0.48 * r}" fill="none" stroke="#1a1a1a"/>`;
-    return `<svg class="swatch" width="${size}" height="${size}" aria-hidden="true"><circle cx="${c}" cy="${c}" r="${r}" fill="${g.color}" stroke="#444" stroke-width="0.8"/>${mark}</svg>`;
+    return `<svg class="swatch" width="${size}" height="${size}" aria-hidden="true"><circle cx="${c}" cy="${c}" r="${r}" fill="${esc(g.color)}" stroke="#444" stroke-width="0.8"/>${mark}</svg>`;
   }
 
   function liveText(D, name, t) {
     const p = D.panels[name], c = p.counts[t], nd = c.di + c.dc;
-    if (!p.robots.design.some((d) => d >= 0)) return `no robot: the team has no partner (delivered <b data-testid="delivered-${name}">0</b>/${D.total})`;
-    const collab = D.nCollab ? ` (${c.di} indiv, ${c.dc} collab)` : "";
+    if (!p.robots.design.some((d) => d >= 0)) return `no robot: the team has no partner (delivered <b data-testid="delivered-${name}">0</b>/${esc(D.total)})`;
+    const collab = D.nCollab ? ` (${esc(c.di)} indiv, ${esc(c.dc)} collab)` : "";
     const energy = 100 - p.team_energy[t];
-    return `delivered <b data-testid="delivered-${name}">${nd}</b>/${D.total}${collab} · picked ` +
-           `<b data-testid="picked-${name}">${c.pi + c.pc}</b> · energy used ` +
+    return `delivered <b data-testid="delivered-${name}">${esc(nd)}</b>/${esc(D.total)}${collab} · picked ` +
+           `<b data-testid="picked-${name}">${esc(c.pi + c.pc)}</b> · energy used ` +
            `<b data-testid="energy-${name}">${fmt(energy, 2)}</b>%`;
   }
 
@@ -210,17 +211,17 @@
     const f = D.panels.focal, b = D.panels.baseline, g = D.designs[D.focal];
     const m = D.marginal, cls = m > 0 ? "pos" : "neg";
     const kept = Math.abs(D.gated - f.score) < 1e-9 ? "the focal's score, kept"
-      : `the focal's score &times; ${D.p_marginal}: it does not beat its baseline`;
+      : `the focal's score &times; ${esc(D.p_marginal)}: it does not beat its baseline`;
     const rec = D.record || {};
     const recTxt = rec.fitness !== undefined && rec.fitness !== null
       ? ` The run recorded a fitness of ${fmtS(rec.fitness)} for this team` +
-        (rec.generation !== undefined ? ` in generation ${rec.generation}` : "") +
+        (rec.generation !== undefined ? ` in generation ${esc(rec.generation)}` : "") +
         " (a mean over the run's trials; this page is one episode)." : "";
     return `<b>Focal individual:</b> ${swatch(D, D.focal, 14)} ${esc(designLabel(D, D.focal))} ` +
-      `(${g.count} of ${D.robots} robots). Focal team score <b data-testid="focal-score">${fmtS(f.score)}</b>, ` +
+      `(${esc(g.count)} of ${esc(D.robots)} robots). Focal team score <b data-testid="focal-score">${fmtS(f.score)}</b>, ` +
       `baseline team score <b data-testid="baseline-score">${fmtS(b.score)}</b> ` +
       (b.robots.design.some((d) => d >= 0)
-        ? `(the focal's ${g.count} slots refilled by its partners` +
+        ? `(the focal's ${esc(g.count)} slots refilled by its partners` +
           (D.baseline_recorded ? ", as the run recorded them" : ", drawn by dominance: the run did not record its baseline") + ")"
         : "(the team has no partner to refill the focal's slots: the baseline team has no robot)") +
       `, marginal contribution ` +
@@ -234,7 +235,7 @@
     D.designs.forEach((g, d) => {
       h += `<tr><td>${swatch(D, d, 16)}</td><td>${esc(designLabel(D, d))}` +
            (g.focal ? ` <span class="focal-star" title="the focal individual">★ focal</span>` : "") +
-           `</td><td class="num">${g.count}</td><td class="num">${g.baseline_count}</td></tr>`;
+           `</td><td class="num">${esc(g.count)}</td><td class="num">${esc(g.baseline_count)}</td></tr>`;
     });
     h += `</table><p class="muted">Robots: discs of their true radius in their design's colour; an inner square: pincher, ` +
          `an inner ring: suction (at least 4 px across); black outline: carrying, with its package drawn small on top; faded: battery flat. Packages: squares need a pincher, ` +
@@ -248,7 +249,7 @@
     const f = D.panels.focal, b = D.panels.baseline;
     const rows = [["delivery", "deliveries"], ["collab", "collaborative deliveries + bonus"], ["pickup", "pick-ups"],
                   ["energy", "energy left"], ["proximity", "proximity"], ["closeness", "closeness"]];
-    let h = `<h3>Fitness terms at the end (tick ${D.ticks})</h3><table><tr><th>term</th><th class="num">focal</th><th class="num">baseline</th></tr>`;
+    let h = `<h3>Fitness terms at the end (tick ${esc(D.ticks)})</h3><table><tr><th>term</th><th class="num">focal</th><th class="num">baseline</th></tr>`;
     for (const [k, label] of rows)
       h += `<tr><td>${label}</td><td class="num">${fmt(f.terms[k], 2)}</td><td class="num">${fmt(b.terms[k], 2)}</td></tr>`;
     h += `<tr><td>× activity (inactive factor if nothing was picked up)</td><td class="num">${fmt(f.terms.activity, 2)}</td><td class="num">${fmt(b.terms.activity, 2)}</td></tr>`;
@@ -275,19 +276,19 @@
     let holdTxt = "nothing";
     if (hold >= 0) {
       const pk = D.packages, cls = pk.cls[hold];
-      const kind = pk.collab[hold] ? `collaborative, grip ${p.grip[t * N + i]}` : "individual";
+      const kind = pk.collab[hold] ? `collaborative, grip ${esc(p.grip[t * N + i])}` : "individual";
       const lifted = pk.collab[hold] && p.p_status[t * Q + hold] !== DELIVERED
         ? (Array.from({length: G}, (_, k) => pk.g_eff[hold * G + k] < 0 || p.holder[(t * Q + hold) * G + k] >= 0).every(Boolean) ? ", lifted" : ", waiting for the other grips") : "";
-      holdTxt = `package #${hold} (${kind}${lifted}; class ${cls}: ${esc(D.classes[cls] || "?")}, ${fmt(pk.mass[hold], 1)} kg)`;
+      holdTxt = `package #${esc(hold)} (${kind}${lifted}; class ${esc(cls)}: ${esc(D.classes[cls] || "?")}, ${fmt(pk.mass[hold], 1)} kg)`;
     }
     const can = g.capability ? (g.capability.length ? g.capability.map((c) => esc(D.classes[c] || c)).join("; ") : "no package class") : "–";
-    let h = `<h3 data-testid="robot-title">${swatch(D, d, 16)} Robot ${i} of the ${panel} team: ${esc(designLabel(D, d))}` +
+    let h = `<h3 data-testid="robot-title">${swatch(D, d, 16)} Robot ${esc(i)} of the ${esc(panel)} team: ${esc(designLabel(D, d))}` +
             (g.focal ? ` <span class="focal-star">★ focal</span>` : "") + `</h3>`;
     h += `<table class="kv" data-testid="robot-design">` +
-      `<tr><td>species</td><td>${g.species}</td></tr>` +
-      `<tr><td>effector</td><td>${g.effector}</td></tr>` +
+      `<tr><td>species</td><td>${esc(g.species)}</td></tr>` +
+      `<tr><td>effector</td><td>${esc(g.effector)}</td></tr>` +
       `<tr><td>radius</td><td>${fmt(g.radius, 3)} m</td></tr>` +
-      `<tr><td>tiers</td><td>chassis ${g.chassis_tier}, battery ${g.battery_tier}, motor ${g.motor_tier}</td></tr>` +
+      `<tr><td>tiers</td><td>chassis ${esc(g.chassis_tier)}, battery ${esc(g.battery_tier)}, motor ${esc(g.motor_tier)}</td></tr>` +
       `<tr><td>operating points</td><td>torque ${fmt(g.torque_point, 2)}, battery ${fmt(g.battery_point, 2)}</td></tr>` +
       `<tr><td>cost</td><td>$${fmt(g.cost, 0)}</td></tr>` +
       `<tr><td>dominance</td><td>${fmt(g.dominance, 3)}${g.selectivity !== null && g.selectivity !== undefined ? ` (selectivity ${fmt(g.selectivity, 3)})` : ""}</td></tr>` +
@@ -314,7 +315,7 @@
       const cls = [];
       if (seen.has(slot)) cls.push("st-" + seen.get(slot)); else if (t > 0) cls.push("unvisited");
       if (slot === acting && acting >= 0) cls.push("acting");
-      h += `<span class="${cls.join(" ")}" data-slot="${slot}">${esc(text)}</span>`;
+      h += `<span class="${cls.join(" ")}" data-slot="${esc(slot)}">${esc(text)}</span>`;
     }
     return h + "</pre>";
   }

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import base64
 import gzip
+import hashlib
 import html
 import json
 import math
@@ -44,6 +45,7 @@ from ..coevo.population import PINCHER, genome_phenotype
 from ..sim import bt
 from ..sim.scenario import Scenario
 from ..sim.state import DELIVERED, capabilities
+from .files import atomic_write_bytes, check_output_path
 from .render import Episode, design_colors, record_episode, team_genome
 
 HTML_FILE = "team.html"  # the default output of `replay --html`
@@ -362,14 +364,27 @@ def _asset(name: str) -> str:
     return resources.files(__package__).joinpath(name).read_text(encoding="utf-8")
 
 
+def content_security_policy(script: str) -> str:
+    """The page's policy: nothing is loaded from anywhere, and the one script that may run is the
+    page's own, named by its SHA-256; inline event handlers (`onerror=`, `onload=`) and any other
+    script, planted in run data or not, are refused by the browser."""
+    digest = base64.b64encode(hashlib.sha256(script.encode("utf-8")).digest()).decode("ascii")
+    return (
+        f"default-src 'none'; script-src 'sha256-{digest}'; style-src 'unsafe-inline'; "
+        "img-src data:; base-uri 'none'; form-action 'none'"
+    )
+
+
 def render_html(data: dict) -> str:
     """The page: the template with its script, styles and the gzip + base64 data inlined."""
     raw = json.dumps(data, separators=(",", ":"), allow_nan=False).encode()
     blob = base64.b64encode(gzip.compress(raw, compresslevel=9, mtime=0)).decode("ascii")
     # the script must not close its own tag; the data is base64, which has no '<'
+    script = _asset("replay_page.js").replace("</script", "<\\/script")
     parts = {
+        "@CSP@": content_security_policy(script),
         "/*STYLE*/": _asset("replay_page.css"),
-        "/*SCRIPT*/": _asset("replay_page.js").replace("</script", "<\\/script"),
+        "/*SCRIPT*/": script,
         "@TITLE@": html.escape(data.get("title") or "SwarmCoDe replay"),
         "@DATA@": blob,
     }
@@ -390,6 +405,7 @@ def decode_page(text: str) -> dict:
 
 
 def write_page(data: dict, path: str | Path) -> Path:
-    path = Path(path)
-    path.write_text(render_html(data), encoding="utf-8")
+    """Write the page atomically beside `path`; a link, device or FIFO there is refused."""
+    path = check_output_path(Path(path))
+    atomic_write_bytes(path, render_html(data).encode("utf-8"))
     return path

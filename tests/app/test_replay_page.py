@@ -1,8 +1,11 @@
 """The interactive replay page (`replay --html`): teams, data, the file (no browser here;
 tests/e2e/test_replay_browser.py drives Chromium)."""
 
+import base64
+import hashlib
 import json
 import re
+from pathlib import Path
 
 import pytest
 import torch
@@ -278,3 +281,39 @@ def test_a_team_of_one_design_has_an_empty_baseline():
     assert set(base["robots"]["design"]) == {-1} and base["species"] == 0
     assert set(base["combo"]) == {-1} and final_counts(data, "baseline")["picked_individual"] == 0
     assert data["marginal"] == pytest.approx(data["panels"]["focal"]["score"] - base["score"])
+
+
+def test_a_planted_best_generation_reaches_the_page_as_nothing_but_a_number(tmp_path):
+    """summary.json's best_generation and best_fitness go into the page's record only as numbers
+    (a planted script in them is dropped), and the page carries a policy naming its own script."""
+    run = _run(tmp_path)
+    planted = "<img src=x onerror=alert(1)>"
+    (run / "summary.json").write_text(
+        json.dumps({"designs": DESIGNS, "best_fitness": planted, "best_generation": planted})
+    )
+    path, _ = replay_run(run, html=True, ticks=3)
+    text = path.read_text()
+    assert planted not in text and decode_page(text)["record"] == {"run": "run"}
+    csp = re.search(r'http-equiv="Content-Security-Policy" content="([^"]+)"', text).group(1)
+    script = text[text.rindex("<script>") + len("<script>") : text.rindex("</script>")]
+    digest = base64.b64encode(hashlib.sha256(script.encode()).digest()).decode()
+    assert f"script-src 'sha256-{digest}'" in csp and "unsafe-inline" not in csp.split(";")[1]
+
+
+@pytest.mark.parametrize("html", [False, True])
+def test_replay_refuses_a_link_or_a_device_as_its_output(tmp_path, html):
+    """--out onto a device node (/dev/null) or a planted symlink is refused in one line; the node
+    and the link's target are left as they were."""
+    run = _run(tmp_path)
+    target = tmp_path / "elsewhere.txt"
+    target.write_text("keep")
+    name = "team.html" if html else "team.gif"
+    (run / name).symlink_to(target)
+    flags = ["--html"] if html else []
+    for out in (None, "/dev/null"):
+        args = ["replay", str(run), "--ticks", "3", *flags] + (["--out", out] if out else [])
+        res = CliRunner().invoke(app, args)
+        assert res.exit_code != 0 and "Traceback" not in res.output, res.output
+        assert ("symbolic link" if out is None else "not a regular file") in res.output
+    assert target.read_text() == "keep" and (run / name).is_symlink()
+    assert Path("/dev/null").is_char_device()

@@ -38,8 +38,7 @@ def page(tmp_path_factory):
     return write_page(data, tmp_path_factory.mktemp("page") / "team.html"), data
 
 
-@pytest.fixture(scope="module")
-def browser(page):
+def _driver():
     from selenium.webdriver.chrome.options import Options
     from selenium.webdriver.chrome.service import Service
 
@@ -58,11 +57,21 @@ def browser(page):
         drv = webdriver.Chrome(service=Service(DRIVER), options=opts)
     except Exception as e:  # a browser that does not start is not a failure of the page
         pytest.skip(f"headless chromium does not start here: {e}")
-    drv.get(page[0].resolve().as_uri())
+    return drv
+
+
+def _open(drv, path):
+    drv.get(path.resolve().as_uri())
     _wait(
         drv,
         "return document.body.dataset.ready === '1' || !document.getElementById('error').hidden",
     )
+
+
+@pytest.fixture(scope="module")
+def browser(page):
+    drv = _driver()
+    _open(drv, page[0])
     yield drv
     drv.quit()
 
@@ -166,3 +175,61 @@ def test_focal_and_baseline_advance_together(browser, page):
     browser.find_element("id", "fwd").click()
     assert browser.execute_script("return window.replay.tick") == t + 1
     assert browser.find_element("id", "tick").text == f"tick {t + 1} / {data['ticks']}"
+
+
+# ------------------------------------------------------------------ hostile run data
+PLANTED = "<img src=x onerror=window.__planted=1><svg onload=window.__planted=2>"
+
+
+def test_a_page_of_hostile_run_data_runs_no_planted_script(tmp_path):
+    """Text planted in every run-data field the page shows (designs' species and effector, the
+    record's generation, the title, a class label) reaches the page as text, and nothing runs."""
+    designs = [dict(d, species=PLANTED) for d in DESIGNS]
+    data = page_data(
+        designs,
+        load_scenario("two-niche"),
+        SwarmCoDeConfig(scenario="two-niche"),
+        seed=1,
+        title=PLANTED,
+        record={"generation": PLANTED, "fitness": 1.0},
+    )
+    data["designs"][0]["effector"] = PLANTED
+    data["classes"][0] = PLANTED
+    data["p_marginal"] = PLANTED
+    path = write_page(data, tmp_path / "team.html")
+    drv = _driver()
+    try:
+        _open(drv, path)
+        assert drv.execute_script("return document.body.dataset.ready") == "1"
+        drv.find_element("id", "play").click()
+        drv.find_element("id", "play").click()
+        drv.execute_script(
+            "const c = document.getElementById('canvas-focal'), r = c.getBoundingClientRect();"
+            "c.dispatchEvent(new MouseEvent('click', {clientX: r.left + r.width / 2,"
+            " clientY: r.top + r.height / 2, bubbles: true}));"
+        )
+        time.sleep(0.3)
+        assert drv.execute_script("return window.__planted === undefined")
+        # the planted markup is shown as text, not made into elements
+        assert (
+            drv.execute_script(
+                "return document.querySelectorAll('#summary img, #legend img').length"
+            )
+            == 0
+        )
+        assert PLANTED in drv.find_element("id", "summary").text
+        assert PLANTED in drv.find_element("id", "legend").text
+    finally:
+        drv.quit()
+
+
+def test_the_pages_policy_forbids_inline_handlers_even_where_markup_gets_in(browser):
+    """Defence in depth: were some value to reach innerHTML unescaped, the page's
+    Content-Security-Policy refuses its inline event handler."""
+    browser.execute_script(
+        "document.getElementById('summary').insertAdjacentHTML('beforeend',"
+        " '<img src=x onerror=\"window.__inline=1\">');"
+    )
+    time.sleep(0.3)
+    assert browser.execute_script("return window.__inline === undefined")
+    assert browser.execute_script("return document.querySelectorAll('#summary img').length") == 1
