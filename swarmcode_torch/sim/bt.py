@@ -436,7 +436,7 @@ def _native_tables(ops: torch.Tensor) -> torch.Tensor | None:
     """`build_tables` on the CPU by the fused tick's C++ extension (`sim.fused`): the same walk
     over every (program, combination) pair, the same int32 words (tests/sim/test_bt.py). None where
     the extension is not built or not wanted (``SWARMCODE_TICK=reference``)."""
-    from .fused import load_extension, tick_choice
+    from .native import load_extension, tick_choice
 
     if tick_choice() != "fused":
         return None

@@ -2,10 +2,10 @@
 runs all of a rollout's ticks in one call, environment by environment, in parallel over
 environments on torch's intra-op threads (``torch.set_num_threads``).
 
-Built once with ``torch.utils.cpp_extension.load`` (g++ and ninja; about a minute) and cached
-under ``TORCH_EXTENSIONS_DIR`` (default ``~/.cache/torch_extensions``); a changed source rebuilds.
-Where it cannot be built (no compiler), or for inputs it does not take (not on the CPU, other
-dtypes), `FusedTicks` runs the Python tick instead and says so once.
+Built once and cached by `native` (a private folder keyed by a hash of the source, torch and
+Python; a verified library; a build lock that a killed build cannot leave held). Where it cannot
+be built or loaded (no compiler, a bad library), or for inputs it does not take (not on the CPU,
+other dtypes), `FusedTicks` runs the Python tick instead and says so once.
 
 The same extension holds `walk_tables`, the CPU walk of `bt.build_tables` (exact: integers).
 
@@ -16,61 +16,16 @@ benchmarks/README.md): the contact solver sums its pairs in another order.
 
 from __future__ import annotations
 
-import os
-import threading
 import warnings
 from collections.abc import Callable
-from pathlib import Path
 
 import torch
 
+from .native import available, build_error, load_extension, tick_choice
 from .state import State, TickInputs, WorldParams
 from .step import step
 
-_SOURCE = Path(__file__).with_name("csrc") / "tick.cpp"
-_lock = threading.Lock()
-_module = None
-_error: Exception | None = None
-
-
-def tick_choice() -> str:
-    """``SWARMCODE_TICK``: 'fused' (default: the C++ tick on the CPU where it builds) or
-    'reference' (the Python tick, eager or torch.compile'd, as before)."""
-    v = os.environ.get("SWARMCODE_TICK", "fused").strip().lower() or "fused"
-    if v not in ("fused", "reference"):
-        raise ValueError(f"SWARMCODE_TICK must be 'fused' or 'reference', got {v!r}")
-    return v
-
-
-def load_extension(verbose: bool = False):
-    """The compiled extension module (built on first use, then cached), or None with the
-    reason in `build_error()`."""
-    global _module, _error
-    with _lock:
-        if _module is not None or _error is not None:
-            return _module
-        try:
-            from torch.utils.cpp_extension import load
-
-            flags = ["-O3", "-ffp-contract=off", "-fopenmp"]
-            _module = load(
-                name="swarmcode_tick",
-                sources=[str(_SOURCE)],
-                extra_cflags=flags,
-                extra_ldflags=["-fopenmp"],
-                verbose=verbose,
-            )
-        except Exception as e:  # noqa: BLE001 - any build failure means: the Python tick
-            _error = e
-        return _module
-
-
-def build_error() -> Exception | None:
-    return _error
-
-
-def available() -> bool:
-    return load_extension() is not None
+__all__ = ["FusedTicks", "available", "build_error", "load_extension", "tick_choice"]
 
 
 _STATE_DTYPES = (
@@ -171,8 +126,9 @@ class FusedTicks:
             return True
         if warn and not self.warned:
             self.warned = True
-            lines = [ln.strip() for ln in str(_error).splitlines() if ln.strip()]
-            why = f"{type(_error).__name__}: {lines[-1][:200]}" if lines else type(_error).__name__
+            err = build_error()
+            lines = [ln.strip() for ln in str(err).splitlines() if ln.strip()]
+            why = f"{type(err).__name__}: {lines[-1][:200]}" if lines else type(err).__name__
             warnings.warn(
                 f"the fused C++ tick could not be built ({why}); running the Python tick",
                 RuntimeWarning,
@@ -188,7 +144,7 @@ class FusedTicks:
             return None
         if not self.ready():
             return None
-        return _module, ins
+        return load_extension(), ins
 
     def run_ticks(self, state: State, inputs: TickInputs, params: WorldParams, ticks: int) -> State:
         inputs = TickInputs(*inputs)

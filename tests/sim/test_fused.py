@@ -13,7 +13,7 @@ import pytest
 import torch
 from worldkit import random_world
 
-from swarmcode_torch.sim import fused as fused_mod
+from swarmcode_torch.sim import native as native_mod
 from swarmcode_torch.sim.fused import FusedTicks
 from swarmcode_torch.sim.rollout import rollout
 from swarmcode_torch.sim.runtime import tick_function, tick_mode
@@ -110,9 +110,9 @@ def test_rollout_and_tick_function_use_it_on_the_cpu(monkeypatch):
 
 
 def test_without_a_compiler_the_python_tick_runs(monkeypatch):
-    monkeypatch.setattr(fused_mod, "_module", None)
+    monkeypatch.setattr(native_mod, "_module", None)
     monkeypatch.setattr(
-        fused_mod, "_error", RuntimeError("Error building extension\nc++: not found")
+        native_mod, "_error", RuntimeError("Error building extension\nc++: not found")
     )
     fn, compiled = tick_function(torch.device("cpu"), generations=5)
     assert fn is step and not compiled  # with a warning, the choice as before
