@@ -86,6 +86,13 @@ class SwarmCoDeConfig:
     (beyond the paper; docs/MODEL.md)."""
     min_share: float = 1.0
     """A species whose quota share is below this many individuals gets no slot (0: none)."""
+    essential_floor: int = 3
+    """Offspring quota floor of an essential species: a partner whose members beat their
+    baselines (the moving average of its gated share below the admission threshold, 0.3), i.e.
+    whose robots do a job no partner's robots can do. It keeps at least this many slots and is
+    exempt from `min_share`, so that the holder of a hard niche, whose mean fitness may be lower
+    than the others', is not starved out. Needs `partner_admission = "substitute"` (it reads the
+    admission's gate statistics); 0: no floor (beyond the paper; docs/MODEL.md)."""
     hw_sigma: float = 0.05
     """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
     social_sigma: float = 0.05
@@ -207,6 +214,7 @@ class SwarmCoDeConfig:
             ("swarm_size", 1),
             ("ticks", 1),
             ("seed", 0),
+            ("essential_floor", 0),
         ):
             v = getattr(self, key)
             if v is not None and v < lo:
@@ -335,6 +343,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "partner_admission": "open",
         "quota_size_exponent": None,
         "p_effector": None,
+        "essential_floor": 0,
     },
 }
 
@@ -370,6 +379,7 @@ UPPER_BOUNDS = {
     "hw_sigma": 1e6,
     "social_sigma": 1e6,
     "min_share": 1e9,
+    "essential_floor": 1_000_000,
     "w_tag": 1e6,
     "w_hw": 1e6,
     "w_bt": 1e6,
@@ -501,6 +511,8 @@ class ReproductionParams:
         0: the mean, NEAT's explicit fitness sharing); None: to the total of the members'
         (gated, penalised, smoothed) fitness, the paper's "total adjusted fitness".
     min_share: a species whose quota share is below this many individuals gets no slot.
+    essential_floor: the quota floor of the species `reproduce` is told are essential (exempt
+        from min_share); at most population // (2 * floor) of them, the least gated first.
     bt_mutation_rate: per-offspring probability of one BT mutation event (1.0: every offspring).
     bt_subtree_prob: fraction of BT mutation events that are subtree replacements (the rest point).
     bt_point_count: point re-draws of one point mutation, each of a uniform slot among the
@@ -530,6 +542,7 @@ class ReproductionParams:
     max_elite: int = _RUN.max_elite
     quota_size_exponent: float | None = _RUN.quota_size_exponent
     min_share: float = _RUN.min_share
+    essential_floor: int = _RUN.essential_floor
     bt_mutation_rate: float = _RUN.bt_mutation_rate
     bt_subtree_prob: float = 0.05
     bt_point_count: int = 1

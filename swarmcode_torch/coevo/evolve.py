@@ -411,7 +411,12 @@ def generation(
     turnover = state.turnover.copy()
     founded, extinct = turnover.advance(state.generation, composition["population"])
 
-    # 3. reproduction
+    # 3. reproduction; essential species (partners that beat their baselines: they do a job no
+    # partner does) keep a quota floor, so that a hard niche's holder is not starved out
+    essential = priority = None
+    if adm is not None and cfg.essential_floor > 0:
+        priority = adm.gated[sp.proto_ids]
+        essential = adm.partner[sp.proto_ids] & (priority < admission.SUBSTITUTE.admit_below)
     children, hint, is_elite, parent = reproduce(
         genome,
         fit,
@@ -421,6 +426,8 @@ def generation(
         ctx.repro,
         g,
         partial(distance, w=ctx.speciation.weights),
+        essential=essential,
+        priority=priority,
     )
     new_state = EvolutionState(
         generation=state.generation + 1,

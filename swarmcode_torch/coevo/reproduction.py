@@ -20,7 +20,7 @@ DistanceFn = Callable[[Population, Population], Tensor]
 
 def offspring_quotas(
     adjusted_fitness_sum: Tensor,
-    population_size: int,
+    population_size: int | Tensor,
     protect: int | Tensor | None = None,
     min_share: float = 0.0,
 ) -> Tensor:
@@ -60,6 +60,34 @@ def offspring_quotas(
         q[q.argmax()] -= need.long()
         q[protect] = torch.where(need, 1, q[protect])
     return q
+
+
+def floor_quotas(
+    quota: Tensor,
+    essential: Tensor,
+    priority: Tensor,
+    floor: int,
+    protect: int | Tensor | None = None,
+) -> Tensor:
+    """quota [K] long, essential [K] bool, priority [K] (lower first) -> [K] long quotas of the
+    same total in which up to total // (2 * floor) essential species (lowest priority first)
+    get at least `floor`, whatever their share, and every species' slots above its floor are the
+    remaining slots shared in proportion to its quota above its floor (largest remainder). A
+    floor of 0, or no essential species, leaves the quotas as they are."""
+    k = quota.numel()
+    if floor <= 0 or k == 0:
+        return quota
+    dev = quota.device
+    total = quota.sum()
+    cap = total // (2 * floor)
+    key = torch.where(essential, priority.double(), torch.full((k,), torch.inf, device=dev))
+    order = torch.sort(key, stable=True).indices
+    place = torch.empty_like(order)
+    place[order] = torch.arange(k, device=dev)
+    chosen = essential & (place < cap)
+    base = torch.where(chosen, floor, 0)
+    excess = (quota - base).clamp(min=0)
+    return base + offspring_quotas(excess.double(), total - base.sum(), protect=protect)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -240,6 +268,8 @@ def reproduce(
     params: ReproductionParams,
     generator: torch.Generator,
     distance_fn: DistanceFn = distance,
+    essential: Tensor | None = None,
+    priority: Tensor | None = None,
 ) -> tuple[Population, Tensor, Tensor, Tensor]:
     """Population [P], fitness [P], species [P], prototypes [K] -> (children [P],
     child_species_hint [P], is_elite [P], parent_index [P]).
@@ -251,6 +281,8 @@ def reproduce(
     by offspring: p1 by in-species tournament, p2 by in-species tournament within `delta` of p1 (and
     != p1), up to mate_tries tries, else a global tournament (!= p1); crossover w.p. crossover_same
     / crossover_cross (same / different species) else clone p1; then every offspring is mutated.
+    `essential` [K] bool (with `priority` [K], lower first): species kept at
+    `params.essential_floor` slots at least (`floor_quotas`), exempt from `min_share`.
     Hints: the elite's own species / p1's species; parent_index: the elite row / p1.
     `distance_fn(genome, genome)` is called once ([P, P]). Fitness must be finite for every
     individual.
@@ -276,9 +308,13 @@ def reproduce(
     if p:
         best_pos = pos[fit.argmax()]
         protect = (nonempty == best_pos).to(torch.int32).argmax()
-        quota[nonempty] = offspring_quotas(
-            adjusted[nonempty], p, protect=protect, min_share=params.min_share
-        )
+        q = offspring_quotas(adjusted[nonempty], p, protect=protect, min_share=params.min_share)
+        if essential is not None and params.essential_floor > 0:
+            pri = priority if priority is not None else torch.zeros(k, device=dev)
+            q = floor_quotas(
+                q, essential[nonempty], pri[nonempty], params.essential_floor, protect=protect
+            )
+        quota[nonempty] = q
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
 
     order, rank = rank_within_groups(pos, fit, sizes)  # by (species, fitness desc, row)
