@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 
+from ..coevo.config import MAX_SEED
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..sim.scenario import Scenario
 from .checkpoints import load_checkpoint
@@ -23,6 +24,35 @@ from .summary import generation_team, read_summary, read_teams
 
 def _finite(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+#: Bounds of a replay's options, the same for `replay` and `replay_run` (a GIF or a page of a
+#: million ticks never finished; dpi 10^6 asked for terabytes).
+MAX_REPLAY_TICKS = 20_000
+REPLAY_FPS = (0.1, 100.0)
+REPLAY_DPI = (10, 600)
+
+
+def _integer(name: str, v, lo: int, hi: int) -> None:
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        raise RunError(f"{name} must be an integer in [{lo}, {hi}], got {v!r:.60}")
+
+
+def check_replay_options(seed=0, ticks=None, every=2, fps: float = 10, dpi: int = 80) -> None:
+    """RunError, naming the option and its bounds, for a replay option out of bounds."""
+    _integer("seed", seed, 0, MAX_SEED)
+    if ticks is not None:
+        _integer("ticks", ticks, 1, MAX_REPLAY_TICKS)
+    _integer("every", every, 1, MAX_REPLAY_TICKS)
+    if (
+        isinstance(fps, bool)
+        or not isinstance(fps, (int, float))
+        or not (REPLAY_FPS[0] <= fps <= REPLAY_FPS[1])
+    ):
+        raise RunError(
+            f"fps must be a number in [{REPLAY_FPS[0]:g}, {REPLAY_FPS[1]:g}], got {fps!r:.60}"
+        )
+    _integer("dpi", dpi, *REPLAY_DPI)
 
 
 def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:
@@ -52,7 +82,16 @@ def default_windows(last_generation: int, step: int = 100, tail: int = 50) -> li
 
 
 def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None) -> list[dict]:
-    """`dynamics.window_stats` of each window of a run directory (default `default_windows`)."""
+    """`dynamics.window_stats` of each window of a run directory (default `default_windows`);
+    RunError for a window that is not two integers START < END, START >= 0."""
+    for w in windows or ():
+        if (
+            not isinstance(w, (tuple, list))
+            or len(w) != 2
+            or any(isinstance(x, bool) or not isinstance(x, int) for x in w)
+            or not 0 <= w[0] < w[1]
+        ):
+            raise RunError(f"windows: each window must be two integers START < END, got {w!r:.60}")
     run_dir = Path(run_dir)
     cfg = read_config(run_dir)
     history = load_checkpoint(run_dir)["history"]
@@ -100,6 +139,7 @@ def replay_run(
     in the same environment, every tick, with each robot's design, energy, load and behavior
     tree; `every`, `fps` and `dpi` do not apply. The metrics returned are the focal team's.
     """
+    check_replay_options(seed=seed, ticks=ticks, every=every, fps=fps, dpi=dpi)
     run_dir = Path(run_dir)
     default = run_dir / (HTML_FILE if html else REPLAY_FILE)
     out = Path(out) if out is not None else default

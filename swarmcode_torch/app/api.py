@@ -206,6 +206,14 @@ def _closing(shown: _Progress | None):
             shown.close()
 
 
+def _logdir(logdir) -> Path:
+    """`logdir` as a folder; RunError for an empty one ('' would write into the working
+    directory) or one that is not a path."""
+    if not isinstance(logdir, (str, os.PathLike)) or not str(os.fspath(logdir)).strip():
+        raise RunError(f"logdir must be a folder path, got {logdir!r:.60}")
+    return Path(logdir)
+
+
 def _check_every(checkpoint_every: int, render_every: int, figure_every: int) -> None:
     for name, v in (
         ("checkpoint_every", checkpoint_every),
@@ -436,7 +444,8 @@ def evolve(
     if scenario_obj is not None:
         cfg = replace(cfg, scenario=scenario_obj.name)
     name = cfg if scenario_obj is None else replace(cfg, scenario=_scenario_stem(scenario_obj))
-    make_dir = None if logdir is None else (lambda ev: new_run_dir(Path(logdir), name))
+    folder = None if logdir is None else _logdir(logdir)
+    make_dir = None if folder is None else (lambda ev: new_run_dir(folder, name))
     history = _History(callback)
     with ExitStack() as stack:
         start = session.start_new(stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness)
@@ -507,7 +516,8 @@ def _branch(
     cfg = make_config(branch.config, **settings)
     if logdir == "runs":  # the default: beside the parent
         logdir = branch.run_dir.parent
-    make_dir = None if logdir is None else (lambda ev: new_run_dir(Path(logdir), cfg))
+    folder = None if logdir is None else _logdir(logdir)
+    make_dir = None if folder is None else (lambda ev: new_run_dir(folder, cfg))
     history = _History(callback)
     with ExitStack() as stack:
         start = session.start_branch(stack, branch, cfg, make_dir, fitness=fitness)

@@ -64,7 +64,7 @@ def resolve_config(
     given (None: not given) on top, then the --set KEY=VALUE pairs (`settings.parse_settings`,
     its errors naming keys as `names` spells them), applied as given, none included."""
     return replace(
-        with_overrides(preset_config(preset or "default"), **options),
+        with_overrides(preset_config("default" if preset is None else preset), **options),
         **parse_settings(settings or [], names),
     )
 

@@ -231,8 +231,8 @@ def set_threads_option(threads: int | None) -> None:
 
     try:
         set_threads(threads)
-    except ValueError:
-        fail(f"--threads must be >= 1, got {threads}")
+    except ValueError as e:
+        fail(f"--{e}")
 
 
 def eval_shards_option(eval_workers: int, cpus: float | None, address: str | None):

@@ -242,15 +242,22 @@ def default_threads() -> int:
     return max(1, min(cores, int(cores - load + 0.5)))
 
 
+#: The most CPU threads a process may ask for (far beyond the cores of any one machine: more
+#: threads than cores only slow a run, and 10^5 of them crashed the process).
+MAX_THREADS = 1024
+
+
 def set_threads(threads: int | None = None) -> int:
     """Set torch's CPU threads (the fused tick runs environments in parallel on them) and return
     the number: `threads`, or unset: `OMP_NUM_THREADS` where the environment sets it (torch
-    already follows it), else `default_threads()`. ValueError below 1."""
+    already follows it), else `default_threads()`. ValueError below 1 or above MAX_THREADS."""
     if threads is None:
         if os.environ.get("OMP_NUM_THREADS", "").strip():
             return torch.get_num_threads()
         threads = default_threads()
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
         raise ValueError(f"threads must be an integer >= 1, got {threads!r}")
+    if threads > MAX_THREADS:
+        raise ValueError(f"threads must be <= {MAX_THREADS}, got {threads}")
     torch.set_num_threads(threads)
     return threads
