@@ -17,6 +17,7 @@ __version__ = "0.7.0"
 
 from .app.analysis import replay_run, run_dynamics
 from .app.api import RunResult, evolve, load, resume
+from .app.evaluate import EvaluationResult, evaluate
 from .app.reporting import composition_figure
 from .coevo.config import EvolveConfig, SwarmCoDeConfig
 from .coevo.evolve import Evolution, GenerationResult
@@ -40,6 +41,8 @@ __all__ = [
     "composition_figure",
     "replay_run",
     "run_dynamics",
+    "evaluate",
+    "EvaluationResult",
     "format_tree",
     "__version__",
 ]

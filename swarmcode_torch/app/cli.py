@@ -21,7 +21,7 @@ from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 from . import evolve_start
 from .inspect_view import capabilities, inspect_sweep, print_lineage
-from .options import Dynamics, Evolve, Replay, Sweep, objective_value
+from .options import Dynamics, Evaluate, Evolve, Replay, Sweep, objective_value
 from .signals import TERMINATED
 from .terminal import check_path, console, err, fail, os_fail, print_team
 
@@ -356,6 +356,28 @@ def replay(
         highlight=False,
         soft_wrap=True,
     )
+
+
+@app.command()
+def evaluate(
+    run_dir: Evaluate.run_dir,
+    team: Evaluate.team = None,
+    generation: Evaluate.generation = None,
+    top: Evaluate.top = None,
+    episodes: Evaluate.episodes = 20,
+    seed_start: Evaluate.seed_start = 1_000_000,
+    scenario: Evaluate.scenario = None,
+    ticks: Evaluate.ticks = None,
+    json_out: Evaluate.json_out = None,
+    device: Evaluate.device = "cpu",
+    threads: Evaluate.threads = None,
+) -> None:
+    """Evaluate a run's team on N fresh seeds, in one batch: fitness (mean, sd, 95 % t
+    interval), deliveries per package class, cost, and each design's knock-out contribution."""
+    options = dict(locals())
+    from .evaluate_view import evaluate_command
+
+    evaluate_command(**options)
 
 
 def main() -> None:

@@ -312,3 +312,69 @@ class Replay:
             help="Write an interactive page instead: one self-contained HTML file with the team and its baseline team side by side, every tick, each robot's design and behavior tree.",
         ),
     ]
+
+
+class EvaluateTeam(str, Enum):
+    """evaluate --team: its choices."""
+
+    best = "best"
+    last = "last"
+
+
+class Evaluate:
+    """The options of `swarmcode-torch evaluate` (`cli.evaluate`, `evaluate_view`)."""
+
+    run_dir = Annotated[str, typer.Argument(metavar="RUN_DIR", help="A run directory.")]
+    team = Annotated[
+        EvaluateTeam | None,
+        typer.Option(
+            help="best: summary.json's best team; last: the last generation's (teams.jsonl) [default: best]."
+        ),
+    ]
+    generation = Annotated[
+        int | None,
+        typer.Option(metavar="G", help="Evaluate generation G's best team (teams.jsonl)."),
+    ]
+    top = Annotated[
+        int | None,
+        typer.Option(
+            metavar="K",
+            help="Evaluate the K best distinct teams of teams.jsonl by recorded fitness, in one batch.",
+        ),
+    ]
+    episodes = Annotated[
+        int, typer.Option(metavar="N", help="Episodes (fresh seeds) per team, 1 to 10000.")
+    ]
+    seed_start = Annotated[
+        int,
+        typer.Option(
+            metavar="S",
+            help="Episode i runs in the environment of seed S + i (replay --seed S + i shows it); the range may not hold the run's own seed.",
+        ),
+    ]
+    scenario = Annotated[
+        str | None,
+        typer.Option(
+            metavar="NAME_OR_PATH",
+            help="Evaluate on this scenario (built-in name or .toml file) instead of the run's own; its catalog builds the robots [default: the run's].",
+        ),
+    ]
+    ticks = Annotated[
+        int | None,
+        typer.Option(help="Episode length [default: the run's; with --scenario, the scenario's]."),
+    ]
+    json_out = Annotated[
+        str | None,
+        typer.Option(
+            "--json", metavar="FILE", help="Also write the results as JSON to FILE (atomically)."
+        ),
+    ]
+    device = Annotated[
+        str,
+        typer.Option(
+            metavar=DEVICE_METAVAR,
+            autocompletion=complete_device,
+            help="Where the episodes run: cpu, cuda, cuda:N or auto.",
+        ),
+    ]
+    threads = Annotated[int | None, typer.Option(help=THREADS_HELP)]

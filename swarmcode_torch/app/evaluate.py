@@ -1,0 +1,735 @@
+"""A run's team on fresh seeds (`swarmcode-torch evaluate RUN`, `swarmcode_torch.evaluate`), as
+Stable-Baselines3's `evaluate_policy` scores a trained policy: the fitness of one team (or of
+the K best) over N new environments, with its spread and a 95 % interval, deliveries per package
+class, the team's cost, and what each of its designs contributes.
+
+**The team.** `best`: summary.json's best team; `last`: the last generation's best team in
+teams.jsonl; `generation=G`: generation G's (teams.jsonl); `top=K`: the K best distinct teams of
+teams.jsonl by their recorded fitness (two records are the same team when their designs' genes
+and robot counts are; ties go to the earlier generation).
+
+**The seeds.** Episode i runs in the environment of seed ``seed_start + i`` (default
+``seed_start`` 1,000,000), i = 0 .. N - 1: ``make_layouts(scenario, 1, Generator().manual_seed(seed))``,
+the environment `replay --seed SEED` shows. The run's own seed drives its evolution (every
+environment it scored teams in was drawn from its one generator, seeded by it); a range that
+holds the run's seed is refused, so that no evaluation environment is drawn from the start of the
+run's own stream. The run's seeds are small numbers (0, 1, ...) and the default start is far
+above them.
+
+**One batch.** Every episode of every team and of every knock-out team (below) is one
+environment of one batch, run through one rollout (the fused C++ tick on the CPU, the eager tick on
+CUDA): not a loop over seeds. Each environment is simulated on its own, so the numbers of an
+episode do not depend on the batch it ran in (tests/app/test_evaluate.py checks the mean of N
+episodes against N evaluations of one episode each), and the same run and options give the same
+numbers on the same device.
+
+**The score.** An episode's fitness is the team score the run ranked teams by: F_raw (the
+run's fitness weights) times the budget penalty (the run's budget), divided by the cost for
+objective `roi` (`evaluation.team_scores`), ungated: the "fitness" teams.jsonl records is the
+mean of this over the run's trials. A run scored by a user function is evaluated with that
+function only when it is given (`fitness=`).
+
+**The interval.** A 95 % Student t interval of the mean: mean ± t(0.975, N - 1) · sd / √N, sd the
+sample standard deviation (N - 1); none for one episode.
+
+**The knock-outs.** A design's contribution is the team's fitness less that of the team with the
+design knocked out, episode by episode in the same environment, averaged over the episodes (with
+its t interval). The knocked-out team refills the design's slots as the algorithm built the
+baseline team a focal was scored against (`partners.assemble_swarms`): from the team's other
+designs (its partners), all of them given to the nearest by design distance (the run's
+`partner_admission = "substitute"`, `speciation.design_distance` with the run's weights; the first
+of equals in species order), or else drawn in proportion to dominance (uniformly when the run
+has `dominance = false` or all are 0) with a generator seeded by the episode's seed (the draw of
+`replay --html`). The team's focal design, where the record gives the baseline it was scored
+against (`baseline_count`), is refilled as that baseline (as `replay --html` shows it). With no
+other design, the knocked-out team has no robot. A design with no robot in the team has no
+knock-out.
+
+**The scenario.** The run's own (its scenario.toml and hardware.toml copies) and episode length,
+or another (`scenario=`, a built-in name or a TOML file, read by `sim.scenario.load_scenario`:
+its robots are built from that scenario's catalog, and its episode length applies), which must be
+a world for at least the team's robots and whose catalog must build every design into a robot of
+finite, positive mass and battery.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from ..coevo.config import MAX_SEED, UPPER_BOUNDS
+from ..coevo.evaluation import ScoreFn, _scores, score_fn_name, team_robots, team_scores
+from ..coevo.fitness import team_cost
+from ..coevo.population import from_designs, genome_phenotype
+from ..coevo.speciation import design_distance
+from ..sim import bt
+from ..sim.layout import Layout, make_layouts
+from ..sim.rollout import rollout
+from ..sim.runtime import resolve_device, set_threads, tick_function, tick_mode
+from ..sim.scenario import Scenario, ScenarioError, load_scenario
+from ..sim.state import DELIVERED, WorldParams
+from .files import RunError
+from .runconfig import _size, memory_limit, read_config, run_scenario
+from .summary import check_designs, read_summary, read_teams
+
+#: The episodes an evaluation runs by default, and at most.
+DEFAULT_EPISODES = 20
+MAX_EPISODES = 10_000
+#: The first evaluation seed by default (see the module docstring).
+DEFAULT_SEED_START = 1_000_000
+#: The most teams `top` evaluates at once.
+MAX_TOP = 100
+#: The interval every figure is given with.
+INTERVAL = "95 % Student t interval of the mean: mean ± t(0.975, n - 1) · sd / √n"
+TEAMS = ("best", "last")
+
+#: progress(stage, done, total): stage "environments" (drawn, one per episode) or "ticks".
+ProgressFn = Callable[[str, int, int], None]
+
+
+# ------------------------------------------------------------------ statistics
+def _betacf(a: float, b: float, x: float) -> float:
+    """The continued fraction of the regularized incomplete beta function (modified Lentz)."""
+    tiny, eps = 1e-300, 3e-16
+    qab, qap, qam = a + b, a + 1.0, a - 1.0
+    c, d = 1.0, 1.0 - qab * x / qap
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    h = d
+    for m in range(1, 10_000):
+        m2 = 2 * m
+        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
+        d = 1.0 + aa * d
+        d = 1.0 / (d if abs(d) > tiny else tiny)
+        c = 1.0 + aa / c if abs(1.0 + aa / c) > tiny else tiny
+        h *= d * c
+        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
+        d = 1.0 + aa * d
+        d = 1.0 / (d if abs(d) > tiny else tiny)
+        c = 1.0 + aa / c if abs(1.0 + aa / c) > tiny else tiny
+        delta = d * c
+        h *= delta
+        if abs(delta - 1.0) < eps:
+            break
+    return h
+
+
+def _betainc(a: float, b: float, x: float) -> float:
+    """I_x(a, b), the regularized incomplete beta function."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    front = math.exp(
+        math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log1p(-x)
+    )
+    if x < (a + 1.0) / (a + b + 2.0):
+        return front * _betacf(a, b, x) / a
+    return 1.0 - front * _betacf(b, a, 1.0 - x) / b
+
+
+def t_cdf(t: float, df: float) -> float:
+    """P(T <= t) of Student's t distribution with `df` degrees of freedom."""
+    tail = 0.5 * _betainc(df / 2.0, 0.5, df / (df + t * t))
+    return 1.0 - tail if t >= 0 else tail
+
+
+def t_quantile(p: float, df: float) -> float:
+    """The `p` quantile (0.5 <= p < 1) of Student's t with `df` > 0 degrees of freedom, by
+    bisection of `t_cdf` (to 1e-12)."""
+    if not 0.5 <= p < 1.0 or df <= 0:
+        raise ValueError(f"t_quantile needs 0.5 <= p < 1 and df > 0, got p={p}, df={df}")
+    lo, hi = 0.0, 1.0
+    while t_cdf(hi, df) < p:
+        lo, hi = hi, hi * 2.0
+    while hi - lo > 1e-12 * max(1.0, hi):
+        mid = 0.5 * (lo + hi)
+        if t_cdf(mid, df) < p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+@dataclass(frozen=True)
+class Stat:
+    """A mean over `n` episodes, its sample standard deviation and 95 % t interval (`INTERVAL`;
+    sd and the interval are None for one episode)."""
+
+    mean: float
+    sd: float | None
+    low: float | None
+    high: float | None
+    n: int
+
+    @classmethod
+    def of(cls, values: Tensor | Sequence[float]) -> Stat:
+        v = torch.as_tensor(values, dtype=torch.float64).reshape(-1)
+        n = int(v.numel())
+        mean = float(v.mean())
+        if n < 2:
+            return cls(mean, None, None, None, n)
+        sd = float(v.std(correction=1))
+        half = t_quantile(0.975, n - 1) * sd / math.sqrt(n)
+        return cls(mean, sd, mean - half, mean + half, n)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+# ------------------------------------------------------------------ results
+@dataclass(frozen=True)
+class Contribution:
+    """What one design of the team contributes: its index in the team record's designs, its
+    species, robots and effector, whether it is the record's focal design, how its slots were
+    refilled (`refill`: "recorded baseline", "nearest partner", "dominance draw" or "no
+    partner"), the knocked-out team's fitness and the contribution (team fitness less it),
+    each over the episodes."""
+
+    design: int
+    species: int
+    robots: int
+    effector: str
+    focal: bool
+    refill: str
+    knockout_fitness: Stat
+    contribution: Stat
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["knockout_fitness"], d["contribution"] = (
+            self.knockout_fitness.to_dict(),
+            self.contribution.to_dict(),
+        )
+        return d
+
+
+@dataclass(frozen=True)
+class TeamEvaluation:
+    """One team over the episodes: where it came from (`source`: "best", "last", "generation"
+    or "top"; `generation`, `recorded_fitness`: the run's record of it), its robots, species and
+    cost (in the evaluation's scenario), its fitness, the deliveries per package class (mean
+    per episode; `deliveries`: one entry per class of the scenario, in its order, with its
+    label and its packages an episode), all deliveries, each episode's fitness, and one
+    `Contribution` per design with robots in the team."""
+
+    source: str
+    generation: int | None
+    recorded_fitness: float | None
+    robots: int
+    species: int
+    cost: float
+    fitness: Stat
+    deliveries: list[dict]
+    deliveries_total: Stat
+    episode_fitness: list[float]
+    contributions: list[Contribution]
+
+    def to_dict(self) -> dict:
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["fitness"] = self.fitness.to_dict()
+        d["deliveries_total"] = self.deliveries_total.to_dict()
+        d["deliveries"] = [dict(x) for x in self.deliveries]
+        d["contributions"] = [c.to_dict() for c in self.contributions]
+        return d
+
+
+@dataclass(frozen=True)
+class EvaluationResult:
+    """What `evaluate` returns: the evaluation's settings and one `TeamEvaluation` per team
+    (one, or up to K with `top`, best first). `fitness`, `cost`, `deliveries` and
+    `contributions` are the first team's. `to_dict()`: all of it as JSON-friendly data (what
+    `swarmcode-torch evaluate --json` writes)."""
+
+    run_dir: str
+    selection: str  # "best", "last", "generation G" or "top K"
+    scenario: str
+    own_scenario: bool  # the run's own scenario (its copy), or another
+    episodes: int
+    seed_start: int
+    seeds: tuple[int, int]  # the first and the last seed
+    ticks: int
+    device: str
+    tick: str  # how the tick ran ("fused", "eager", ...)
+    fitness_function: str  # "built-in" or "custom: module.qualname"
+    interval: str
+    teams: list[TeamEvaluation] = field(default_factory=list)
+
+    @property
+    def fitness(self) -> Stat:
+        return self.teams[0].fitness
+
+    @property
+    def cost(self) -> float:
+        return self.teams[0].cost
+
+    @property
+    def deliveries(self) -> list[dict]:
+        return self.teams[0].deliveries
+
+    @property
+    def contributions(self) -> list[Contribution]:
+        return self.teams[0].contributions
+
+    def to_dict(self) -> dict:
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["seeds"] = list(self.seeds)
+        d["teams"] = [t.to_dict() for t in self.teams]
+        return d
+
+
+# ------------------------------------------------------------------ the teams of a run
+@dataclass(frozen=True)
+class _Chosen:
+    source: str
+    generation: int | None
+    recorded_fitness: float | None
+    designs: list[dict]
+
+
+def _number(v: Any) -> float | None:
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+    return float(v) if ok else None
+
+
+def _int(v: Any) -> int | None:
+    return v if isinstance(v, int) and not isinstance(v, bool) else None
+
+
+_GENES = (
+    "effector",
+    "radius",
+    "chassis_tier",
+    "battery_tier",
+    "motor_tier",
+    "torque_point",
+    "battery_point",
+    "dominance",
+    "bt",
+    "count",
+)
+
+
+def _team_key(designs: list[dict]) -> str:
+    """Two records of the same team have the same key: each design's genes and robots."""
+    import json
+
+    return json.dumps(sorted(json.dumps([d[k] for k in _GENES]) for d in designs))
+
+
+def choose_teams(
+    run_dir: Path, team: str = "best", generation: int | None = None, top: int | None = None
+) -> list[_Chosen]:
+    """The team(s) to evaluate (see the module docstring); RunError where the run has none."""
+    if generation is not None or team == "last":
+        records = read_teams(run_dir)
+        if not records:
+            raise RunError(f"{run_dir} has no teams.jsonl records (no finished generation?)")
+        g = max(records) if generation is None else generation
+        if g not in records:
+            raise RunError(
+                f"{run_dir} has no record of generation {g} (its teams.jsonl holds "
+                f"generations {min(records)}..{max(records)})"
+            )
+        rec = records[g]
+        check_designs(rec.get("designs"), f"{run_dir / 'teams.jsonl'} (generation {g})")
+        return [
+            _Chosen(
+                "generation" if generation is not None else "last",
+                g,
+                _number(rec.get("fitness")),
+                rec["designs"],
+            )
+        ]
+    if top is not None:
+        found: dict[str, _Chosen] = {}
+        records = read_teams(run_dir)
+        for g in sorted(records):
+            rec = records[g]
+            fit = _number(rec.get("fitness"))
+            if fit is None:
+                continue
+            try:
+                designs = check_designs(rec.get("designs"), "teams.jsonl")
+            except RunError:
+                continue  # a damaged record is not among the best
+            key = _team_key(designs)
+            if key not in found or fit > (found[key].recorded_fitness or -math.inf):
+                found[key] = _Chosen("top", g, fit, designs)
+        if not found:
+            raise RunError(f"{run_dir} has no teams.jsonl record with a fitness and designs")
+        ranked = sorted(found.values(), key=lambda c: (-(c.recorded_fitness or 0.0), c.generation))
+        return ranked[:top]
+    s = read_summary(run_dir, figures=False)
+    return [
+        _Chosen(
+            "best", _int(s.get("best_generation")), _number(s.get("best_fitness")), s["designs"]
+        )
+    ]
+
+
+# ------------------------------------------------------------------ knock-outs
+def _refill(
+    designs: list[dict],
+    d: int,
+    team: Tensor,
+    seeds: Sequence[int],
+    near: Tensor | None,
+    uniform: bool,
+    recorded: Tensor | None,
+) -> tuple[Tensor, str]:
+    """[N, S] the team (rows of its own designs) with design `d` knocked out in each episode,
+    and how its slots were refilled (module docstring)."""
+    n_ep = len(seeds)
+    slots = team == d
+    n_slots = int(slots.sum())
+    out = team.repeat(n_ep, 1)
+    partners = [i for i, x in enumerate(designs) if i != d and int(x["count"]) > 0]
+    if recorded is not None:
+        out[:, slots] = recorded
+        return out, "recorded baseline"
+    if not partners:
+        out[:, slots] = -1
+        return out, "no partner"
+    if near is not None:
+        order = sorted(partners, key=lambda i: (float(near[d, i]), designs[i]["species"], i))
+        out[:, slots] = order[0]
+        return out, "nearest partner"
+    w = torch.tensor([max(float(designs[i]["dominance"]), 0.0) for i in partners])
+    if uniform or float(w.sum()) <= 0:
+        w = torch.ones(len(partners))
+    rows = torch.tensor(partners)
+    for e, seed in enumerate(seeds):
+        g = torch.Generator().manual_seed(int(seed))
+        out[e, slots] = rows[torch.multinomial(w, n_slots, replacement=True, generator=g)]
+    return out, "dominance draw"
+
+
+def _recorded_baseline(designs: list[dict], team: Tensor) -> tuple[int | None, Tensor | None]:
+    """(the focal design, the refill of its slots) where the record gives the baseline it was
+    scored against (`replay_page.focal_and_baseline`); otherwise (the design the record marks
+    as the focal, or None; None)."""
+    from .replay_page import focal_and_baseline
+
+    marked = [i for i, x in enumerate(designs) if x.get("focal") is True and int(x["count"]) > 0]
+    focal, _, base, recorded = focal_and_baseline(designs, 0)
+    if not recorded:
+        return (marked[0] if marked else None), None
+    return focal, base[team == focal]
+
+
+# ------------------------------------------------------------------ the evaluation
+def _check_arguments(team, generation, top, episodes, seed_start, ticks) -> None:
+    def is_int(v) -> bool:
+        return isinstance(v, int) and not isinstance(v, bool)
+
+    if team not in TEAMS:
+        raise ValueError(f"team must be 'best' or 'last', got {team!r:.40}")
+    if generation is not None and (not is_int(generation) or generation < 0):
+        raise ValueError(f"generation must be an integer >= 0, got {generation!r:.40}")
+    if top is not None and (not is_int(top) or not 1 <= top <= MAX_TOP):
+        raise ValueError(f"top must be an integer in [1, {MAX_TOP}], got {top!r:.40}")
+    if generation is not None and top is not None:
+        raise ValueError("give generation or top, not both")
+    if team != "best" and (generation is not None or top is not None):
+        raise ValueError(f"team={team!r} and {'generation' if top is None else 'top'}: give one")
+    if not is_int(episodes) or not 1 <= episodes <= MAX_EPISODES:
+        raise ValueError(
+            f"episodes must be an integer in [1, {MAX_EPISODES}], got {episodes!r:.40}"
+        )
+    if not is_int(seed_start) or not 0 <= seed_start <= MAX_SEED - episodes + 1:
+        raise ValueError(
+            f"seed_start must be an integer in [0, {MAX_SEED - episodes + 1}] (the last seed, "
+            f"seed_start + episodes - 1, at most 2**63 - 1), got {seed_start!r:.40}"
+        )
+    if ticks is not None and (not is_int(ticks) or not 1 <= ticks <= UPPER_BOUNDS["ticks"]):
+        raise ValueError(
+            f"ticks must be an integer in [1, {UPPER_BOUNDS['ticks']}], got {ticks!r:.40}"
+        )
+
+
+def _check_team_fits(designs: list[dict], scenario: Scenario, own: bool) -> None:
+    robots = sum(int(d["count"]) for d in designs)
+    if not own and robots > scenario.num_robots:
+        raise RunError(
+            f"scenario {scenario.name} is a world for {scenario.num_robots} robots and cannot "
+            f"carry the team's {robots}; give a scenario of at least {robots} robots"
+        )
+    genome, _ = from_designs(designs)
+    ph = genome_phenotype(genome, scenario.hardware)
+    good = torch.stack([torch.isfinite(t.float()).all() for t in ph]).all()
+    good &= (ph.mass > 0).all() & (ph.capacity > 0).all()
+    if not bool(good):
+        raise RunError(
+            f"the hardware catalog of scenario {scenario.name} cannot build the team's designs "
+            "(a robot of non-finite or non-positive mass or battery)"
+        )
+
+
+def _layouts(scenario: Scenario, robots: int, seeds: Sequence[int], progress) -> Layout:
+    """One environment per seed, as `replay --seed` draws it, stacked [N]."""
+    world = replace(scenario, num_robots=robots)
+    parts = []
+    step = max(1, len(seeds) // 50)
+    for i, s in enumerate(seeds):
+        parts.append(make_layouts(world, 1, torch.Generator().manual_seed(int(s))))
+        if progress is not None and ((i + 1) % step == 0 or i + 1 == len(seeds)):
+            progress("environments", i + 1, len(seeds))
+    return Layout(*(torch.cat(t) for t in zip(*parts)))
+
+
+def _need_bytes(envs: int, robots: int, layouts: int, world: Scenario) -> int:
+    """The memory of `envs` environments of `robots` robots drawn from `layouts` layouts: the
+    batch and layout terms of `runconfig.estimate_bytes` (the programs of a few designs are
+    nothing beside them)."""
+    grips = sum(c.count * len(c.grips) for c in world.packages)
+    K, O = world.num_packages, world.obstacle_count
+    batch = envs * robots * 16 * (16 + grips + min(robots, 500))
+    drawn = layouts * 4 * 32 * (K * (O + 4) + 2 * O) + 3 * 8 * max(robots, world.num_robots) ** 2
+    return batch + drawn
+
+
+class _Reporting:
+    """A tick function that runs `inner`'s ticks in chunks and reports each (`progress`)."""
+
+    def __init__(self, inner: Callable, progress: ProgressFn, chunks: int = 50):
+        self.inner, self.progress, self.chunks = inner, progress, chunks
+
+    def __call__(self, *args):
+        return self.inner(*args)
+
+    def run_ticks(self, state, inputs, params, ticks: int):
+        step = max(1, -(-ticks // self.chunks))
+        done = 0
+        self.progress("ticks", 0, ticks)
+        while done < ticks:
+            n = min(step, ticks - done)
+            if hasattr(self.inner, "run_ticks"):
+                state = self.inner.run_ticks(state, inputs, params, n)
+            else:
+                for _ in range(n):
+                    state = self.inner(state, *inputs, params)
+            done += n
+            self.progress("ticks", done, ticks)
+        return state
+
+
+def evaluate(
+    run_dir: str | Path,
+    team: str = "best",
+    generation: int | None = None,
+    top: int | None = None,
+    episodes: int = DEFAULT_EPISODES,
+    seed_start: int = DEFAULT_SEED_START,
+    scenario: str | None = None,
+    device: str = "cpu",
+    *,
+    ticks: int | None = None,
+    fitness: ScoreFn | None = None,
+    threads: int | None = None,
+    progress: ProgressFn | None = None,
+) -> EvaluationResult:
+    """Evaluate a run's team on `episodes` fresh seeds, `seed_start` + i, all in one batch (see
+    this module's docstring for the team, the seeds, the score, the interval and the
+    knock-outs). `team`: "best" (summary.json) or "last" (teams.jsonl's last generation);
+    `generation`: that generation's best team; `top`: the K best distinct teams of teams.jsonl;
+    `scenario`: another scenario (a built-in name or a TOML file) instead of the run's own;
+    `ticks`: the episode length (default: the run's on its own scenario, else the scenario's);
+    `fitness`: the run's user fitness function, for a run scored by one (any other ScoreFn
+    scores the episodes with it); `threads`: torch's CPU threads (`evolve`'s rule when unset);
+    `progress(stage, done, total)`: called as the environments are drawn and the ticks run.
+    Reads the run directory and writes nothing. RunError (a ValueError) for a run, a team or a
+    scenario that cannot be evaluated, ValueError for an argument out of range."""
+    _check_arguments(team, generation, top, episodes, seed_start, ticks)
+    if fitness is not None and not callable(fitness):
+        raise TypeError(f"fitness must be a function, got {type(fitness).__name__}")
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise RunError(f"{run_dir} is not a run directory (no such directory)")
+    dev = resolve_device(device)
+    set_threads(threads)
+    cfg = read_config(run_dir)
+    if cfg.fitness_function is not None and fitness is None:
+        raise RunError(
+            f"{run_dir} was scored by a custom fitness function ({cfg.fitness_function}): "
+            "evaluate it from Python with the same function, "
+            "swarmcode_torch.evaluate(run_dir, fitness=fn)"
+        )
+    seeds = range(seed_start, seed_start + episodes)
+    if cfg.seed in seeds:
+        raise RunError(
+            f"the evaluation seeds {seeds[0]}..{seeds[-1]} hold the run's own seed {cfg.seed}; "
+            f"start them past it (seed_start {cfg.seed + 1} or more)"
+        )
+    chosen = choose_teams(run_dir, team, generation, top)
+    if scenario is not None:
+        world = load_scenario(scenario)  # ScenarioError (a ValueError) names the field
+    else:
+        try:
+            world = run_scenario(run_dir, cfg)
+        except ScenarioError as e:
+            raise RunError(f"{run_dir}: its scenario cannot be loaded ({e})") from None
+    for c in chosen:
+        _check_team_fits(c.designs, world, scenario is None)
+    robots = {sum(int(d["count"]) for d in c.designs) for c in chosen}
+    if len(robots) > 1:
+        raise RunError(
+            f"the teams to evaluate have different sizes ({sorted(robots)} robots); "
+            "evaluate them one by one"
+        )
+    S = robots.pop()
+    if ticks is None:
+        ticks = (cfg.ticks or world.episode_ticks) if scenario is None else world.episode_ticks
+    score_fn = fitness if fitness is not None else team_scores
+
+    # every design of every team, one genome; each team's rows and its knock-outs
+    offsets, all_designs = [], []
+    for c in chosen:
+        offsets.append(len(all_designs))
+        all_designs.extend(c.designs)
+    genome, _ = from_designs(all_designs, cfg.tag_length)
+    near_rule = cfg.partner_admission == "substitute"
+    variants: list[list[tuple[int, str, Tensor]]] = []  # per team: (design, refill, [N, S])
+    teams_rows: list[Tensor] = []
+    for c, off in zip(chosen, offsets):
+        local, counts = from_designs(c.designs, cfg.tag_length)
+        team_t = torch.arange(counts.numel()).repeat_interleave(counts)  # [S] design per slot
+        near = design_distance(local, cfg.distance_weights) if near_rule else None
+        focal, recorded = _recorded_baseline(c.designs, team_t)
+        vs = []
+        for d, rec in enumerate(c.designs):
+            if int(rec["count"]) == 0:
+                continue
+            ko, how = _refill(
+                c.designs,
+                d,
+                team_t,
+                seeds,
+                near,
+                not cfg.dominance,
+                recorded if d == focal else None,
+            )
+            vs.append((d, how, torch.where(ko >= 0, ko + off, -1)))
+        variants.append(vs)
+        teams_rows.append(team_t + off)
+    blocks = []
+    for t_rows, vs in zip(teams_rows, variants):
+        blocks.append(t_rows.repeat(episodes, 1))
+        blocks.extend(v for _, _, v in vs)
+    teams = torch.cat(blocks)  # [E, S]: per team, its episodes then each knock-out's
+    E = teams.shape[0]
+    layout_ids = torch.arange(episodes).repeat(E // episodes)
+
+    need = _need_bytes(E, S, episodes, world)
+    limit, what = memory_limit(str(dev))
+    if need > limit:
+        raise RunError(
+            f"{E} environments of {S} robots ({len(chosen)} team(s), their knock-outs, "
+            f"{episodes} episodes) would need about {_size(need)} of memory, more than the "
+            f"{_size(limit)} of {what}; evaluate fewer episodes"
+        )
+
+    layouts = _layouts(world, S, seeds, progress)
+    species = torch.tensor([int(d["species"]) for d in all_designs])
+    _, species_index = torch.unique(species, return_inverse=True)
+    present = teams >= 0
+    seen = torch.zeros(E, int(species_index.max()) + 1, dtype=torch.bool)
+    seen[torch.arange(E)[:, None].expand_as(teams)[present], species_index[teams[present]]] = True
+    ph = genome_phenotype(genome, world.hardware)
+    cost = team_cost(ph.cost[teams.clamp_min(0)], present, seen.sum(1), world.species_overhead)
+
+    step_fn, compiled = tick_function(dev, compile=False)
+    mode = tick_mode(step_fn, compiled)
+    if progress is not None:
+        step_fn = _Reporting(step_fn, progress)
+    params = WorldParams.for_scenario(world)
+    genome_d = genome.to(dev)
+    with torch.no_grad():
+        m, state = rollout(
+            Layout(*(t.to(dev) for t in layouts)).select(layout_ids.to(dev)),
+            team_robots(genome_d, teams.to(dev), world.hardware),
+            bt.build_tables(genome_d.bt),
+            params,
+            ticks,
+            step_fn,
+            return_state=True,
+        )
+        ecfg = cfg.evaluation(world.num_robots, world.episode_ticks)
+        scores = _scores(score_fn, m, cost.to(dev), ecfg).double().cpu()
+        done = (state.p_status.cpu() == DELIVERED) & layouts.p_present[layout_ids]
+    cls = torch.tensor([i for i, c in enumerate(world.packages) for _ in range(c.count)])
+    per_class = torch.zeros(E, len(world.packages), dtype=torch.float64)
+    per_class.index_add_(1, cls, done.double())
+
+    out, at = [], 0
+    for c, vs in zip(chosen, variants):
+        base = slice(at, at + episodes)
+        f = scores[base]
+        contributions = []
+        for k, (d, how, _) in enumerate(vs):
+            ko = scores[at + (k + 1) * episodes : at + (k + 2) * episodes]
+            rec = c.designs[d]
+            contributions.append(
+                Contribution(
+                    design=d,
+                    species=int(rec["species"]),
+                    robots=int(rec["count"]),
+                    effector=str(rec["effector"]),
+                    focal=rec.get("focal") is True,
+                    refill=how,
+                    knockout_fitness=Stat.of(ko),
+                    contribution=Stat.of(f - ko),
+                )
+            )
+        pc = per_class[base]
+        out.append(
+            TeamEvaluation(
+                source=c.source,
+                generation=c.generation,
+                recorded_fitness=c.recorded_fitness,
+                robots=S,
+                species=len({int(d["species"]) for d in c.designs if int(d["count"]) > 0}),
+                cost=float(cost[at]),
+                fitness=Stat.of(f),
+                deliveries=[
+                    {
+                        "class": j,
+                        "label": pk.label,
+                        "packages": pk.count,
+                        "mean": float(pc[:, j].mean()),
+                    }
+                    for j, pk in enumerate(world.packages)
+                ],
+                deliveries_total=Stat.of(pc.sum(1)),
+                episode_fitness=[float(x) for x in f],
+                contributions=contributions,
+            )
+        )
+        at += episodes * (1 + len(vs))
+    if generation is not None:
+        selection = f"generation {generation}"
+    elif top is not None:
+        selection = f"top {top}"
+    else:
+        selection = team
+    return EvaluationResult(
+        run_dir=str(run_dir),
+        selection=selection,
+        scenario=world.name,
+        own_scenario=scenario is None,
+        episodes=episodes,
+        seed_start=seed_start,
+        seeds=(seeds[0], seeds[-1]),
+        ticks=int(ticks),
+        device=str(dev),
+        tick=mode,
+        fitness_function=("built-in" if fitness is None else f"custom: {score_fn_name(fitness)}"),
+        interval=INTERVAL,
+        teams=out,
+    )
