@@ -412,6 +412,8 @@ def evolve(
     """
     _check_every(checkpoint_every, render_every, figure_every)
     reporters = _check_hooks(callback, reporters)
+    if wandb is not None and logdir is None:
+        raise ValueError("wandb needs a run directory for its files: give a logdir")
     wandb_reporters = _wandb_reporters(wandb, None, render_every)
     fitness = _checked_fitness(fitness)
     bounds = _bounds(max_time, patience, snapshot_every)

@@ -38,11 +38,12 @@ def wandb_option(on: bool, project: str) -> str | None:
     """The W&B project of `evolve --wandb` (None: off); a one-line error without wandb."""
     if not on:
         return None
-    from .reporting import require_wandb
+    from .reporting import check_wandb_settings, require_wandb
 
     try:
         require_wandb()
-    except ImportError as e:
+        check_wandb_settings(project)
+    except (ImportError, ValueError) as e:
         fail(str(e))
     return project
 

@@ -10,6 +10,9 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
+import re
+import warnings
 from pathlib import Path
 
 from ..coevo.evolve import Evolution, GenerationResult
@@ -451,6 +454,25 @@ def require_wandb():
     return wandb
 
 
+WANDB_MODES = ("online", "offline", "disabled")
+_WANDB_PROJECT = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
+
+
+def check_wandb_settings(project, mode=None) -> None:
+    """ValueError, one line, for a W&B project name W&B refuses (empty, with '/', not a
+    string) or a mode (or WANDB_MODE) that is not online, offline or disabled: said before a
+    run directory is made rather than as wandb's traceback later."""
+    if not isinstance(project, str) or not _WANDB_PROJECT.match(project):
+        raise ValueError(
+            f"wandb project must be 1-128 letters, digits, '_', '.' or '-' (no '/'), "
+            f"got {project!r:.60}"
+        )
+    env = os.environ.get("WANDB_MODE")
+    for what, v in (("mode", mode), ("WANDB_MODE", env)):
+        if v is not None and v not in WANDB_MODES and not (what == "WANDB_MODE" and v == ""):
+            raise ValueError(f"{what} must be one of {', '.join(WANDB_MODES)}, got {v!r:.60}")
+
+
 def _wandb_run_id(run_dir: Path) -> str:
     """A W&B run id of a run directory: the same on every resume of it, so that its parts
     continue one W&B run."""
@@ -480,6 +502,7 @@ class WandbReporter:
         **init,
     ):
         self.wandb = require_wandb()
+        check_wandb_settings(project, mode)
         self.project, self.entity, self.mode = project, entity, mode
         self.run_dir = Path(run_dir) if run_dir is not None else None
         self.render_every = render_every
@@ -496,12 +519,40 @@ class WandbReporter:
             "config": json_clean(ev.cfg.to_dict()),
         }
         if self.run_dir is not None:
-            init.update(name=self.run_dir.name, id=_wandb_run_id(self.run_dir), resume="allow")
-        self.run = self.wandb.init(
-            **{k: v for k, v in {**init, **self.init}.items() if v is not None}
+            # W&B's own files go inside the run directory, never into the working directory
+            init.update(
+                name=self.run_dir.name,
+                id=_wandb_run_id(self.run_dir),
+                resume="allow",
+                dir=str(self.run_dir),
+            )
+        try:
+            self.run = self.wandb.init(
+                **{k: v for k, v in {**init, **self.init}.items() if v is not None}
+            )
+        except Exception as e:  # noqa: BLE001 - no network, a bad key: the run goes on
+            self._drop(e)
+
+    def _drop(self, e: BaseException) -> None:
+        """Go on without W&B, saying why in one line (the run's own files are unaffected)."""
+        self.run = None
+        lines = [ln.strip() for ln in str(e).splitlines() if ln.strip()]
+        why = f"{type(e).__name__}: {lines[0][:200]}" if lines else type(e).__name__
+        warnings.warn(
+            f"Weights & Biases logging stopped ({why}); the run goes on without it",
+            RuntimeWarning,
+            stacklevel=2,
         )
 
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
+        if self.run is None:
+            return
+        try:
+            self._log_generation(ev, result)
+        except Exception as e:  # noqa: BLE001
+            self._drop(e)
+
+    def _log_generation(self, ev: Evolution, result: GenerationResult) -> None:
         row = scalars(result)
         log = {tag: float(row[tag]) if row[tag] is not None else math.nan for tag in SCALAR_TAGS}
         log.update(best_scalars(result))

@@ -108,7 +108,9 @@ def test_evolve_wandb_logs_the_config_scalars_and_replays_offline(tmp_path, offl
     )
     assert r.exit_code == 0, r.output
     (run_dir,) = (tmp_path / "runs").iterdir()
-    (wb_run,) = (offline / "wandb").glob("offline-run-*")
+    # W&B's files are inside the run directory, not in WANDB_DIR or the working directory
+    assert not (offline / "wandb").exists()
+    (wb_run,) = (run_dir / "wandb").glob("offline-run-*")
     (log,) = wb_run.glob("run-*.wandb")
     records = _records(log)
     (run,) = [x.run for x in records if x.WhichOneof("record_type") == "run"]
@@ -152,7 +154,7 @@ def test_the_api_logs_to_wandb_offline(tmp_path, offline):
         render_every=0,
         wandb="api-test",
     )
-    (wb_run,) = (offline / "wandb").glob("offline-run-*")
+    (wb_run,) = (result.run_dir / "wandb").glob("offline-run-*")
     records = _records(next(wb_run.glob("run-*.wandb")))
     (run,) = [x.run for x in records if x.WhichOneof("record_type") == "run"]
     assert run.project == "api-test" and run.display_name == result.run_dir.name
@@ -173,3 +175,64 @@ def test_without_wandb_a_one_line_error_names_the_extra(tmp_path, monkeypatch):
             scenario="one-niche", population=4, generations=1, logdir=tmp_path / "api", wandb="p"
         )
     assert not (tmp_path / "api").exists()
+
+
+@pytest.mark.parametrize("project", ["", 123, "a/b", "x" * 200])
+def test_a_bad_project_is_one_line_before_anything_is_made(tmp_path, offline, project):
+    with pytest.raises(ValueError, match="wandb project"):
+        sc.evolve(
+            scenario="one-niche",
+            population=4,
+            generations=1,
+            logdir=tmp_path / "api",
+            wandb=project,
+        )
+    assert not (tmp_path / "api").exists()
+    if isinstance(project, str) and project:
+        r = CliRunner().invoke(
+            app, [*RUN, "--logdir", str(tmp_path / "runs"), "--wandb", "--wandb-project", project]
+        )
+        assert r.exit_code != 0 and "wandb project" in r.output and "Traceback" not in r.output
+        assert not (tmp_path / "runs").exists()
+
+
+def test_a_bad_wandb_mode_is_one_line(tmp_path, offline, monkeypatch):
+    monkeypatch.setenv("WANDB_MODE", "bogus")
+    with pytest.raises(ValueError, match="WANDB_MODE must be one of"):
+        sc.evolve(
+            scenario="one-niche", population=4, generations=1, logdir=tmp_path / "a", wandb="p"
+        )
+    assert not (tmp_path / "a").exists()
+
+
+def test_wandb_that_cannot_start_is_one_warning_and_the_run_goes_on(tmp_path, offline, monkeypatch):
+    """No network (CommError after a long wait) or any other failure of wandb.init: one warning
+    line, and the run writes its own files in full."""
+    import wandb
+
+    def refuse(**kw):
+        raise RuntimeError("CommError: network unreachable\n  many more lines")
+
+    monkeypatch.setattr(wandb, "init", refuse)
+    monkeypatch.chdir(tmp_path)
+    with pytest.warns(
+        RuntimeWarning, match="Weights & Biases logging stopped .*network unreachable"
+    ):
+        result = sc.evolve(
+            scenario="one-niche",
+            population=4,
+            swarm_size=3,
+            trials=1,
+            ticks=6,
+            generations=2,
+            device="cpu",
+            compile=False,
+            logdir=tmp_path / "runs",
+            render_every=0,
+            wandb="p",
+            progress=False,
+        )
+    assert json.loads((result.run_dir / "summary.json").read_text())["generation"] == 1
+    assert not (tmp_path / "wandb").exists()
+    with pytest.raises(ValueError, match="logdir"):
+        sc.evolve(scenario="one-niche", population=4, generations=1, logdir=None, wandb="p")
