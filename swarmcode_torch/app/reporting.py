@@ -398,8 +398,9 @@ def _number(text: str):
 
 
 def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[str]]:
-    """The rows of a metrics.csv (numbers as int or float, empty cells None; rows cut short by
-    an interruption, or whose generation is not a number, are skipped) and its header. With
+    """The rows of a metrics.csv (numbers as int or float, empty cells None; a last row cut
+    short by an interruption is skipped; any other row with more or fewer cells than the header,
+    or whose generation or a cell is not a number, is a RunError naming it) and its header. With
     `raw`, the cells other than `generation` are kept as text. The file is read without
     following a link and up to `files.MAX_RECORD_BYTES`; RunError naming the file for one that
     cannot be read, is not UTF-8 or not CSV, or whose header is not metrics.csv's (no
@@ -424,14 +425,29 @@ def read_metrics_csv(path: Path, raw: bool = False) -> tuple[list[dict], list[st
                 "move the file away"
             )
         rows = []
-        for r in reader:
-            if None in r or any(v is None for v in r.values()):
-                continue  # more or fewer cells than the header: a cut-short line
-            try:
-                gen = int(r["generation"])
-                row = {k: (v if raw else _number(v)) for k, v in r.items()}
-            except (KeyError, ValueError):
-                continue
+        records = list(reader)
+        for i, r in enumerate(records):
+            if any(v is None for v in r.values()) and None not in r and i == len(records) - 1:
+                continue  # fewer cells than the header in the last line: cut short by a kill
+            problem = None
+            if None in r:
+                problem = "more cells than the header"
+            elif any(v is None for v in r.values()):
+                problem = "fewer cells than the header"
+            else:
+                try:
+                    gen = int(r["generation"])
+                    row = {k: (v if raw else _number(v)) for k, v in r.items()}
+                except (KeyError, ValueError):
+                    problem = (
+                        f"generation {str(r.get('generation'))[:20]!r} or a cell is not a number"
+                    )
+            if problem is not None:
+                # a damaged row inside the file: refused, so that a resume does not drop it
+                raise RunError(
+                    f"{path}: data row {i + 1} is damaged ({problem}); repair or remove that row, "
+                    "or move the file away"
+                )
             row["generation"] = gen
             rows.append(row)
     except csv.Error as e:

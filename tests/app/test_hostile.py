@@ -121,9 +121,7 @@ def test_run_files_open_without_following_links(tmp_path):
     assert target.read_bytes() == b"keep\n"
 
 
-def test_replay_refuses_a_planted_team_gif_link_and_never_writes_through_it(
-    finished_run, tmp_path
-):
+def test_replay_refuses_a_planted_team_gif_link_and_never_writes_through_it(finished_run, tmp_path):
     run = _copy_run(finished_run, tmp_path / "run")
     victim = tmp_path / "victim.txt"
     victim.write_text("precious")
@@ -332,12 +330,26 @@ def test_checkpoint_tensors_are_checked_against_the_config(finished_run, tmp_pat
     assert _snapshot(run) == before  # nothing written
 
 
+def _damage_row(text: str, row: int, change) -> str:
+    lines = text.splitlines()
+    assert len(lines) >= row + 3  # a row inside the file, not the last one
+    lines[row + 1] = change(lines[row + 1])
+    return "\n".join(lines) + "\n"
+
+
 @pytest.mark.parametrize(
     "damage,needle",
     [
         (lambda t: t.replace("generation", "gen", 1), "not a metrics.csv header"),
         (lambda t: t.encode("utf-8")[:-1] + b"\xff\xfe\n", "is not UTF-8 text"),
         (lambda t: t + '"' + "x" * 200_000 + '"\n', "malformed CSV"),
+        # rows inside the file that a resume used to drop silently (rows 0, 1 became 1)
+        (lambda t: _damage_row(t, 0, lambda r: r + ",1.5"), "data row 1 is damaged (more cells"),
+        (lambda t: _damage_row(t, 0, lambda r: "x" + r), "data row 1 is damaged (generation"),
+        (
+            lambda t: _damage_row(t, 0, lambda r: r.rsplit(",", 3)[0]),
+            "data row 1 is damaged (fewer",
+        ),
     ],
 )
 def test_a_damaged_metrics_csv_is_one_line_and_kept(finished_run, tmp_path, damage, needle):
