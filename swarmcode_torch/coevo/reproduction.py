@@ -55,8 +55,9 @@ def offspring_quotas(
     rem = (population_size - q.sum()).clamp(0, k)  # +1 to the rem largest remainders
     order = torch.sort(share - base, descending=True, stable=True).indices
     q[order] += (torch.arange(k, device=dev) < rem).long()
-    if protect is not None and population_size > 0:
-        need = q[protect] == 0  # take 1 from the largest quota
+    if protect is not None:
+        # take 1 from the largest quota (no host read: population_size may be a tensor)
+        need = (q[protect] == 0) & (torch.as_tensor(population_size, device=dev) > 0)
         q[q.argmax()] -= need.long()
         q[protect] = torch.where(need, 1, q[protect])
     return q
