@@ -22,7 +22,7 @@ from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 from . import evolve_start
 from .inspect_view import capabilities, inspect_sweep, print_lineage
 from .options import Dynamics, Evaluate, Evolve, Replay, Sweep, objective_value
-from .signals import TERMINATED
+from .signals import TERMINATED, ignore_stop_signals, stop_once
 from .terminal import check_path, console, err, fail, os_fail, print_team
 
 
@@ -381,6 +381,8 @@ def evaluate(
 
 
 def main() -> None:
+    # one stop per process: after the first Ctrl-C or SIGTERM, later ones are ignored
+    stop_once()
     try:
         app()
     except KeyboardInterrupt:
@@ -388,6 +390,10 @@ def main() -> None:
         # closing): no traceback, and the exit status of a stop, never death by SIGINT
         err.print("Interrupted", markup=False, highlight=False)
         sys.exit(143 if TERMINATED else 130)
+    finally:
+        # the command is over and its exit status stands: a signal while the interpreter exits
+        # (after the last line) neither kills the process nor prints a traceback
+        ignore_stop_signals()
 
 
 if __name__ == "__main__":

@@ -359,3 +359,55 @@ def test_the_stop_message_names_the_generation_summary_json_holds(tmp_path, how,
             json.loads(x)["generation"] for x in (run / "teams.jsonl").read_text().splitlines()
         ]
         assert teams[-1] == last
+
+
+def _cli_with_ctrl_c(*args: str, logdir: Path):
+    """The command line in a subprocess whose SIGINT is Python's (a background job inherits SIGINT
+    ignored: the child resets it to the default, so Python installs its handler at start-up)."""
+    import subprocess
+    import sys
+
+    return subprocess.Popen(
+        [sys.executable, "-m", "swarmcode_torch.app.cli", *args, "--logdir", str(logdir)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+
+
+@pytest.mark.subprocess
+@pytest.mark.parametrize("how", ["int", "term"])
+def test_a_second_signal_during_the_stop_or_the_exit_never_kills_the_process(tmp_path, how):
+    """SIGINT (or SIGTERM) twice, 0.05 s apart, then again every 0.05 s until the process is
+    gone: the stop and the interpreter's exit are hit wherever they stand; the exit status is
+    still 130 (143), never death by the signal, and the files are whole."""
+    import time
+
+    sig = signal.SIGINT if how == "int" else signal.SIGTERM
+    proc = _cli_with_ctrl_c(
+        "evolve", *BASE, "--seed", "0", "--generations", "100000", logdir=tmp_path
+    )
+    try:
+        deadline = time.monotonic() + 180
+        while not any(tmp_path.glob("*/summary.json")):  # generation 0 recorded
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+            time.sleep(0.05)
+        proc.send_signal(sig)
+        time.sleep(0.05)
+        while proc.poll() is None and time.monotonic() < deadline:
+            proc.send_signal(sig)
+            time.sleep(0.05)
+        errs = proc.stderr.read()
+        proc.wait(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == (130 if how == "int" else 143), errs
+    assert "Traceback" not in errs, errs
+    (run,) = list(tmp_path.iterdir())
+    held = load_checkpoint(run)["generation"]
+    assert held >= 1
+    assert json.loads((run / "summary.json").read_text())["generation"] == held - 1
+    assert _named_checkpoint(errs) == held - 1, errs
+    r = invoke("evolve", "--resume", run, "--generations", held + 1, *RFAST)
+    assert r.exit_code == 0, r.output
