@@ -24,6 +24,7 @@ from .coevo.evolve import Evolution, GenerationResult
 from .coevo.population import Population
 from .sim.bt import format_tree
 from .sim.scenario import Scenario, builtin_names, load_scenario
+from .sim.worlds import World, generate_world, split_seeds, study_worlds, world_toml
 
 __all__ = [
     "evolve",
@@ -38,6 +39,11 @@ __all__ = [
     "load_scenario",
     "builtin_names",
     "Scenario",
+    "generate_world",
+    "World",
+    "world_toml",
+    "study_worlds",
+    "split_seeds",
     "composition_figure",
     "replay_run",
     "run_dynamics",

@@ -21,7 +21,7 @@ from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 from . import evolve_start
 from .inspect_view import capabilities, inspect_sweep, print_lineage
-from .options import Dynamics, Evaluate, Evolve, Replay, Sweep, objective_value
+from .options import Dynamics, Evaluate, Evolve, Replay, Sweep, Worlds, objective_value
 from .signals import TERMINATED, ignore_stop_signals, stop_once
 from .terminal import check_path, console, err, fail, os_fail, print_team
 
@@ -123,6 +123,87 @@ def scenarios() -> None:
     # on a terminal a description is cut to the window; off one (a pipe, a file) every row is
     # one whole line, however long
     (console if console.is_terminal else Console(width=100_000, highlight=False)).print(t)
+
+
+@app.command()
+def world(
+    seed: Worlds.seed = None,
+    niches: Worlds.niches = None,
+    family: Worlds.family = None,
+    effectors: Worlds.effectors = None,
+    bands: Worlds.bands = None,
+    mass: Worlds.mass = None,
+    distance: Worlds.distance = None,
+    inversion: Worlds.inversion = None,
+    obstacles: Worlds.obstacles = None,
+    num_robots: Worlds.num_robots = None,
+    packages: Worlds.packages = None,
+    budget: Worlds.budget = None,
+    species_overhead: Worlds.species_overhead = None,
+    episode_ticks: Worlds.episode_ticks = None,
+    arena: Worlds.arena = None,
+    base_radius: Worlds.base_radius = None,
+    name: Worlds.name = None,
+    split: Worlds.split = None,
+    index: Worlds.index = None,
+    out: Worlds.out = None,
+    force: Worlds.force = False,
+) -> None:
+    """Generate a world that needs a known number of niches (distinct robot designs) and write
+    it as a scenario TOML file, or print it (docs/WORLDS.md)."""
+    knobs = {k: v for k, v in locals().items() if v is not None and k != "force"}
+    from ..sim import worlds
+    from .files import atomic_write_bytes, check_output_path
+    from .runs import RunError
+
+    split, index, path = knobs.pop("split", None), knobs.pop("index", None), knobs.pop("out", None)
+    path = check_path(path, "--out")
+    if path is not None:
+        try:
+            check_output_path(path)
+        except RunError as e:
+            fail(str(e))
+        if path.exists() and not force:
+            fail(f"--out {path} exists; give --force to replace it")
+    try:
+        if split is not None or index is not None:
+            if split is None or index is None:
+                fail("--split and --index go together: --split train|test --index K")
+            if knobs:
+                fail(
+                    f"--split takes no generator options (got --{next(iter(knobs)).replace('_', '-')})"
+                )
+            w = worlds.study_world(split.value, index)
+        else:
+            for key in ("mass", "distance"):
+                if key in knobs:
+                    lo, _, hi = knobs[key].partition(",")
+                    try:
+                        knobs[key] = (float(lo), float(hi))
+                    except ValueError:
+                        fail(f"--{key} expects LO,HI (two numbers), got {knobs[key]!r}")
+            if "effectors" in knobs:
+                knobs["effectors"] = tuple(e.strip() for e in knobs["effectors"].split(","))
+            for key in ("family", "bands"):
+                if key in knobs:
+                    knobs[key] = knobs[key].value
+            w = worlds.generate_world(knobs.pop("seed", 0), **knobs)
+    except ValueError as e:
+        fail(str(e))
+    text = worlds.world_toml(w)
+    if path is None:
+        typer.echo(text, nl=False)
+        return
+    try:
+        atomic_write_bytes(path, text.encode("utf-8"))
+    except OSError as e:
+        os_fail(e, f"cannot write {path}")
+    console.print(
+        f"Wrote {path}: {w.scenario.name}, {w.niches} niche{'s' if w.niches > 1 else ''}",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )
 
 
 @app.command()

@@ -378,3 +378,113 @@ class Evaluate:
         ),
     ]
     threads = Annotated[int | None, typer.Option(help=THREADS_HELP)]
+
+
+class WorldFamily(str, Enum):
+    """world --family: its choices (`sim.worlds.FAMILIES`)."""
+
+    classes = "classes"
+    generalist = "generalist"
+    collab = "collab"
+    single = "single"
+
+
+class WorldBands(str, Enum):
+    """world --bands: its choices (`sim.worlds.BAND_MODES`)."""
+
+    disjoint = "disjoint"
+    overlapping = "overlapping"
+
+
+class WorldSplit(str, Enum):
+    """world --split: its choices (`sim.worlds.split_seeds`)."""
+
+    train = "train"
+    test = "test"
+
+
+class Worlds:
+    """The options of `swarmcode-torch world` (`cli.world`, `sim.worlds.generate_world`); the
+    generator's options default to None so that --split can refuse them."""
+
+    seed = Annotated[
+        int | None,
+        typer.Option(
+            help="Generator seed: the same seed and options give the same file [default: 0]."
+        ),
+    ]
+    niches = Annotated[
+        int | None,
+        typer.Option(help="Niches, 1-6: the distinct robot designs the world needs [default: 3]."),
+    ]
+    family = Annotated[
+        WorldFamily | None,
+        typer.Option(
+            help="classes: one package class per niche; generalist: plus a class two niches lift; collab: plus a collaborative class; single: classes one design lifts (1 niche) [default: classes]."
+        ),
+    ]
+    effectors = Annotated[
+        str | None,
+        typer.Option(
+            metavar="LIST",
+            help="Comma-separated effectors of the niches [default: pincher,suction].",
+        ),
+    ]
+    bands = Annotated[
+        WorldBands | None,
+        typer.Option(
+            help="Radius bands of one effector's niches: disjoint, or overlapping (told apart by mass; give --mass up to ~120) [default: disjoint]."
+        ),
+    ]
+    mass = Annotated[
+        str | None, typer.Option(metavar="LO,HI", help="Package masses in kg [default: 2,24].")
+    ]
+    distance = Annotated[
+        str | None,
+        typer.Option(
+            metavar="LO,HI", help="Package distances from the base centre in m [default: 3,9.5]."
+        ),
+    ]
+    inversion = Annotated[
+        bool | None,
+        typer.Option(
+            "--inversion/--no-inversion",
+            help="Heavy packages far from the base instead of near it [default: near].",
+        ),
+    ]
+    obstacles = Annotated[int | None, typer.Option(help="Obstacles [default: 4].")]
+    num_robots = Annotated[int | None, typer.Option(help="Robots in a team [default: 20].")]
+    packages = Annotated[
+        int | None, typer.Option(help="Packages in all, shared among the classes [default: 16].")
+    ]
+    budget = Annotated[
+        float | None,
+        typer.Option(
+            help="Fabrication budget in $ the world is drawn for: refused when no team with one robot per niche fits it; written in the file's header (pass it to evolve --budget) [default: none]."
+        ),
+    ]
+    species_overhead = Annotated[
+        float | None, typer.Option(help="$ per distinct species in a team [default: 0].")
+    ]
+    episode_ticks = Annotated[int | None, typer.Option(help="Episode length [default: 200].")]
+    arena = Annotated[float | None, typer.Option(help="Side of the arena in m [default: 20].")]
+    base_radius = Annotated[float | None, typer.Option(help="Base radius in m [default: 1.5].")]
+    name = Annotated[
+        str | None, typer.Option(help="Scenario name [default: world-FAMILY-Nn-SEED].")
+    ]
+    split = Annotated[
+        WorldSplit | None,
+        typer.Option(
+            help="Write standard study world --index of this split instead (train: seeds 1000-1999, test: 5000-5999; docs/WORLDS.md)."
+        ),
+    ]
+    index = Annotated[
+        int | None, typer.Option(metavar="K", help="Which study world of --split, 0-14.")
+    ]
+    out = Annotated[
+        str | None,
+        typer.Option(
+            metavar="PATH", help="Write the scenario TOML to this file [default: print it]."
+        ),
+    ]
+    force = Annotated[bool, typer.Option("--force", help="Replace an existing --out file.")]
