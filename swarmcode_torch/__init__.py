@@ -13,8 +13,6 @@ heterogeneous robot swarms.
 algorithm, not matplotlib, TensorBoard or the CLI's libraries: they load when first used.
 """
 
-__version__ = "0.7.0"
-
 from .app.analysis import replay_run, run_dynamics
 from .app.api import RunResult, evolve, load, resume
 from .app.evaluate import EvaluationResult, evaluate
@@ -25,6 +23,7 @@ from .coevo.population import Population
 from .sim.bt import format_tree
 from .sim.scenario import Scenario, builtin_names, load_scenario
 from .sim.worlds import World, generate_world, split_seeds, study_worlds, world_toml
+from .version import __version__
 
 __all__ = [
     "evolve",

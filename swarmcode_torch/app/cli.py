@@ -68,7 +68,7 @@ app = typer.Typer(
 
 def _print_version(value: bool) -> None:
     if value:
-        from .. import __version__
+        from ..version import __version__
 
         console.print(f"swarmcode-torch {__version__}", highlight=False)
         raise typer.Exit()

@@ -213,7 +213,7 @@ def device_name(device: torch.device | str) -> str:
 def software(device: torch.device | str) -> dict:
     """What made a run's files: package and torch versions, the device and the git commit (None
     outside a checkout); summary.json's "software", config.toml's "written by" comment."""
-    from .. import __version__
+    from ..version import __version__
     from ..sim.runtime import resolve_device
 
     try:
