@@ -31,6 +31,9 @@ def migrate_config(d: Any, keep_retired: bool = False) -> Any:
     d = {k: (None if v == "none" else v) for k, v in d.items()}
     # written before 0.8: no quota floor for essential species
     d.setdefault("essential_floor", 0)
+    d.setdefault("admission_basis", "members")
+    # written before 0.8: the best team was the highest single evaluation, never re-evaluated
+    d.setdefault("reeval_trials", 0)
     if "w_tag" in d:
         # written since 0.7, which writes every key and none of the retired ones
         return d if keep_retired else drop_retired_settings(d)

@@ -147,19 +147,28 @@ def update(
     nearest: Tensor,
     params: AdmissionParams = AdmissionParams(),
     near: Tensor | None = None,
+    elite: Tensor | None = None,
 ) -> Admission:
     """The admission after one evaluation: species [P] ids, proto_ids [K] (the species, in
     order of founding), gated [P] bool (whose focal team did not beat its baseline), nearest [K]
     long (`nearest_partner`, the partner each species' baseline was re-filled from), near [K]
     bool (its design is within δ of that partner's; None: every pair is near): a partner above
     `clash_above` for `clash_generations` whose nearest partner is near is a substitute of it,
-    and the lower-ranked of the two is demoted."""
+    and the lower-ranked of the two is demoted. `elite` [P] bool (None: no one): a species'
+    gated share is that of its elites, the members carried over unchanged, where it has any
+    (its fresh offspring, some of them broken by mutation, would blur what the species does),
+    else that of all its members."""
     k = proto_ids.numel()
     if k == 0:
         return adm
     member = species[:, None] == proto_ids[None, :]  # [P, K]
     size = member.sum(0)
     share = (member & gated[:, None]).sum(0).float() / size.clamp_min(1).float()
+    if elite is not None:
+        kept = member & elite[:, None]
+        n_kept = kept.sum(0)
+        kept_share = (kept & gated[:, None]).sum(0).float() / n_kept.clamp_min(1).float()
+        share = torch.where(n_kept > 0, kept_share, share)
     prev = adm.gated[proto_ids]
     avg = torch.where(torch.isnan(prev), share, params.decay * prev + (1 - params.decay) * share)
     partner = adm.partner[proto_ids]

@@ -53,6 +53,12 @@ class SwarmCoDeConfig:
     """Robots per team; None: the scenario's robot count."""
     trials: int = 3
     """Random environments per team evaluation."""
+    reeval_trials: int = 10
+    """Fresh environments each generation's best team is re-evaluated on before it may become
+    the run's best team: the run records the team of the best re-evaluated mean (summary.json's
+    `best_fitness`, with its 95 % interval), not the luckiest single evaluation. What is
+    recorded only; evolution is the same for every value. 0: no re-evaluation, the best team is
+    the highest single evaluation (as before 0.8, and for configs written before the key)."""
     ticks: int | None = None
     """Episode length in ticks; None: the scenario's."""
     seed: int = 0
@@ -86,6 +92,11 @@ class SwarmCoDeConfig:
     (beyond the paper; docs/MODEL.md)."""
     min_share: float = 1.0
     """A species whose quota share is below this many individuals gets no slot (0: none)."""
+    admission_basis: str = "elites"
+    """Whose gate results make a species' gated share in partner admission (probation,
+    demotion, the essential floor): "elites", its members carried over unchanged where it has
+    any (a species' fresh offspring, some broken by mutation, are gated whatever the species
+    does), or "members", all of them (0.6 and 0.7)."""
     essential_floor: int = 3
     """Offspring quota floor of an essential species: a partner whose members beat their
     baselines (the moving average of its gated share below the admission threshold, 0.3), i.e.
@@ -215,6 +226,7 @@ class SwarmCoDeConfig:
             ("ticks", 1),
             ("seed", 0),
             ("essential_floor", 0),
+            ("reeval_trials", 0),
         ):
             v = getattr(self, key)
             if v is not None and v < lo:
@@ -327,6 +339,7 @@ CHOICES = {
     "objective": ("fitness", "roi"),
     "partners_per_niche": ("all", "one"),
     "partner_admission": ("open", "substitute"),
+    "admission_basis": ("elites", "members"),
 }
 #: Choices of settings that may also be unset.
 OPTIONAL_CHOICES = {"preset": ("default", "paper")}
@@ -370,6 +383,7 @@ UPPER_BOUNDS = {
     "max_elite": 1_000_000,
     "population": 100_000_000,
     "trials": 1_000_000,
+    "reeval_trials": 10_000,
     "swarm_size": 10_000_000,
     # numbers the float32 tensors must hold with room to spare (delta=1e300 is inf
     # there; social_sigma=1e300 makes NaN genes)

@@ -213,6 +213,9 @@ class GenerationResult:
     algorithm builds no records (`app.records.step` fills it in)."""
     best: dict | None = None
     """The application's record of the best team of the run so far (`app.records.step`)."""
+    reeval_seconds: float = 0.0
+    """Wall time of the application's re-evaluation of the generation's best team
+    (`app.records.step`, `app.best_team`); 0 here."""
 
 
 # ------------------------------------------------------------------ observer hooks
@@ -327,7 +330,14 @@ def generation(
         # a substitute pair: the nearest partner's design within δ of the species' own
         near = designs_d.gather(1, nearest.clamp_min(0)[:, None]).squeeze(1) <= ctx.speciation.delta
         adm = admission.update(
-            adm, sp.species, sp.proto_ids, gated, nearest, admission.SUBSTITUTE, near=near
+            adm,
+            sp.species,
+            sp.proto_ids,
+            gated,
+            nearest,
+            admission.SUBSTITUTE,
+            near=near,
+            elite=state.has_fitness if cfg.admission_basis == "elites" else None,
         )
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)

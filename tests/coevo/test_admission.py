@@ -125,3 +125,19 @@ def test_a_checkpoint_with_a_damaged_admission_state_is_refused():
     with pytest.raises(ValueError, match="admission"):
         Evolution.from_checkpoint(short, cfg)
     assert Evolution.from_checkpoint({**d, "admission": None}, replace(cfg)).state.admission is None
+
+
+def test_the_gated_share_is_that_of_the_elites_where_a_species_has_any():
+    """A species of one elite that beats its baseline and three fresh offspring that do not: by
+    its elites it is never gated (0.0), by all members 0.75; a species without elites is
+    measured by its members."""
+    adm = Admission.empty().grow(2, partner=False)
+    species = torch.tensor([0, 0, 0, 0, 1, 1])
+    gated = torch.tensor([False, True, True, True, True, False])
+    elite = torch.tensor([True, False, False, False, False, False])
+    nearest = torch.tensor([1, 0])
+    ids = torch.tensor([0, 1])
+    by_elites = update(adm, species, ids, gated, nearest, elite=elite)
+    by_members = update(adm, species, ids, gated, nearest)
+    assert by_elites.gated.tolist() == [0.0, 0.5]
+    assert by_members.gated.tolist() == [0.75, 0.5]
