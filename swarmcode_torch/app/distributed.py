@@ -36,8 +36,11 @@ from ..sim.runtime import CompiledStep, CudaGraphTicks, tick_function
 from ..sim.state import WorldParams
 
 RAY_INSTALL = 'pip install -e ".[ray]" in the source tree (or pip install "ray>=2.9")'
-#: Seconds to wait for the evaluation actors to start (the cluster may be busy).
-ACTOR_START_TIMEOUT = 600.0
+#: Seconds to wait for Ray's workers (the evaluation actors, the first tasks of a sweep) to
+#: start before giving up (SWARMCODE_RAY_START_TIMEOUT overrides it): the cluster may be busy,
+#: or its worker processes may fail to start at all (under a virtual-memory limit they fail
+#: with "mmap failed" and Ray waits for them forever).
+RAY_START_TIMEOUT = 120.0
 #: Seconds that interrupted tasks get to write their checkpoints before the driver leaves.
 INTERRUPT_GRACE = 60.0
 
@@ -82,6 +85,36 @@ def _connect_timeout() -> float:
     except ValueError:
         t = RAY_CONNECT_TIMEOUT
     return t if 0 < t < 3600 else RAY_CONNECT_TIMEOUT
+
+
+def _start_timeout() -> float:
+    try:
+        t = float(os.environ.get("SWARMCODE_RAY_START_TIMEOUT", RAY_START_TIMEOUT))
+    except ValueError:
+        t = RAY_START_TIMEOUT
+    return t if 0 < t <= 86400 else RAY_START_TIMEOUT
+
+
+def wait_started(ray, refs: list, workers: str, what: str) -> list:
+    """The results of `refs`, each an object a Ray worker returns as soon as it has started (an
+    actor's `ready()`, a probe task): RayUnavailable, within `_start_timeout()` seconds, when
+    some have not started by then (a busy cluster, or worker processes that cannot start: Ray
+    would wait for them forever), and when a worker died while starting. `workers` names them
+    ('2 evaluation workers'), `what` the option that asked for them."""
+    timeout = _start_timeout()
+    ready, pending = ray.wait(list(refs), num_returns=len(refs), timeout=timeout)
+    if pending:
+        raise RayUnavailable(
+            f"{what}: Ray could not start {workers} within {timeout:g} s ({len(ready)} of "
+            f"{len(refs)} started): the cluster has no free CPUs or GPUs for them, or its "
+            'worker processes fail to start ("mmap failed" under a virtual-memory limit, '
+            "ulimit -v: raise or lift it); see Ray's logs (/tmp/ray/session_latest/logs on "
+            "each node); SWARMCODE_RAY_START_TIMEOUT=SECONDS waits longer"
+        )
+    try:
+        return ray.get(list(refs))
+    except Exception as e:  # noqa: BLE001 - a worker that died while starting: one line
+        raise RayUnavailable(f"{what}: Ray's {workers} did not start ({one_line(e)})") from None
 
 
 def check_ray_address(address: str, what: str) -> None:
@@ -179,6 +212,11 @@ def _run_task(fn: Callable, threads: int, hide_gpus: bool, *args):
     return fn(*args)
 
 
+def _started() -> int:
+    """A probe task: returns as soon as a worker runs it."""
+    return os.getpid()
+
+
 def run_tasks(
     fn: Callable,
     jobs: list[tuple],
@@ -187,6 +225,7 @@ def run_tasks(
     num_cpus: float,
     num_gpus: float,
     on_finish: Callable[[int, str | None, dict], None] | None = None,
+    what: str = "running tasks on Ray",
 ) -> list[str | None]:
     """fn(*job) for every job as a Ray task (Ray connected: `ray_session`), at most `workers` at
     once, each reserving `num_cpus` CPUs and `num_gpus` GPUs; fn returns None when the job
@@ -195,8 +234,23 @@ def run_tasks(
     counts)` is called as each ends (counts: done, running, failed, total). Returns each job's
     error (None: finished). Ctrl-C (KeyboardInterrupt) cancels the running tasks, which get
     KeyboardInterrupt in turn (a run writes its checkpoint), waits up to INTERRUPT_GRACE seconds
-    for them, and re-raises."""
-    ray = require_ray("running tasks on Ray")
+    for them, and re-raises. Before any job, as many probe tasks as will run at once (with the
+    same CPUs and GPUs) must start within SWARMCODE_RAY_START_TIMEOUT seconds (`wait_started`),
+    else RayUnavailable naming `what` (Ray would wait forever for workers that cannot start)."""
+    ray = require_ray(what)
+    if jobs:
+        probe = ray.remote(num_cpus=num_cpus, num_gpus=num_gpus, max_retries=0)(_started)
+        n = min(workers, len(jobs))
+        refs = [probe.remote() for _ in range(n)]
+        try:
+            wait_started(ray, refs, f"{n} worker{'s' if n > 1 else ''} for the runs", what)
+        except RayUnavailable:
+            for ref in refs:
+                try:
+                    ray.cancel(ref, force=True)
+                except Exception:  # noqa: BLE001 - already gone
+                    pass
+            raise
     task = ray.remote(num_cpus=num_cpus, num_gpus=num_gpus, max_retries=0)(_run_task)
     threads = max(1, int(num_cpus))
     errors: list[str | None] = [None] * len(jobs)
@@ -419,14 +473,15 @@ class ShardedEvaluator:
         )
         self.actors = [actor.remote(spec) for _ in range(workers)]
         try:
-            self.where = ray.get(
-                [a.ready.remote() for a in self.actors], timeout=ACTOR_START_TIMEOUT
+            self.where = wait_started(
+                ray,
+                [a.ready.remote() for a in self.actors],
+                f"{workers} evaluation worker{'s' if workers > 1 else ''}",
+                what,
             )
-        except Exception as e:  # noqa: BLE001 - a timeout or a dead actor: one line
+        except RayUnavailable:
             self.close()
-            raise RayUnavailable(
-                f"{what}: the evaluation actors did not start ({one_line(e)})"
-            ) from None
+            raise
         self.stats: list[dict] = []
 
     def simulate(self, plan: EvalPlan, genome: Population) -> tuple[dict, float]:

@@ -264,6 +264,7 @@ def sweep_on_ray(
                     num_cpus=cpus,
                     num_gpus=gpus,
                     on_finish=on_finish,
+                    what=what,
                 )
         except RayUnavailable as e:
             fail(str(e))
