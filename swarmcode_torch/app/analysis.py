@@ -166,11 +166,24 @@ def replay_run(
     if html:
         fitness = record.get("fitness") if generation is not None else record.get("best_fitness")
         shown = generation if generation is not None else record.get("best_generation")
+        # the re-evaluated mean and its interval where the run has them (`best_team`)
+        reeval = record.get("reeval") if generation is not None else None
+        if isinstance(reeval, dict):
+            fitness, k, ci = reeval.get("mean"), reeval.get("trials"), reeval.get("ci95")
+        elif generation is None:
+            k, ci = record.get("best_reeval_trials"), record.get("best_fitness_ci95")
+        else:
+            k = ci = None
+        if not (isinstance(ci, list) and len(ci) == 2):
+            ci = [None, None]
         # only numbers reach the page from the run's records (the page escapes text as well)
         rec = {
             "run": run_dir.name,
             "fitness": float(fitness) if _finite(fitness) else None,
             "generation": shown if isinstance(shown, int) and not isinstance(shown, bool) else None,
+            "trials": k if isinstance(k, int) and not isinstance(k, bool) and k > 0 else None,
+            "fitness_low": float(ci[0]) if _finite(ci[0]) else None,
+            "fitness_high": float(ci[1]) if _finite(ci[1]) else None,
         }
         what = f"generation {generation}" if generation is not None else "best team"
         data = page_data(

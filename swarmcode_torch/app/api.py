@@ -57,7 +57,10 @@ class RunResult:
     species: one composition record per generation: `{"generation", "population": {species id:
         individuals}, "team": {species id: robots in the best team}}`.
     best_team: the best team of the run (fitness, cost, species, niches, deliveries, energy,
-        designs: each design's hardware, behavior tree, count and capability).
+        designs: each design's hardware, behavior tree, count and capability): the team of the
+        highest mean over the `reeval_trials` fresh environments each generation's best team
+        is re-evaluated on, `fitness` that mean, `reeval` its sd and 95 % interval,
+        `single_trial_fitness` its own single evaluation (`app.best_team`).
     run_dir: the run directory, or None for a run in memory.
     config: the run's `SwarmCoDeConfig` (swarm size and episode length pinned).
     scenario: the `Scenario` it ran.

@@ -18,7 +18,8 @@ above them.
 
 **One batch.** Every episode of every team and of every knock-out team (below) is one
 environment of one batch, run through one rollout (the fused C++ tick on the CPU, the eager tick on
-CUDA): not a loop over seeds. Each environment is simulated on its own, so the numbers of an
+CUDA): not a loop over seeds (`team_eval`, which a run's re-evaluation of its best teams runs
+as well, `best_team`). Each environment is simulated on its own, so the numbers of an
 episode do not depend on the batch it ran in (tests/app/test_evaluate.py checks the mean of N
 episodes against N evaluations of one episode each), and the same run and options give the same
 numbers on the same device.
@@ -56,8 +57,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -65,19 +66,29 @@ import torch
 from torch import Tensor
 
 from ..coevo.config import MAX_SEED, UPPER_BOUNDS
-from ..coevo.evaluation import ScoreFn, _scores, score_fn_name, team_robots, team_scores
-from ..coevo.fitness import team_cost
+from ..coevo.evaluation import ScoreFn, score_fn_name, team_scores
 from ..coevo.population import from_designs, genome_phenotype
 from ..coevo.speciation import design_distance
-from ..sim import bt
-from ..sim.layout import Layout, make_layouts
-from ..sim.rollout import rollout
-from ..sim.runtime import resolve_device, set_threads, tick_function, tick_mode
+from ..sim.runtime import resolve_device, set_threads
 from ..sim.scenario import Scenario, ScenarioError, load_scenario
-from ..sim.state import DELIVERED, WorldParams
 from .files import RunError
 from .runconfig import _size, memory_limit, read_config, run_scenario
 from .summary import check_designs, read_summary, read_teams
+from .team_eval import (  # noqa: F401 - Stat, t_quantile, INTERVAL: this module's API as well
+    INTERVAL,
+    TEAM_GENES,
+    ProgressFn,
+    Stat,
+    draw_layouts,
+    need_bytes,
+    run_episodes,
+    t_cdf,
+    t_quantile,
+    team_rows,
+)
+
+#: `draw_layouts` by the name tests and tools used before it moved to `team_eval`.
+_layouts = draw_layouts
 
 #: The episodes an evaluation runs by default, and at most.
 DEFAULT_EPISODES = 20
@@ -86,101 +97,7 @@ MAX_EPISODES = 10_000
 DEFAULT_SEED_START = 1_000_000
 #: The most teams `top` evaluates at once.
 MAX_TOP = 100
-#: The interval every figure is given with.
-INTERVAL = "95 % Student t interval of the mean: mean ± t(0.975, n - 1) · sd / √n"
 TEAMS = ("best", "last")
-
-#: progress(stage, done, total): stage "environments" (drawn, one per episode) or "ticks".
-ProgressFn = Callable[[str, int, int], None]
-
-
-# ------------------------------------------------------------------ statistics
-def _betacf(a: float, b: float, x: float) -> float:
-    """The continued fraction of the regularized incomplete beta function (modified Lentz)."""
-    tiny, eps = 1e-300, 3e-16
-    qab, qap, qam = a + b, a + 1.0, a - 1.0
-    c, d = 1.0, 1.0 - qab * x / qap
-    d = 1.0 / (d if abs(d) > tiny else tiny)
-    h = d
-    for m in range(1, 10_000):
-        m2 = 2 * m
-        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
-        d = 1.0 + aa * d
-        d = 1.0 / (d if abs(d) > tiny else tiny)
-        c = 1.0 + aa / c if abs(1.0 + aa / c) > tiny else tiny
-        h *= d * c
-        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
-        d = 1.0 + aa * d
-        d = 1.0 / (d if abs(d) > tiny else tiny)
-        c = 1.0 + aa / c if abs(1.0 + aa / c) > tiny else tiny
-        delta = d * c
-        h *= delta
-        if abs(delta - 1.0) < eps:
-            break
-    return h
-
-
-def _betainc(a: float, b: float, x: float) -> float:
-    """I_x(a, b), the regularized incomplete beta function."""
-    if x <= 0.0:
-        return 0.0
-    if x >= 1.0:
-        return 1.0
-    front = math.exp(
-        math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log1p(-x)
-    )
-    if x < (a + 1.0) / (a + b + 2.0):
-        return front * _betacf(a, b, x) / a
-    return 1.0 - front * _betacf(b, a, 1.0 - x) / b
-
-
-def t_cdf(t: float, df: float) -> float:
-    """P(T <= t) of Student's t distribution with `df` degrees of freedom."""
-    tail = 0.5 * _betainc(df / 2.0, 0.5, df / (df + t * t))
-    return 1.0 - tail if t >= 0 else tail
-
-
-def t_quantile(p: float, df: float) -> float:
-    """The `p` quantile (0.5 <= p < 1) of Student's t with `df` > 0 degrees of freedom, by
-    bisection of `t_cdf` (to 1e-12)."""
-    if not 0.5 <= p < 1.0 or df <= 0:
-        raise ValueError(f"t_quantile needs 0.5 <= p < 1 and df > 0, got p={p}, df={df}")
-    lo, hi = 0.0, 1.0
-    while t_cdf(hi, df) < p:
-        lo, hi = hi, hi * 2.0
-    while hi - lo > 1e-12 * max(1.0, hi):
-        mid = 0.5 * (lo + hi)
-        if t_cdf(mid, df) < p:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-@dataclass(frozen=True)
-class Stat:
-    """A mean over `n` episodes, its sample standard deviation and 95 % t interval (`INTERVAL`;
-    sd and the interval are None for one episode)."""
-
-    mean: float
-    sd: float | None
-    low: float | None
-    high: float | None
-    n: int
-
-    @classmethod
-    def of(cls, values: Tensor | Sequence[float]) -> Stat:
-        v = torch.as_tensor(values, dtype=torch.float64).reshape(-1)
-        n = int(v.numel())
-        mean = float(v.mean())
-        if n < 2:
-            return cls(mean, None, None, None, n)
-        sd = float(v.std(correction=1))
-        half = t_quantile(0.975, n - 1) * sd / math.sqrt(n)
-        return cls(mean, sd, mean - half, mean + half, n)
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
 
 
 # ------------------------------------------------------------------ results
@@ -302,25 +219,11 @@ def _int(v: Any) -> int | None:
     return v if isinstance(v, int) and not isinstance(v, bool) else None
 
 
-_GENES = (
-    "effector",
-    "radius",
-    "chassis_tier",
-    "battery_tier",
-    "motor_tier",
-    "torque_point",
-    "battery_point",
-    "dominance",
-    "bt",
-    "count",
-)
-
-
 def _team_key(designs: list[dict]) -> str:
     """Two records of the same team have the same key: each design's genes and robots."""
     import json
 
-    return json.dumps(sorted(json.dumps([d[k] for k in _GENES]) for d in designs))
+    return json.dumps(sorted(json.dumps([d[k] for k in TEAM_GENES]) for d in designs))
 
 
 def choose_teams(
@@ -472,54 +375,6 @@ def _check_team_fits(designs: list[dict], scenario: Scenario, own: bool) -> None
         )
 
 
-def _layouts(scenario: Scenario, robots: int, seeds: Sequence[int], progress) -> Layout:
-    """One environment per seed, as `replay --seed` draws it, stacked [N]."""
-    world = replace(scenario, num_robots=robots)
-    parts = []
-    step = max(1, len(seeds) // 50)
-    for i, s in enumerate(seeds):
-        parts.append(make_layouts(world, 1, torch.Generator().manual_seed(int(s))))
-        if progress is not None and ((i + 1) % step == 0 or i + 1 == len(seeds)):
-            progress("environments", i + 1, len(seeds))
-    return Layout(*(torch.cat(t) for t in zip(*parts)))
-
-
-def _need_bytes(envs: int, robots: int, layouts: int, world: Scenario) -> int:
-    """The memory of `envs` environments of `robots` robots drawn from `layouts` layouts: the
-    batch and layout terms of `runconfig.estimate_bytes` (the programs of a few designs are
-    nothing beside them)."""
-    grips = sum(c.count * len(c.grips) for c in world.packages)
-    K, O = world.num_packages, world.obstacle_count
-    batch = envs * robots * 16 * (16 + grips + min(robots, 500))
-    drawn = layouts * 4 * 32 * (K * (O + 4) + 2 * O) + 3 * 8 * max(robots, world.num_robots) ** 2
-    return batch + drawn
-
-
-class _Reporting:
-    """A tick function that runs `inner`'s ticks in chunks and reports each (`progress`)."""
-
-    def __init__(self, inner: Callable, progress: ProgressFn, chunks: int = 50):
-        self.inner, self.progress, self.chunks = inner, progress, chunks
-
-    def __call__(self, *args):
-        return self.inner(*args)
-
-    def run_ticks(self, state, inputs, params, ticks: int):
-        step = max(1, -(-ticks // self.chunks))
-        done = 0
-        self.progress("ticks", 0, ticks)
-        while done < ticks:
-            n = min(step, ticks - done)
-            if hasattr(self.inner, "run_ticks"):
-                state = self.inner.run_ticks(state, inputs, params, n)
-            else:
-                for _ in range(n):
-                    state = self.inner(state, *inputs, params)
-            done += n
-            self.progress("ticks", done, ticks)
-        return state
-
-
 def evaluate(
     run_dir: str | Path,
     team: str = "best",
@@ -598,8 +453,7 @@ def evaluate(
     variants: list[list[tuple[int, str, Tensor]]] = []  # per team: (design, refill, [N, S])
     teams_rows: list[Tensor] = []
     for c, off in zip(chosen, offsets):
-        local, counts = from_designs(c.designs, cfg.tag_length)
-        team_t = torch.arange(counts.numel()).repeat_interleave(counts)  # [S] design per slot
+        local, team_t = team_rows(c.designs, cfg.tag_length)  # [S] design per slot
         near = design_distance(local, cfg.distance_weights) if near_rule else None
         focal, recorded = _recorded_baseline(c.designs, team_t)
         vs = []
@@ -626,7 +480,7 @@ def evaluate(
     E = teams.shape[0]
     layout_ids = torch.arange(episodes).repeat(E // episodes)
 
-    need = _need_bytes(E, S, episodes, world)
+    need = need_bytes(E, S, episodes, world)
     limit, what = memory_limit(str(dev))
     if need > limit:
         raise RunError(
@@ -635,34 +489,12 @@ def evaluate(
             f"{_size(limit)} of {what}; evaluate fewer episodes"
         )
 
-    layouts = _layouts(world, S, seeds, progress)
+    layouts = draw_layouts(world, S, seeds, progress)
     species = torch.tensor([int(d["species"]) for d in all_designs])
-    _, species_index = torch.unique(species, return_inverse=True)
-    present = teams >= 0
-    seen = torch.zeros(E, int(species_index.max()) + 1, dtype=torch.bool)
-    seen[torch.arange(E)[:, None].expand_as(teams)[present], species_index[teams[present]]] = True
-    ph = genome_phenotype(genome, world.hardware)
-    cost = team_cost(ph.cost[teams.clamp_min(0)], present, seen.sum(1), world.species_overhead)
-
-    step_fn, compiled = tick_function(dev, compile=False)
-    mode = tick_mode(step_fn, compiled)
-    if progress is not None:
-        step_fn = _Reporting(step_fn, progress)
-    params = WorldParams.for_scenario(world)
-    genome_d = genome.to(dev)
-    with torch.no_grad():
-        m, state = rollout(
-            Layout(*(t.to(dev) for t in layouts)).select(layout_ids.to(dev)),
-            team_robots(genome_d, teams.to(dev), world.hardware),
-            bt.build_tables(genome_d.bt),
-            params,
-            ticks,
-            step_fn,
-            return_state=True,
-        )
-        ecfg = cfg.evaluation(world.num_robots, world.episode_ticks)
-        scores = _scores(score_fn, m, cost.to(dev), ecfg).double().cpu()
-        done = (state.p_status.cpu() == DELIVERED) & layouts.p_present[layout_ids]
+    ep = run_episodes(
+        genome, species, teams, layouts, layout_ids, world, cfg, ticks, dev, score_fn, progress
+    )
+    scores, cost, done, mode = ep.scores, ep.cost, ep.delivered, ep.tick
     cls = torch.tensor([i for i, c in enumerate(world.packages) for _ in range(c.count)])
     per_class = torch.zeros(E, len(world.packages), dtype=torch.float64)
     per_class.index_add_(1, cls, done.double())

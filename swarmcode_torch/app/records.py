@@ -19,6 +19,7 @@ from ..coevo.evolve import BestTeam, Evolution, GenerationResult
 from ..coevo.population import design_record, from_designs, genome_phenotype
 from ..sim.hardware import Phenotype
 from ..sim.state import WorldParams, capabilities
+from . import best_team
 
 #: The scalar tags of a generation, in the order of metrics.csv's columns.
 SCALAR_TAGS = (
@@ -29,6 +30,7 @@ SCALAR_TAGS = (
     "species/extinct",
     "species/median_age",
     "team/fitness",
+    "team/fitness_reeval",
     "team/species",
     "team/niches",
     "team/median_age",
@@ -42,6 +44,7 @@ SCALAR_TAGS = (
     "perf/generation_seconds",
     "perf/eval_seconds",
     "perf/sim_seconds",
+    "perf/reeval_seconds",
 )
 
 #: The gene histograms of a generation: tag -> GenerationResult field. Named `traits/`: the
@@ -124,15 +127,16 @@ def describe_team(record: dict | None, scenario) -> dict | None:
 
 def step(ev: Evolution) -> GenerationResult:
     """One generation of `ev` with its report records: the generation's best team
-    (`team_record`) and the run's best team so far, which `ev.state.best` keeps (a checkpoint
-    saves it): what the application's reporters and callbacks receive."""
+    (`team_record`, re-evaluated on the run's `reeval_trials` fresh environments) and the run's
+    best team so far, the one of the best re-evaluated mean (`best_team.update`), which
+    `ev.state.best` keeps (a checkpoint saves it): what the application's reporters and
+    callbacks receive."""
     result = ev.step()
     team = team_record(result.best_team, result.generation, ev.ctx.scenario)
-    best = describe_team(ev.state.best, ev.ctx.scenario)
-    if best is None or team["fitness"] > best["fitness"]:
-        best = team
+    ev.state.best = describe_team(ev.state.best, ev.ctx.scenario)
+    best, seconds = best_team.update(ev, team)
     ev.state.best = best
-    return replace(result, team=team, best=best)
+    return replace(result, team=team, best=best, reeval_seconds=seconds)
 
 
 def scalars(r: GenerationResult) -> dict[str, Any]:
@@ -148,6 +152,7 @@ def scalars(r: GenerationResult) -> dict[str, Any]:
         "species/extinct": r.extinct,
         "species/median_age": r.species_median_age,
         "team/fitness": team["fitness"],
+        "team/fitness_reeval": team["reeval"]["mean"] if "reeval" in team else math.nan,
         "team/species": team["species"],
         "team/niches": team["niches"],
         "team/median_age": r.team_median_age,
@@ -161,6 +166,7 @@ def scalars(r: GenerationResult) -> dict[str, Any]:
         "perf/generation_seconds": r.seconds,
         "perf/eval_seconds": r.eval_seconds,
         "perf/sim_seconds": r.sim_seconds,
+        "perf/reeval_seconds": r.reeval_seconds,
     }
 
 
@@ -238,8 +244,10 @@ def summary(ev: Evolution, r: GenerationResult) -> dict:
             "scenario": ev.cfg.scenario,
             "objective": ev.cfg.objective,
             "preset": ev.cfg.preset,
+            # the best team's re-evaluated mean (its single evaluation without re-evaluation)
             "best_fitness": best["fitness"],
             "best_generation": best["generation"],
+            **best_team.summary_fields(best),
             "team_cost": best["cost"],
             "budget": ev.cfg.budget,
             "num_species": best["species"],

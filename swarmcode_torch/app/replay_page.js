@@ -216,7 +216,12 @@
     const recTxt = rec.fitness !== undefined && rec.fitness !== null
       ? ` The run recorded a fitness of ${fmtS(rec.fitness)} for this team` +
         (rec.generation !== undefined ? ` in generation ${esc(rec.generation)}` : "") +
-        " (a mean over the run's trials; this page is one episode)." : "";
+        (rec.trials !== undefined
+          ? ` (its mean over ${esc(rec.trials)} fresh environments` +
+            (rec.fitness_low !== undefined && rec.fitness_high !== undefined
+              ? `, 95 % interval ${fmtS(rec.fitness_low)} to ${fmtS(rec.fitness_high)}` : "") +
+            "; this page is one episode)."
+          : " (a mean over the run's trials; this page is one episode).") : "";
     return `<b>Focal individual:</b> ${swatch(D, D.focal, 14)} ${esc(designLabel(D, D.focal))} ` +
       `(${esc(g.count)} of ${esc(D.robots)} robots). Focal team score <b data-testid="focal-score">${fmtS(f.score)}</b>, ` +
       `baseline team score <b data-testid="baseline-score">${fmtS(b.score)}</b> ` +

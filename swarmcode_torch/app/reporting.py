@@ -73,11 +73,15 @@ def figure_image(fig):
 
 
 #: Scalars of the best team of the run so far (`GenerationResult.best`), logged every
-#: generation beside `records.SCALAR_TAGS`: tag -> key of the team record. They are also the
-#: metrics of TensorBoard's HParams tab (the last value of each run), so that no scalar is
-#: written only for it.
+#: generation beside `records.SCALAR_TAGS`: tag -> key of `best_team.figures` (best/fitness:
+#: its re-evaluated mean, with the bounds of its 95 % interval; best/single_trial_fitness: the
+#: highest single evaluation of the run). They are also the metrics of TensorBoard's HParams
+#: tab (the last value of each run), so that no scalar is written only for it.
 HPARAM_METRICS = {
     "best/fitness": "fitness",
+    "best/fitness_ci_lo": "fitness_ci_lo",
+    "best/fitness_ci_hi": "fitness_ci_hi",
+    "best/single_trial_fitness": "single_trial_fitness",
     "best/cost": "cost",
     "best/species": "species",
     "best/niches": "niches",
@@ -121,6 +125,16 @@ CUSTOM_SCALARS = {
             "team/fitness",
             "best/fitness",
         ],
+        "best team: re-evaluated fitness, its 95 % interval, the highest single evaluation": [
+            "best/fitness",
+            "best/fitness_ci_lo",
+            "best/fitness_ci_hi",
+            "best/single_trial_fitness",
+        ],
+        "generation's team: single evaluation, re-evaluated": [
+            "team/fitness",
+            "team/fitness_reeval",
+        ],
         "team cost and budget ($)": ["team/cost", "team/budget", "best/cost"],
         "deliveries: generation's team, best team": [
             "team/deliveries",
@@ -134,6 +148,7 @@ CUSTOM_SCALARS = {
             "perf/generation_seconds",
             "perf/eval_seconds",
             "perf/sim_seconds",
+            "perf/reeval_seconds",
         ]
     },
 }
@@ -141,9 +156,11 @@ CUSTOM_SCALARS = {
 
 def best_scalars(result: GenerationResult) -> dict[str, float]:
     """The run's best team so far as scalars (`HPARAM_METRICS`); NaN for a missing value."""
-    best = result.best or {}
+    from .best_team import figures
+
+    found = figures(result.best)
     return {
-        tag: float(best[key]) if best.get(key) is not None else math.nan
+        tag: found[key] if found.get(key) is not None else math.nan
         for tag, key in HPARAM_METRICS.items()
     }
 

@@ -362,7 +362,8 @@ def estimate_bytes(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> in
     """A rough estimate of the memory one generation needs (a lower bound of the peak, close to
     the measured peak of a swarm1000 generation), in bytes:
 
-    - the evaluation batch: E = 2 x population x trials environments of N robots (the swarm
+    - the evaluation batch: E = 2 x population x trials environments (or the `reeval_trials` of
+      the best team's re-evaluation, where they are more) of N robots (the swarm
       size; the scenario's robots; 1 when unknown), 16 x (16 + C + min(N, 500)) bytes a robot
       (state and constants, distances to the C grip points of the packages, contact pairs);
     - the layouts: population x trials environments of 32 candidate positions for each of the
@@ -379,7 +380,7 @@ def estimate_bytes(cfg: SwarmCoDeConfig, scenario: Scenario | None = None) -> in
         K, O = scenario.num_packages, scenario.obstacle_count
     else:
         N, C, K, O = cfg.swarm_size or 1, 1, 1, 0
-    envs = 2 * P * T
+    envs = max(2 * P * T, cfg.reeval_trials)
     batch = envs * N * 16 * (16 + C + min(N, 500))
     layouts = P * T * 4 * 32 * (K * (O + 4) + 2 * O)
     # the start slots: pairwise distances of the scenario's robots, three [N, N] float64

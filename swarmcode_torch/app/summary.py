@@ -175,8 +175,35 @@ def read_summary(run_dir: Path, figures: bool = True) -> dict:
     b = s.get("budget")
     if b is not None and not (_is_number(b) and math.isfinite(b)):
         raise RunError(f"{path}: budget: expected a number or null, got {b!r:.60}")
+    if figures:
+        _check_reeval_figures(s, path)
     check_designs(s.get("designs"), str(path))
     return s
+
+
+#: summary.json's figures of the best team's re-evaluation (`best_team.summary_fields`), which
+#: a summary written before 0.8 has not: each a number or null.
+_REEVAL_NUMBERS = (
+    "best_fitness_sd",
+    "best_reeval_trials",
+    "best_single_trial_fitness",
+    "best_single_trial_generation",
+)
+
+
+def _check_reeval_figures(s: dict, path: Path) -> None:
+    for key in _REEVAL_NUMBERS:
+        v = s.get(key)
+        if v is not None and not (_is_number(v) and math.isfinite(v)):
+            raise RunError(f"{path}: {key}: expected a number or null, got {v!r:.60}")
+    for key in ("best_fitness_ci95", "best_reeval_seeds"):
+        v = s.get(key)
+        if v is not None and not (
+            isinstance(v, list)
+            and len(v) == 2
+            and all(_is_number(x) and math.isfinite(x) for x in v)
+        ):
+            raise RunError(f"{path}: {key}: expected two numbers or null, got {v!r:.60}")
 
 
 def read_teams(run_dir: Path) -> dict[int, dict]:

@@ -160,9 +160,43 @@ def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
             # the mean; a column no run gives is "none"
             vals = [float(s[col]) for s in summaries if s.get(col) is not None]
             row[col], row[f"{col}_std"] = mean_std(vals) if vals else (None, None)
+        row.update(_interval(summaries))
         rows.append(row)
     rows.sort(key=lambda r: math.inf if r["budget"] is None else r["budget"])
     return rows
+
+
+def _interval(summaries: list[dict]) -> dict:
+    """The runs' best-team re-evaluation (`best_team`): the fresh environments each best team
+    was re-evaluated on (the fewest of the runs; None where a run was not re-evaluated), the
+    mean of the bounds of their 95 % intervals and of their half-widths (None without)."""
+    ks = [s.get("best_reeval_trials") for s in summaries]
+    cis = [s.get("best_fitness_ci95") for s in summaries]
+    cis = [c for c in cis if isinstance(c, list) and len(c) == 2 and None not in c]
+    k = min(ks) if all(isinstance(x, int) and x > 0 for x in ks) else None
+    if k is None or len(cis) < len(summaries):
+        return {
+            "best_reeval_trials": k,
+            "best_fitness_ci_lo": None,
+            "best_fitness_ci_hi": None,
+            "best_fitness_ci_half": None,
+        }
+    n = len(cis)
+    return {
+        "best_reeval_trials": k,
+        "best_fitness_ci_lo": sum(c[0] for c in cis) / n,
+        "best_fitness_ci_hi": sum(c[1] for c in cis) / n,
+        "best_fitness_ci_half": sum((c[1] - c[0]) / 2 for c in cis) / n,
+    }
+
+
+#: The columns of table.csv after the figures: the best teams' re-evaluation (`_interval`).
+INTERVAL_COLUMNS = (
+    "best_reeval_trials",
+    "best_fitness_ci_lo",
+    "best_fitness_ci_hi",
+    "best_fitness_ci_half",
+)
 
 
 def _fmt(v, col: str) -> str:
@@ -182,6 +216,12 @@ def markdown(rows: list[dict]) -> str:
             cell = _fmt(r[col], col)
             if seeds > 1 and col != "budget":
                 cell += f" ± {_fmt(r[col + '_std'], col)}"
+            if col == "best_fitness" and r.get("best_fitness_ci_half") is not None:
+                if r["seeds"] > 1:
+                    cell += f" (CI ± {_fmt(r['best_fitness_ci_half'], col)})"
+                else:
+                    lo, hi = r["best_fitness_ci_lo"], r["best_fitness_ci_hi"]
+                    cell += f" [{_fmt(lo, col)}, {_fmt(hi, col)}]"
             cells.append(cell)
         lines.append("| " + " | ".join(cells) + " |")
     note = (
@@ -189,16 +229,29 @@ def markdown(rows: list[dict]) -> str:
         if seeds > 1
         else "\nThe best team of each run."
     )
+    ks = {r.get("best_reeval_trials") for r in rows if r.get("best_fitness_ci_half") is not None}
+    if ks:
+        k = min(ks)
+        note += (
+            f" Best fitness: the best team's mean over {k} fresh environments it was "
+            "re-evaluated on, "
+            + (
+                "with the mean half-width of the runs' 95 % intervals (CI ±)."
+                if seeds > 1
+                else "with its 95 % interval [low, high]."
+            )
+        )
     return "\n".join(lines) + "\n" + note + "\n"
 
 
 def csv_text(rows: list[dict]) -> str:
     buf = io.StringIO()
     fields = ["budget", "seeds"] + [c for col in COLUMNS[1:] for c in (col, f"{col}_std")]
+    fields += INTERVAL_COLUMNS
     w = csv.DictWriter(buf, fieldnames=fields)
     w.writeheader()
     for r in rows:
-        w.writerow({k: ("none" if r[k] is None else r[k]) for k in fields})
+        w.writerow({k: ("none" if r.get(k) is None else r[k]) for k in fields})
     return buf.getvalue()
 
 

@@ -136,9 +136,11 @@ class ProgressReporter:
         # generations are numbered from 0 (summary.json, teams.jsonl, TensorBoard steps); the
         # count "done" is how many have finished: generation g is the (g + 1)-th
         team = r.team
+        # with re-evaluation, both are re-evaluated means (the best team's never below)
+        this = team["reeval"]["mean"] if "reeval" in team else team["fitness"]
         text = (
             f"generation {r.generation}  best team {r.best['fitness']:.1f} "
-            f"(this generation {team['fitness']:.1f})  species {r.num_species}  "
+            f"(this generation {this:.1f})  species {r.num_species}  "
             f"team {team['species']} sp, {team['niches']} niches, "
             f"${team['cost']:.0f}  {r.seconds:.2f}s/gen"
         )
@@ -426,6 +428,24 @@ def _num(v, fmt: str) -> str:
     return "n/a" if v is None else format(v, fmt)
 
 
+def best_interval(s: dict) -> str:
+    """How summary.json's best fitness was measured, for the line after it: " (mean of K fresh
+    environments, 95 % interval LO to HI; the highest single evaluation of the run: F in
+    generation G)"; "" for a run whose best team was not re-evaluated."""
+    k, ci = s.get("best_reeval_trials"), s.get("best_fitness_ci95")
+    if not k:
+        return ""
+    interval = f", 95 % interval {ci[0]:.2f} to {ci[1]:.2f}" if ci else ""
+    single = s.get("best_single_trial_fitness")
+    highest = (
+        f"; the highest single evaluation of the run: {single:.2f} in generation "
+        f"{s.get('best_single_trial_generation')}"
+        if single is not None
+        else ""
+    )
+    return f" (mean of {k} fresh environments{interval}{highest})"
+
+
 def print_team(run_dir: Path) -> None:
     from .runs import RunError, read_summary
 
@@ -436,8 +456,8 @@ def print_team(run_dir: Path) -> None:
     designs = s["designs"]
     budget = "none" if s.get("budget") is None else f"${s['budget']:g}"
     console.print(
-        f"Best team (generation {s['best_generation']}): fitness {_num(s['best_fitness'], '.2f')}, "
-        f"cost ${_num(s['team_cost'], '.0f')} (budget {budget}), {s['num_species']} species, "
+        f"Best team (generation {s['best_generation']}): fitness {_num(s['best_fitness'], '.2f')}"
+        f"{best_interval(s)}, cost ${_num(s['team_cost'], '.0f')} (budget {budget}), {s['num_species']} species, "
         f"deliveries {_num(s['deliveries'], '.2f')} ({_num(s['deliveries_individual'], '.2f')} "
         f"individual, {_num(s['deliveries_collab'], '.2f')} collaborative), energy used "
         f"{_num(s['energy_used'], '.1f')}%",

@@ -44,7 +44,11 @@ def test_a_user_fitness_replaces_the_team_score_and_the_rest_applies_to_it():
     CALLS.clear()
     base = sc.evolve(generations=3, logdir=None, **TINY)
     twice = sc.evolve(generations=3, logdir=None, fitness=doubled, **TINY)
-    assert len(CALLS) == 3
+    # once per generation for its evaluation, and for the re-evaluation of its best team on
+    # reeval_trials (10) environments (not run again for a team that is the best already)
+    assert [c[1] for c in CALLS].count((2 * 4 * 2,)) == 3
+    assert {c[1] for c in CALLS} == {(2 * 4 * 2,), (10,)}
+    assert twice.best_team["fitness"] == 2 * base.best_team["fitness"]
     keys, shape, kind = CALLS[0]
     assert "delivered_individual" in keys and "closeness" in keys and kind is EvalConfig
     assert shape == (2 * 4 * 2,)  # E = 2 (focal, baseline) * B * trials
