@@ -83,13 +83,14 @@ def default_windows(last_generation: int, step: int = 100, tail: int = 50) -> li
 
 def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None) -> list[dict]:
     """`dynamics.window_stats` of each window of a run directory (default `default_windows`);
-    RunError for a window that is not two integers START < END, START >= 0."""
+    RunError for a window that is not two integers START < END (a START before 0 counts
+    from generation 0)."""
     for w in windows or ():
         if (
             not isinstance(w, (tuple, list))
             or len(w) != 2
             or any(isinstance(x, bool) or not isinstance(x, int) for x in w)
-            or not 0 <= w[0] < w[1]
+            or not w[0] < w[1]
         ):
             raise RunError(f"windows: each window must be two integers START < END, got {w!r:.60}")
     run_dir = Path(run_dir)

@@ -219,8 +219,8 @@ def device_name(device: torch.device | str) -> str:
 def software(device: torch.device | str) -> dict:
     """What made a run's files: package and torch versions, the device and the git commit (None
     outside a checkout); summary.json's "software", config.toml's "written by" comment."""
-    from ..version import __version__
     from ..sim.runtime import resolve_device
+    from ..version import __version__
 
     try:
         name = device_name(resolve_device(device) if isinstance(device, str) else device)

@@ -64,7 +64,7 @@ def test_threads_have_an_upper_bound(monkeypatch):
     assert res.exit_code != 0 and f"--threads must be <= {MAX_THREADS}" in res.output
 
 
-@pytest.mark.parametrize("windows", [[(5, 1)], [(-1, 3)], [(0, "a")], [(1, 2, 3)]])
+@pytest.mark.parametrize("windows", [[(5, 1)], [(3, 3)], [(0, "a")], [(1, 2, 3)], [(True, 4)]])
 def test_dynamics_windows_must_be_ordered_pairs(tmp_path, windows):
     with pytest.raises(RunError, match="windows"):
         run_dynamics(tmp_path, windows=windows)
