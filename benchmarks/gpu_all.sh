@@ -68,12 +68,14 @@ if [[ "$TINY" == 1 ]]; then   # sizes small enough for a CPU check of every comm
     E2E_4=(--configs four-niche:6:8 --generations 3); E2E_200=(--configs swarm200:20:4 --generations 2)
     SIM_200=(--envs 4 --robots 30 --ticks 5 --repeats 1); SIM_1000=(--envs 2 --robots 600 --ticks 2 --repeats 1)
     PROF=(--configs 4:20 --ticks 5); VMAS=(--envs 4 --robots 30 --ticks 5 --repeats 1)
+    TRITON_X=(--configs 2:20,1:600 --ticks 2 --repeats 1 --warmup 1 --settle 3)
 else
     GEN_CFG=four-niche:20:50,swarm1000:1000:50; GEN_X=(--generations 1)
     BIG_CFG=swarm1000:10000:50; BIG_X=(--generations 1 --trials 1 --no-count)
     E2E_4=(--configs four-niche:20:50 --generations 500); E2E_200=(--configs swarm200:200:50 --generations 500)
     SIM_200=(--envs 400 --robots 200 --ticks 200); SIM_1000=(--envs 50,400 --robots 1000 --ticks 50)
     PROF=(--configs 400:20,400:200); VMAS=(--robots 200 --vmas-ticks 10 --repeats 2)
+    TRITON_X=(--configs 400:200,50:1000,4:10000)
 fi
 GRAPHS=(); [[ "$DEV" == cuda ]] && GRAPHS=(--cuda-graphs)
 E2E_SET=(); [[ "$DEV" == cuda ]] && E2E_SET=(--set cuda_graphs=true)
@@ -100,12 +102,17 @@ step pytest_gpu 120 "$PY" -m pytest -m gpu -q -p no:cacheprovider \
 # 7. swarm 10,000 from population 50 (1 trial): seconds per generation and peak memory
 step swarm10000 100 "$PY" $B/bench_generation.py --device "$DEV" --configs "$BIG_CFG" \
     "${BIG_X[@]}" --out "$DEST/generation_cuda_10000.json"
-# 8. swarm200, 500 generations, end to end (target <= 120 s): what time is left, projected if cut
+# 8. the Triton tick (issue 40, never run on a GPU): robot-ticks/s against the eager tick at
+#    400 x 200, 50 x 1000 and 4 x 10000 (broad phase), the pair phases alone, agreement; on
+#    the CPU (GPU_ALL_DEVICE=cpu) it runs in Triton's interpreter
+step triton_tick 90 env "TRITON_INTERPRET=$([[ "$DEV" == cpu ]] && echo 1 || echo 0)" "$PY" \
+    $B/bench_triton_tick.py "${TRITON_X[@]}" --out "$DEST/triton_tick_$DEV.json"
+# 9. swarm200, 500 generations, end to end (target <= 120 s): what time is left, projected if cut
 left=$(( DEADLINE - SECONDS - 25 ))
 step e2e_swarm200 "$(( left / SCALE ))" "$PY" $B/bench_end_to_end.py --device "$DEV" "${E2E_200[@]}" \
     --time-limit "$(( left > 40 ? left - 15 : 25 ))" "${E2E_SET[@]}" \
     --out "$DEST/end_to_end_swarm200.json"
-# 9. our side of the VMAS comparison at N = 200 (VMAS itself only if installed there)
+# 10. our side of the VMAS comparison at N = 200 (VMAS itself only if installed there)
 step vmas_200 45 "$PY" $B/bench_vs_vmas.py --device "$DEV" "${VMAS[@]}" \
     --out "$DEST/vmas_cuda_200.json"
 
