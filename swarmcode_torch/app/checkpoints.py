@@ -199,6 +199,13 @@ def same_function(recorded: str, given: str) -> bool:
     script or notebook (module `__main__`) and the other was imported."""
     if recorded == given:
         return True
+    # a lambda or local function carries a hash of its code, which must match too (a run
+    # recorded before the hash existed is matched by name, as it was then)
+    (recorded, _, code_a), (given, _, code_b) = recorded.partition("#"), given.partition("#")
+    if code_a and code_b and code_a != code_b:
+        return False
+    if recorded == given:
+        return True
     main = "__main__."
     for a, b in ((recorded, given), (given, recorded)):
         if a.startswith(main) and not b.startswith(main) and b.endswith("." + a[len(main) :]):

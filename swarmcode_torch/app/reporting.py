@@ -20,6 +20,34 @@ from .files import METRICS_FILE
 from .records import HISTOGRAMS, SCALAR_TAGS, scalars
 
 
+def _check_history(history) -> None:
+    """ValueError, one line, unless `history` is a list of composition records: dicts with an
+    integer `generation` and `population` and `team` tables of species id -> count."""
+    if not isinstance(history, (list, tuple)):
+        raise ValueError(
+            f"history must be a list of composition records, got {type(history).__name__}"
+        )
+    for i, h in enumerate(history):
+        ok = (
+            isinstance(h, dict)
+            and isinstance(h.get("generation"), int)
+            and not isinstance(h.get("generation"), bool)
+            and all(
+                isinstance(h.get(k), dict)
+                and all(
+                    str(s).lstrip("-").isdigit() and isinstance(n, int) and not isinstance(n, bool)
+                    for s, n in h[k].items()
+                )
+                for k in ("population", "team")
+            )
+        )
+        if not ok:
+            raise ValueError(
+                f"history[{i}] is not a composition record ({{'generation': int, 'population': "
+                f"{{species: count}}, 'team': {{species: robots}}}}), got {str(h)[:60]!r}"
+            )
+
+
 def composition_figure(history: list[dict], legend: int = 8):
     """A matplotlib `Figure`: species composition of the population and of the best team per
     generation (stacked areas, one colour per species id; paper Fig. 5). Each panel's legend
@@ -29,6 +57,7 @@ def composition_figure(history: list[dict], legend: int = 8):
     Drawn object-oriented (`matplotlib.figure.Figure`): no pyplot, no backend change, so a
     notebook keeps its inline plots; the figure displays as the value of a cell
     (`IPython.display.display(fig)`) and `fig.savefig(path)` writes it."""
+    _check_history(history)
     from matplotlib import colormaps
     from matplotlib.figure import Figure
 

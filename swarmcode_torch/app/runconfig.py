@@ -247,6 +247,21 @@ def scenario_to_toml(s: Scenario) -> str:
 def scenario_data(s: Scenario) -> bytes:
     """The TOML of a Scenario object, checked to load back as the same scenario (parsing it
     validates it: ScenarioError names the field)."""
+    from ..sim.scenario import PackageClass
+
+    if not isinstance(s, Scenario):
+        raise TypeError(f"scenario must be a name, a path or a Scenario, got {type(s).__name__}")
+    packages = s.packages if isinstance(s.packages, (list, tuple)) else None
+    if packages is None or not all(isinstance(p, PackageClass) for p in packages):
+        bad = (
+            type(s.packages).__name__
+            if packages is None
+            else next(type(p).__name__ for p in packages if not isinstance(p, PackageClass))
+        )
+        raise TypeError(
+            f"scenario {str(s.name)[:60]!r}: packages must be PackageClass objects, got {bad} "
+            "(or load the scenario from a TOML file: load_scenario)"
+        )
     data = scenario_to_toml(s).encode("utf-8")
     if parse_scenario(data, f"scenario {s.name!r}") != s:
         raise ValueError(f"scenario {s.name!r} does not survive a round trip through TOML")

@@ -74,10 +74,26 @@ EvalConfig) -> [E] score. The gate, the mean over trials and the EMA apply to it
 
 
 def score_fn_name(fn: ScoreFn) -> str:
-    """How a config records a user score function: "module.qualname"."""
+    """How a config records a user score function: "module.qualname"; for a function without a
+    name of its own (a lambda, or one defined inside another function: `<lambda>`, `<locals>` in
+    its qualified name) "module.qualname#CODE", CODE a hash of its code, so that two different
+    lambdas are not taken for one (the hash depends on the Python version's bytecode)."""
     module = getattr(fn, "__module__", None) or "?"
     qualname = getattr(fn, "__qualname__", None) or type(fn).__qualname__
-    return f"{module}.{qualname}"
+    name = f"{module}.{qualname}"
+    inner = fn
+    while getattr(inner, "__wrapped__", None) is not None:  # functools.wraps wrappers
+        inner = getattr(inner, "__wrapped__")  # noqa: B009
+    code = getattr(inner, "__code__", None)
+    if "<" in qualname and code is not None:
+        import hashlib
+        import marshal
+
+        try:
+            name += "#" + hashlib.sha256(marshal.dumps(code)).hexdigest()[:12]
+        except ValueError:  # a code object marshal cannot write
+            pass
+    return name
 
 
 def _scores(score_fn: ScoreFn, m: dict, cost: Tensor, cfg: EvalConfig) -> Tensor:

@@ -80,3 +80,37 @@ def test_an_empty_logdir_or_preset_is_refused(tmp_path, monkeypatch):
     res = CliRunner().invoke(app, ["evolve", "--preset", "", "--logdir", str(tmp_path / "r")])
     assert res.exit_code != 0 and "preset" in res.output and "Traceback" not in res.output
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_scenario_whose_packages_are_dicts_is_one_error(tmp_path):
+    from dataclasses import replace
+
+    from swarmcode_torch.sim.scenario import load_scenario
+
+    s = load_scenario("one-niche")
+    bad = replace(s, packages=[{"kind": "individual", "effector": "pincher", "count": 4}])
+    with pytest.raises(TypeError, match="packages must be PackageClass objects, got dict"):
+        sc.evolve(scenario=bad, generations=1, population=4, logdir=tmp_path, progress=False)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "history",
+    [
+        "abc",
+        [1, 2, 3],
+        [{"generation": "0", "population": {}, "team": {}}],
+        [{"generation": 0, "population": {"a": 1}, "team": {}}],
+        [{"generation": 0, "population": {"1": 2}}],
+    ],
+)
+def test_composition_figure_of_garbage_is_one_error(history):
+    with pytest.raises(ValueError, match="history"):
+        sc.composition_figure(history)
+
+
+def test_composition_figure_of_a_real_history_draws():
+    fig = sc.composition_figure(
+        [{"generation": g, "population": {"1": 3, "2": 1}, "team": {"1": 4}} for g in range(3)]
+    )
+    assert len(fig.axes) == 2

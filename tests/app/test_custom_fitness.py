@@ -207,3 +207,40 @@ def test_a_function_run_as_a_script_is_the_same_function_imported():
     assert not same_function("mymod.score", "mymod.other")
     assert not same_function("__main__.score", "mymod.other")
     assert not same_function("__main__.score", "__main__.other")
+
+
+def test_a_resume_with_another_lambda_is_refused(tmp_path):
+    """Two lambdas share the name `<lambda>`; the run records a hash of its function's code, so
+    a resume with a different lambda is refused and one with the same code goes on."""
+    from swarmcode_torch.app.checkpoints import same_function
+    from swarmcode_torch.coevo.evaluation import score_fn_name
+
+    def pair():
+        return (
+            lambda m, c, cfg: m["delivered_individual"] + 1.0,
+            lambda m, c, cfg: m["delivered_individual"] * 2.0,
+        )
+
+    (a, b), (a2, _) = pair(), pair()
+    assert a.__qualname__ == b.__qualname__  # the names alone cannot tell them apart
+    assert score_fn_name(a) == score_fn_name(a2) != score_fn_name(b)
+    assert same_function(score_fn_name(a), score_fn_name(a2))
+    assert not same_function(score_fn_name(a), score_fn_name(b))
+    # a run recorded before the hash: matched by name, as before
+    assert same_function(score_fn_name(a).split("#")[0], score_fn_name(b))
+    run = sc.evolve(
+        scenario="one-niche",
+        population=4,
+        swarm_size=3,
+        trials=1,
+        ticks=6,
+        generations=1,
+        device="cpu",
+        compile=False,
+        logdir=tmp_path,
+        fitness=a,
+        progress=False,
+    ).run_dir
+    with pytest.raises(ValueError, match="was scored by"):
+        sc.resume(run, generations=2, fitness=b, progress=False)
+    assert sc.resume(run, generations=2, fitness=a2, progress=False).generations == 2
