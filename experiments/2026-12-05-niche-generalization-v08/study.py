@@ -1,0 +1,319 @@
+"""The generalization study of issue 38: does the default keep every niche on worlds nobody
+tuned for?
+
+    python experiments/2026-12-05-niche-generalization-v08/study.py run --split train \
+        --arms v07,v08 [--generations 300] [--seeds 0,1,2] [--workers 2] [--runs DIR]
+    python experiments/2026-12-05-niche-generalization-v08/study.py table --split train
+
+Worlds: `--split train` or `test` are the generator's study worlds of that split
+(`swarmcode_torch.sim.worlds.study_worlds`, generator seeds 1000-1999 and 5000-5999); `--split builtin` is
+one-, two- and four-niche. The train split is the one to look at and choose with; the test split
+is run only to report an adopted change.
+
+Arms: `v07` is the 0.7 default (`--set essential_floor=0 --set admission_basis=members`),
+`v08` the quota floor of essential species alone (`--set admission_basis=members`), `v09` the
+default of this version (the floor and admission by elites), `paper` the paper preset
+(`--preset paper`). (The v07 and v08 runs of the train split were made with the code of commit
+59bf1a5, whose defaults were those settings.)
+
+Every run is a CLI run in its own process (`--workers` at a time, one torch thread each),
+population 50, the world's swarm size, in `--runs` (default /tmp/niche-study-runs). The study
+is resumable: a run whose measures are in `results/` is not run again, and a run directory
+left by an interrupted run is resumed (`evolve --resume`). Each finished run's measures go to
+`results/SPLIT/ARM/WORLD__sSEED.json`; `table` prints the tables RESULTS.md shows.
+
+Measures of one run (the niche count is known by construction; nothing of it is fed back):
+- covered: the package classes some design of the generation's best team can lift (teams.jsonl
+  records each design's capability); a world's niches are kept when every class is covered.
+- kept_last: every class covered in every one of the last 50 generations.
+- team_species / population_species: medians over the last 50 generations.
+- score: median best-team score over the last 50; `table` divides it by the best median score
+  of any run of the same world (any arm, any seed).
+- founded_after_100: species founded a generation from generation 100 on.
+- losses: for each class once covered for 100 generations in a row, every later gap in its
+  coverage longer than 5 generations (the best team is one sample a generation); lost_for_good
+  counts gaps longer than 50 (or reaching the end after more than 50), refounded the others.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+LAST = 50
+HOLD = 100
+REFOUND = 50
+NOISE_GAP = 5
+ARMS = {
+    "v07": ["--set", "essential_floor=0", "--set", "admission_basis=members"],
+    "v08": ["--set", "admission_basis=members"],
+    "v09": [],
+    "paper": ["--preset", "paper"],
+}
+BUILTIN = {"one-niche": 1, "two-niche": 2, "four-niche": 4}
+
+
+def worlds(split: str) -> list[dict]:
+    """[{name, path, niches}] of a split; generated worlds are written to worlds/SPLIT/."""
+    if split == "builtin":
+        return [{"name": n, "path": n, "niches": k} for n, k in BUILTIN.items()]
+    from swarmcode_torch.sim.worlds import study_worlds, world_toml
+
+    out = []
+    folder = HERE / "worlds" / split
+    folder.mkdir(parents=True, exist_ok=True)
+    for w in study_worlds(split):
+        name = w.scenario.name
+        path = folder / f"{name}.toml"
+        text = world_toml(w)
+        if not path.exists() or path.read_text() != text:
+            path.write_text(text)
+        out.append({"name": name, "path": str(path), "niches": int(w.niches)})
+    return out
+
+
+def measure(run: Path, niches: int) -> dict:
+    from swarmcode_torch.app.checkpoints import load_checkpoint
+    from swarmcode_torch.app.summary import read_teams
+
+    teams = read_teams(run)
+    ck = load_checkpoint(run)
+    history = ck["history"]
+    n_classes = None
+    from swarmcode_torch.sim.scenario import load_scenario
+
+    n_classes = len(load_scenario(str(run / "scenario.toml")).packages)
+    gens = sorted(teams)
+    end = gens[-1] + 1
+    covered = {}
+    for g in gens:
+        cov = set()
+        for d in teams[g]["designs"]:
+            cov.update(int(c) for c in d.get("capability", []))
+        covered[g] = cov
+    tail = [g for g in gens if g >= end - LAST]
+    all_classes = set(range(n_classes))
+    kept_last = all(covered[g] >= all_classes for g in tail)
+    team_species = statistics.median(teams[g]["species"] for g in tail)
+    pop = {h["generation"]: len(h["population"]) for h in history}
+    pop_species = statistics.median(pop[g] for g in tail if g in pop)
+    score = statistics.median(teams[g]["fitness"] for g in tail)
+    seen: set[int] = set()
+    founded_after = 0
+    for h in history:
+        ids = {int(s) for s in h["population"]}
+        if h["generation"] >= HOLD:
+            founded_after += len(ids - seen)
+        seen |= ids
+    losses = []
+    for c in sorted(all_classes):
+        run_len, held, gap_start = 0, False, None
+        for g in range(end):
+            on = c in covered.get(g, set())
+            if on:
+                if held and gap_start is not None and g - gap_start > NOISE_GAP:
+                    losses.append({"class": c, "from": gap_start, "gap": g - gap_start})
+                gap_start = None
+                run_len += 1
+                held = held or run_len >= HOLD
+            else:
+                run_len = 0
+                if gap_start is None:
+                    gap_start = g
+        if held and gap_start is not None and end - gap_start > NOISE_GAP:
+            losses.append({"class": c, "from": gap_start, "gap": end - gap_start, "open": True})
+    return {
+        "generations": end,
+        "classes": n_classes,
+        "niches": niches,
+        "classes_covered_last": statistics.median(len(covered[g] & all_classes) for g in tail),
+        "kept_last": kept_last,
+        "team_species": team_species,
+        "population_species": pop_species,
+        "score": score,
+        "founded_after_100": founded_after / max(1, end - HOLD),
+        "losses": losses,
+        "lost_for_good": sum(1 for x in losses if x["gap"] > REFOUND),
+        "refounded": sum(1 for x in losses if x["gap"] <= REFOUND and not x.get("open")),
+    }
+
+
+def _done(run: Path, generations: int) -> bool:
+    try:
+        s = json.loads((run / "summary.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return s.get("generation") == generations - 1 and (run / "checkpoint.pt").is_file()
+
+
+def run_one(job: dict) -> str:
+    out = Path(job["result"])
+    if out.exists():
+        return f"have {out.name}"
+    run = Path(job["run"])
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    exe = ["swarmcode-torch"]
+    if job.get("code"):  # the package of another checkout (a frozen copy of the code under test)
+        env["PYTHONPATH"] = job["code"]
+        exe = [sys.executable, "-m", "swarmcode_torch"]
+    common = ["--threads", "1", "--generations", str(job["generations"])]
+    if (run / "checkpoint.pt").is_file() and not _done(run, job["generations"]):
+        cmd = [*exe, "evolve", "--resume", str(run), *common]
+    elif _done(run, job["generations"]):
+        cmd = None
+    else:
+        run.parent.mkdir(parents=True, exist_ok=True)
+        cmd = [
+            *exe,
+            "evolve",
+            "--scenario",
+            job["path"],
+            "--population",
+            "50",
+            "--seed",
+            str(job["seed"]),
+            "--device",
+            "cpu",
+            "--logdir",
+            str(run.parent),
+            "--render-every",
+            "0",
+            "--figure-every",
+            "100000",
+            "--checkpoint-every",
+            "50",
+            *job["arm_args"],
+            *common,
+        ]
+    t0 = time.time()
+    if cmd is not None:
+        res = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        if res.returncode != 0:
+            return f"FAILED {run.name}: {res.stderr.strip().splitlines()[-1:]}"
+        if not run.exists():  # a new run: its directory is named by the CLI; find it
+            made = sorted(
+                (p for p in run.parent.iterdir() if p.is_dir() and p.name != run.name and
+                 not p.name.startswith("study__")),
+                key=lambda p: p.stat().st_mtime,
+            )
+            made[-1].rename(run)
+    m = measure(run, job["niches"])
+    m.update(world=job["world"], seed=job["seed"], arm=job["arm"], seconds=round(time.time() - t0))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(m, indent=1) + "\n")
+    return f"done {out.parent.name}/{out.name} in {time.time() - t0:.0f} s"
+
+
+def cmd_run(a) -> None:
+    jobs = []
+    runs = Path(a.runs)
+    # world by world, seed by seed, the arms side by side: a partial study is paired
+    for w in worlds(a.split):
+        for seed in [int(s) for s in a.seeds.split(",")]:
+            for arm in a.arms.split(","):
+                key = f"{w['name']}__s{seed}"
+                jobs.append(
+                    {
+                        "world": w["name"],
+                        "path": w["path"],
+                        "niches": w["niches"],
+                        "seed": seed,
+                        "arm": arm,
+                        "arm_args": ARMS[arm],
+                        "generations": a.generations,
+                        "code": a.code,
+                        # one folder per run, so that the CLI's new directory is the only one
+                        "run": str(runs / a.split / arm / key / f"study__{key}"),
+                        "result": str(HERE / "results" / a.split / arm / f"{key}.json"),
+                    }
+                )
+    t0 = time.time()
+    with ThreadPoolExecutor(a.workers) as ex:
+        for i, msg in enumerate(ex.map(run_one, jobs), 1):
+            el = time.time() - t0
+            print(f"[{i}/{len(jobs)}] {msg}  ({el / 60:.1f} min)", flush=True)
+
+
+def load(split: str) -> list[dict]:
+    rows = []
+    for p in sorted((HERE / "results" / split).glob("*/*.json")):
+        rows.append(json.loads(p.read_text()))
+    return rows
+
+
+def cmd_table(a) -> None:
+    rows = load(a.split)
+    best: dict[str, float] = {}
+    for r in rows:
+        best[r["world"]] = max(best.get(r["world"], float("-inf")), r["score"])
+    arms = sorted({r["arm"] for r in rows})
+    out = {}
+    print(f"split {a.split}: {len({r['world'] for r in rows})} worlds")
+    print(
+        "| arm | runs | every niche kept, last 50 | best-team species = niches | "
+        "lost for good after a 100-generation hold | median score / best run of the world |"
+        " founded a generation after 100 |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for arm in arms:
+        rs = [r for r in rows if r["arm"] == arm]
+        n = len(rs)
+        kept = sum(r["kept_last"] for r in rs)
+        eq = sum(r["team_species"] == r["niches"] for r in rs)
+        lost = sum(r["lost_for_good"] > 0 for r in rs)
+        rel = statistics.median(r["score"] / best[r["world"]] for r in rs)
+        fnd = statistics.median(r["founded_after_100"] for r in rs)
+        out[arm] = dict(runs=n, kept=kept, species_eq=eq, lost=lost, rel_score=rel, founded=fnd)
+        print(
+            f"| {arm} | {n} | {kept} ({kept / n:.0%}) | {eq} ({eq / n:.0%}) | {lost} | "
+            f"{rel:.3f} | {fnd:.3f} |"
+        )
+    if a.runs_table:
+        print("\n| world | niches | seed | " + " | ".join(arms) + " |")
+        print("|---|---|---|" + "---|" * len(arms))
+        keyed = {(r["world"], r["seed"], r["arm"]): r for r in rows}
+        for w, s in sorted({(r["world"], r["seed"]) for r in rows}):
+            cells = []
+            for arm in arms:
+                r = keyed.get((w, s, arm))
+                cells.append(
+                    "-"
+                    if r is None
+                    else f"{'K' if r['kept_last'] else 'lost'} sp {r['team_species']:g} "
+                    f"{r['score']:.0f}"
+                )
+            n = next(r["niches"] for r in rows if r["world"] == w)
+            print(f"| {w} | {n} | {s} | " + " | ".join(cells) + " |")
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("--split", choices=("train", "test", "builtin"), required=True)
+    r.add_argument("--arms", default="v08")
+    r.add_argument("--seeds", default="0,1,2")
+    r.add_argument("--generations", type=int, default=300)
+    r.add_argument("--workers", type=int, default=2)
+    r.add_argument("--runs", default="/tmp/niche-study-runs")
+    r.add_argument("--code", help="run the package of this checkout (PYTHONPATH)")
+    t = sub.add_parser("table")
+    t.add_argument("--split", choices=("train", "test", "builtin"), required=True)
+    t.add_argument("--runs-table", action="store_true")
+    t.add_argument("--json")
+    a = ap.parse_args()
+    {"run": cmd_run, "table": cmd_table}[a.cmd](a)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
