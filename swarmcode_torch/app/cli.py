@@ -318,7 +318,9 @@ def inspect(
     print_lineage(run_dir)
     caps = capabilities(run_dir, designs)
     for i, d in enumerate(designs):
-        console.print(f"[bold]species {d['species']}[/] ({d['count']} robots, {d['effector']}):")
+        n = d["count"]
+        robots = f"{n} robot" if n == 1 else f"{n} robots"
+        console.print(f"[bold]species {d['species']}[/] ({robots}, {d['effector']}):")
         if caps is not None:
             labels, can = caps
             lifts = "; ".join(labels[j] for j in can[i]) or "no package class"

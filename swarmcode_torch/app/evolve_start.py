@@ -136,7 +136,10 @@ def print_resolved_config(config_file, from_run, resume, preset, settings, **giv
         fail(str(e))
     except OSError as e:
         os_fail(e, "cannot read the config")
-    sys.stdout.write(config_to_toml(cfg, parent=branch.parent if branch else None))
+    header = (
+        "# swarmcode-torch settings (start a run with them: swarmcode-torch evolve --config FILE)"
+    )
+    sys.stdout.write(config_to_toml(cfg, parent=branch.parent if branch else None, header=header))
     sys.stdout.flush()
 
 

@@ -86,7 +86,7 @@ class Evolve:
         bool | None,
         typer.Option(
             "--compile/--no-compile",
-            help="torch.compile the tick [default: on CUDA, and on CPU for >= 50 generations].",
+            help="torch.compile the Python tick [default: on CUDA; on the CPU the fused C++ tick runs, and --compile replaces it with the compiled Python tick (also where the C++ tick cannot be built, for runs of >= 50 generations)].",
         ),
     ]
     logdir = Annotated[

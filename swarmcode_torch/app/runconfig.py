@@ -60,14 +60,18 @@ def config_table(cfg: SwarmCoDeConfig) -> dict[str, Any]:
 
 
 def config_to_toml(
-    cfg: SwarmCoDeConfig, software: dict | None = None, parent: dict | None = None
+    cfg: SwarmCoDeConfig,
+    software: dict | None = None,
+    parent: dict | None = None,
+    header: str | None = None,
 ) -> str:
     """config.toml: every set key of `cfg` (`config_table`), written by tomli-w; `software`
     (`records.software`), what wrote it, goes into a comment line (a config file holds settings
     only); `parent`, the run and generation a branched run started from, into a [parent]
-    table (`read_parent`)."""
+    table (`read_parent`); `header`: the first comment line, if not a run's."""
     lines = [
-        "# swarmcode-torch run configuration (re-run with: swarmcode-torch evolve --resume DIR)"
+        header
+        or "# swarmcode-torch run configuration (re-run with: swarmcode-torch evolve --resume DIR)"
     ]
     if software:
         lines.append(
