@@ -157,7 +157,13 @@ def test_every_phenotype_of_a_run_is_built_from_its_scenarios_catalog(dear):
     """Team cost in the evaluation, the recorded designs' cost and capability, the replayed
     robots and a shard's rollout: each uses the scenario's catalog, not the built-in one."""
     result = sc.evolve(
-        scenario=str(dear), generations=2, population=6, trials=1, device="cpu", compile=False
+        scenario=str(dear),
+        generations=2,
+        population=6,
+        trials=1,
+        device="cpu",
+        compile=False,
+        logdir=dear.parent / "runs",  # not the checkout's runs/ (the default)
     )
     scen = load_scenario(str(dear))
     best = result.best_team
@@ -276,7 +282,13 @@ def test_a_scenario_object_with_its_own_catalog_round_trips_and_runs(dear):
     assert parse_scenario(text.encode(), "object") == s
     assert "[hardware" not in scenario_to_toml(load_scenario("four-niche"))
     result = sc.evolve(
-        scenario=s, generations=1, population=4, trials=1, device="cpu", compile=False
+        scenario=s,
+        generations=1,
+        population=4,
+        trials=1,
+        device="cpu",
+        compile=False,
+        logdir=dear.parent / "runs",
     )
     assert result.best_team["cost"] > 1000.0 * s.num_robots
 
