@@ -14,12 +14,19 @@ from ..coevo.config import MAX_SEED
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..sim.scenario import Scenario
 from .checkpoints import load_checkpoint
-from .files import REPLAY_FILE, RunError, atomic_write_bytes, check_output_path
+from .files import (
+    REPLAY_FILE,
+    SUMMARY_FILE,
+    TEAMS_FILE,
+    RunError,
+    atomic_write_bytes,
+    check_output_path,
+)
 from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
 from .replay_page import HTML_FILE, page_data, write_page
 from .runconfig import _size, estimate_bytes, memory_limit, read_config, run_scenario
-from .summary import generation_team, read_summary, read_teams
+from .summary import check_capability_classes, generation_team, read_summary, read_teams
 
 
 def _finite(x) -> bool:
@@ -154,6 +161,12 @@ def replay_run(
         record = read_summary(run_dir, figures=False)
     designs = record["designs"]
     scenario = run_scenario(run_dir, cfg)  # the run's own copies, when it has them
+    source = (
+        f"{run_dir / TEAMS_FILE} (generation {generation})"
+        if generation is not None
+        else str(run_dir / SUMMARY_FILE)
+    )
+    check_capability_classes(designs, len(scenario.packages), source)
     robots = sum(d["count"] for d in designs)
     need = estimate_bytes(replace(cfg, population=1, trials=1, swarm_size=robots), scenario)
     limit, what = memory_limit("cpu")

@@ -9,6 +9,7 @@ import io
 import os
 import pickle
 import re
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -134,8 +135,18 @@ def read_checkpoint(path: Path) -> dict:
     swarmcode-torch checkpoint."""
     path = Path(path)
     try:
-        with os.fdopen(open_nofollow(path, os.O_RDONLY), "rb") as f:  # never through a link
+        # never through a link; O_NONBLOCK: a FIFO planted there is refused, not waited on
+        fd = open_nofollow(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(fd).st_mode):
+                raise RunError(
+                    f"{path} is not a regular file (a FIFO, a device, a folder); a "
+                    "checkpoint is a file torch.save wrote"
+                )
+            os.set_blocking(fd, True)
             d = torch.load(f, map_location="cpu", weights_only=True)
+    except RunError:
+        raise
     except pickle.UnpicklingError as e:
         if "weights only load failed" in str(e).lower() or "unsupported global" in str(e).lower():
             raise RunError(
@@ -156,13 +167,93 @@ def read_checkpoint(path: Path) -> dict:
             raise RunError(
                 f"{path} is damaged: {key!r} has the wrong type ({type(d[key]).__name__})"
             )
+    check_records(d, path)
     return d
+
+
+def _integer(v, low: int = 0) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= low
+
+
+def _species_id(k) -> bool:
+    """A species id as a history record keys it: an integer >= 0, or its decimal text."""
+    return _integer(k) or (isinstance(k, str) and 0 < len(k) < 20 and k.isascii() and k.isdigit())
+
+
+def _number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def check_records(d: dict, path: Path) -> None:
+    """RunError, one line naming `path` and the entry, unless the plain records of a checkpoint
+    (its types checked) fit together: `generation` no more than the generations of the config
+    it holds, one `history` record per finished generation, in order, each with its species
+    composition (`population`, `team`: species id -> count), and a `best` team (None before a
+    generation finished) of a finished generation, with a number for its fitness and
+    well-formed designs. What every reader of a checkpoint relies on (resume, `--from`,
+    `dynamics`, the API's load); the tensors are checked against the config where a run is
+    built from them (`evolve.load_state_dict`)."""
+    from .summary import check_designs
+
+    gen = d["generation"]
+    if gen < 0:
+        raise RunError(f"{path}: generation must be an integer >= 0, got {gen}")
+    total = d["config"].get("generations")
+    if _integer(total) and gen > total:
+        raise RunError(
+            f"{path}: generation: {gen} is beyond the {total} generations of the run's config "
+            "(the file is damaged)"
+        )
+    history = d["history"]
+    if len(history) != gen:
+        raise RunError(
+            f"{path}: history must hold one record per generation 0..{gen - 1} (it has "
+            f"{len(history)} for {gen} finished generations)"
+        )
+    for i, h in enumerate(history):
+        w = f"{path}: history[{i}]"
+        if not isinstance(h, dict):
+            raise RunError(f"{w}: expected a record (a table), got {h!r:.60}")
+        g = h.get("generation")
+        if not _integer(g) or g != i:
+            raise RunError(
+                f"{w}.generation: expected {i} (one record per generation, in order), got {g!r:.40}"
+            )
+        for key in ("population", "team"):
+            if key not in h and key == "team":
+                continue
+            v = h.get(key)
+            if not isinstance(v, dict) or not all(
+                _species_id(k) and _integer(n) for k, n in v.items()
+            ):
+                raise RunError(
+                    f"{w}.{key}: expected species id -> count (integers >= 0), got {v!r:.60}"
+                )
+    best = d["best"]
+    if best is None:
+        return
+    w = f"{path}: best"
+    g = best.get("generation")
+    if not _integer(g) or g >= gen:
+        raise RunError(
+            f"{w}.generation: expected a finished generation (0..{gen - 1}), got {g!r:.40}"
+        )
+    if not _number(best.get("fitness")):
+        raise RunError(f"{w}.fitness: expected a number, got {best.get('fitness')!r:.60}")
+    check_designs(best.get("designs"), w)
+    for key, fields in (("reeval", ("mean",)), ("run_single_trial", ("fitness", "generation"))):
+        v = best.get(key)
+        if v is not None and not (isinstance(v, dict) and all(_number(v.get(f)) for f in fields)):
+            raise RunError(f"{w}.{key}: expected a table of numbers, got {v!r:.60}")
+    v = best.get("single_trial_fitness")
+    if v is not None and not _number(v):
+        raise RunError(f"{w}.single_trial_fitness: expected a number, got {v!r:.60}")
 
 
 def load_checkpoint(run_dir: Path) -> dict:
     """The checkpoint of a run directory (see `read_checkpoint`)."""
     path = Path(run_dir) / CHECKPOINT_FILE
-    if not path.is_file() and not path.is_symlink():
+    if not path.exists() and not path.is_symlink():
         raise RunError(f"{run_dir} has no {CHECKPOINT_FILE} to resume from")
     return read_checkpoint(path)
 

@@ -325,7 +325,10 @@ def inspect(
             labels, can = caps
             lifts = "; ".join(labels[j] for j in can[i]) or "no package class"
             console.print(f"  lifts: {lifts}", highlight=False, markup=False)
-        console.print(bt.format_tree(d["bt"], root=True), highlight=False)
+        # not wrapped by Rich (soft_wrap): a tree nested thousands of levels deep prints at once
+        console.print(
+            bt.format_tree(d["bt"], root=True), highlight=False, markup=False, soft_wrap=True
+        )
     if caps is not None:
         from ..coevo.dynamics import niche_count
 

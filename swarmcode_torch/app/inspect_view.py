@@ -82,12 +82,22 @@ def inspect_sweep(path: Path) -> bool:
 
 
 def capabilities(run_dir: Path, designs: list[dict]):
-    """(package class labels, per design the classes it lifts), or None without a scenario."""
+    """(package class labels, per design the classes it lifts), or None without a scenario; a
+    one-line error for a recorded capability naming a class the scenario has not."""
     from .analysis import design_capabilities
+    from .files import SUMMARY_FILE
     from .runs import RunError, read_config, run_scenario
+    from .summary import check_capability_classes
 
     try:
         scenario = run_scenario(run_dir, read_config(run_dir))
+    except (RunError, ValueError):
+        return None
+    try:
+        check_capability_classes(designs, len(scenario.packages), str(run_dir / SUMMARY_FILE))
+    except RunError as e:
+        fail(str(e))
+    try:
         return [c.label for c in scenario.packages], design_capabilities(designs, scenario)
     except (RunError, ValueError):
         return None

@@ -11,6 +11,7 @@ from typing import Any
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.bt import NUM_OPCODES
 from ..sim.hardware import MAX_NESTING, nesting_depth
+from ..sim.scenario import MAX_PACKAGES
 from . import records
 from .files import (
     MAX_RECORD_BYTES,
@@ -123,6 +124,11 @@ def check_designs(designs: Any, source: str) -> list[dict]:
                 raise RunError(f"{w}: missing {key!r}")
             if not ok(d[key]):
                 raise RunError(f"{w}.{key}: expected {what}, got {d[key]!r:.60}")
+        if "capability" in d and not _capability_ok(d["capability"]):
+            raise RunError(
+                f"{w}.capability: expected a list of package class indices (distinct, "
+                f"ascending, 0..{MAX_PACKAGES - 1}), got {_short(d['capability'])}"
+            )
     total = sum(d["count"] for d in designs)
     if total < 1:
         raise RunError(f"{source}: designs: the counts add up to no robot")
@@ -132,6 +138,39 @@ def check_designs(designs: Any, source: str) -> list[dict]:
             f"run can have ({MAX_TEAM})"
         )
     return designs
+
+
+def _capability_ok(v: Any) -> bool:
+    """A design's recorded capability: the indices of the package classes it lifts, ascending
+    and distinct (at most one per class: a scenario has at most MAX_PACKAGES classes)."""
+    return (
+        isinstance(v, list)
+        and len(v) <= MAX_PACKAGES
+        and all(isinstance(x, int) and not isinstance(x, bool) for x in v)
+        and all(a < b for a, b in zip(v, v[1:]))
+        and (not v or (v[0] >= 0 and v[-1] < MAX_PACKAGES))
+    )
+
+
+def _short(v: Any) -> str:
+    """A value as a message shows it: its repr, cut to 60 characters (a list of 10^6 entries is
+    not printed whole first)."""
+    if isinstance(v, list) and len(v) > 20:
+        return f"a list of {len(v)} entries"
+    return f"{v!r:.60}"
+
+
+def check_capability_classes(designs: list[dict], classes: int, source: str) -> None:
+    """RunError naming `source` and the design when a recorded capability (`check_designs`
+    checked its form) names a package class the scenario, of `classes` classes, does not
+    have."""
+    for i, d in enumerate(designs):
+        bad = [c for c in d.get("capability", ()) if c >= classes]
+        if bad:
+            raise RunError(
+                f"{source}: designs[{i}].capability: package class {bad[0]} does not exist "
+                f"(the run's scenario has {classes}: 0..{classes - 1})"
+            )
 
 
 #: summary.json keys and whether each must be a number (None allowed: a non-finite value).

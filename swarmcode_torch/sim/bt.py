@@ -230,16 +230,30 @@ Node = int | tuple[int, list["Node"]]  # a leaf opcode, or (SEQ|SEL, children)
 
 def parse(program: Sequence[int]) -> list[Node]:
     """Pre-order opcode list -> the implicit root's children (NOP skipped, stray END ignored):
-    `parse_slots` without the slots."""
-
-    def strip(nodes: list[SlotNode]) -> list[Node]:
-        return [(op, strip(children)) if op in CONTROL_OPS else op for _, op, children in nodes]
-
-    return strip(parse_slots(program))
+    `parse_slots` without the slots. It keeps its own stack, as `format_tree`, `tree_lines` and
+    `trace` do, so a tree nested thousands of levels deep (a 4096-slot program of SEQ, which a
+    run file may hold) is read and shown without recursion; only the tests' reference `_eval`
+    recurses."""
+    root: list[Node] = []
+    stack = [root]
+    for op in (int(o) for o in program):
+        if op == NOP:
+            continue
+        if op == END:
+            if len(stack) > 1:
+                stack.pop()
+        elif op in CONTROL_OPS:
+            children: list[Node] = []
+            stack[-1].append((op, children))
+            stack.append(children)
+        else:
+            stack[-1].append(op)
+    return root
 
 
 def _eval(node: Node, leaf_status: Sequence[int], fired: set[int]) -> tuple[int, int]:
-    """Recursively tick one node -> (status, action of the RUNNING leaf or NOP)."""
+    """Recursively tick one node -> (status, action of the RUNNING leaf or NOP): the plain
+    reference the tests hold the interpreters to (`trace`, which replays use, keeps a stack)."""
     if isinstance(node, int):
         st = int(leaf_status[node])
         if st == RUNNING:
@@ -531,18 +545,20 @@ def format_tree(opcodes: torch.Tensor | Sequence[int], root: bool = False) -> st
     and indent them under it, so that the program reads as one tree.
     """
     program = opcodes.tolist() if isinstance(opcodes, torch.Tensor) else list(opcodes)
-    lines: list[str] = ["SEQ (root)"] if root else []
+    lines = [text for text, _ in _slot_lines(program, 1 if root else 0)]
+    return "\n".join(["SEQ (root)", *lines] if root else lines)
 
-    def emit(nodes: list[Node], level: int) -> None:
-        for node in nodes:
-            if isinstance(node, int):
-                lines.append("  " * level + _node_name(node))
-            else:
-                lines.append("  " * level + _node_name(node[0]))
-                emit(node[1], level + 1)
 
-    emit(parse(program), 1 if root else 0)
-    return "\n".join(lines)
+def _slot_lines(program: Sequence[int], level: int) -> list[tuple[str, int]]:
+    """Each node of `program` in pre-order as (its line, indented two spaces per level from
+    `level`, its slot): a walk with its own stack (no recursion, however deep the tree)."""
+    lines: list[tuple[str, int]] = []
+    todo: list[tuple[SlotNode, int]] = [(n, level) for n in reversed(parse_slots(program))]
+    while todo:
+        (slot, op, children), depth = todo.pop()
+        lines.append(("  " * depth + _node_name(op), slot))
+        todo.extend((c, depth + 1) for c in reversed(children))
+    return lines
 
 
 def random_programs(
@@ -584,16 +600,7 @@ def parse_slots(program: Sequence[int]) -> list[SlotNode]:
 def tree_lines(program: Sequence[int]) -> list[tuple[str, int]]:
     """``format_tree(program, root=True)``'s lines, each with the slot of its node (-1: the
     implicit root)."""
-    lines = [("SEQ (root)", -1)]
-
-    def emit(nodes: list[SlotNode], level: int) -> None:
-        for slot, op, children in nodes:
-            lines.append(("  " * level + _node_name(op), slot))
-            if op in CONTROL_OPS:
-                emit(children, level + 1)
-
-    emit(parse_slots(program), 1)
-    return lines
+    return [("SEQ (root)", -1), *_slot_lines(program, 1)]
 
 
 def trace(program: Sequence[int], leaf_status: Sequence[int]) -> tuple[int, list[tuple[int, int]]]:
@@ -607,26 +614,34 @@ def trace(program: Sequence[int], leaf_status: Sequence[int]) -> tuple[int, list
     e.g. a pick-up or a drop), else -1.
     """
     visited: list[tuple[int, int]] = []
-    acting = [-1, -1]  # running leaf, last fired action
-
-    def tick(node: SlotNode) -> int:
-        slot, op, children = node
-        if op not in CONTROL_OPS:
-            st = int(leaf_status[op])
-            visited.append((slot, st))
-            if st == RUNNING:
-                acting[0] = slot
-            elif st == SUCCESS and op in ACTION_OPS:
-                acting[1] = slot
-            return st
-        st = SUCCESS if op == SEQ else FAILURE
-        for child in children:
-            c = tick(child)
+    running = fired = -1  # the leaf that returned RUNNING, the last action that fired
+    # frames of the control nodes being ticked: [node, index of its next child, its status]
+    stack: list[list] = [[(-1, SEQ, parse_slots(program)), 0, SUCCESS]]
+    returned: int | None = None  # the status the last finished child returned
+    while stack:
+        frame = stack[-1]
+        slot, op, children = frame[0]
+        if returned is not None:
+            c, returned = returned, None
             if c == RUNNING or (op == SEQ and c == FAILURE) or (op == SEL and c == SUCCESS):
-                st = c
-                break
-        visited.append((slot, st))
-        return st
-
-    tick((-1, SEQ, parse_slots(program)))
-    return (acting[0] if acting[0] >= 0 else acting[1]), visited
+                frame[2] = c
+                frame[1] = len(children)  # short-circuit: no further child is ticked
+        if frame[1] < len(children):
+            child = children[frame[1]]
+            frame[1] += 1
+            cslot, cop, _ = child
+            if cop in CONTROL_OPS:
+                stack.append([child, 0, SUCCESS if cop == SEQ else FAILURE])
+            else:
+                st = int(leaf_status[cop])
+                visited.append((cslot, st))
+                if st == RUNNING:
+                    running = cslot
+                elif st == SUCCESS and cop in ACTION_OPS:
+                    fired = cslot
+                returned = st
+            continue
+        visited.append((slot, frame[2]))
+        stack.pop()
+        returned = frame[2]
+    return (running if running >= 0 else fired), visited
