@@ -92,18 +92,20 @@ class SwarmCoDeConfig:
     (beyond the paper; docs/MODEL.md)."""
     min_share: float = 1.0
     """A species whose quota share is below this many individuals gets no slot (0: none)."""
-    admission_basis: str = "elites"
+    admission_basis: str = "members"
     """Whose gate results make a species' gated share in partner admission (probation,
     demotion, the essential floor): "elites", its members carried over unchanged where it has
     any (a species' fresh offspring, some broken by mutation, are gated whatever the species
-    does), or "members", all of them (0.6 and 0.7)."""
-    essential_floor: int = 3
+    does), or "members", all of them (the default). "elites" was a candidate of the 0.8
+    generalization study and was not adopted (docs/MODEL.md)."""
+    essential_floor: int = 0
     """Offspring quota floor of an essential species: a partner whose members beat their
     baselines (the moving average of its gated share below the admission threshold, 0.3), i.e.
     whose robots do a job no partner's robots can do. It keeps at least this many slots and is
     exempt from `min_share`, so that the holder of a hard niche, whose mean fitness may be lower
     than the others', is not starved out. Needs `partner_admission = "substitute"` (it reads the
-    admission's gate statistics); 0: no floor (beyond the paper; docs/MODEL.md)."""
+    admission's gate statistics); 0: no floor, the default (a candidate of the 0.8
+    generalization study, not adopted: docs/MODEL.md)."""
     hw_sigma: float = 0.05
     """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
     social_sigma: float = 0.05

@@ -40,15 +40,14 @@ def test_no_essential_species_or_a_floor_of_0_leaves_the_quotas():
 
 def test_a_starved_essential_species_keeps_its_floor_in_reproduce():
     """One individual of species 2 with a tenth of the others' fitness: min_share gives it no
-    slot (it would go extinct); marked essential, it keeps `essential_floor` slots."""
+    slot (it would go extinct); marked essential, it keeps `essential_floor` (3) slots."""
     gen = torch.Generator().manual_seed(1)
     genome = random_genomes(50, gen)
     species = torch.cat([torch.zeros(25), torch.ones(24), torch.full((1,), 2.0)]).long()
     fit = torch.cat([torch.full((49,), 100.0), torch.full((1,), 10.0)])
     proto_ids = torch.tensor([0, 1, 2])
     proto_index = torch.tensor([0, 25, 49])
-    params = ReproductionParams()
-    assert params.essential_floor == 3
+    params = ReproductionParams(essential_floor=3)
     _, hint, _, _ = reproduce(genome, fit, species, proto_index, proto_ids, params, gen, distance)
     assert int((hint == 2).sum()) == 0
     _, hint, _, _ = reproduce(
@@ -66,6 +65,7 @@ def test_a_starved_essential_species_keeps_its_floor_in_reproduce():
     assert int((hint == 2).sum()) == 3 and hint.numel() == 50
 
 
-def test_the_paper_preset_has_no_floor_and_the_default_has_one():
-    assert SwarmCoDeConfig().essential_floor == 3
+def test_neither_the_default_nor_the_paper_preset_has_a_floor():
+    """The floor was a candidate of the generalization study and was not adopted."""
+    assert SwarmCoDeConfig().essential_floor == 0 and SwarmCoDeConfig().admission_basis == "members"
     assert PRESETS["paper"]["essential_floor"] == 0
