@@ -200,8 +200,11 @@ def run_one(job: dict) -> str:
             return f"FAILED {run.name}: {res.stderr.strip().splitlines()[-1:]}"
         if not run.exists():  # a new run: its directory is named by the CLI; find it
             made = sorted(
-                (p for p in run.parent.iterdir() if p.is_dir() and p.name != run.name and
-                 not p.name.startswith("study__")),
+                (
+                    p
+                    for p in run.parent.iterdir()
+                    if p.is_dir() and p.name != run.name and not p.name.startswith("study__")
+                ),
                 key=lambda p: p.stat().st_mtime,
             )
             made[-1].rename(run)
@@ -251,6 +254,9 @@ def load(split: str) -> list[dict]:
 
 def cmd_table(a) -> None:
     rows = load(a.split)
+    if a.seeds:  # the runs of these seeds only (a paired comparison)
+        keep = {int(x) for x in a.seeds.split(",")}
+        rows = [r for r in rows if r["seed"] in keep]
     best: dict[str, float] = {}
     for r in rows:
         best[r["world"]] = max(best.get(r["world"], float("-inf")), r["score"])
@@ -310,6 +316,7 @@ def main() -> None:
     t = sub.add_parser("table")
     t.add_argument("--split", choices=("train", "test", "builtin"), required=True)
     t.add_argument("--runs-table", action="store_true")
+    t.add_argument("--seeds", help="only the runs of these seeds, e.g. 0")
     t.add_argument("--json")
     a = ap.parse_args()
     {"run": cmd_run, "table": cmd_table}[a.cmd](a)
