@@ -177,7 +177,9 @@ def _integer(v, low: int = 0) -> bool:
 
 def _species_id(k) -> bool:
     """A species id as a history record keys it: an integer >= 0, or its decimal text."""
-    return _integer(k) or (isinstance(k, str) and 0 < len(k) < 20 and k.isascii() and k.isdigit())
+    return (_integer(k) and k < 2**63) or (
+        isinstance(k, str) and 0 < len(k) < 19 and k.isascii() and k.isdigit()
+    )
 
 
 def _number(v) -> bool:
@@ -193,41 +195,42 @@ def check_records(d: dict, path: Path) -> None:
     well-formed designs. What every reader of a checkpoint relies on (resume, `--from`,
     `dynamics`, the API's load); the tensors are checked against the config where a run is
     built from them (`evolve.load_state_dict`)."""
-    from .summary import check_designs
+    from .summary import check_designs, finite, short
 
     gen = d["generation"]
     if gen < 0:
-        raise RunError(f"{path}: generation must be an integer >= 0, got {gen}")
+        raise RunError(f"{path}: generation must be an integer >= 0, got {short(gen)}")
     total = d["config"].get("generations")
     if _integer(total) and gen > total:
         raise RunError(
-            f"{path}: generation: {gen} is beyond the {total} generations of the run's config "
-            "(the file is damaged)"
+            f"{path}: generation: {short(gen)} is beyond the {short(total)} generations of "
+            "the run's config (the file is damaged)"
         )
     history = d["history"]
     if len(history) != gen:
         raise RunError(
             f"{path}: history must hold one record per generation 0..{gen - 1} (it has "
-            f"{len(history)} for {gen} finished generations)"
+            f"{len(history)} for {short(gen)} finished generations)"
         )
     for i, h in enumerate(history):
         w = f"{path}: history[{i}]"
         if not isinstance(h, dict):
-            raise RunError(f"{w}: expected a record (a table), got {h!r:.60}")
+            raise RunError(f"{w}: expected a record (a table), got {short(h)}")
         g = h.get("generation")
         if not _integer(g) or g != i:
             raise RunError(
-                f"{w}.generation: expected {i} (one record per generation, in order), got {g!r:.40}"
+                f"{w}.generation: expected {i} (one record per generation, in order), "
+                f"got {short(g)}"
             )
         for key in ("population", "team"):
             if key not in h and key == "team":
                 continue
             v = h.get(key)
             if not isinstance(v, dict) or not all(
-                _species_id(k) and _integer(n) for k, n in v.items()
+                _species_id(k) and _integer(n) and n < 2**63 for k, n in v.items()
             ):
                 raise RunError(
-                    f"{w}.{key}: expected species id -> count (integers >= 0), got {v!r:.60}"
+                    f"{w}.{key}: expected species id -> count (integers >= 0), got {short(v)}"
                 )
     best = d["best"]
     if best is None:
@@ -236,18 +239,18 @@ def check_records(d: dict, path: Path) -> None:
     g = best.get("generation")
     if not _integer(g) or g >= gen:
         raise RunError(
-            f"{w}.generation: expected a finished generation (0..{gen - 1}), got {g!r:.40}"
+            f"{w}.generation: expected a finished generation (0..{gen - 1}), got {short(g)}"
         )
-    if not _number(best.get("fitness")):
-        raise RunError(f"{w}.fitness: expected a number, got {best.get('fitness')!r:.60}")
+    if not finite(best.get("fitness")):
+        raise RunError(f"{w}.fitness: expected a number, got {short(best.get('fitness'))}")
     check_designs(best.get("designs"), w)
     for key, fields in (("reeval", ("mean",)), ("run_single_trial", ("fitness", "generation"))):
         v = best.get(key)
-        if v is not None and not (isinstance(v, dict) and all(_number(v.get(f)) for f in fields)):
-            raise RunError(f"{w}.{key}: expected a table of numbers, got {v!r:.60}")
+        if v is not None and not (isinstance(v, dict) and all(finite(v.get(f)) for f in fields)):
+            raise RunError(f"{w}.{key}: expected a table of numbers, got {short(v)}")
     v = best.get("single_trial_fitness")
-    if v is not None and not _number(v):
-        raise RunError(f"{w}.single_trial_fitness: expected a number, got {v!r:.60}")
+    if v is not None and not finite(v):
+        raise RunError(f"{w}.single_trial_fitness: expected a number, got {short(v)}")
 
 
 def load_checkpoint(run_dir: Path) -> dict:

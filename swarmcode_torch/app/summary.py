@@ -73,6 +73,12 @@ def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+def _tier(v: Any) -> bool:
+    """A hardware tier: the integer 1, 2 or 3 (a tensor or a float is not one: `v in (1, 2, 3)`
+    alone would compare a tensor elementwise)."""
+    return isinstance(v, int) and not isinstance(v, bool) and v in (1, 2, 3)
+
+
 #: The most robots the designs of a summary.json or teams.jsonl record may add up to (the
 #: swarm_size bound); a replay also checks the memory its team needs (`analysis.replay_run`).
 MAX_TEAM = 10_000_000
@@ -82,31 +88,35 @@ def check_designs(designs: Any, source: str) -> list[dict]:
     """The "designs" of a summary.json or teams.jsonl record, every field checked (RunError
     naming `source`, the design and the field)."""
     if not isinstance(designs, list) or not designs:
-        raise RunError(f"{source}: designs: expected a non-empty list, got {designs!r:.60}")
+        raise RunError(f"{source}: designs: expected a non-empty list, got {short(designs)}")
     for i, d in enumerate(designs):
         w = f"{source}: designs[{i}]"
         if not isinstance(d, dict):
-            raise RunError(f"{w}: expected a table, got {d!r:.60}")
+            raise RunError(f"{w}: expected a table, got {short(d)}")
         for key, ok, what in (
             (
                 "count",
                 lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0,
                 "an integer >= 0",
             ),
-            ("species", lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer"),
-            ("effector", lambda v: v in ("suction", "pincher"), "suction or pincher"),
             (
-                "radius",
-                lambda v: _is_number(v) and math.isfinite(v) and 0 < v <= 10,
-                "a radius in (0, 10] m",
+                "species",
+                lambda v: isinstance(v, int) and not isinstance(v, bool) and 0 <= v < 2**63,
+                "an integer in [0, 2**63)",
             ),
-            ("chassis_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
-            ("battery_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
-            ("motor_tier", lambda v: v in (1, 2, 3) and not isinstance(v, bool), "1, 2 or 3"),
-            ("torque_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
-            ("battery_point", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
-            ("dominance", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
-            ("cost", lambda v: _is_number(v) and math.isfinite(v), "a finite number"),
+            (
+                "effector",
+                lambda v: isinstance(v, str) and v in ("suction", "pincher"),
+                "suction or pincher",
+            ),
+            ("radius", lambda v: finite(v) and 0 < v <= 10, "a radius in (0, 10] m"),
+            ("chassis_tier", _tier, "1, 2 or 3"),
+            ("battery_tier", _tier, "1, 2 or 3"),
+            ("motor_tier", _tier, "1, 2 or 3"),
+            ("torque_point", lambda v: finite(v), "a finite number"),
+            ("battery_point", lambda v: finite(v), "a finite number"),
+            ("dominance", lambda v: finite(v), "a finite number"),
+            ("cost", lambda v: finite(v), "a finite number"),
             (
                 "bt",
                 lambda v: (
@@ -123,18 +133,22 @@ def check_designs(designs: Any, source: str) -> list[dict]:
             if key not in d:
                 raise RunError(f"{w}: missing {key!r}")
             if not ok(d[key]):
-                raise RunError(f"{w}.{key}: expected {what}, got {d[key]!r:.60}")
+                raise RunError(f"{w}.{key}: expected {what}, got {short(d[key])}")
+        # optional: a design recorded before it was written is read with a default
+        v = d.get("selectivity", 0.5)
+        if not (finite(v)):
+            raise RunError(f"{w}.selectivity: expected a finite number, got {short(v)}")
         if "capability" in d and not _capability_ok(d["capability"]):
             raise RunError(
                 f"{w}.capability: expected a list of package class indices (distinct, "
-                f"ascending, 0..{MAX_PACKAGES - 1}), got {_short(d['capability'])}"
+                f"ascending, 0..{MAX_PACKAGES - 1}), got {short(d['capability'])}"
             )
     total = sum(d["count"] for d in designs)
     if total < 1:
         raise RunError(f"{source}: designs: the counts add up to no robot")
     if total > MAX_TEAM:
         raise RunError(
-            f"{source}: designs: the counts add up to {total} robots, more than any "
+            f"{source}: designs: the counts add up to {short(total)} robots, more than any "
             f"run can have ({MAX_TEAM})"
         )
     return designs
@@ -152,12 +166,24 @@ def _capability_ok(v: Any) -> bool:
     )
 
 
-def _short(v: Any) -> str:
+def short(v: Any) -> str:
     """A value as a message shows it: its repr, cut to 60 characters (a list of 10^6 entries is
-    not printed whole first)."""
-    if isinstance(v, list) and len(v) > 20:
-        return f"a list of {len(v)} entries"
-    return f"{v!r:.60}"
+    not printed whole first; an integer of more digits than Python converts to text, alone or
+    inside, is described)."""
+    if isinstance(v, (list, dict)) and len(v) > 20:
+        return f"a {'list' if isinstance(v, list) else 'table'} of {len(v)} entries"
+    try:
+        return f"{v!r:.60}"
+    except ValueError:  # sys.get_int_max_str_digits
+        return "an integer of more than 4300 digits"
+
+
+def finite(v: Any) -> bool:
+    """A finite number (an integer too large for a float is not one)."""
+    try:
+        return _is_number(v) and math.isfinite(v)
+    except OverflowError:
+        return False
 
 
 def check_capability_classes(designs: list[dict], classes: int, source: str) -> None:
@@ -186,6 +212,10 @@ _SUMMARY_NUMBERS = (
 )
 
 
+#: What a JSON run file with an integer of more digits than Python converts is told.
+_LONG_NUMBER = "an integer of more than 4300 digits (the file is damaged)"
+
+
 def read_summary(run_dir: Path, figures: bool = True) -> dict:
     """summary.json of a run, checked: a table whose designs are well-formed and (`figures`)
     whose figures are numbers (or null, where a value was not finite) and budget a number or
@@ -201,6 +231,8 @@ def read_summary(run_dir: Path, figures: bool = True) -> dict:
         s = json.loads(text)
     except json.JSONDecodeError as e:
         raise RunError(f"{path}: malformed JSON ({e})") from None
+    except ValueError:  # an integer too long to convert (sys.get_int_max_str_digits)
+        raise RunError(f"{path}: {_LONG_NUMBER}") from None
     except RecursionError:
         raise RunError(f"{path}: nested too deeply") from None
     if not isinstance(s, dict):
@@ -209,11 +241,11 @@ def read_summary(run_dir: Path, figures: bool = True) -> dict:
         if key not in s:
             raise RunError(f"{path}: missing {key!r}")
         v = s[key]
-        if v is not None and not (_is_number(v) and math.isfinite(v)):
-            raise RunError(f"{path}: {key}: expected a number, got {v!r:.60}")
+        if v is not None and not (finite(v)):
+            raise RunError(f"{path}: {key}: expected a number, got {short(v)}")
     b = s.get("budget")
-    if b is not None and not (_is_number(b) and math.isfinite(b)):
-        raise RunError(f"{path}: budget: expected a number or null, got {b!r:.60}")
+    if b is not None and not (finite(b)):
+        raise RunError(f"{path}: budget: expected a number or null, got {short(b)}")
     if figures:
         _check_reeval_figures(s, path)
     check_designs(s.get("designs"), str(path))
@@ -233,16 +265,14 @@ _REEVAL_NUMBERS = (
 def _check_reeval_figures(s: dict, path: Path) -> None:
     for key in _REEVAL_NUMBERS:
         v = s.get(key)
-        if v is not None and not (_is_number(v) and math.isfinite(v)):
-            raise RunError(f"{path}: {key}: expected a number or null, got {v!r:.60}")
+        if v is not None and not (finite(v)):
+            raise RunError(f"{path}: {key}: expected a number or null, got {short(v)}")
     for key in ("best_fitness_ci95", "best_reeval_seeds"):
         v = s.get(key)
         if v is not None and not (
-            isinstance(v, list)
-            and len(v) == 2
-            and all(_is_number(x) and math.isfinite(x) for x in v)
+            isinstance(v, list) and len(v) == 2 and all(finite(x) for x in v)
         ):
-            raise RunError(f"{path}: {key}: expected two numbers or null, got {v!r:.60}")
+            raise RunError(f"{path}: {key}: expected two numbers or null, got {short(v)}")
 
 
 def read_teams(run_dir: Path) -> dict[int, dict]:
@@ -253,7 +283,7 @@ def read_teams(run_dir: Path) -> dict[int, dict]:
     out: dict[int, dict] = {}
     if not path.is_file() and not path.is_symlink():
         return out
-    for line in read_text(path, MAX_RECORD_BYTES).splitlines():
+    for n, line in enumerate(read_text(path, MAX_RECORD_BYTES).splitlines(), 1):
         if nesting_depth(line) > MAX_NESTING:
             raise RunError(
                 f"{path}: a record nested {nesting_depth(line)} levels deep (at most {MAX_NESTING})"
@@ -262,6 +292,8 @@ def read_teams(run_dir: Path) -> dict[int, dict]:
             rec = json.loads(line)
         except json.JSONDecodeError:
             continue  # a line cut short by an interruption
+        except ValueError:  # not cut short: an integer too long to convert
+            raise RunError(f"{path}: line {n}: {_LONG_NUMBER}") from None
         g = rec.get("generation") if isinstance(rec, dict) else None
         if isinstance(g, int) and not isinstance(g, bool):
             out[g] = rec
