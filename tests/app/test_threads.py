@@ -13,9 +13,9 @@ def test_cli_and_api_take_threads(tmp_path):
     before = torch.get_num_threads()
     try:
         r = CliRunner().invoke(app, ["evolve", "--threads", "0", "--logdir", str(tmp_path)])
-        assert r.exit_code != 0 and "--threads must be >= 1" in r.output
+        assert r.exit_code != 0 and "--threads must be an integer >= 1" in r.output
         r = CliRunner().invoke(app, ["sweep", "--threads", "0", "--out", str(tmp_path / "s")])
-        assert r.exit_code != 0 and "--threads must be >= 1" in r.output
+        assert r.exit_code != 0 and "--threads must be an integer >= 1" in r.output
         res = api.evolve(
             scenario="one-niche",
             population=4,
