@@ -57,6 +57,22 @@ def sense(
         _INF,
     )
 
+    return leaf_senses(state, params, base, gpos, best, best_d, rand, rand_d)
+
+
+def leaf_senses(
+    state: State,
+    params: WorldParams,
+    base: torch.Tensor,
+    gpos: torch.Tensor,
+    best: torch.Tensor,
+    best_d: torch.Tensor,
+    rand: torch.Tensor,
+    rand_d: torch.Tensor,
+) -> Senses:
+    """The leaf statuses of every robot from its nearest and preferred grips (`sense` and the
+    Triton tick's sensing share it: only how the grips are found differs)."""
+    E, N = state.holding.shape
     d_base = (state.pos - base).norm(dim=-1)
     has_target = best_d < _INF
     holding = state.holding >= 0

@@ -37,10 +37,9 @@ from typing import Any
 
 import torch
 
-from . import bt
 from .cell_list import cell_list_for
 from .layout import Layout
-from .sense import _INF, Senses
+from .sense import _INF, Senses, leaf_senses
 from .state import DELIVERED, Robots, State, WorldParams
 from .step import step
 
@@ -318,31 +317,7 @@ def sense_triton(
     free = alive & (state.holding < 0)
     best, best_d, rand, rand_d = nearest_grips(state.pos, gpos, avail, free, compat, keys)
 
-    # from here on as sense.sense
-    d_base = (state.pos - base).norm(dim=-1)
-    has_target = best_d < _INF
-    holding = state.holding >= 0
-    S, F, R = bt.SUCCESS, bt.FAILURE, bt.RUNNING
-
-    def cond(x):
-        return torch.where(x, S, F)
-
-    def move(fail, done):
-        return torch.where(fail, F, torch.where(done, S, R))
-
-    leaf = torch.zeros(E, N, bt.NUM_OPCODES, dtype=torch.long, device=state.pos.device)
-    leaf[..., bt.COND_HAS_PACKAGE] = cond(holding)
-    leaf[..., bt.COND_NEAR_PACKAGE] = cond(best_d <= params.near)
-    leaf[..., bt.COND_NEAR_BASE] = cond(d_base <= params.base_radius)
-    leaf[..., bt.COND_AM_I_STUCK] = cond(state.stuck >= params.stuck_ticks)
-    leaf[..., bt.ACT_MOVE_TO_PACK] = move(~has_target, best_d <= params.reach)
-    leaf[..., bt.ACT_MOVE_TO_BASE] = move(torch.zeros_like(holding), d_base <= params.base_radius)
-    wp_done = (state.waypoint - state.pos).norm(dim=-1) <= params.reach
-    leaf[..., bt.ACT_RANDOM_WALK] = move(torch.zeros_like(holding), wp_done)
-    leaf[..., bt.ACT_PICK_UP] = cond(best_d <= params.reach)
-    leaf[..., bt.ACT_DROP] = cond(holding)
-    leaf[..., bt.ACT_MOVE_TO_RANDOM_PACK] = move(~has_target, rand_d <= params.reach)
-    return Senses(leaf, best, best_d, rand, rand_d, gpos, d_base)
+    return leaf_senses(state, params, base, gpos, best, best_d, rand, rand_d)
 
 
 def _rebind(fn: Callable, name: str, **names: Callable) -> Callable:
