@@ -11,9 +11,10 @@ one-, two- and four-niche. The train split is the one to look at and choose with
 is run only to report an adopted change.
 
 Arms: `v07` is the 0.7 default (`--set essential_floor=0 --set admission_basis=members`),
-`v08` the quota floor of essential species alone (`--set admission_basis=members`), `v09` the
-default of this version (the floor and admission by elites), `paper` the paper preset
-(`--preset paper`). (The v07 and v08 runs of the train split were made with the code of commit
+`v08` the quota floor of essential species alone, `v09` the floor and admission by elites,
+`v10` the floor kept until a holder is gated as often as a substitute (`essential_below=0.5`)
+with admission by elites, `paper` the paper preset (`--preset paper`). (v09 was run while the
+code's defaults were its settings, as `[]`.) (The v07 and v08 runs of the train split were made with the code of commit
 59bf1a5, whose defaults were those settings.)
 
 Every run is a CLI run in its own process (`--workers` at a time, one torch thread each),
@@ -55,7 +56,15 @@ NOISE_GAP = 5
 ARMS = {
     "v07": ["--set", "essential_floor=0", "--set", "admission_basis=members"],
     "v08": ["--set", "admission_basis=members"],
-    "v09": [],
+    "v09": ["--set", "essential_floor=3", "--set", "admission_basis=elites"],
+    "v10": [
+        "--set",
+        "essential_floor=3",
+        "--set",
+        "admission_basis=elites",
+        "--set",
+        "essential_below=0.5",
+    ],
     "paper": ["--preset", "paper"],
 }
 BUILTIN = {"one-niche": 1, "two-niche": 2, "four-niche": 4}

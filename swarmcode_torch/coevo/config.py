@@ -106,6 +106,12 @@ class SwarmCoDeConfig:
     than the others', is not starved out. Needs `partner_admission = "substitute"` (it reads the
     admission's gate statistics); 0: no floor, the default (a candidate of the 0.8
     generalization study, not adopted: docs/MODEL.md)."""
+    essential_below: float = 0.3
+    """With `essential_floor`: a partner is essential while the moving average of its gated
+    share is below this (0.3, the admission threshold: it beats the baseline in which its
+    nearest partner design refills its slots; 0.5, the clash threshold above which two partners
+    count as substitutes: a holder keeps its floor until it is gated as often as a perfect
+    substitute is)."""
     hw_sigma: float = 0.05
     """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
     social_sigma: float = 0.05
@@ -260,6 +266,7 @@ class SwarmCoDeConfig:
         for key in (
             "p_marginal",
             "quota_size_exponent",
+            "essential_below",
             "alpha",
             "p_categorical",
             "p_effector",

@@ -426,7 +426,7 @@ def generation(
     essential = priority = None
     if adm is not None and cfg.essential_floor > 0:
         priority = adm.gated[sp.proto_ids]
-        essential = adm.partner[sp.proto_ids] & (priority < admission.SUBSTITUTE.admit_below)
+        essential = adm.partner[sp.proto_ids] & (priority < cfg.essential_below)
     children, hint, is_elite, parent = reproduce(
         genome,
         fit,
