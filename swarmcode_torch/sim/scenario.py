@@ -45,6 +45,17 @@ MAX_PATH = 4096
 MAX_PACKAGES = 10_000
 #: Room kept free around a package for a robot at each grip (layout.make_layouts: size + 0.6).
 PACKAGE_CLEARANCE = 0.6
+#: The scalar fields of a scenario file, in the order a written one gives them (the tables
+#: `obstacles`, `packages` and `hardware` follow).
+SCALAR_FIELDS = (
+    "name",
+    "description",
+    "arena",
+    "base_radius",
+    "num_robots",
+    "episode_ticks",
+    "species_overhead",
+)
 
 
 class ScenarioError(ValueError):
@@ -211,18 +222,7 @@ def _scenario_from_dict(
 ) -> Scenario:
     if not isinstance(d, dict):
         raise ScenarioError(f"{source}: expected a table")
-    known = {
-        "name",
-        "description",
-        "arena",
-        "base_radius",
-        "num_robots",
-        "episode_ticks",
-        "species_overhead",
-        "obstacles",
-        "packages",
-        "hardware",
-    }
+    known = {*SCALAR_FIELDS, "obstacles", "packages", "hardware"}
     for k in d:
         if k not in known:
             raise ScenarioError(f"{k}: unknown field (known: {', '.join(sorted(known))})")
