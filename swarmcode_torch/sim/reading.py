@@ -1,14 +1,23 @@
 """One bounded reader of a regular file, for the scenario and catalog files (`sim.scenario`) and
 a run's files (`app.files`): it refuses what is not a regular file and reads nothing past its
-limit, so a FIFO, a device or a huge file can neither block nor exhaust memory."""
+limit, so a FIFO, a device or a huge file can neither block nor exhaust memory. `tomllib` here is
+the standard library's, or tomli's before Python 3.11."""
 
 from __future__ import annotations
 
 import errno
 import os
 import stat
+import sys
 from collections.abc import Callable
 from pathlib import Path
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = ["FileTooLargeError", "NotRegularFileError", "read_regular", "tomllib"]
 
 
 class NotRegularFileError(OSError):

@@ -7,7 +7,6 @@ here."""
 from __future__ import annotations
 
 import math
-import sys
 from importlib import resources
 from pathlib import Path
 
@@ -21,7 +20,7 @@ from .hardware import (
     parse_catalog,
 )
 from .placement import check_placement
-from .reading import FileTooLargeError, NotRegularFileError, read_regular
+from .reading import FileTooLargeError, NotRegularFileError, read_regular, tomllib
 from .scenario_types import (
     EFFECTORS,
     MAX_ARENA,
@@ -40,11 +39,6 @@ from .scenario_types import (
     Scenario,
     ScenarioError,
 )
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 __all__ = [
     "EFFECTORS",

@@ -15,38 +15,22 @@ the children of an implicit root SEQ. Every array of opcodes 0..13 is a valid pr
   per generation, and ``lookup`` is then a single gather per robot per tick.
 * ``interpret_reference`` / ``parse`` / ``format_tree``: plain-Python reference and printing.
 * ``TEMPLATES``: the hand-made seed trees.
-The module is split by job: `ops` (opcodes, statuses, the packed word), `interpreter`
-(`compute_jumps`, `interpret`), `tables` (`build_tables`, `lookup`) and `programs` (the reference,
+The module is split by job: `ops` (opcodes, statuses, the packed word), `batched`
+(`compute_jumps`, `interpret`, `build_tables`, `lookup`) and `programs` (the reference,
 templates, printing, `trace`); every public name is importable from here.
 """
 
-from .interpreter import compute_jumps, interpret
-from .ops import (
-    ACT_DROP,
-    ACT_MOVE_TO_BASE,
-    ACT_MOVE_TO_PACK,
-    ACT_MOVE_TO_RANDOM_PACK,
-    ACT_PICK_UP,
-    ACT_RANDOM_WALK,
-    ACTION_OPS,
-    COND_AM_I_STUCK,
-    COND_HAS_PACKAGE,
-    COND_NEAR_BASE,
-    COND_NEAR_PACKAGE,
-    CONDITION_OPS,
-    CONTROL_OPS,
-    END,
-    FAILURE,
-    LEAF_OPS,
-    NOP,
-    NUM_COMBOS,
-    NUM_OPCODES,
-    OPCODE_NAMES,
-    RUNNING,
-    SEL,
-    SEQ,
-    SUCCESS,
+from .batched import (
+    build_tables,
+    combo_index,
+    combo_statuses,
+    compute_jumps,
+    interpret,
+    lookup,
+    unpack,
 )
+from .ops import *  # noqa: F403 (every opcode, status and group: ops.__all__)
+from .ops import __all__ as _ops_names
 from .programs import (
     TEMPLATES,
     Node,
@@ -61,34 +45,10 @@ from .programs import (
     trace,
     tree_lines,
 )
-from .tables import build_tables, combo_index, combo_statuses, lookup, unpack
 
 __all__ = [
-    "ACTION_OPS",
-    "ACT_DROP",
-    "ACT_MOVE_TO_BASE",
-    "ACT_MOVE_TO_PACK",
-    "ACT_MOVE_TO_RANDOM_PACK",
-    "ACT_PICK_UP",
-    "ACT_RANDOM_WALK",
-    "CONDITION_OPS",
-    "COND_AM_I_STUCK",
-    "COND_HAS_PACKAGE",
-    "COND_NEAR_BASE",
-    "COND_NEAR_PACKAGE",
-    "CONTROL_OPS",
-    "END",
-    "FAILURE",
-    "LEAF_OPS",
-    "NOP",
-    "NUM_COMBOS",
-    "NUM_OPCODES",
+    *_ops_names,
     "Node",
-    "OPCODE_NAMES",
-    "RUNNING",
-    "SEL",
-    "SEQ",
-    "SUCCESS",
     "SlotNode",
     "TEMPLATES",
     "build_tables",

@@ -95,3 +95,31 @@ def _set1(
 def _node_name(op: int) -> str:
     """Opcode -> its name, e.g. "SEL"."""
     return OPCODE_NAMES.get(op, f"OP{op}")
+
+
+__all__ = [
+    "SEQ",
+    "SEL",
+    "COND_HAS_PACKAGE",
+    "COND_NEAR_PACKAGE",
+    "COND_NEAR_BASE",
+    "COND_AM_I_STUCK",
+    "ACT_MOVE_TO_PACK",
+    "ACT_MOVE_TO_BASE",
+    "ACT_RANDOM_WALK",
+    "ACT_PICK_UP",
+    "ACT_DROP",
+    "ACT_MOVE_TO_RANDOM_PACK",
+    "END",
+    "NOP",
+    "NUM_OPCODES",
+    "SUCCESS",
+    "FAILURE",
+    "RUNNING",
+    "CONTROL_OPS",
+    "CONDITION_OPS",
+    "ACTION_OPS",
+    "LEAF_OPS",
+    "OPCODE_NAMES",
+    "NUM_COMBOS",
+]
