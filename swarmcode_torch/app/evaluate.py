@@ -228,6 +228,24 @@ def _check_arguments(team, generation, top, episodes, seed_start, ticks) -> None
         )
 
 
+def _seeds(run_dir: Path, cfg, fitness: ScoreFn | None, seed_start: int, episodes: int) -> range:
+    """The evaluation seeds; RunError for a run scored by a custom function that is not given,
+    or seeds that hold the run's own."""
+    if cfg.fitness_function is not None and fitness is None:
+        raise RunError(
+            f"{run_dir} was scored by a custom fitness function ({cfg.fitness_function}): "
+            "evaluate it from Python with the same function, "
+            "swarmcode_torch.evaluate(run_dir, fitness=fn)"
+        )
+    seeds = range(seed_start, seed_start + episodes)
+    if cfg.seed in seeds:
+        raise RunError(
+            f"the evaluation seeds {seeds[0]}..{seeds[-1]} hold the run's own seed {cfg.seed}; "
+            f"start them past it (seed_start {cfg.seed + 1} or more)"
+        )
+    return seeds
+
+
 def _scenario_and_teams(
     run_dir: Path, cfg, chosen: list[_Chosen], scenario: str | None, ticks: int | None
 ) -> tuple[Scenario, int, int]:
@@ -387,18 +405,7 @@ def evaluate(
     dev = resolve_device(device)
     set_threads(threads)
     cfg = read_config(run_dir)
-    if cfg.fitness_function is not None and fitness is None:
-        raise RunError(
-            f"{run_dir} was scored by a custom fitness function ({cfg.fitness_function}): "
-            "evaluate it from Python with the same function, "
-            "swarmcode_torch.evaluate(run_dir, fitness=fn)"
-        )
-    seeds = range(seed_start, seed_start + episodes)
-    if cfg.seed in seeds:
-        raise RunError(
-            f"the evaluation seeds {seeds[0]}..{seeds[-1]} hold the run's own seed {cfg.seed}; "
-            f"start them past it (seed_start {cfg.seed + 1} or more)"
-        )
+    seeds = _seeds(run_dir, cfg, fitness, seed_start, episodes)
     chosen = choose_teams(run_dir, team, generation, top)
     world, S, ticks = _scenario_and_teams(run_dir, cfg, chosen, scenario, ticks)
     score_fn = fitness if fitness is not None else team_scores
