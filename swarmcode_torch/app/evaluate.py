@@ -310,6 +310,18 @@ def _knockout_batch(chosen: list[_Chosen], cfg, seeds: range) -> tuple:
     return genome, all_designs, variants, torch.cat(blocks)
 
 
+def _check_memory(E: int, S: int, n_teams: int, episodes: int, world: Scenario, dev) -> None:
+    """RunError when the batch of E environments of S robots would not fit the device's memory."""
+    need = need_bytes(E, S, episodes, world)
+    limit, what = memory_limit(str(dev))
+    if need > limit:
+        raise RunError(
+            f"{E} environments of {S} robots ({n_teams} team(s), their knock-outs, "
+            f"{episodes} episodes) would need about {_size(need)} of memory, more than the "
+            f"{_size(limit)} of {what}; evaluate fewer episodes"
+        )
+
+
 def _team_results(
     chosen: list[_Chosen],
     variants: list,
@@ -413,14 +425,7 @@ def evaluate(
     E = teams.shape[0]
     layout_ids = torch.arange(episodes).repeat(E // episodes)
 
-    need = need_bytes(E, S, episodes, world)
-    limit, what = memory_limit(str(dev))
-    if need > limit:
-        raise RunError(
-            f"{E} environments of {S} robots ({len(chosen)} team(s), their knock-outs, "
-            f"{episodes} episodes) would need about {_size(need)} of memory, more than the "
-            f"{_size(limit)} of {what}; evaluate fewer episodes"
-        )
+    _check_memory(E, S, len(chosen), episodes, world, dev)
 
     layouts = draw_layouts(world, S, seeds, progress)
     species = torch.tensor([int(d["species"]) for d in all_designs])
