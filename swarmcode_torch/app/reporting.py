@@ -7,6 +7,7 @@ importable from here. `records` makes the scalars all three write."""
 
 from __future__ import annotations
 
+from .files import METRICS_FILE
 from .records import HISTOGRAMS, SCALAR_TAGS, scalars
 from .report_csv import CsvReporter, read_metrics_csv
 from .report_tensorboard import (
@@ -34,6 +35,7 @@ from .report_wandb import (
 )
 
 __all__ = [
+    "METRICS_FILE",
     "CUSTOM_SCALARS",
     "CsvReporter",
     "HISTOGRAMS",
