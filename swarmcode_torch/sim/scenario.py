@@ -23,6 +23,7 @@ from .placement import check_placement
 from .reading import FileTooLargeError, NotRegularFileError, read_regular, tomllib
 from .scenario_types import (
     EFFECTORS,
+    FIELDS,
     MAX_ARENA,
     MAX_DESCRIPTION,
     MAX_EPISODE_TICKS,
@@ -32,7 +33,9 @@ from .scenario_types import (
     MAX_NUMBER,
     MAX_PACKAGES,
     MAX_PATH,
+    OBSTACLE_FIELDS,
     PACKAGE_CLEARANCE,
+    PACKAGE_FIELDS,
     ROBOT_RADII,
     SCALAR_FIELDS,
     PackageClass,
@@ -42,6 +45,7 @@ from .scenario_types import (
 
 __all__ = [
     "EFFECTORS",
+    "FIELDS",
     "MAX_ARENA",
     "MAX_DESCRIPTION",
     "MAX_EPISODE_TICKS",
@@ -51,7 +55,9 @@ __all__ = [
     "MAX_NUMBER",
     "MAX_PACKAGES",
     "MAX_PATH",
+    "OBSTACLE_FIELDS",
     "PACKAGE_CLEARANCE",
+    "PACKAGE_FIELDS",
     "ROBOT_RADII",
     "SCALAR_FIELDS",
     "PackageClass",
@@ -207,22 +213,9 @@ def _obstacles(d: dict) -> tuple[int, tuple[float, float]]:
         raise ScenarioError(f"obstacles.count: must be >= 0, got {obs_count}")
     obs_radius = _range(obs, "radius", "obstacles.", default=(0.5, 1.0))
     for k in obs:
-        if k not in {"count", "radius"}:
+        if k not in OBSTACLE_FIELDS:
             raise ScenarioError(f"obstacles.{k}: unknown field (known: count, radius)")
     return obs_count, obs_radius
-
-
-_PACKAGE_FIELDS = {
-    "kind",
-    "count",
-    "distance",
-    "mass",
-    "effector",
-    "grips",
-    "radius_band",
-    "size",
-    "distance_weighting",
-}
 
 
 def _package_class(i: int, p) -> PackageClass:
@@ -254,7 +247,7 @@ def _package_class(i: int, p) -> PackageClass:
         raise ScenarioError(f"{w}size: must be > 0, got {size}")
     dw = _get(p, "distance_weighting", w, bool, default=False, required=False)
     for k in p:
-        if k not in _PACKAGE_FIELDS:
+        if k not in PACKAGE_FIELDS:
             raise ScenarioError(f"{w}{k}: unknown field")
     return PackageClass(kind, count, dist, mass, grips, band, dw, size)
 
@@ -280,7 +273,7 @@ def _scenario_from_dict(
 ) -> Scenario:
     if not isinstance(d, dict):
         raise ScenarioError(f"{source}: expected a table")
-    known = {*SCALAR_FIELDS, "obstacles", "packages", "hardware"}
+    known = set(FIELDS)
     for k in d:
         if k not in known:
             raise ScenarioError(f"{k}: unknown field (known: {', '.join(sorted(known))})")

@@ -36,6 +36,21 @@ SCALAR_FIELDS = (
     "episode_ticks",
     "species_overhead",
 )
+#: The keys a scenario file may have (the loader checks them against these): at its top level,
+#: in [obstacles] and in each [[packages]].
+FIELDS = (*SCALAR_FIELDS, "obstacles", "packages", "hardware")
+OBSTACLE_FIELDS = ("count", "radius")
+PACKAGE_FIELDS = (
+    "kind",
+    "count",
+    "distance",
+    "mass",
+    "effector",
+    "grips",
+    "radius_band",
+    "size",
+    "distance_weighting",
+)
 
 
 class ScenarioError(ValueError):
