@@ -7,7 +7,6 @@ The tests that build need the `docs` extra (mkdocs and its plugins; .ci/run inst
 
 from __future__ import annotations
 
-import ast
 import os
 import re
 import subprocess
@@ -69,18 +68,11 @@ def test_every_page_and_notebook_is_in_the_nav_and_every_nav_entry_exists():
 
 
 def _accepted_scenario_keys() -> set[str]:
-    """Every key the scenario loader accepts: the string sets it checks keys against
-    (`sim/scenario.py`: the top level, [obstacles] and [[packages]])."""
-    tree = ast.parse((ROOT / "swarmcode_torch/sim/scenario.py").read_text(encoding="utf-8"))
-    keys = set()
-    for node in ast.walk(tree):
-        if (
-            isinstance(node, ast.Set)
-            and node.elts
-            and all(isinstance(e, ast.Constant) and isinstance(e.value, str) for e in node.elts)
-        ):
-            keys |= {e.value for e in node.elts}
-    return keys
+    """Every key the scenario loader accepts: the sets it checks keys against
+    (`sim.scenario`: FIELDS at the top level, OBSTACLE_FIELDS, PACKAGE_FIELDS)."""
+    from swarmcode_torch.sim import scenario
+
+    return {*scenario.FIELDS, *scenario.OBSTACLE_FIELDS, *scenario.PACKAGE_FIELDS}
 
 
 def test_scenario_format_page_documents_every_accepted_key():

@@ -56,24 +56,21 @@ finite, positive mass and battery.
 from __future__ import annotations
 
 import dataclasses
-import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import torch
 from torch import Tensor
 
 from ..coevo.config import MAX_SEED, UPPER_BOUNDS
 from ..coevo.evaluation import ScoreFn, score_fn_name, team_scores
-from ..coevo.population import from_designs, genome_phenotype
+from ..coevo.population import from_designs
 from ..coevo.speciation import design_distance
 from ..sim.runtime import resolve_device, set_threads
 from ..sim.scenario import Scenario, ScenarioError, load_scenario
+from .evaluate_teams import _check_team_fits, _Chosen, _recorded_baseline, _refill, choose_teams
 from .files import RunError
 from .runconfig import _size, memory_limit, read_config, run_scenario
-from .summary import check_designs, read_summary, read_teams
 from .team_eval import (  # noqa: F401 - Stat, t_quantile, INTERVAL: this module's API as well
     INTERVAL,
     TEAM_GENES,
@@ -201,132 +198,6 @@ class EvaluationResult:
         return d
 
 
-# ------------------------------------------------------------------ the teams of a run
-@dataclass(frozen=True)
-class _Chosen:
-    source: str
-    generation: int | None
-    recorded_fitness: float | None
-    designs: list[dict]
-
-
-def _number(v: Any) -> float | None:
-    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-    return float(v) if ok else None
-
-
-def _int(v: Any) -> int | None:
-    return v if isinstance(v, int) and not isinstance(v, bool) else None
-
-
-def _team_key(designs: list[dict]) -> str:
-    """Two records of the same team have the same key: each design's genes and robots."""
-    import json
-
-    return json.dumps(sorted(json.dumps([d[k] for k in TEAM_GENES]) for d in designs))
-
-
-def choose_teams(
-    run_dir: Path, team: str = "best", generation: int | None = None, top: int | None = None
-) -> list[_Chosen]:
-    """The team(s) to evaluate (see the module docstring); RunError where the run has none."""
-    if generation is not None or team == "last":
-        records = read_teams(run_dir)
-        if not records:
-            raise RunError(f"{run_dir} has no teams.jsonl records (no finished generation?)")
-        g = max(records) if generation is None else generation
-        if g not in records:
-            raise RunError(
-                f"{run_dir} has no record of generation {g} (its teams.jsonl holds "
-                f"generations {min(records)}..{max(records)})"
-            )
-        rec = records[g]
-        check_designs(rec.get("designs"), f"{run_dir / 'teams.jsonl'} (generation {g})")
-        return [
-            _Chosen(
-                "generation" if generation is not None else "last",
-                g,
-                _number(rec.get("fitness")),
-                rec["designs"],
-            )
-        ]
-    if top is not None:
-        found: dict[str, _Chosen] = {}
-        records = read_teams(run_dir)
-        for g in sorted(records):
-            rec = records[g]
-            fit = _number(rec.get("fitness"))
-            if fit is None:
-                continue
-            try:
-                designs = check_designs(rec.get("designs"), "teams.jsonl")
-            except RunError:
-                continue  # a damaged record is not among the best
-            key = _team_key(designs)
-            if key not in found or fit > (found[key].recorded_fitness or -math.inf):
-                found[key] = _Chosen("top", g, fit, designs)
-        if not found:
-            raise RunError(f"{run_dir} has no teams.jsonl record with a fitness and designs")
-        ranked = sorted(found.values(), key=lambda c: (-(c.recorded_fitness or 0.0), c.generation))
-        return ranked[:top]
-    s = read_summary(run_dir, figures=False)
-    return [
-        _Chosen(
-            "best", _int(s.get("best_generation")), _number(s.get("best_fitness")), s["designs"]
-        )
-    ]
-
-
-# ------------------------------------------------------------------ knock-outs
-def _refill(
-    designs: list[dict],
-    d: int,
-    team: Tensor,
-    seeds: Sequence[int],
-    near: Tensor | None,
-    uniform: bool,
-    recorded: Tensor | None,
-) -> tuple[Tensor, str]:
-    """[N, S] the team (rows of its own designs) with design `d` knocked out in each episode,
-    and how its slots were refilled (module docstring)."""
-    n_ep = len(seeds)
-    slots = team == d
-    n_slots = int(slots.sum())
-    out = team.repeat(n_ep, 1)
-    partners = [i for i, x in enumerate(designs) if i != d and int(x["count"]) > 0]
-    if recorded is not None:
-        out[:, slots] = recorded
-        return out, "recorded baseline"
-    if not partners:
-        out[:, slots] = -1
-        return out, "no partner"
-    if near is not None:
-        order = sorted(partners, key=lambda i: (float(near[d, i]), designs[i]["species"], i))
-        out[:, slots] = order[0]
-        return out, "nearest partner"
-    w = torch.tensor([max(float(designs[i]["dominance"]), 0.0) for i in partners])
-    if uniform or float(w.sum()) <= 0:
-        w = torch.ones(len(partners))
-    rows = torch.tensor(partners)
-    for e, seed in enumerate(seeds):
-        g = torch.Generator().manual_seed(int(seed))
-        out[e, slots] = rows[torch.multinomial(w, n_slots, replacement=True, generator=g)]
-    return out, "dominance draw"
-
-
-def _recorded_baseline(designs: list[dict], team: Tensor) -> tuple[int | None, Tensor | None]:
-    """(the focal design, the refill of its slots) where the record gives the baseline it was
-    scored against (`replay_page.focal_and_baseline`); otherwise (the design the record marks
-    as the focal, or None; None)."""
-    from .replay_page import focal_and_baseline
-
-    marked = [i for i, x in enumerate(designs) if x.get("focal") is True and int(x["count"]) > 0]
-    focal, _, base, recorded = focal_and_baseline(designs, 0)
-    if not recorded:
-        return (marked[0] if marked else None), None
-    return focal, base[team == focal]
-
-
 # ------------------------------------------------------------------ the evaluation
 def _check_arguments(team, generation, top, episodes, seed_start, ticks) -> None:
     def is_int(v) -> bool:
@@ -357,22 +228,158 @@ def _check_arguments(team, generation, top, episodes, seed_start, ticks) -> None
         )
 
 
-def _check_team_fits(designs: list[dict], scenario: Scenario, own: bool) -> None:
-    robots = sum(int(d["count"]) for d in designs)
-    if not own and robots > scenario.num_robots:
+def _seeds(run_dir: Path, cfg, fitness: ScoreFn | None, seed_start: int, episodes: int) -> range:
+    """The evaluation seeds; RunError for a run scored by a custom function that is not given,
+    or seeds that hold the run's own."""
+    if cfg.fitness_function is not None and fitness is None:
         raise RunError(
-            f"scenario {scenario.name} is a world for {scenario.num_robots} robots and cannot "
-            f"carry the team's {robots}; give a scenario of at least {robots} robots"
+            f"{run_dir} was scored by a custom fitness function ({cfg.fitness_function}): "
+            "evaluate it from Python with the same function, "
+            "swarmcode_torch.evaluate(run_dir, fitness=fn)"
         )
-    genome, _ = from_designs(designs)
-    ph = genome_phenotype(genome, scenario.hardware)
-    good = torch.stack([torch.isfinite(t.float()).all() for t in ph]).all()
-    good &= (ph.mass > 0).all() & (ph.capacity > 0).all()
-    if not bool(good):
+    seeds = range(seed_start, seed_start + episodes)
+    if cfg.seed in seeds:
         raise RunError(
-            f"the hardware catalog of scenario {scenario.name} cannot build the team's designs "
-            "(a robot of non-finite or non-positive mass or battery)"
+            f"the evaluation seeds {seeds[0]}..{seeds[-1]} hold the run's own seed {cfg.seed}; "
+            f"start them past it (seed_start {cfg.seed + 1} or more)"
         )
+    return seeds
+
+
+def _scenario_and_teams(
+    run_dir: Path, cfg, chosen: list[_Chosen], scenario: str | None, ticks: int | None
+) -> tuple[Scenario, int, int]:
+    """The scenario the teams run in (the run's own, or `scenario`), the robots of a team and
+    the episode length; RunError where a team does not fit it or the teams differ in size."""
+    if scenario is not None:
+        world = load_scenario(scenario)  # ScenarioError (a ValueError) names the field
+    else:
+        try:
+            world = run_scenario(run_dir, cfg)
+        except ScenarioError as e:
+            raise RunError(f"{run_dir}: its scenario cannot be loaded ({e})") from None
+    for c in chosen:
+        _check_team_fits(c.designs, world, scenario is None)
+    robots = {sum(int(d["count"]) for d in c.designs) for c in chosen}
+    if len(robots) > 1:
+        raise RunError(
+            f"the teams to evaluate have different sizes ({sorted(robots)} robots); "
+            "evaluate them one by one"
+        )
+    if ticks is None:
+        ticks = (cfg.ticks or world.episode_ticks) if scenario is None else world.episode_ticks
+    return world, robots.pop(), ticks
+
+
+def _knockout_batch(chosen: list[_Chosen], cfg, seeds: range) -> tuple:
+    """Every design of every team in one genome, and the batch's teams [E, S]: per team, its
+    episodes, then each knock-out's -> (genome, all designs, per team its knock-outs as
+    (design, refill, [N, S]), teams)."""
+    offsets, all_designs = [], []
+    for c in chosen:
+        offsets.append(len(all_designs))
+        all_designs.extend(c.designs)
+    genome, _ = from_designs(all_designs, cfg.tag_length)
+    near_rule = cfg.partner_admission == "substitute"
+    variants: list[list[tuple[int, str, Tensor]]] = []  # per team: (design, refill, [N, S])
+    teams_rows: list[Tensor] = []
+    for c, off in zip(chosen, offsets):
+        local, team_t = team_rows(c.designs, cfg.tag_length)  # [S] design per slot
+        near = design_distance(local, cfg.distance_weights) if near_rule else None
+        focal, recorded = _recorded_baseline(c.designs, team_t)
+        vs = []
+        for d, rec in enumerate(c.designs):
+            if int(rec["count"]) == 0:
+                continue
+            ko, how = _refill(
+                c.designs,
+                d,
+                team_t,
+                seeds,
+                near,
+                not cfg.dominance,
+                recorded if d == focal else None,
+            )
+            vs.append((d, how, torch.where(ko >= 0, ko + off, -1)))
+        variants.append(vs)
+        teams_rows.append(team_t + off)
+    blocks = []
+    for t_rows, vs in zip(teams_rows, variants):
+        blocks.append(t_rows.repeat(len(seeds), 1))
+        blocks.extend(v for _, _, v in vs)
+    return genome, all_designs, variants, torch.cat(blocks)
+
+
+def _check_memory(E: int, S: int, n_teams: int, episodes: int, world: Scenario, dev) -> None:
+    """RunError when the batch of E environments of S robots would not fit the device's memory."""
+    need = need_bytes(E, S, episodes, world)
+    limit, what = memory_limit(str(dev))
+    if need > limit:
+        raise RunError(
+            f"{E} environments of {S} robots ({n_teams} team(s), their knock-outs, "
+            f"{episodes} episodes) would need about {_size(need)} of memory, more than the "
+            f"{_size(limit)} of {what}; evaluate fewer episodes"
+        )
+
+
+def _team_results(
+    chosen: list[_Chosen],
+    variants: list,
+    scores: Tensor,
+    cost: Tensor,
+    per_class: Tensor,
+    world: Scenario,
+    episodes: int,
+    robots: int,
+) -> list[TeamEvaluation]:
+    """One `TeamEvaluation` per team from the batch's episode scores, costs and deliveries per
+    class (rows in `_knockout_batch`'s order)."""
+    out, at = [], 0
+    for c, vs in zip(chosen, variants):
+        base = slice(at, at + episodes)
+        f = scores[base]
+        contributions = []
+        for k, (d, how, _) in enumerate(vs):
+            ko = scores[at + (k + 1) * episodes : at + (k + 2) * episodes]
+            rec = c.designs[d]
+            contributions.append(
+                Contribution(
+                    design=d,
+                    species=int(rec["species"]),
+                    robots=int(rec["count"]),
+                    effector=str(rec["effector"]),
+                    focal=rec.get("focal") is True,
+                    refill=how,
+                    knockout_fitness=Stat.of(ko),
+                    contribution=Stat.of(f - ko),
+                )
+            )
+        pc = per_class[base]
+        out.append(
+            TeamEvaluation(
+                source=c.source,
+                generation=c.generation,
+                recorded_fitness=c.recorded_fitness,
+                robots=robots,
+                species=len({int(d["species"]) for d in c.designs if int(d["count"]) > 0}),
+                cost=float(cost[at]),
+                fitness=Stat.of(f),
+                deliveries=[
+                    {
+                        "class": j,
+                        "label": pk.label,
+                        "packages": pk.count,
+                        "mean": float(pc[:, j].mean()),
+                    }
+                    for j, pk in enumerate(world.packages)
+                ],
+                deliveries_total=Stat.of(pc.sum(1)),
+                episode_fitness=[float(x) for x in f],
+                contributions=contributions,
+            )
+        )
+        at += episodes * (1 + len(vs))
+    return out
 
 
 def evaluate(
@@ -410,140 +417,25 @@ def evaluate(
     dev = resolve_device(device)
     set_threads(threads)
     cfg = read_config(run_dir)
-    if cfg.fitness_function is not None and fitness is None:
-        raise RunError(
-            f"{run_dir} was scored by a custom fitness function ({cfg.fitness_function}): "
-            "evaluate it from Python with the same function, "
-            "swarmcode_torch.evaluate(run_dir, fitness=fn)"
-        )
-    seeds = range(seed_start, seed_start + episodes)
-    if cfg.seed in seeds:
-        raise RunError(
-            f"the evaluation seeds {seeds[0]}..{seeds[-1]} hold the run's own seed {cfg.seed}; "
-            f"start them past it (seed_start {cfg.seed + 1} or more)"
-        )
+    seeds = _seeds(run_dir, cfg, fitness, seed_start, episodes)
     chosen = choose_teams(run_dir, team, generation, top)
-    if scenario is not None:
-        world = load_scenario(scenario)  # ScenarioError (a ValueError) names the field
-    else:
-        try:
-            world = run_scenario(run_dir, cfg)
-        except ScenarioError as e:
-            raise RunError(f"{run_dir}: its scenario cannot be loaded ({e})") from None
-    for c in chosen:
-        _check_team_fits(c.designs, world, scenario is None)
-    robots = {sum(int(d["count"]) for d in c.designs) for c in chosen}
-    if len(robots) > 1:
-        raise RunError(
-            f"the teams to evaluate have different sizes ({sorted(robots)} robots); "
-            "evaluate them one by one"
-        )
-    S = robots.pop()
-    if ticks is None:
-        ticks = (cfg.ticks or world.episode_ticks) if scenario is None else world.episode_ticks
+    world, S, ticks = _scenario_and_teams(run_dir, cfg, chosen, scenario, ticks)
     score_fn = fitness if fitness is not None else team_scores
-
-    # every design of every team, one genome; each team's rows and its knock-outs
-    offsets, all_designs = [], []
-    for c in chosen:
-        offsets.append(len(all_designs))
-        all_designs.extend(c.designs)
-    genome, _ = from_designs(all_designs, cfg.tag_length)
-    near_rule = cfg.partner_admission == "substitute"
-    variants: list[list[tuple[int, str, Tensor]]] = []  # per team: (design, refill, [N, S])
-    teams_rows: list[Tensor] = []
-    for c, off in zip(chosen, offsets):
-        local, team_t = team_rows(c.designs, cfg.tag_length)  # [S] design per slot
-        near = design_distance(local, cfg.distance_weights) if near_rule else None
-        focal, recorded = _recorded_baseline(c.designs, team_t)
-        vs = []
-        for d, rec in enumerate(c.designs):
-            if int(rec["count"]) == 0:
-                continue
-            ko, how = _refill(
-                c.designs,
-                d,
-                team_t,
-                seeds,
-                near,
-                not cfg.dominance,
-                recorded if d == focal else None,
-            )
-            vs.append((d, how, torch.where(ko >= 0, ko + off, -1)))
-        variants.append(vs)
-        teams_rows.append(team_t + off)
-    blocks = []
-    for t_rows, vs in zip(teams_rows, variants):
-        blocks.append(t_rows.repeat(episodes, 1))
-        blocks.extend(v for _, _, v in vs)
-    teams = torch.cat(blocks)  # [E, S]: per team, its episodes then each knock-out's
+    genome, all_designs, variants, teams = _knockout_batch(chosen, cfg, seeds)
     E = teams.shape[0]
     layout_ids = torch.arange(episodes).repeat(E // episodes)
 
-    need = need_bytes(E, S, episodes, world)
-    limit, what = memory_limit(str(dev))
-    if need > limit:
-        raise RunError(
-            f"{E} environments of {S} robots ({len(chosen)} team(s), their knock-outs, "
-            f"{episodes} episodes) would need about {_size(need)} of memory, more than the "
-            f"{_size(limit)} of {what}; evaluate fewer episodes"
-        )
+    _check_memory(E, S, len(chosen), episodes, world, dev)
 
     layouts = draw_layouts(world, S, seeds, progress)
     species = torch.tensor([int(d["species"]) for d in all_designs])
     ep = run_episodes(
         genome, species, teams, layouts, layout_ids, world, cfg, ticks, dev, score_fn, progress
     )
-    scores, cost, done, mode = ep.scores, ep.cost, ep.delivered, ep.tick
     cls = torch.tensor([i for i, c in enumerate(world.packages) for _ in range(c.count)])
     per_class = torch.zeros(E, len(world.packages), dtype=torch.float64)
-    per_class.index_add_(1, cls, done.double())
-
-    out, at = [], 0
-    for c, vs in zip(chosen, variants):
-        base = slice(at, at + episodes)
-        f = scores[base]
-        contributions = []
-        for k, (d, how, _) in enumerate(vs):
-            ko = scores[at + (k + 1) * episodes : at + (k + 2) * episodes]
-            rec = c.designs[d]
-            contributions.append(
-                Contribution(
-                    design=d,
-                    species=int(rec["species"]),
-                    robots=int(rec["count"]),
-                    effector=str(rec["effector"]),
-                    focal=rec.get("focal") is True,
-                    refill=how,
-                    knockout_fitness=Stat.of(ko),
-                    contribution=Stat.of(f - ko),
-                )
-            )
-        pc = per_class[base]
-        out.append(
-            TeamEvaluation(
-                source=c.source,
-                generation=c.generation,
-                recorded_fitness=c.recorded_fitness,
-                robots=S,
-                species=len({int(d["species"]) for d in c.designs if int(d["count"]) > 0}),
-                cost=float(cost[at]),
-                fitness=Stat.of(f),
-                deliveries=[
-                    {
-                        "class": j,
-                        "label": pk.label,
-                        "packages": pk.count,
-                        "mean": float(pc[:, j].mean()),
-                    }
-                    for j, pk in enumerate(world.packages)
-                ],
-                deliveries_total=Stat.of(pc.sum(1)),
-                episode_fitness=[float(x) for x in f],
-                contributions=contributions,
-            )
-        )
-        at += episodes * (1 + len(vs))
+    per_class.index_add_(1, cls, ep.delivered.double())
+    out = _team_results(chosen, variants, ep.scores, ep.cost, per_class, world, episodes, S)
     if generation is not None:
         selection = f"generation {generation}"
     elif top is not None:
@@ -560,7 +452,7 @@ def evaluate(
         seeds=(seeds[0], seeds[-1]),
         ticks=int(ticks),
         device=str(dev),
-        tick=mode,
+        tick=ep.tick,
         fitness_function=("built-in" if fitness is None else f"custom: {score_fn_name(fitness)}"),
         interval=INTERVAL,
         teams=out,

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from ..coevo.config import SwarmCoDeConfig
 from ..sim.hardware import MAX_NESTING, nesting_depth
+from ..sim.reading import read_regular
 
 CONFIG_FILE = "config.toml"
 CHECKPOINT_FILE = "checkpoint.pt"
@@ -101,30 +102,9 @@ def open_nofollow(path: Path, flags: int, mode: int = 0o666) -> int:
 def read_file_bytes(path: Path, limit: int = MAX_TEXT_BYTES) -> bytes:
     """The bytes of a regular file, opened without following a link (`open_nofollow`), read up
     to `limit` bytes: OSError for a link, a file that is not regular (a FIFO, a device) or one
-    larger than `limit` (EFBIG), before more than `limit` bytes are read."""
-    fd = open_nofollow(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    try:
-        st = os.fstat(fd)
-        import stat as _stat
-
-        if not _stat.S_ISREG(st.st_mode):
-            raise OSError(errno.EINVAL, "not a regular file", str(path))
-        if st.st_size > limit:
-            raise OSError(
-                errno.EFBIG, f"file too large ({st.st_size} bytes, at most {limit})", str(path)
-            )
-        chunks, total = [], 0
-        while True:
-            b = os.read(fd, min(1 << 20, limit + 1 - total))
-            if not b:
-                break
-            chunks.append(b)
-            total += len(b)
-            if total > limit:
-                raise OSError(errno.EFBIG, f"file too large (more than {limit} bytes)", str(path))
-        return b"".join(chunks)
-    finally:
-        os.close(fd)
+    larger than `limit` (EFBIG), before more than `limit` bytes are read
+    (`sim.reading.read_regular`)."""
+    return read_regular(path, limit, open_nofollow)
 
 
 def check_nesting(text: str, source: str, error=None) -> None:

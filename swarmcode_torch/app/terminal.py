@@ -1,19 +1,18 @@
-"""What the commands of the command line share: its consoles, one-line errors, path options,
-the progress line, a run executed under it (`execute`: its reporters, and the line a stopped or
-failed run prints), the best team's table, and the Ray options of a run."""
+"""What the commands of the command line share: its consoles, one-line errors, path options
+(`cli_output`), the progress line and a run executed under it (`execute`, here: its reporters,
+and the line a stopped or failed run prints, `stop_lines`), the best team's table
+(`team_table`), and the thread and Ray options of a run (`run_options`). Every public name is
+importable from here."""
 
 from __future__ import annotations
 
-import math
 import sys
 import threading
-from contextlib import ExitStack, contextmanager
+from contextlib import contextmanager
 from pathlib import Path
 
 import typer
-from rich import box
 from rich.console import Console
-from rich.markup import escape
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -22,64 +21,49 @@ from rich.progress import (
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
-from rich.table import Column, Table
+from rich.table import Column
 
 from . import session
+from .cli_output import MAX_PATH, Failed, check_path, console, err, fail, os_fail
+from .run_options import (
+    THREADS_HELP,
+    attach_shards,
+    eval_shards_option,
+    need_ray,
+    print_shard_traffic,
+    set_threads_option,
+)
 from .signals import TERMINATED, deferred_signals, terminate_as_interrupt
+from .stop_lines import Where, checkpoint_words, last_checkpoint, stop_line, stopped
+from .team_table import best_interval, print_team
 
-# off a terminal (logs, pipes) Rich would wrap at 80 columns; tables need a little more
-console = Console(width=None if sys.stdout.isatty() else 120)
-err = Console(stderr=True, width=None if sys.stderr.isatty() else 200)
-
-
-class Failed(typer.Exit):
-    """The exit (code 2) of `fail`; `message` is its line (a sweep's Ray task reports it)."""
-
-    def __init__(self, message: str):
-        super().__init__(code=2)
-        self.message = message
-
-
-def fail(msg: str) -> None:
-    """Print a one-line error and exit non-zero. The message is printed as it is: brackets such
-    as [low, high] or [[packages]] are not read as Rich markup; a newline inside it becomes a
-    space, so the error stays on one line."""
-    msg = " ".join(str(msg).split())
-    err.print(f"[bold red]Error:[/] {escape(msg)}", highlight=False, soft_wrap=True)
-    raise Failed(msg)
-
-
-#: The longest path an option takes (PATH_MAX).
-MAX_PATH = 4096
-
-
-def check_path(value: str | None, option: str) -> Path | None:
-    """An option's path, checked: not empty (an empty --logdir would write into the working
-    directory; '.' says so), at most MAX_PATH characters, no NUL, and text that can be printed
-    (bytes that are not UTF-8 reach Python as surrogates no message can print)."""
-    if value is None:
-        return None
-    if not value.strip():
-        fail(f"{option} is empty: give a directory ('.' for the working directory)")
-    if len(value) > MAX_PATH or "\0" in value:
-        fail(
-            f"{option}: not a path ({len(value)} characters{', a NUL' if chr(0) in value else ''};"
-            f" at most {MAX_PATH})"
-        )
-    try:
-        value.encode("utf-8")
-    except UnicodeEncodeError:
-        fail(
-            f"{option}: the path {value.encode('utf-8', 'backslashreplace').decode()[:200]} "
-            "is not UTF-8 text; rename it or give another"
-        )
-    return Path(value)
-
-
-def os_fail(e: OSError, doing: str) -> None:
-    from .files import os_error_text
-
-    fail(f"{doing}: {os_error_text(e)}")
+__all__ = [
+    "MAX_PATH",
+    "NARROW",
+    "THREADS_HELP",
+    "Failed",
+    "ProgressReporter",
+    "Where",
+    "attach_shards",
+    "best_interval",
+    "check_path",
+    "checkpoint_words",
+    "close_writers",
+    "console",
+    "err",
+    "eval_shards_option",
+    "execute",
+    "fail",
+    "last_checkpoint",
+    "need_ray",
+    "os_fail",
+    "print_shard_traffic",
+    "print_team",
+    "quiet_thread_os_errors",
+    "set_threads_option",
+    "stop_line",
+    "stopped",
+]
 
 
 #: Below this many columns the progress line drops its bar and elapsed time.
@@ -158,144 +142,6 @@ class ProgressReporter:
             self.bar = None
 
 
-class Where:
-    """Where an evolve command stands, for the line an interrupt prints: its run directory (None
-    before one is made or locked), whether it resumes one, the generation its checkpoint file
-    holds (`saved`; the `CheckpointReporter`'s once the run loop has it) and how to continue."""
-
-    def __init__(self):
-        self.run_dir: Path | None = None
-        self.resuming = False
-        self.saved: int | None = None
-        self.checkpoints = None
-        self.again: str | None = None
-
-    def holds(self) -> int | None:
-        return self.checkpoints.saved if self.checkpoints is not None else self.saved
-
-
-def checkpoint_words(saved: int) -> str:
-    """The checkpoint of a run that has finished `saved` generations (the checkpoint file's
-    "generation" count), named as summary.json, teams.jsonl and TensorBoard number generations:
-    from 0, so that its last finished generation is summary.json's "generation"."""
-    if saved == 0:
-        return "checkpoint before generation 0 (no generation finished yet)"
-    done = "generation 0 finished" if saved == 1 else f"generations 0-{saved - 1} finished"
-    return f"checkpoint after generation {saved - 1} ({done})"
-
-
-def last_checkpoint(saved: int | None) -> str:
-    """'the last checkpoint ...' of a failed run (`checkpoint_words`), or that there is none."""
-    if saved is None:
-        return "no checkpoint was written yet"
-    return f"the last {checkpoint_words(saved)}"
-
-
-def stop_line(
-    how: str, run_dir: Path | None, saved: int | None, again: str | None, resuming: bool = False
-) -> str:
-    """The line an interrupted run prints: the checkpoint its file really holds
-    (`checkpoint_words`: the last finished generation, numbered as in summary.json), or that
-    there is none."""
-    if run_dir is None:
-        return f"{how}: no run directory was made"
-    if saved is None:
-        if resuming:
-            return f"{how} before the run resumed; {run_dir} is unchanged"
-        return (
-            f"{how}: no checkpoint was written yet, so {run_dir} holds no generation to "
-            "continue from; start the run again"
-        )
-    again = again or f"swarmcode-torch evolve --resume {run_dir}"
-    return f"{how}: {checkpoint_words(saved)} is in {run_dir}; continue with: {again}"
-
-
-def stopped(where: Where, terminated: bool) -> None:
-    terminated = terminated or bool(TERMINATED)
-    how = "Terminated" if terminated else "Interrupted"
-    err.print(
-        stop_line(how, where.run_dir, where.holds(), where.again, where.resuming),
-        markup=False,
-        highlight=False,
-        soft_wrap=True,
-    )
-    raise typer.Exit(code=143 if terminated else 130)
-
-
-THREADS_HELP = (
-    "CPU threads of this process [default: OMP_NUM_THREADS if set, else the cores "
-    "less the load average, at least 1]."
-)
-
-
-def set_threads_option(threads: int | None) -> None:
-    from ..sim.runtime import set_threads
-
-    try:
-        set_threads(threads)
-    except ValueError as e:
-        fail(f"--{e}")
-
-
-def eval_shards_option(eval_workers: int, cpus: float | None, address: str | None):
-    """(workers, CPUs per worker, address) of a sharded evaluation, or None for the evaluation
-    in this process; a one-line error for bad values or Ray options without Ray."""
-    if eval_workers < 1:
-        fail(f"--eval-workers must be >= 1, got {eval_workers}")
-    if eval_workers == 1 and address is None:
-        if cpus is not None:
-            fail(
-                "--cpus-per-eval-worker is for evaluation shards on Ray: use it with "
-                "--eval-workers N > 1 or --ray-address"
-            )
-        return None
-    if cpus is not None and not (cpus > 0 and math.isfinite(cpus)):
-        fail(f"--cpus-per-eval-worker must be a finite number > 0, got {cpus}")
-    need_ray(f"--eval-workers {eval_workers}" if eval_workers > 1 else "--ray-address")
-    return eval_workers, 1.0 if cpus is None else cpus, address
-
-
-def need_ray(what: str) -> None:
-    """A one-line error naming the extra to install when Ray is missing."""
-    from .distributed import RayUnavailable, require_ray
-
-    try:
-        require_ray(what)
-    except RayUnavailable as e:
-        fail(str(e))
-
-
-def attach_shards(stack: ExitStack, ev, workers: int, cpus: float, address: str | None) -> None:
-    """Evaluate `ev`'s generations in shards on Ray actors until `stack` closes."""
-    from .distributed import RayUnavailable, sharded_evaluation
-
-    try:
-        evaluator = stack.enter_context(sharded_evaluation(ev, workers, address, cpus))
-    except RayUnavailable as e:
-        fail(str(e))
-    where = sorted(set(evaluator.where))
-    console.print(
-        f"Evaluation: {workers} shards on Ray actors ({escape('; '.join(where))})",
-        highlight=False,
-        soft_wrap=True,
-    )
-
-
-def print_shard_traffic(evaluator) -> None:
-    stats = getattr(evaluator, "stats", None)
-    if not stats:
-        return
-    n = len(stats)
-    sent = sum(s["bytes_sent"] for s in stats) / n
-    back = sum(s["bytes_received"] for s in stats) / n
-    console.print(
-        f"Evaluation shards: {sent / 1024:.1f} KiB sent and {back / 1024:.1f} KiB "
-        f"received per generation (pickled, mean of {n} generations)",
-        highlight=False,
-        markup=False,
-    )
-
-
 def execute(
     ev,
     run_dir: Path,
@@ -320,7 +166,7 @@ def execute(
     (default: swarmcode-torch evolve --resume RUN_DIR); `snapshot_every`, `bounds`: as
     `session.file_reporters` and `session.run` take them."""
     from .distributed import ShardError
-    from .files import RunError, os_error_text
+    from .files import RunError
 
     again = again or f"swarmcode-torch evolve --resume {run_dir}"
     writers = session.file_reporters(
@@ -363,36 +209,40 @@ def execute(
             soft_wrap=True,
         )
         raise typer.Exit(code=143 if stopped else 130) from None
-    except RunError as e:
+    except (RunError, OSError, ShardError) as e:
         if progress is not None:
             progress.stop()
         close_writers(reporters)
-        fail(f"{e}; {last_checkpoint(checkpoints.saved)}")
-    except OSError as e:
-        progress.stop()
-        close_writers(reporters)
-        what = (
-            f"writing the run's files failed after {ev.state.generation} generations "
-            f"({os_error_text(e)})"
-        )
-        if checkpoints.saved is None:
-            fail(
-                f"{what}; no checkpoint was written yet: free space or fix the cause, then start "
-                "the run again"
-            )
+        _failed(e, ev.state.generation, run_dir, checkpoints.saved, again)
+    progress.stop()
+
+
+def _failed(e: Exception, generations: int, run_dir: Path, saved: int | None, again: str):
+    """The one-line error of a run that failed after `generations` generations: a run directory
+    that cannot be used (RunError), a failed write (OSError) or a failed evaluation shard; what
+    the checkpoint file holds and how to continue."""
+    from .distributed import ShardError
+    from .files import RunError, os_error_text
+
+    if isinstance(e, RunError):
+        fail(f"{e}; {last_checkpoint(saved)}")
+    if isinstance(e, ShardError):
         fail(
-            f"{what}; {last_checkpoint(checkpoints.saved)} "
-            f"({run_dir / 'checkpoint.pt'}); free space or fix the cause, then continue with: "
-            f"{again}"
-        )
-    except ShardError as e:
-        progress.stop()
-        close_writers(reporters)
-        fail(
-            f"{e} after {ev.state.generation} generations; {last_checkpoint(checkpoints.saved)} "
+            f"{e} after {generations} generations; {last_checkpoint(saved)} "
             f"({run_dir / 'checkpoint.pt'}); continue with: {again}"
         )
-    progress.stop()
+    assert isinstance(e, OSError)
+    what = f"writing the run's files failed after {generations} generations ({os_error_text(e)})"
+    if saved is None:
+        fail(
+            f"{what}; no checkpoint was written yet: free space or fix the cause, then start "
+            "the run again"
+        )
+    fail(
+        f"{what}; {last_checkpoint(saved)} "
+        f"({run_dir / 'checkpoint.pt'}); free space or fix the cause, then continue with: "
+        f"{again}"
+    )
 
 
 def close_writers(reporters) -> None:
@@ -422,80 +272,3 @@ def quiet_thread_os_errors():
         yield
     finally:
         threading.excepthook = previous
-
-
-def _num(v, fmt: str) -> str:
-    return "n/a" if v is None else format(v, fmt)
-
-
-def best_interval(s: dict) -> str:
-    """How summary.json's best fitness was measured, for the line after it: " (mean of K fresh
-    environments, 95 % interval LO to HI; the highest single evaluation of the run: F in
-    generation G)"; "" for a run whose best team was not re-evaluated."""
-    k, ci = s.get("best_reeval_trials"), s.get("best_fitness_ci95")
-    if not k:
-        return ""
-    interval = f", 95 % interval {ci[0]:.2f} to {ci[1]:.2f}" if ci else ""
-    single = s.get("best_single_trial_fitness")
-    highest = (
-        f"; the highest single evaluation of the run: {single:.2f} in generation "
-        f"{s.get('best_single_trial_generation')}"
-        if single is not None
-        else ""
-    )
-    return f" (mean of {k} fresh environments{interval}{highest})"
-
-
-def print_team(run_dir: Path) -> None:
-    from .runs import RunError, read_summary
-
-    try:
-        s = read_summary(run_dir)
-    except RunError as e:
-        fail(str(e))
-    designs = s["designs"]
-    budget = "none" if s.get("budget") is None else f"${s['budget']:g}"
-    console.print(
-        f"Best team (generation {s['best_generation']}): fitness {_num(s['best_fitness'], '.2f')}"
-        f"{best_interval(s)}, cost ${_num(s['team_cost'], '.0f')} (budget {budget}), {s['num_species']} species, "
-        f"deliveries {_num(s['deliveries'], '.2f')} ({_num(s['deliveries_individual'], '.2f')} "
-        f"individual, {_num(s['deliveries_collab'], '.2f')} collaborative), energy used "
-        f"{_num(s['energy_used'], '.1f')}%",
-        markup=False,
-    )
-    t = Table(
-        title="Robots per design",
-        box=box.SIMPLE_HEAD,
-        caption="ch/bat/mot: chassis, battery, motor tier (1-3); torque, capacity: "
-        "operating points (0-1); dom: dominance",
-    )
-    for col in (
-        "robots",
-        "species",
-        "tool",
-        "radius",
-        "ch",
-        "bat",
-        "mot",
-        "torque",
-        "capacity",
-        "dom",
-        "$ each",
-    ):
-        t.add_column(col, justify="right", no_wrap=True)
-    for d in designs:
-        t.add_row(
-            str(d["count"]),
-            str(d["species"]),
-            d["effector"],
-            f"{d['radius']:.3f}",
-            str(d["chassis_tier"]),
-            str(d["battery_tier"]),
-            str(d["motor_tier"]),
-            f"{d['torque_point']:.2f}",
-            f"{d['battery_point']:.2f}",
-            f"{d['dominance']:.2f}",
-            f"{d['cost']:.0f}",
-        )
-    console.print(t)
-    return designs

@@ -61,6 +61,33 @@ def make_algorithm(name: str, cfg: SwarmCoDeConfig, num_species: int = 4) -> _Al
     raise ValueError(f"unknown algorithm {name!r}; expected one of {', '.join(ALGORITHMS)}")
 
 
+def _run(name: str, cfg: SwarmCoDeConfig, num_species: int, ctx, held_out) -> dict:
+    """One algorithm run for cfg.generations generations, its best team scored on the held-out
+    environments: `compare`'s row."""
+    t0 = time.perf_counter()
+    algo = make_algorithm(name, cfg, num_species)
+    last = None
+    for _ in range(cfg.generations):
+        last = algo.step()
+    seconds = time.perf_counter() - t0
+    ev = evaluate_team(algo.best, ctx, held_out)
+    row = {
+        "algorithm": name,
+        "seed": cfg.seed,
+        "generations": cfg.generations,
+        "episodes": algo.episodes,
+        "best_fitness": algo.best.fitness,
+        "species": algo.best.species,
+        "team_cost": algo.best.cost,
+        "heldout_fitness": ev["score"],
+        "heldout_deliveries": ev["deliveries"],
+        "seconds": seconds,
+    }
+    if isinstance(algo, SwarmCoDeRun):
+        row["population_species"] = last["species/count"]
+    return row
+
+
 def compare(
     scenario: str = "four-niche",
     seeds: Sequence[int] = (0, 1, 2),
@@ -120,31 +147,17 @@ def compare(
     rows = []
     for seed in seeds:
         for name in algorithms:
-            cfg = replace(cfg0, seed=seed, generations=plan[name])
-            t0 = time.perf_counter()
-            algo = make_algorithm(name, cfg, num_species)
-            last = None
-            for _ in range(plan[name]):
-                last = algo.step()
-            seconds = time.perf_counter() - t0
-            ev = evaluate_team(algo.best, ctx, held_out)
-            row = {
-                "algorithm": name,
-                "seed": seed,
-                "generations": plan[name],
-                "episodes": algo.episodes,
-                "best_fitness": algo.best.fitness,
-                "species": algo.best.species,
-                "team_cost": algo.best.cost,
-                "heldout_fitness": ev["score"],
-                "heldout_deliveries": ev["deliveries"],
-                "seconds": seconds,
-            }
-            if isinstance(algo, SwarmCoDeRun):
-                row["population_species"] = last["species/count"]
-            rows.append(row)
+            rows.append(
+                _run(
+                    name,
+                    replace(cfg0, seed=seed, generations=plan[name]),
+                    num_species,
+                    ctx,
+                    held_out,
+                )
+            )
             if progress is not None:
-                progress(row)
+                progress(rows[-1])
     used = {r["episodes"] for r in rows}
     if len(used) > 1:  # pragma: no cover - plan_generations guarantees it
         raise AssertionError(f"unequal episode budgets: {sorted(used)}")

@@ -1,19 +1,17 @@
-"""Scenarios: the foraging worlds of the paper as data, loadable by name or from a TOML file."""
+"""Scenarios: the foraging worlds of the paper as data, loadable by name or from a TOML file.
+
+What a scenario is (its dataclasses, its error, the bounds of its fields) is in
+`scenario_types`, whether its packages can be placed in `placement`; both are importable from
+here."""
 
 from __future__ import annotations
 
 import math
-import os
-import stat
-import sys
-from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
 from .hardware import (
     MAX_NESTING,
-    R_MAX,
-    R_MIN,
     Catalog,
     CatalogError,
     catalog_from_dict,
@@ -21,86 +19,59 @@ from .hardware import (
     nesting_depth,
     parse_catalog,
 )
+from .placement import check_placement
+from .reading import FileTooLargeError, NotRegularFileError, read_regular, tomllib
+from .scenario_types import (
+    EFFECTORS,
+    FIELDS,
+    MAX_ARENA,
+    MAX_DESCRIPTION,
+    MAX_EPISODE_TICKS,
+    MAX_FILE_BYTES,
+    MAX_GRIPS,
+    MAX_NAME,
+    MAX_NUMBER,
+    MAX_PACKAGES,
+    MAX_PATH,
+    OBSTACLE_FIELDS,
+    PACKAGE_CLEARANCE,
+    PACKAGE_FIELDS,
+    ROBOT_RADII,
+    SCALAR_FIELDS,
+    PackageClass,
+    Scenario,
+    ScenarioError,
+)
 
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
-
-EFFECTORS = {"suction": 0, "pincher": 1}
-MAX_GRIPS = 3
-#: Robot radii the hardware genes can take.
-ROBOT_RADII = (R_MIN, R_MAX)
-#: Upper bounds of a scenario's sizes: beyond them a world is certainly not what was meant.
-MAX_ARENA = 10_000.0  # m
-MAX_EPISODE_TICKS = 1_000_000
-MAX_NUMBER = 1e15  # any number of a scenario: float32 holds it with room to spare
-#: The most bytes read from a scenario file or the hardware catalog file it names.
-MAX_FILE_BYTES = 16 * 2**20
-#: The longest scenario name, description and --scenario name or path (characters).
-MAX_NAME = 200
-MAX_DESCRIPTION = 10_000
-MAX_PATH = 4096
-#: The most packages a scenario places (each environment places and senses every one).
-MAX_PACKAGES = 10_000
-#: Room kept free around a package for a robot at each grip (layout.make_layouts: size + 0.6).
-PACKAGE_CLEARANCE = 0.6
-
-
-class ScenarioError(ValueError):
-    """A scenario that cannot be loaded; the message names the bad field."""
-
-
-@dataclass(frozen=True)
-class PackageClass:
-    """A group of packages that share a spec; `count` of them are placed in every environment."""
-
-    kind: str  # "individual" or "collab"
-    count: int
-    distance: tuple[float, float]  # from the base centre (m)
-    mass: tuple[float, float]  # kg; heavier near the base when distance_weighting
-    grips: tuple[int, ...]  # effector of each grip point (one for an individual package)
-    radius_band: tuple[float, float] = (0.0, 10.0)  # robot radii that can lift it (m)
-    distance_weighting: bool = False
-    size: float = 0.2  # package radius (m); grip points lie just outside it
-
-    @property
-    def label(self) -> str:
-        """e.g. 'pincher 16-24 kg, r 0.32-0.5 m' or 'collab suction+pincher 30-40 kg'."""
-        names = {v: k for k, v in EFFECTORS.items()}
-        eff = "+".join(names[e] for e in self.grips)
-        collab = "collab " if self.kind == "collab" else ""
-        text = f"{collab}{eff} {self.mass[0]:g}-{self.mass[1]:g} kg"
-        if self.radius_band != (0.0, 10.0):
-            text += f", r {self.radius_band[0]:g}-{self.radius_band[1]:g} m"
-        return text
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """A foraging world: arena, base, obstacles, packages and swarm size."""
-
-    name: str
-    description: str
-    arena: float  # side of the square arena (m); the base is at its centre
-    base_radius: float
-    num_robots: int
-    episode_ticks: int
-    species_overhead: float  # $ fabrication overhead per distinct species in a team
-    obstacle_count: int
-    obstacle_radius: tuple[float, float]
-    packages: tuple[PackageClass, ...]
-    #: the hardware catalog its robots are built from: the scenario's own (its `hardware` key)
-    #: or the built-in one (data/hardware.toml)
-    hardware: Catalog = field(default_factory=default_catalog)
-
-    @property
-    def num_packages(self) -> int:
-        return sum(p.count for p in self.packages)
-
-    @property
-    def max_grips(self) -> int:
-        return max((len(p.grips) for p in self.packages), default=1)
+__all__ = [
+    "EFFECTORS",
+    "FIELDS",
+    "MAX_ARENA",
+    "MAX_DESCRIPTION",
+    "MAX_EPISODE_TICKS",
+    "MAX_FILE_BYTES",
+    "MAX_GRIPS",
+    "MAX_NAME",
+    "MAX_NUMBER",
+    "MAX_PACKAGES",
+    "MAX_PATH",
+    "OBSTACLE_FIELDS",
+    "PACKAGE_CLEARANCE",
+    "PACKAGE_FIELDS",
+    "ROBOT_RADII",
+    "SCALAR_FIELDS",
+    "PackageClass",
+    "Scenario",
+    "ScenarioError",
+    "builtin_names",
+    "check_placement",
+    "decode_text",
+    "load_scenario",
+    "parse_scenario",
+    "read_limited",
+    "read_scenario",
+    "scenario_from_dict",
+]
 
 
 def _get(d: dict, key: str, where: str, kind, default=None, required: bool = True):
@@ -206,26 +177,8 @@ def _hardware(v, folder: Path | None) -> Catalog:
         raise ScenarioError(str(e)) from None
 
 
-def _scenario_from_dict(
-    d: dict, source: str, folder: Path | None = None, hardware: Catalog | None = None
-) -> Scenario:
-    if not isinstance(d, dict):
-        raise ScenarioError(f"{source}: expected a table")
-    known = {
-        "name",
-        "description",
-        "arena",
-        "base_radius",
-        "num_robots",
-        "episode_ticks",
-        "species_overhead",
-        "obstacles",
-        "packages",
-        "hardware",
-    }
-    for k in d:
-        if k not in known:
-            raise ScenarioError(f"{k}: unknown field (known: {', '.join(sorted(known))})")
+def _scalars(d: dict) -> tuple[str, float, float, int, int, float]:
+    """name, arena, base_radius, num_robots, episode_ticks, species_overhead, checked."""
     name = _get(d, "name", "", str)
     if not name.strip() or len(name) > MAX_NAME or not name.isprintable():
         raise ScenarioError(
@@ -247,7 +200,11 @@ def _scenario_from_dict(
         raise ScenarioError(f"episode_ticks: must be in [1, {MAX_EPISODE_TICKS}], got {ticks}")
     if overhead < 0:
         raise ScenarioError(f"species_overhead: must be >= 0, got {overhead}")
+    return name, arena, base_radius, num_robots, ticks, overhead
 
+
+def _obstacles(d: dict) -> tuple[int, tuple[float, float]]:
+    """The [obstacles] table: count and radius range, checked."""
     obs = d.get("obstacles", {})
     if not isinstance(obs, dict):
         raise ScenarioError("obstacles: expected a table")
@@ -256,54 +213,51 @@ def _scenario_from_dict(
         raise ScenarioError(f"obstacles.count: must be >= 0, got {obs_count}")
     obs_radius = _range(obs, "radius", "obstacles.", default=(0.5, 1.0))
     for k in obs:
-        if k not in {"count", "radius"}:
+        if k not in OBSTACLE_FIELDS:
             raise ScenarioError(f"obstacles.{k}: unknown field (known: count, radius)")
+    return obs_count, obs_radius
 
+
+def _package_class(i: int, p) -> PackageClass:
+    """One [[packages]] table (the i-th), checked."""
+    w = f"packages[{i}]."
+    if not isinstance(p, dict):
+        raise ScenarioError(f"packages[{i}]: expected a table")
+    kind = _get(p, "kind", w, str)
+    if kind not in ("individual", "collab"):
+        raise ScenarioError(f"{w}kind: expected 'individual' or 'collab', got {kind!r}")
+    count = _get(p, "count", w, int)
+    if count < 0:
+        raise ScenarioError(f"{w}count: must be >= 0, got {count}")
+    dist = _range(p, "distance", w)
+    mass = _range(p, "mass", w)
+    grips: tuple[int, ...]
+    if kind == "individual":
+        grips = (_effector(_get(p, "effector", w, str), f"{w}effector"),)
+        band = _range(p, "radius_band", w, default=(0.0, 10.0))
+        size = _get(p, "size", w, float, default=0.2, required=False)
+    else:
+        g = p.get("grips")
+        if not isinstance(g, list) or not 2 <= len(g) <= MAX_GRIPS:
+            raise ScenarioError(f"{w}grips: expected a list of 2..{MAX_GRIPS} effectors")
+        grips = tuple(_effector(x, f"{w}grips") for x in g)
+        band = _range(p, "radius_band", w, default=(0.0, 10.0))
+        size = _get(p, "size", w, float, default=0.5, required=False)
+    if size <= 0:
+        raise ScenarioError(f"{w}size: must be > 0, got {size}")
+    dw = _get(p, "distance_weighting", w, bool, default=False, required=False)
+    for k in p:
+        if k not in PACKAGE_FIELDS:
+            raise ScenarioError(f"{w}{k}: unknown field")
+    return PackageClass(kind, count, dist, mass, grips, band, dw, size)
+
+
+def _package_classes(d: dict) -> tuple[PackageClass, ...]:
+    """The [[packages]] tables, checked (at least one package in all, at most MAX_PACKAGES)."""
     pkgs = d.get("packages")
     if not isinstance(pkgs, list) or not pkgs:
         raise ScenarioError("packages: expected at least one [[packages]] table")
-    classes = []
-    for i, p in enumerate(pkgs):
-        w = f"packages[{i}]."
-        if not isinstance(p, dict):
-            raise ScenarioError(f"packages[{i}]: expected a table")
-        kind = _get(p, "kind", w, str)
-        if kind not in ("individual", "collab"):
-            raise ScenarioError(f"{w}kind: expected 'individual' or 'collab', got {kind!r}")
-        count = _get(p, "count", w, int)
-        if count < 0:
-            raise ScenarioError(f"{w}count: must be >= 0, got {count}")
-        dist = _range(p, "distance", w)
-        mass = _range(p, "mass", w)
-        grips: tuple[int, ...]
-        if kind == "individual":
-            grips = (_effector(_get(p, "effector", w, str), f"{w}effector"),)
-            band = _range(p, "radius_band", w, default=(0.0, 10.0))
-            size = _get(p, "size", w, float, default=0.2, required=False)
-        else:
-            g = p.get("grips")
-            if not isinstance(g, list) or not 2 <= len(g) <= MAX_GRIPS:
-                raise ScenarioError(f"{w}grips: expected a list of 2..{MAX_GRIPS} effectors")
-            grips = tuple(_effector(x, f"{w}grips") for x in g)
-            band = _range(p, "radius_band", w, default=(0.0, 10.0))
-            size = _get(p, "size", w, float, default=0.5, required=False)
-        if size <= 0:
-            raise ScenarioError(f"{w}size: must be > 0, got {size}")
-        dw = _get(p, "distance_weighting", w, bool, default=False, required=False)
-        for k in p:
-            if k not in {
-                "kind",
-                "count",
-                "distance",
-                "mass",
-                "effector",
-                "grips",
-                "radius_band",
-                "size",
-                "distance_weighting",
-            }:
-                raise ScenarioError(f"{w}{k}: unknown field")
-        classes.append(PackageClass(kind, count, dist, mass, grips, band, dw, size))
+    classes = [_package_class(i, p) for i, p in enumerate(pkgs)]
     if sum(c.count for c in classes) < 1:
         raise ScenarioError("packages: the scenario places no package")
     if sum(c.count for c in classes) > MAX_PACKAGES:
@@ -311,6 +265,21 @@ def _scenario_from_dict(
             f"packages: {sum(c.count for c in classes)} packages, more than "
             f"{MAX_PACKAGES} (each is placed one by one in every environment)"
         )
+    return tuple(classes)
+
+
+def _scenario_from_dict(
+    d: dict, source: str, folder: Path | None = None, hardware: Catalog | None = None
+) -> Scenario:
+    if not isinstance(d, dict):
+        raise ScenarioError(f"{source}: expected a table")
+    known = set(FIELDS)
+    for k in d:
+        if k not in known:
+            raise ScenarioError(f"{k}: unknown field (known: {', '.join(sorted(known))})")
+    name, arena, base_radius, num_robots, ticks, overhead = _scalars(d)
+    obs_count, obs_radius = _obstacles(d)
+    classes = _package_classes(d)
     description = d.get("description", "")
     if not isinstance(description, str):
         raise ScenarioError(f"description: expected str, got {description!r:.60}")
@@ -333,83 +302,11 @@ def _scenario_from_dict(
         overhead,
         obs_count,
         obs_radius,
-        tuple(classes),
+        classes,
         hardware,
     )
     check_placement(scenario)
     return scenario
-
-
-def check_placement(s: Scenario) -> None:
-    """ScenarioError unless the packages and obstacles of `s` can be placed the way
-    `layout.make_layouts` places them. These are necessary conditions, kept simple:
-
-    - every obstacle fits in the arena (2 x radius < arena), and the obstacles cover at most
-      half of it (count x pi x low radius^2);
-    - a package's grip band meets the robot radii [0.15, 0.5] m;
-    - its distance range starts outside the base (low >= base_radius + size), its nearest
-      distance is inside the arena in every direction (low <= arena/2 - clearance) and its
-      farthest at most reaches the corners (high <= (arena/2 - clearance) x sqrt 2), where the
-      clearance is size + 0.6 m (the room a robot needs at each grip);
-    - its packages, as discs of radius clearance, fit in the ring their distances allow, and all
-      packages and obstacles together fit in the arena outside the base.
-    """
-    W, base = s.arena, s.base_radius
-    lo_r, hi_r = s.obstacle_radius
-    if s.obstacle_count:
-        if 2 * hi_r >= W:
-            raise ScenarioError(
-                f"obstacles.radius: an obstacle of radius {hi_r:g} m does not fit "
-                f"in a {W:g} m arena"
-            )
-        if s.obstacle_count * math.pi * lo_r**2 > W * W / 2:
-            raise ScenarioError(
-                f"obstacles: {s.obstacle_count} obstacles of radius >= {lo_r:g} m "
-                f"cover more than half of the {W:g} m arena; packages could not "
-                "be placed clear of them"
-            )
-    used = s.obstacle_count * math.pi * lo_r**2
-    for i, c in enumerate(s.packages):
-        w = f"packages[{i}]."
-        band_lo, band_hi = c.radius_band
-        if band_hi < ROBOT_RADII[0] or band_lo > ROBOT_RADII[1]:
-            raise ScenarioError(
-                f"{w}radius_band: [{band_lo:g}, {band_hi:g}] m holds no robot "
-                f"radius (robots are {ROBOT_RADII[0]:g}-{ROBOT_RADII[1]:g} m)"
-            )
-        clear = c.size + PACKAGE_CLEARANCE
-        d_lo, d_hi = c.distance
-        if d_lo < base + c.size:
-            raise ScenarioError(
-                f"{w}distance: packages at {d_lo:g} m lie inside the base "
-                f"(base_radius {base:g} m + size {c.size:g} m)"
-            )
-        if d_lo > W / 2 - clear:
-            raise ScenarioError(
-                f"{w}distance: {d_lo:g} m from the base centre lies outside the "
-                f"arena in most directions (at most {W / 2 - clear:g} m: arena/2 "
-                f"- size - {PACKAGE_CLEARANCE:g})"
-            )
-        if d_hi > (W / 2 - clear) * math.sqrt(2):
-            raise ScenarioError(
-                f"{w}distance: {d_hi:g} m lies outside the arena (at most "
-                f"{(W / 2 - clear) * math.sqrt(2):.3g} m)"
-            )
-        need = c.count * math.pi * clear**2
-        ring = min(math.pi * ((d_hi + clear) ** 2 - max(d_lo - clear, 0.0) ** 2), W * W)
-        if need > ring:
-            raise ScenarioError(
-                f"{w}count: {c.count} packages of size {c.size:g} m do not fit "
-                f"at {d_lo:g}-{d_hi:g} m from the base (they need {need:.4g} m2, "
-                f"the ring holds {ring:.4g} m2)"
-            )
-        used += need
-    if used > W * W - math.pi * base**2:
-        raise ScenarioError(
-            f"packages: the packages and obstacles need {used:.4g} m2, more than "
-            f"the {W * W - math.pi * base**2:.4g} m2 of the arena outside the "
-            "base"
-        )
 
 
 def builtin_names() -> list[str]:
@@ -421,27 +318,23 @@ def builtin_names() -> list[str]:
 def read_limited(path: Path, source: str, limit: int = MAX_FILE_BYTES) -> bytes:
     """The bytes of a regular file, at most `limit` of them (ScenarioError naming `source` for
     one that cannot be read, is not a regular file or is larger: nothing past `limit` is
-    read)."""
+    read; `reading.read_regular`)."""
     try:
-        with os.fdopen(os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)), "rb") as f:
-            st = os.fstat(f.fileno())
-            if not stat.S_ISREG(st.st_mode):
-                raise ScenarioError(f"{source}: not a regular file")
-            if st.st_size > limit:
-                raise ScenarioError(
-                    f"{source}: {st.st_size} bytes, more than the {limit} a "
-                    "scenario or catalog file may have"
-                )
-            data = f.read(limit + 1)
+        return read_regular(path, limit)
+    except NotRegularFileError:
+        raise ScenarioError(f"{source}: not a regular file") from None
+    except FileTooLargeError as e:
+        if e.size is None:
+            raise ScenarioError(
+                f"{source}: more than the {limit} bytes a scenario or catalog file may have"
+            ) from None
+        raise ScenarioError(
+            f"{source}: {e.size} bytes, more than the {limit} a scenario or catalog file may have"
+        ) from None
     except OSError as e:
         raise ScenarioError(
             f"{source}: cannot be read ({e.strerror or type(e).__name__})"
         ) from None
-    if len(data) > limit:
-        raise ScenarioError(
-            f"{source}: more than the {limit} bytes a scenario or catalog file may have"
-        )
-    return data
 
 
 def decode_text(data: bytes, source: str) -> str:

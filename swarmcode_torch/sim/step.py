@@ -12,7 +12,7 @@ import torch
 from . import bt
 from .contacts import _gather, collide
 from .layout import Layout
-from .sense import _INF, sense
+from .sense import _INF, Senses, sense
 from .state import DELIVERED, GROUND, HELD, Robots, State, WorldParams, _waypoints
 
 _MOVE_ACTIONS = (
@@ -37,30 +37,15 @@ def _cap(v: torch.Tensor, vmax: float, vmin: float = 0.0) -> torch.Tensor:
     return torch.where(n < vmin, 0.0, v * (vmax / n.clamp_min(vmax)))
 
 
-# ---------------------------------------------------------------- one tick
-def step(
-    state: State,
-    layout: Layout,
-    robots: Robots,
-    compat: torch.Tensor,
-    keys: torch.Tensor,
-    tables: torch.Tensor,
-    params: WorldParams,
-) -> State:
-    """Advance every environment by one tick."""
-    E, N = robots.radius.shape
+# ---------------------------------------------------------------- the phases of a tick
+def _grips(
+    state: State, layout: Layout, s: Senses, fired: torch.Tensor, params: WorldParams
+) -> tuple[torch.Tensor, ...]:
+    """Drop, then pick up -> holder [E, H], holding, grip, lifted [E, Q], p_status, p_picked."""
+    E, N = state.holding.shape
     Q, G = layout.g_effector.shape[1:]
     H = Q * G
     dev = state.pos.device
-    base = state.pos.new_tensor([params.arena / 2, params.arena / 2])
-    s = sense(state, layout, robots, compat, keys, params)
-
-    # --- the behavior trees
-    alive = robots.present & (state.energy > 0)
-    action, fired, _ = bt.lookup(tables, robots.program, s.leaf)
-    action = torch.where(alive, action, bt.NOP)
-    fired = fired & alive[..., None]
-
     holder = state.holder.reshape(E, H)
     holding, grip = state.holding, state.grip
     robot_ids = torch.arange(N, device=dev).expand(E, N)
@@ -96,8 +81,13 @@ def step(
     lifted = ((holder3 >= 0) | ~exists).all(-1) & exists.any(-1) & ~delivered
     p_status = torch.where(delivered, DELIVERED, torch.where(held_any, HELD, GROUND))
     p_picked = state.p_picked | lifted
+    return holder, holding, grip, lifted, p_status, p_picked
 
-    # --- where each robot wants to go
+
+def _targets(state: State, s: Senses, action: torch.Tensor, params: WorldParams) -> torch.Tensor:
+    """Where each robot wants to go [E, N, 2]: its own position unless a move action says."""
+    E, N = action.shape
+    base = state.pos.new_tensor([params.arena / 2, params.arena / 2])
     target = state.pos
     target = torch.where(
         (action == bt.ACT_MOVE_TO_PACK)[..., None] & (s.best_d < _INF)[..., None],
@@ -110,19 +100,48 @@ def step(
         target,
     )
     target = torch.where((action == bt.ACT_MOVE_TO_BASE)[..., None], base.expand(E, N, 2), target)
-    target = torch.where((action == bt.ACT_RANDOM_WALK)[..., None], state.waypoint, target)
+    return torch.where((action == bt.ACT_RANDOM_WALK)[..., None], state.waypoint, target)
 
-    # --- PD control (cascaded: position error -> desired velocity -> force), force-limited
+
+def _control(
+    state: State,
+    layout: Layout,
+    robots: Robots,
+    alive: torch.Tensor,
+    holding: torch.Tensor,
+    target: torch.Tensor,
+    params: WorldParams,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """PD control (cascaded: position error -> desired velocity -> force), force-limited ->
+    f_cmd [E, N, 2] and each robot's share of the mass it carries [E, N]."""
     carrying = holding >= 0
-    n_grips = exists.sum(-1).clamp_min(1)
+    n_grips = (layout.g_effector >= 0).sum(-1).clamp_min(1)
     share = torch.where(carrying, _gather(layout.p_mass / n_grips, holding), 0.0)
     m_ctrl = robots.mass + share
     v_des = _cap(params.kp * (target - state.pos), params.v_cap)
     f_cmd = m_ctrl[..., None] * (params.kv * (v_des - state.vel) + params.drag * v_des)
     f_max = torch.where(alive, robots.force, 0.0)[..., None]
     f_cmd = f_cmd * (f_max / f_cmd.norm(dim=-1, keepdim=True).clamp_min(1e-9)).clamp(max=1.0)
+    return f_cmd, share
 
-    # --- free robots: semi-implicit Euler
+
+def _move(
+    state: State,
+    layout: Layout,
+    robots: Robots,
+    f_cmd: torch.Tensor,
+    holding: torch.Tensor,
+    grip: torch.Tensor,
+    lifted: torch.Tensor,
+    params: WorldParams,
+) -> tuple[torch.Tensor, ...]:
+    """Free robots by semi-implicit Euler; lifted packages as one rigid body with their
+    carriers -> pos, vel, p_pos, p_vel, pidx (the package each robot moves with, Q: none),
+    in_lifted, g_off (each robot's grip offset)."""
+    E = holding.shape[0]
+    Q, G = layout.g_effector.shape[1:]
+    H = Q * G
+    carrying = holding >= 0
     vel = _cap(
         state.vel + params.dt * (f_cmd / robots.mass[..., None] - params.drag * state.vel),
         params.v_cap,
@@ -130,7 +149,6 @@ def step(
     )
     pos = state.pos + params.dt * vel
 
-    # --- lifted packages move as one rigid body with their carriers
     in_lifted = carrying & _gather(lifted.long(), holding).bool()
     pidx = torch.where(in_lifted, holding, Q)
     f_pkg = _scatter_sum(f_cmd, pidx, Q)
@@ -148,8 +166,64 @@ def step(
     g_off = _gather(layout.g_offset.reshape(E, H, 2), holding * G + grip)
     pos = torch.where(carrying[..., None], _gather(p_pos, holding) + g_off, pos)
     vel = torch.where(carrying[..., None], _gather(p_vel, holding), vel)
+    return pos, vel, p_pos, p_vel, pidx, in_lifted, g_off
+
+
+def _stuck_and_waypoints(
+    state: State,
+    action: torch.Tensor,
+    alive: torch.Tensor,
+    target: torch.Tensor,
+    pos: torch.Tensor,
+    params: WorldParams,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Stuck detection and random-walk waypoints -> stuck, t, waypoint."""
+    moving = torch.zeros_like(alive)
+    for a in _MOVE_ACTIONS:
+        moving = moving | (action == a)
+    trying = moving & ((target - state.pos).norm(dim=-1) > params.reach)
+    slow = (pos - state.pos).norm(dim=-1) < params.stuck_speed * params.dt
+    stuck = torch.where(trying & slow, state.stuck + 1, 0)
+    t = state.t + 1
+    redraw = ((state.waypoint - pos).norm(dim=-1) <= params.reach) | (
+        t % params.waypoint_period == 0
+    )
+    waypoint = torch.where(redraw[..., None], _waypoints(state.wp_key, t, params), state.waypoint)
+    return stuck, t, waypoint
+
+
+# ---------------------------------------------------------------- one tick
+def step(
+    state: State,
+    layout: Layout,
+    robots: Robots,
+    compat: torch.Tensor,
+    keys: torch.Tensor,
+    tables: torch.Tensor,
+    params: WorldParams,
+) -> State:
+    """Advance every environment by one tick. `sense` and `collide` are called here, not in a
+    phase function: `triton_tick.step_triton` is this function's code with those two names
+    bound to its kernels."""
+    E = robots.radius.shape[0]
+    Q, G = layout.g_effector.shape[1:]
+    s = sense(state, layout, robots, compat, keys, params)
+
+    # --- the behavior trees
+    alive = robots.present & (state.energy > 0)
+    action, fired, _ = bt.lookup(tables, robots.program, s.leaf)
+    action = torch.where(alive, action, bt.NOP)
+    fired = fired & alive[..., None]
+
+    holder, holding, grip, lifted, p_status, p_picked = _grips(state, layout, s, fired, params)
+    target = _targets(state, s, action, params)
+    f_cmd, share = _control(state, layout, robots, alive, holding, target, params)
+    pos, vel, p_pos, p_vel, pidx, in_lifted, g_off = _move(
+        state, layout, robots, f_cmd, holding, grip, lifted, params
+    )
 
     # --- contacts; carriers pass their correction on to the package they hold
+    carrying = holding >= 0
     waiting = carrying & ~in_lifted
     m_col = torch.where(waiting, params.anchor_mass, robots.mass + share)
     pos_c, vel_c = collide(
@@ -174,18 +248,7 @@ def step(
     used = params.dt * (p_mech / robots.efficiency + params.idle_power)
     energy = torch.where(robots.present, (state.energy - used).clamp_min(0), 0.0)
 
-    # --- stuck detection and random-walk waypoints
-    moving = torch.zeros_like(alive)
-    for a in _MOVE_ACTIONS:
-        moving = moving | (action == a)
-    trying = moving & ((target - state.pos).norm(dim=-1) > params.reach)
-    slow = (pos - state.pos).norm(dim=-1) < params.stuck_speed * params.dt
-    stuck = torch.where(trying & slow, state.stuck + 1, 0)
-    t = state.t + 1
-    redraw = ((state.waypoint - pos).norm(dim=-1) <= params.reach) | (
-        t % params.waypoint_period == 0
-    )
-    waypoint = torch.where(redraw[..., None], _waypoints(state.wp_key, t, params), state.waypoint)
+    stuck, t, waypoint = _stuck_and_waypoints(state, action, alive, target, pos, params)
 
     # contiguous, like reset()'s holder: a strided view here would make a compiled step (which
     # guards on input strides) compile a second time on its second call
