@@ -17,8 +17,9 @@ from .app.analysis import replay_run, run_dynamics
 from .app.api import RunResult, evolve, load, resume
 from .app.evaluate import EvaluationResult, evaluate
 from .app.reporting import composition_figure
+from .coevo.ask_tell import Asked, Evolution
 from .coevo.config import EvolveConfig, SwarmCoDeConfig
-from .coevo.evolve import Evolution, GenerationResult
+from .coevo.evolve import GenerationResult
 from .coevo.population import Population
 from .sim.bt import format_tree
 from .sim.scenario import Scenario, builtin_names, load_scenario
@@ -33,6 +34,7 @@ __all__ = [
     "SwarmCoDeConfig",
     "EvolveConfig",
     "Evolution",
+    "Asked",
     "GenerationResult",
     "Population",
     "load_scenario",

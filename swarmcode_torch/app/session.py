@@ -28,7 +28,8 @@ from typing import Protocol
 
 from ..coevo.config import PRESETS, SwarmCoDeConfig, preset_config, with_overrides
 from ..coevo.evaluation import ScoreFn
-from ..coevo.evolve import Evolution, GenerationResult
+from ..coevo.ask_tell import Evolution
+from ..coevo.evolve import GenerationResult
 from ..sim.scenario import Scenario, read_scenario
 from . import checkpoints, files, records
 from .checkpoints import Branch, CheckpointReporter, load_run, resume
