@@ -237,6 +237,11 @@ def evolve(
     snapshot_every: Evolve.snapshot_every = 0,
     max_time: Evolve.max_time = None,
     patience: Evolve.patience = None,
+    stop_metric: Evolve.stop_metric = None,
+    stop_min_delta: Evolve.stop_min_delta = None,
+    stop_warmup: Evolve.stop_warmup = None,
+    stop_mode: Evolve.stop_mode = None,
+    keep_checkpoints: Evolve.keep_checkpoints = 0,
     wandb: Evolve.wandb = False,
     wandb_project: Evolve.wandb_project = "swarmcode-torch",
 ) -> None:

@@ -185,6 +185,41 @@ class Evolve:
             help="Stop cleanly with a checkpoint (resumable) when the best team has not improved for K generations.",
         ),
     ]
+    stop_metric = Annotated[
+        str | None,
+        typer.Option(
+            metavar="TAG",
+            help="--patience watches this metric instead of the best team: best/fitness, or a metrics.csv column such as team/fitness or fitness/mean [default: best/fitness].",
+        ),
+    ]
+    stop_min_delta = Annotated[
+        float | None,
+        typer.Option(
+            metavar="X",
+            help="--patience counts only improvements of the watched metric by more than X [default: 0].",
+        ),
+    ]
+    stop_warmup = Annotated[
+        int | None,
+        typer.Option(
+            metavar="N",
+            help="--patience watches from generation N on (the first N generations are not counted) [default: 0].",
+        ),
+    ]
+    stop_mode = Annotated[
+        str | None,
+        typer.Option(
+            metavar="[max|min]",
+            help="Whether the watched metric improves upwards (max) or downwards (min) [default: max].",
+        ),
+    ]
+    keep_checkpoints = Annotated[
+        int,
+        typer.Option(
+            metavar="K",
+            help="Also keep the last K checkpoints (RUN_DIR/checkpoints/generation-NNNNNN.pt) and the one that holds the run's best team (checkpoints/best.pt); 0: none.",
+        ),
+    ]
     wandb = Annotated[
         bool,
         typer.Option(
