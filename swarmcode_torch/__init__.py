@@ -16,6 +16,7 @@ algorithm, not matplotlib, TensorBoard or the CLI's libraries: they load when fi
 from .app.analysis import replay_run, run_dynamics
 from .app.api import RunResult, evolve, load, resume
 from .app.evaluate import EvaluationResult, evaluate
+from .app.load_runs import Runs, load_runs
 from .app.reporting import composition_figure
 from .coevo.ask_tell import Asked, Evolution
 from .coevo.config import EvolveConfig, SwarmCoDeConfig
@@ -30,6 +31,8 @@ __all__ = [
     "evolve",
     "resume",
     "load",
+    "load_runs",
+    "Runs",
     "RunResult",
     "SwarmCoDeConfig",
     "EvolveConfig",

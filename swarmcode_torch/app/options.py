@@ -233,7 +233,12 @@ class Evolve:
 class Sweep:
     """The options of `swarmcode-torch sweep` (`cli.sweep`)."""
 
-    budgets = Annotated[str, typer.Option(help="Comma-separated budgets in $.")]
+    budgets = Annotated[
+        str | None,
+        typer.Option(
+            help="Comma-separated budgets in $ [default: 2500,3000,4000,5000,6000,8000; with --grid or --config: the config's budget]."
+        ),
+    ]
     seeds = Annotated[str, typer.Option(help="Comma-separated seeds; one run per budget and seed.")]
     objective = Annotated[
         Objective | None,
@@ -308,6 +313,22 @@ class Sweep:
         ),
     ]
     threads = Annotated[int | None, typer.Option(help=THREADS_HELP)]
+    grid = Annotated[
+        list[str] | None,
+        typer.Option(
+            "--grid",
+            metavar="KEY=V1,V2,...",
+            help="Also sweep this setting over these values (repeatable: one run per combination, budget and seed), e.g. --grid delta=0.3,0.5 --grid population=50,100; keys as in a run's config.toml.",
+        ),
+    ]
+    config = Annotated[
+        str | None,
+        typer.Option(
+            "--config",
+            metavar="FILE",
+            help="The runs' settings to start from, in the format of a run's config.toml, as evolve --config; --preset, the options and --set go on top.",
+        ),
+    ]
 
 
 class Dynamics:
