@@ -181,6 +181,14 @@ class _Progress:
     def on_end(self, ev: Evolution) -> None:
         self.close()
 
+    def on_stop(self, ev: Evolution, record: dict) -> None:
+        """A bound or the callback stopped the run: a line saying why (`stopping.stop_text`)."""
+        from .stopping import stop_text
+
+        self.close()
+        self.stream.write(stop_text(record) + "\n")
+        self.stream.flush()
+
     def close(self) -> None:
         """End the line redrawn in place (at the end of a run, or when it stops)."""
         if self.inplace and self.width:

@@ -213,3 +213,27 @@ class CallbackStop:
     def why(self) -> str:
         extra = "" if self.said == "callback" else f": {self.said}"
         return f"the callback asked to stop after generation {self.generation}{extra}"
+
+
+def stop_text(record: dict) -> str:
+    """The line that says why a run stopped early, from summary.json's "stop" record
+    (`session.Bounds.record`): what the API's progress prints when a bound stops a run."""
+    g, reason = record.get("generation"), record.get("reason")
+    if reason == "callback":
+        said = record.get("callback")
+        why = "the callback asked to stop" + ("" if said in (None, "callback") else f": {said}")
+    elif reason == "patience" and "metric" in record:
+        delta = record.get("min_delta") or 0
+        why = (
+            f"{record['metric']} has not improved{f' by more than {delta:g}' if delta else ''} "
+            f"for {record.get('patience')} generations (best at generation "
+            f"{record.get('best_generation')})"
+        )
+    elif reason == "patience":
+        why = (
+            f"the best team (generation {record.get('best_generation')}) has not improved for "
+            f"{record.get('patience')} generations"
+        )
+    else:
+        why = f"max_time reached ({record.get('elapsed_seconds')}s of {record.get('max_time_seconds')}s)"
+    return f"Stopped after {g} generations: {why}"

@@ -59,6 +59,14 @@ def test_a_callback_that_returns_true_or_a_reason_stops_after_that_generation(
     assert more.generations == 6 and more.stopped is None
 
 
+def test_the_progress_says_why_a_callback_stopped_the_run(capsys):
+    res = sc.evolve(logdir=None, generations=6, callback=lambda r: "enough", progress=True,
+                    **{k: v for k, v in API_TINY.items() if k != "progress"})  # fmt: skip
+    assert res.stopped == "callback" and res.generations == 1
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1] == "Stopped after 1 generations: the callback asked to stop: enough"
+
+
 def test_a_callback_returning_other_values_lets_the_run_go_on():
     values = iter([None, False, 0, 1, ""])
     res = sc.evolve(logdir=None, generations=5, callback=lambda r: next(values), **API_TINY)
