@@ -102,6 +102,15 @@ def test_a_grid_of_two_keys_runs_every_combination_with_the_configs_budget(tmp_p
     ]  # fmt: skip
     header = (out / "table.md").read_text().splitlines()[0]
     assert header.startswith("| population | p_tag_flip | Budget")
+    # --config: a run's settings to start from (its budget, population, p_tag_flip), a grid on top
+    config = out / f"population-4_p_tag_flip-0.1_budget-{b}_seed-0" / "config.toml"
+    r = invoke("sweep", "--config", config, "--grid", "delta=0.2,0.4", "--seeds", 7,
+               "--out", tmp_path / "c")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    rows = sc.load_runs(tmp_path / "c")
+    assert [(r["delta"], r["seed"], r["population"], r["p_tag_flip"]) for r in rows] == [
+        (0.2, 7, 4, 0.1), (0.4, 7, 4, 0.1)
+    ]  # fmt: skip
 
 
 @pytest.mark.parametrize(
