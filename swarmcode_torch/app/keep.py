@@ -56,6 +56,15 @@ def check_keep(keep, name: str = "keep_checkpoints") -> int:
     return keep
 
 
+def checkpoint_reporter(
+    run_dir: Path, every: int, snapshot_every: int = 0, keep: int = 0
+) -> CheckpointReporter:
+    """The run's checkpoint writer: a `KeepingCheckpoints` with `keep` > 0, else the plain one."""
+    if keep:
+        return KeepingCheckpoints(run_dir, every, snapshot_every, keep)
+    return CheckpointReporter(run_dir, every, snapshot_every)
+
+
 class KeepingCheckpoints(CheckpointReporter):
     """`CheckpointReporter` that also keeps the last `keep` checkpoints and the best one
     (the module's docstring)."""

@@ -311,14 +311,10 @@ def file_reporters(
     generations and at the end (`saved`: the generation the file holds when the run starts),
     and a snapshot of it every `snapshot_every` generations (0: none); with `keep_checkpoints`
     K > 0, the last K checkpoints and the best one too (`keep.KeepingCheckpoints`)."""
-    from .keep import KeepingCheckpoints
+    from .keep import checkpoint_reporter
     from .reporting import CsvReporter, TensorBoardReporter
 
-    checkpoint = (
-        KeepingCheckpoints(run_dir, checkpoint_every, snapshot_every, keep_checkpoints)
-        if keep_checkpoints
-        else CheckpointReporter(run_dir, checkpoint_every, snapshot_every)
-    )
+    checkpoint = checkpoint_reporter(run_dir, checkpoint_every, snapshot_every, keep_checkpoints)
     checkpoint.saved = saved
     return [
         SummaryReporter(run_dir),
@@ -378,9 +374,7 @@ class Bounds:
     patience: int | None = None
     reason: str | None = None
     elapsed: float = 0.0
-    stops: list = field(default_factory=list)
-    """More stops (`stopping.MetricStop`, `stopping.CallbackStop`): each checked after every
-    generation (`check(ev, result)`); `stopper` is the one that stopped the run."""
+    stops: list = field(default_factory=list)  # more (`stopping`); `stopper`: the one that stopped
     stopper: object = None
 
     def __post_init__(self) -> None:
@@ -395,8 +389,7 @@ class Bounds:
 
     def reached(self, ev: Evolution, elapsed: float, result=None) -> str | None:
         """The bound `ev`'s state, `elapsed` seconds into the run, has reached (None: none; a
-        run at its last generation has reached none: it ends). `result`: the generation's, which
-        every one of `stops` sees."""
+        run at its last generation has reached none: it ends); every stop sees `result`."""
         said = [(s, s.check(ev, result)) for s in self.stops] if result is not None else []
         if ev.done:
             return None
@@ -404,22 +397,14 @@ class Bounds:
             if reason is not None:
                 self.stopper = s
                 return reason
-        if self.patience is not None and ev.state.best is not None and not self.stops_patience:
+        on_metric = any(s.reason == "patience" for s in self.stops)  # --patience --stop-metric
+        if self.patience is not None and ev.state.best is not None and not on_metric:
             last = ev.state.generation - 1
             if last - int(ev.state.best["generation"]) >= self.patience:
                 return "patience"
         if self.max_time is not None and elapsed >= self.max_time:
             return "max_time"
         return None
-
-    @property
-    def stops_patience(self) -> bool:
-        """Whether one of `stops` watches --patience (on a metric), instead of the best team."""
-        return any(getattr(s, "reason", None) == "patience" for s in self.stops)
-
-    def start(self, ev: Evolution, run_dir: Path | None) -> None:
-        for s in self.stops:
-            s.start(ev, run_dir)
 
     def record(self, ev: Evolution) -> dict:
         """summary.json's "stop" of a run this stopped."""
@@ -470,8 +455,8 @@ def run(
         with hold():
             for r in reporters:
                 r.on_start(ev)
-        if bounds is not None:
-            bounds.start(ev, run_dir)
+        for s in bounds.stops if bounds is not None else []:
+            s.start(ev, run_dir)  # a resumed run's earlier values
         while not ev.done:
             result = records.step(ev)
             if on_disk:
