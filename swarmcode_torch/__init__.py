@@ -16,9 +16,11 @@ algorithm, not matplotlib, TensorBoard or the CLI's libraries: they load when fi
 from .app.analysis import replay_run, run_dynamics
 from .app.api import RunResult, evolve, load, resume
 from .app.evaluate import EvaluationResult, evaluate
+from .app.load_runs import Runs, load_runs
 from .app.reporting import composition_figure
+from .coevo.ask_tell import Asked, Evolution
 from .coevo.config import EvolveConfig, SwarmCoDeConfig
-from .coevo.evolve import Evolution, GenerationResult
+from .coevo.evolve import GenerationResult
 from .coevo.population import Population
 from .sim.bt import format_tree
 from .sim.scenario import Scenario, builtin_names, load_scenario
@@ -29,10 +31,13 @@ __all__ = [
     "evolve",
     "resume",
     "load",
+    "load_runs",
+    "Runs",
     "RunResult",
     "SwarmCoDeConfig",
     "EvolveConfig",
     "Evolution",
+    "Asked",
     "GenerationResult",
     "Population",
     "load_scenario",

@@ -75,8 +75,8 @@ class RunResult:
     scenario: Scenario | None = None
     evolution: Evolution | None = field(default=None, repr=False)
     stopped: str | None = None
-    """Why the run stopped before its last generation: "max_time" or "patience" (`evolve`'s
-    bounds; `resume` continues it), None when it did not."""
+    """Why the run stopped before its last generation: "max_time", "patience" or "callback"
+    (`evolve`'s bounds; `resume` continues it), None when it did not."""
 
     @property
     def generations(self) -> int:
@@ -180,6 +180,14 @@ class _Progress:
 
     def on_end(self, ev: Evolution) -> None:
         self.close()
+
+    def on_stop(self, ev: Evolution, record: dict) -> None:
+        """A bound or the callback stopped the run: a line saying why (`stopping.stop_text`)."""
+        from .stopping import stop_text
+
+        self.close()
+        self.stream.write(stop_text(record) + "\n")
+        self.stream.flush()
 
     def close(self) -> None:
         """End the line redrawn in place (at the end of a run, or when it stops)."""
@@ -329,8 +337,14 @@ def _result(
     )
 
 
-def _bounds(max_time, patience, snapshot_every) -> session.Bounds | None:
-    """The run's `session.Bounds` (None without max_time and patience); ValueError otherwise."""
+def _bounds(max_time, patience, snapshot_every, stop=(), callback=None) -> session.Bounds | None:
+    """The run's `session.Bounds` (None without max_time, patience, the early-stopping settings
+    `stop` (`stopping.metric_stop`'s) and a callback); ValueError otherwise."""
+    from .stopping import CallbackStop, metric_stop
+
+    metric = metric_stop(patience, *(tuple(stop) or (None,) * 4))
+    stops = [metric] if metric is not None else []
+    stops += [CallbackStop(callback)] if callback is not None else []
     if (
         not isinstance(snapshot_every, int)
         or isinstance(snapshot_every, bool)
@@ -339,9 +353,9 @@ def _bounds(max_time, patience, snapshot_every) -> session.Bounds | None:
         raise ValueError(
             f"snapshot_every must be an integer >= 0 (0: no snapshots), got {snapshot_every!r:.40}"
         )
-    if max_time is None and patience is None:
+    if max_time is None and patience is None and not stops:
         return None
-    return session.Bounds(max_time=max_time, patience=patience)
+    return session.Bounds(max_time=max_time, patience=patience, stops=stops)
 
 
 # ------------------------------------------------------------------ evolve, resume, load
@@ -363,6 +377,11 @@ def evolve(
     patience: int | None = None,
     wandb: str | None = None,
     progress: bool | None = None,
+    stop_metric: str | None = None,
+    stop_min_delta: float | None = None,
+    stop_warmup: int | None = None,
+    stop_mode: str | None = None,
+    keep_checkpoints: int = 0,
     **settings,
 ) -> RunResult:
     """Run an evolution and return its `RunResult`.
@@ -381,7 +400,10 @@ def evolve(
         figures).
     reporters: more reporters (objects with on_start(ev), on_generation(ev, result),
         on_end(ev)); callback: called with each generation's `GenerationResult`
-        (`result.best_fitness`, `result.team`, ...; `records.scalars(result)` under the tags).
+        (`result.best_fitness`, `result.team`, ...; `records.scalars(result)` under the tags);
+        returning True (or a non-empty string, the reason) stops the run after that generation,
+        as `patience` does (`RunResult.stopped` "callback"; summary.json's "stop" has the
+        reason); any other value (None, False) lets it go on.
     fitness: a function `fitness(metrics, cost, cfg) -> Tensor [E]` that scores each
         team-episode instead of the built-in fitness (`evaluation.team_scores`: F_raw times the
         budget penalty, / cost for roi): `metrics` maps names (`fitness.METRIC_KEYS`,
@@ -404,6 +426,13 @@ def evolve(
     max_time, patience: stop cleanly (checkpoint written, `resume` continues it) after the
         generation that ends past `max_time` (seconds, or "90m", "2h", ...), or when the best
         team has not improved for `patience` generations; `RunResult.stopped` says which.
+    stop_metric, stop_min_delta, stop_warmup, stop_mode: early stopping on a chosen metric
+        (`stopping.MetricStop`; they need `patience`): stop when `stop_metric` (the run's best
+        team's "best/fitness", the default, or a metrics.csv tag such as "team/fitness") has not
+        improved by more than `stop_min_delta` for `patience` generations, counted from
+        generation `stop_warmup` on; `stop_mode` "max" (the default) or "min".
+    keep_checkpoints: also keep the last K checkpoints (RUN_DIR/checkpoints/generation-NNNNNN.pt)
+        and the one of the run's best team (checkpoints/best.pt); 0 (the default): none.
     progress: print the run's progress on stdout, a compact line per generation (done count,
         time left, best fitness, species; redrawn in place on a terminal or in a notebook).
         None (the default): on a terminal or in a notebook, not when stdout is a file or a
@@ -419,7 +448,16 @@ def evolve(
         raise ValueError("wandb needs a run directory for its files: give a logdir")
     wandb_reporters = _wandb_reporters(wandb, None, render_every)
     fitness = _checked_fitness(fitness)
-    bounds = _bounds(max_time, patience, snapshot_every)
+    bounds = _bounds(
+        max_time,
+        patience,
+        snapshot_every,
+        (stop_metric, stop_min_delta, stop_warmup, stop_mode),
+        callback,
+    )
+    from .keep import check_keep
+
+    check_keep(keep_checkpoints)
     shown = _progress(progress)
     set_threads(threads)
     reporters = [*([shown] if shown else []), *reporters, *wandb_reporters]
@@ -434,7 +472,7 @@ def evolve(
             reporters,
             callback,
             bounds,
-            (checkpoint_every, render_every, figure_every, snapshot_every),
+            (checkpoint_every, render_every, figure_every, snapshot_every, keep_checkpoints),
             wandb_reporters,
             shown,
         )
@@ -451,7 +489,7 @@ def evolve(
     name = cfg if scenario_obj is None else replace(cfg, scenario=_scenario_stem(scenario_obj))
     folder = None if logdir is None else _logdir(logdir)
     make_dir = None if folder is None else (lambda ev: new_run_dir(folder, name))
-    history = _History(callback)
+    history = _History()  # the callback is `bounds`': it may stop the run
     with ExitStack() as stack:
         start = session.start_new(stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness)
         return _run_started(
@@ -461,7 +499,7 @@ def evolve(
             wandb_reporters,
             shown,
             bounds,
-            (checkpoint_every, render_every, figure_every, snapshot_every),
+            (checkpoint_every, render_every, figure_every, snapshot_every, keep_checkpoints),
         )
 
 
@@ -472,7 +510,7 @@ def _run_started(start, history, reporters, wandb_reporters, shown, bounds, ever
     line closed however the run ends. Its `RunResult`."""
     for r in wandb_reporters:  # named after the run directory, if there is one
         r.run_dir = start.run_dir
-    checkpoint_every, render_every, figure_every, snapshot_every = every
+    checkpoint_every, render_every, figure_every, snapshot_every, keep = every
     reps = (
         []
         if start.run_dir is None
@@ -482,6 +520,7 @@ def _run_started(start, history, reporters, wandb_reporters, shown, bounds, ever
             render_every,
             figure_every,
             snapshot_every=snapshot_every,
+            keep_checkpoints=keep,
         )
     )
     with _closing(shown):
@@ -523,7 +562,7 @@ def _branch(
         logdir = branch.run_dir.parent
     folder = None if logdir is None else _logdir(logdir)
     make_dir = None if folder is None else (lambda ev: new_run_dir(folder, cfg))
-    history = _History(callback)
+    history = _History()  # the callback is `bounds`'
     with ExitStack() as stack:
         start = session.start_branch(stack, branch, cfg, make_dir, fitness=fitness)
         return _run_started(start, history, reporters, wandb_reporters, shown, bounds, every)
@@ -569,6 +608,11 @@ def resume(
     patience: int | None = None,
     wandb: str | None = None,
     progress: bool | None = None,
+    stop_metric: str | None = None,
+    stop_min_delta: float | None = None,
+    stop_warmup: int | None = None,
+    stop_mode: str | None = None,
+    keep_checkpoints: int = 0,
 ) -> RunResult:
     """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
     to `generations` in all (default: the run's), on `device` (default: the run's);
@@ -576,14 +620,24 @@ def resume(
     result's history has every generation: those before the checkpoint from metrics.csv (when
     the run has one), then this part's. RunError (a ValueError) for a directory, config or
     checkpoint that cannot be used. `reporters`, `callback` (called with each generation's
-    `GenerationResult`), `threads`, `snapshot_every`, `max_time`, `patience`, `wandb` and
-    `progress`: as in `evolve` (`max_time` counts from this call)."""
+    `GenerationResult`; it may stop the run), `threads`, `snapshot_every`, `max_time`,
+    `patience`, the `stop_*` settings, `keep_checkpoints`, `wandb` and `progress`: as in
+    `evolve` (`max_time` counts from this call)."""
     _check_every(checkpoint_every, render_every, figure_every)
     reporters = _check_hooks(callback, reporters) + _wandb_reporters(
         wandb, Path(run_dir), render_every
     )
     fitness = _checked_fitness(fitness)
-    bounds = _bounds(max_time, patience, snapshot_every)
+    bounds = _bounds(
+        max_time,
+        patience,
+        snapshot_every,
+        (stop_metric, stop_min_delta, stop_warmup, stop_mode),
+        callback,
+    )
+    from .keep import check_keep
+
+    check_keep(keep_checkpoints)
     shown = _progress(progress)
     if generations is not None and (
         not isinstance(generations, int) or isinstance(generations, bool) or generations < 1
@@ -604,9 +658,14 @@ def resume(
         earlier = _earlier_rows(run_dir, ev.state.generation)
         if ev.done:  # nothing to run: no file changes (as the CLI)
             return _result(ev, run_dir, earlier)
-        history = _History(callback)
+        history = _History()  # the callback is `bounds`'
         reps = session.file_reporters(
-            run_dir, checkpoint_every, render_every, figure_every, snapshot_every=snapshot_every
+            run_dir,
+            checkpoint_every,
+            render_every,
+            figure_every,
+            snapshot_every=snapshot_every,
+            keep_checkpoints=keep_checkpoints,
         )
         with _closing(shown):
             session.run(

@@ -15,9 +15,10 @@ from pathlib import Path
 
 import torch
 
+from ..coevo.ask_tell import Evolution
 from ..coevo.config import SwarmCoDeConfig, with_overrides
 from ..coevo.evaluation import score_fn_name
-from ..coevo.evolve import Evolution, GenerationResult
+from ..coevo.evolve import GenerationResult
 from ..sim.scenario import Scenario
 from .files import (
     CHECKPOINT_FILE,

@@ -237,6 +237,11 @@ def evolve(
     snapshot_every: Evolve.snapshot_every = 0,
     max_time: Evolve.max_time = None,
     patience: Evolve.patience = None,
+    stop_metric: Evolve.stop_metric = None,
+    stop_min_delta: Evolve.stop_min_delta = None,
+    stop_warmup: Evolve.stop_warmup = None,
+    stop_mode: Evolve.stop_mode = None,
+    keep_checkpoints: Evolve.keep_checkpoints = 0,
     wandb: Evolve.wandb = False,
     wandb_project: Evolve.wandb_project = "swarmcode-torch",
 ) -> None:
@@ -246,7 +251,7 @@ def evolve(
 
 @app.command()
 def sweep(
-    budgets: Sweep.budgets = "2500,3000,4000,5000,6000,8000",
+    budgets: Sweep.budgets = None,
     seeds: Sweep.seeds = "0",
     objective: Sweep.objective = None,
     scenario: Sweep.scenario = None,
@@ -268,8 +273,10 @@ def sweep(
     gpus_per_run: Sweep.gpus_per_run = None,
     ray_address: Sweep.ray_address = None,
     threads: Sweep.threads = None,
+    grid: Sweep.grid = None,
+    config: Sweep.config = None,
 ) -> None:
-    """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
+    """One evolution per budget (and seed, and --grid setting); writes the paper's Table III as Markdown and CSV, and a plot."""
     from .sweep_run import run_sweep
 
     run_sweep(
@@ -295,6 +302,8 @@ def sweep(
         gpus_per_run,
         ray_address,
         threads,
+        grid=grid,
+        config=config,
     )
 
 

@@ -48,16 +48,25 @@ def wandb_option(on: bool, project: str) -> str | None:
     return project
 
 
-def bounds_option(max_time: str | None, patience: int | None, snapshot_every: int):
-    """The run's `session.Bounds` (None without --max-time and --patience); one-line errors."""
+def bounds_option(max_time: str | None, patience: int | None, snapshot_every: int, stop=None):
+    """The run's `session.Bounds` (None without --max-time, --patience and `stop`: the
+    --stop-* options, `stopping.metric_stop`'s arguments); one-line errors."""
+    from .stopping import metric_stop
+
     if snapshot_every < 0:
         fail(f"--snapshot-every must be >= 0 (0: no snapshots), got {snapshot_every}")
+    try:
+        metric = metric_stop(patience, *(stop or (None,) * 4), dash=True)
+    except ValueError as e:
+        fail(str(e))
     if max_time is None and patience is None:
         return None
     if patience is not None and patience < 1:
         fail(f"--patience must be >= 1 (generations without a better best team), got {patience}")
     try:
-        return session.Bounds(max_time=max_time, patience=patience)
+        return session.Bounds(
+            max_time=max_time, patience=patience, stops=[metric] if metric else []
+        )
     except ValueError as e:
         fail(f"--{e}".replace("--max_time", "--max-time"))
 
@@ -65,7 +74,9 @@ def bounds_option(max_time: str | None, patience: int | None, snapshot_every: in
 def bound_line(bounds, ev, run_dir: Path) -> str:
     """What a run stopped by --max-time or --patience prints."""
     g = ev.state.generation
-    if bounds.reason == "patience":
+    if bounds.stopper is not None:
+        why = bounds.stopper.why()
+    elif bounds.reason == "patience":
         why = (
             f"the best team (generation {ev.state.best['generation']}) has not improved for "
             f"{bounds.patience} generations (--patience {bounds.patience})"
@@ -337,6 +348,11 @@ def evolve_command(
     patience,
     wandb,
     wandb_project,
+    stop_metric=None,
+    stop_min_delta=None,
+    stop_warmup=None,
+    stop_mode=None,
+    keep_checkpoints=0,
 ) -> None:
     """The `evolve` command's work, with its options as `cli.evolve` parsed them: the run
     started (new, resumed or branched), run with progress, and its end printed."""
@@ -344,7 +360,11 @@ def evolve_command(
     config_file = check_path(config, "--config")
     wandb_project = wandb_option(wandb, wandb_project)
     TERMINATED.clear()  # this command's SIGTERM, not an earlier one's
-    bounds = bounds_option(max_time, patience, snapshot_every)
+    bounds = bounds_option(
+        max_time, patience, snapshot_every, (stop_metric, stop_min_delta, stop_warmup, stop_mode)
+    )
+    if keep_checkpoints < 0:
+        fail(f"--keep-checkpoints must be >= 0 (0: none kept), got {keep_checkpoints}")
     if print_config:
         print_resolved_config(
             config_file,
@@ -412,6 +432,7 @@ def evolve_command(
                     snapshot_every=snapshot_every,
                     bounds=bounds,
                     wandb_project=wandb_project,
+                    keep_checkpoints=keep_checkpoints,
                 )
                 if shards is not None:
                     print_shard_traffic(ev.ctx.evaluator)

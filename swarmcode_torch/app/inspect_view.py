@@ -23,7 +23,7 @@ def print_lineage(run_dir: Path) -> None:
             soft_wrap=True,
         )
     stop = read_summary(run_dir).get("stop")
-    if isinstance(stop, dict) and stop.get("reason") in ("max_time", "patience"):
+    if isinstance(stop, dict) and stop.get("reason") in ("max_time", "patience", "callback"):
         console.print(
             f"Stopped early by {stop['reason']} at generation {stop.get('generation')}"
             "; it can be continued with evolve --resume",

@@ -185,6 +185,41 @@ class Evolve:
             help="Stop cleanly with a checkpoint (resumable) when the best team has not improved for K generations.",
         ),
     ]
+    stop_metric = Annotated[
+        str | None,
+        typer.Option(
+            metavar="TAG",
+            help="--patience watches this metric instead of the best team: best/fitness, or a metrics.csv column such as team/fitness or fitness/mean [default: best/fitness].",
+        ),
+    ]
+    stop_min_delta = Annotated[
+        float | None,
+        typer.Option(
+            metavar="X",
+            help="--patience counts only improvements of the watched metric by more than X [default: 0].",
+        ),
+    ]
+    stop_warmup = Annotated[
+        int | None,
+        typer.Option(
+            metavar="N",
+            help="--patience watches from generation N on (the first N generations are not counted) [default: 0].",
+        ),
+    ]
+    stop_mode = Annotated[
+        str | None,
+        typer.Option(
+            metavar="[max|min]",
+            help="Whether the watched metric improves upwards (max) or downwards (min) [default: max].",
+        ),
+    ]
+    keep_checkpoints = Annotated[
+        int,
+        typer.Option(
+            metavar="K",
+            help="Also keep the last K checkpoints (RUN_DIR/checkpoints/generation-NNNNNN.pt) and the one that holds the run's best team (checkpoints/best.pt); 0: none.",
+        ),
+    ]
     wandb = Annotated[
         bool,
         typer.Option(
@@ -198,7 +233,12 @@ class Evolve:
 class Sweep:
     """The options of `swarmcode-torch sweep` (`cli.sweep`)."""
 
-    budgets = Annotated[str, typer.Option(help="Comma-separated budgets in $.")]
+    budgets = Annotated[
+        str | None,
+        typer.Option(
+            help="Comma-separated budgets in $ [default: 2500,3000,4000,5000,6000,8000; with --grid or --config: the config's budget]."
+        ),
+    ]
     seeds = Annotated[str, typer.Option(help="Comma-separated seeds; one run per budget and seed.")]
     objective = Annotated[
         Objective | None,
@@ -273,6 +313,22 @@ class Sweep:
         ),
     ]
     threads = Annotated[int | None, typer.Option(help=THREADS_HELP)]
+    grid = Annotated[
+        list[str] | None,
+        typer.Option(
+            "--grid",
+            metavar="KEY=V1,V2,...",
+            help="Also sweep this setting over these values (repeatable: one run per combination, budget and seed), e.g. --grid delta=0.3,0.5 --grid population=50,100; keys as in a run's config.toml.",
+        ),
+    ]
+    config = Annotated[
+        str | None,
+        typer.Option(
+            "--config",
+            metavar="FILE",
+            help="The runs' settings to start from, in the format of a run's config.toml, as evolve --config; --preset, the options and --set go on top.",
+        ),
+    ]
 
 
 class Dynamics:

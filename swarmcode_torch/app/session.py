@@ -22,13 +22,14 @@ import re
 import time
 from collections.abc import Callable, Iterable
 from contextlib import ExitStack, nullcontext
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Protocol
 
+from ..coevo.ask_tell import Evolution
 from ..coevo.config import PRESETS, SwarmCoDeConfig, preset_config, with_overrides
 from ..coevo.evaluation import ScoreFn
-from ..coevo.evolve import Evolution, GenerationResult
+from ..coevo.evolve import GenerationResult
 from ..sim.scenario import Scenario, read_scenario
 from . import checkpoints, files, records
 from .checkpoints import Branch, CheckpointReporter, load_run, resume
@@ -302,15 +303,18 @@ def file_reporters(
     figure_every: int = 50,
     saved: int | None = None,
     snapshot_every: int = 0,
+    keep_checkpoints: int = 0,
 ) -> list:
     """The reporters that write a run directory: summary.json and teams.jsonl, metrics.csv,
     TensorBoard events (a replay image every `render_every` generations, 0: never; the
     composition figure every `figure_every`) and, last, checkpoint.pt every `checkpoint_every`
     generations and at the end (`saved`: the generation the file holds when the run starts),
-    and a snapshot of it every `snapshot_every` generations (0: none)."""
+    and a snapshot of it every `snapshot_every` generations (0: none); with `keep_checkpoints`
+    K > 0, the last K checkpoints and the best one too (`keep.KeepingCheckpoints`)."""
+    from .keep import checkpoint_reporter
     from .reporting import CsvReporter, TensorBoardReporter
 
-    checkpoint = CheckpointReporter(run_dir, checkpoint_every, snapshot_every)
+    checkpoint = checkpoint_reporter(run_dir, checkpoint_every, snapshot_every, keep_checkpoints)
     checkpoint.saved = saved
     return [
         SummaryReporter(run_dir),
@@ -370,6 +374,8 @@ class Bounds:
     patience: int | None = None
     reason: str | None = None
     elapsed: float = 0.0
+    stops: list = field(default_factory=list)  # more (`stopping`); `stopper`: the one that stopped
+    stopper: object = None
 
     def __post_init__(self) -> None:
         if self.patience is not None and (
@@ -381,12 +387,18 @@ class Bounds:
         if self.max_time is not None:
             self.max_time = parse_duration(self.max_time)
 
-    def reached(self, ev: Evolution, elapsed: float) -> str | None:
+    def reached(self, ev: Evolution, elapsed: float, result=None) -> str | None:
         """The bound `ev`'s state, `elapsed` seconds into the run, has reached (None: none; a
-        run at its last generation has reached none: it ends)."""
+        run at its last generation has reached none: it ends); every stop sees `result`."""
+        said = [(s, s.check(ev, result)) for s in self.stops] if result is not None else []
         if ev.done:
             return None
-        if self.patience is not None and ev.state.best is not None:
+        for s, reason in said:
+            if reason is not None:
+                self.stopper = s
+                return reason
+        on_metric = any(s.reason == "patience" for s in self.stops)  # --patience --stop-metric
+        if self.patience is not None and ev.state.best is not None and not on_metric:
             last = ev.state.generation - 1
             if last - int(ev.state.best["generation"]) >= self.patience:
                 return "patience"
@@ -397,7 +409,9 @@ class Bounds:
     def record(self, ev: Evolution) -> dict:
         """summary.json's "stop" of a run this stopped."""
         out: dict = {"reason": self.reason, "generation": ev.state.generation}
-        if self.reason == "patience":
+        if self.stopper is not None:
+            out.update(self.stopper.record())  # type: ignore[attr-defined]
+        elif self.reason == "patience":
             out.update(patience=self.patience, best_generation=int(ev.state.best["generation"]))
         else:
             out.update(max_time_seconds=self.max_time, elapsed_seconds=round(self.elapsed, 3))
@@ -441,6 +455,8 @@ def run(
         with hold():
             for r in reporters:
                 r.on_start(ev)
+        for s in bounds.stops if bounds is not None else []:
+            s.start(ev, run_dir)  # a resumed run's earlier values
         while not ev.done:
             result = records.step(ev)
             if on_disk:
@@ -452,7 +468,7 @@ def run(
                 reason = None
                 if bounds is not None:
                     bounds.elapsed = clock() - t0
-                    reason = bounds.reached(ev, bounds.elapsed)
+                    reason = bounds.reached(ev, bounds.elapsed, result)
                 if reason is not None:
                     bounds.reason = reason
                     if saver is not None:

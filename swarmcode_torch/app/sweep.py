@@ -73,12 +73,13 @@ class PlannedRun:
     done: int | None = None
 
 
-def plan_run(out: Path, cfg: SwarmCoDeConfig, scenario: Scenario) -> PlannedRun:
+def plan_run(out: Path, cfg: SwarmCoDeConfig, scenario: Scenario, prefix: str = "") -> PlannedRun:
     """What the sweep in `out` does with its run of `cfg`: start it, resume it from its
     checkpoint, or leave it (done). RunError for an existing run whose config differs from this
     sweep's in anything but how it runs (`HOW_KEYS`); OSError, ScenarioError, RunError for a
-    run directory that cannot be read."""
-    run_dir = Path(out) / run_name(cfg.budget, cfg.seed)
+    run directory that cannot be read. `prefix`: the grid point's part of the run's name
+    (`sweep_grid.point_name`)."""
+    run_dir = Path(out) / (prefix + run_name(cfg.budget, cfg.seed))
 
     def planned(state: str, done: int | None = None) -> PlannedRun:
         return PlannedRun(cfg.budget, cfg.seed, run_dir, cfg, state, done)
@@ -146,15 +147,17 @@ def sweep_contents(path: Path) -> SweepContents | None:
     return SweepContents(read_text(path / TABLE_MD) if has_table else None, runs)
 
 
-def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
-    """One row per budget: each column's mean over seeds and its sample standard deviation
-    (`<col>_std`, 0 for one seed; `dynamics.mean_std`)."""
-    by_budget: dict = {}
-    for budget, _seed, run_dir in runs:
-        by_budget.setdefault(budget, []).append(read_summary(run_dir))
+def table_rows(runs: list[tuple], keys: tuple[str, ...] = ()) -> list[dict]:
+    """One row per budget (and grid point: `keys`, the grid's settings, each run
+    (budget, seed, run directory, {key: value})): each column's mean over seeds and its
+    sample standard deviation (`<col>_std`, 0 for one seed; `dynamics.mean_std`)."""
+    by_point: dict = {}
+    for budget, _seed, run_dir, *point in runs:
+        values = tuple(point[0][k] for k in keys) if keys else ()
+        by_point.setdefault((values, budget), []).append(read_summary(run_dir))
     rows = []
-    for budget, summaries in by_budget.items():
-        row = {"budget": budget, "seeds": len(summaries)}
+    for (values, budget), summaries in by_point.items():
+        row = {**dict(zip(keys, values)), "budget": budget, "seeds": len(summaries)}
         for col in COLUMNS[1:]:
             # a figure a run could not give (null in summary.json: not finite) is left out of
             # the mean; a column no run gives is "none"
@@ -162,8 +165,18 @@ def table_rows(runs: list[tuple[float | None, int, Path]]) -> list[dict]:
             row[col], row[f"{col}_std"] = mean_std(vals) if vals else (None, None)
         row.update(_interval(summaries))
         rows.append(row)
-    rows.sort(key=lambda r: math.inf if r["budget"] is None else r["budget"])
+    order = [*keys, "budget"]
+    rows.sort(key=lambda r: tuple(_order(r[k]) for k in order))
     return rows
+
+
+def _order(v) -> tuple:
+    """A sort key of a setting's value: numbers in order, then text, None last."""
+    if v is None:
+        return (2, math.inf, "")
+    if isinstance(v, (int, float)):
+        return (0, float(v), "")
+    return (1, 0.0, str(v))
 
 
 def _interval(summaries: list[dict]) -> dict:
@@ -207,11 +220,17 @@ def _fmt(v, col: str) -> str:
     return f"{v:.1f}" if col != "num_species" else f"{v:.2g}"
 
 
-def markdown(rows: list[dict]) -> str:
+def _setting(v) -> str:
+    return "none" if v is None else f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def markdown(rows: list[dict], keys: tuple[str, ...] = ()) -> str:
+    """Table III (`keys`: the grid's settings, a column each before the budget)."""
     seeds = max((r["seeds"] for r in rows), default=1)
-    lines = ["| " + " | ".join(HEADERS) + " |", "|" + "---|" * len(HEADERS)]
+    headers = (*keys, *HEADERS)
+    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
     for r in rows:
-        cells = []
+        cells = [_setting(r[k]) for k in keys]
         for col in COLUMNS:
             cell = _fmt(r[col], col)
             if seeds > 1 and col != "budget":
@@ -244,9 +263,9 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n" + note + "\n"
 
 
-def csv_text(rows: list[dict]) -> str:
+def csv_text(rows: list[dict], keys: tuple[str, ...] = ()) -> str:
     buf = io.StringIO()
-    fields = ["budget", "seeds"] + [c for col in COLUMNS[1:] for c in (col, f"{col}_std")]
+    fields = [*keys, "budget", "seeds"] + [c for col in COLUMNS[1:] for c in (col, f"{col}_std")]
     fields += INTERVAL_COLUMNS
     w = csv.DictWriter(buf, fieldnames=fields)
     w.writeheader()
@@ -297,12 +316,15 @@ def plot(rows: list[dict], path: Path) -> None:
     fig.savefig(path, dpi=120, format="png")
 
 
-def write_outputs(rows: list[dict], out_dir: Path) -> list[Path]:
+def write_outputs(rows: list[dict], out_dir: Path, keys: tuple[str, ...] = ()) -> list[Path]:
+    """table.md, table.csv and (for a sweep of budgets alone, no grid `keys`) budget.png."""
     out_dir = Path(out_dir)
     paths = [out_dir / TABLE_MD, out_dir / TABLE_CSV, out_dir / BUDGET_PLOT]
     # each replaced whole (`atomic_write_bytes`): a link planted in --out is never written through
-    atomic_write_bytes(paths[0], markdown(rows).encode())
-    atomic_write_bytes(paths[1], csv_text(rows).encode())
+    atomic_write_bytes(paths[0], markdown(rows, keys).encode())
+    atomic_write_bytes(paths[1], csv_text(rows, keys).encode())
+    if keys:
+        return paths[:2]
     buf = io.BytesIO()
     plot(rows, buf)
     atomic_write_bytes(paths[2], buf.getvalue())

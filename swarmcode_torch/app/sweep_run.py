@@ -42,8 +42,13 @@ def parse_list(text: str, kind, option: str) -> list:
     return vals
 
 
+#: --budgets of a sweep of budgets alone (the paper's Table III); a sweep with --grid or
+#: --config runs the budget of its config unless --budgets is given.
+DEFAULT_BUDGETS = "2500,3000,4000,5000,6000,8000"
+
+
 def run_sweep(
-    budgets: str,
+    budgets: str | None,
     seeds: str,
     objective: str | None,
     scenario,
@@ -65,12 +70,14 @@ def run_sweep(
     gpus_per_run,
     ray_address,
     threads,
+    grid: list[str] | None = None,
+    config: str | None = None,
 ) -> None:
-    """The body of `swarmcode-torch sweep` (its options as parsed)."""
+    """The body of `swarmcode-torch sweep` (its options as parsed; `grid`: the --grid
+    KEY=V1,V2 pairs, `sweep_grid`; `config`: --config FILE, the runs' settings to start from)."""
     set_threads_option(threads)
     import time
 
-    from ..coevo.config import with_overrides
     from ..sim.scenario import read_scenario
     from .files import SWEEP_LOCK_FILE, TABLE_MD, RunError
     from .locks import RunLock
@@ -78,10 +85,12 @@ def run_sweep(
     from .settings import option_names
     from .summary import read_summary
     from .sweep import table_rows, write_outputs
+    from .sweep_grid import grid_points, parse_grid, point_name, with_point
 
     logdir, out = check_path(logdir, "--logdir"), check_path(out, "--out")
+    config_file = check_path(config, "--config")
     TERMINATED.clear()
-    budget_list = parse_list(budgets, float, "--budgets")
+    budget_list = None if budgets is None else parse_list(budgets, float, "--budgets")
     seed_list = parse_list(seeds, int, "--seeds")
     if checkpoint_every < 1 or log_every < 1:
         fail("--checkpoint-every and --log-every must be >= 1")
@@ -95,27 +104,42 @@ def run_sweep(
         fail(f"--logdir {logdir} is not a directory")
     out = out or (logdir or Path("runs")) / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
     names = option_names({"seed": "--seeds", "budget": "--budgets"})
+    given = dict(
+        objective=objective,
+        scenario=scenario,
+        generations=generations,
+        population=population,
+        swarm_size=swarm_size,
+        trials=trials,
+        ticks=ticks,
+        device=device,
+        compile=compile,
+    )
     try:
-        base = session.resolve_config(
-            preset,
-            settings,
-            names,
-            objective=objective,
-            scenario=scenario,
-            generations=generations,
-            population=population,
-            swarm_size=swarm_size,
-            trials=trials,
-            ticks=ticks,
-            device=device,
-            compile=compile,
-        )
+        grid_spec = parse_grid(grid, given)
+        if config_file is None:
+            base = session.resolve_config(preset, settings, names, **given)
+        else:
+            from .evolve_start import new_config
+
+            base = new_config(config_file, None, preset, settings, **given)[0]
+        if budget_list is None:
+            budget_list = (
+                [base.budget]
+                if grid_spec or config_file is not None
+                else parse_list(DEFAULT_BUDGETS, float, "--budgets")
+            )
+        points = grid_points(grid_spec)
         scen, data = read_scenario(base.scenario)
-        for b in budget_list:
-            for sd in seed_list:
-                check_config(with_overrides(base, budget=b, seed=sd), scen, names)
-    except (ScenarioError, ValueError) as e:
+        for pt in points:
+            for b in budget_list:
+                for sd in seed_list:
+                    check_config(with_point(base, pt, b, sd), scen, names)
+    except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
+    except OSError as e:
+        os_fail(e, "cannot read the config")
+    keys = tuple(grid_spec)
     if out.exists() and not out.is_dir():
         fail(f"--out {out} is not a directory")
     try:
@@ -131,7 +155,8 @@ def run_sweep(
         except OSError as e:
             os_fail(e, f"--out {out}: cannot lock the sweep directory")
         plans = [
-            plan_sweep_run(out, with_overrides(base, budget=b, seed=sd), scen, data)
+            plan_sweep_run(out, with_point(base, pt, b, sd), scen, data, point_name(pt))
+            for pt in points
             for b in budget_list
             for sd in seed_list
         ]  # every refusal before any run
@@ -144,9 +169,18 @@ def run_sweep(
         )
         failed: list[tuple[str, str]] = []
         if on_ray is None:
-            for b, sd, run_dir, cfg, state in plans:
+            from .sweep_grid import SweepProgress
+
+            shown = SweepProgress(
+                [max(0, cfg.generations - (done or 0)) for *_, cfg, _, done in plans]
+            )
+            for k, (b, sd, run_dir, cfg, state, _) in enumerate(plans):
                 if state != "done":
+                    console.print(
+                        shown.line(k, run_dir.name), markup=False, highlight=False, soft_wrap=True
+                    )
                     run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
+                    shown.finished(k)
                 runs.append((b, sd, run_dir))
         else:
             runs, failed = sweep_on_ray(plans, data, checkpoint_every, log_every, again, *on_ray)
@@ -158,8 +192,10 @@ def run_sweep(
         try:
             for _, _, run_dir in runs:
                 read_summary(run_dir)  # every figure of the table is checked
-            rows = table_rows(runs)
-            paths = write_outputs(rows, out)
+            cfgs = {p[2]: p[3] for p in plans}
+            runs = [(b, sd, d, {k: getattr(cfgs[d], k) for k in keys}) for b, sd, d in runs]
+            rows = table_rows(runs, keys)
+            paths = write_outputs(rows, out, keys)
         except (RunError, ValueError) as e:
             fail(str(e))
         except OSError as e:
@@ -227,7 +263,7 @@ def sweep_on_ray(
     # absolute paths: a worker's working directory may not be this one
     jobs = [
         (run_dir.resolve(), cfg, data, state, checkpoint_every, log_every, again)
-        for _, _, run_dir, cfg, state in todo
+        for _, _, run_dir, cfg, state, _ in todo
     ]
     what = f"--workers {workers}" if workers > 1 else "--ray-address"
 
@@ -301,18 +337,19 @@ def sweep_task(
     return None
 
 
-def plan_sweep_run(out: Path, cfg, scenario, data: bytes):
-    """(budget, seed, run directory, config, state) of one run of a sweep (`sweep.plan_run`),
-    state 'done', 'resume' or 'new'; a one-line error for a run it cannot take over."""
+def plan_sweep_run(out: Path, cfg, scenario, data: bytes, prefix: str = ""):
+    """(budget, seed, run directory, config, state, generations done) of one run of a sweep
+    (`sweep.plan_run`; `prefix`: its grid point's part of its name), state 'done', 'resume' or
+    'new'; a one-line error for a run it cannot take over."""
     from .files import RunError
     from .sweep import plan_run, run_name
 
     try:
-        p = plan_run(out, cfg, scenario)
+        p = plan_run(out, cfg, scenario, prefix)
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
     except OSError as e:
-        os_fail(e, f"{out / run_name(cfg.budget, cfg.seed)}: cannot read the run")
+        os_fail(e, f"{out / (prefix + run_name(cfg.budget, cfg.seed))}: cannot read the run")
     if p.state == "done":
         more = (
             f" (it has {p.done}, more than the {cfg.generations} asked for)"
@@ -320,7 +357,7 @@ def plan_sweep_run(out: Path, cfg, scenario, data: bytes):
             else ""
         )
         console.print(f"{p.run_dir.name}: already done{more}", markup=False, highlight=False)
-    return p.budget, p.seed, p.run_dir, p.cfg, p.state
+    return p.budget, p.seed, p.run_dir, p.cfg, p.state, p.done
 
 
 def run_sweep_run(

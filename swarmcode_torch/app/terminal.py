@@ -155,6 +155,7 @@ def execute(
     wandb_project: str | None = None,
     snapshot_every: int = 0,
     bounds: session.Bounds | None = None,
+    keep_checkpoints: int = 0,
 ) -> None:
     """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints
     (and Weights & Biases with `wandb_project`).
@@ -163,8 +164,8 @@ def execute(
     TensorBoard) ends the run with a one-line error that names the last checkpointed generation
     and how to continue (exit 2); the checkpoint on disk is the last complete one. `saved` is the
     generation of the checkpoint the run resumed from; `again` is the command to continue with
-    (default: swarmcode-torch evolve --resume RUN_DIR); `snapshot_every`, `bounds`: as
-    `session.file_reporters` and `session.run` take them."""
+    (default: swarmcode-torch evolve --resume RUN_DIR); `snapshot_every`, `keep_checkpoints`,
+    `bounds`: as `session.file_reporters` and `session.run` take them."""
     from .distributed import ShardError
     from .files import RunError
 
@@ -176,6 +177,7 @@ def execute(
         figure_every,
         saved=saved,
         snapshot_every=snapshot_every,
+        keep_checkpoints=keep_checkpoints,
     )
     checkpoints = writers[-1]
     extra: list = []
