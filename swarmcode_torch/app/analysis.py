@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -14,6 +14,7 @@ from ..coevo.config import MAX_SEED
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..sim.scenario import Scenario
 from .checkpoints import load_checkpoint
+from .episodes import Episode, ProgressFn
 from .files import (
     REPLAY_FILE,
     SUMMARY_FILE,
@@ -24,7 +25,7 @@ from .files import (
 )
 from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
-from .replay_page import HTML_FILE, page_data, write_page
+from .replay_page import HTML_FILE, explain_lines, page_data, write_page
 from .runconfig import _size, estimate_bytes, memory_limit, read_config, run_scenario
 from .summary import check_capability_classes, generation_team, read_summary, read_teams
 
@@ -60,6 +61,21 @@ def check_replay_options(seed=0, ticks=None, every=2, fps: float = 10, dpi: int 
             f"fps must be a number in [{REPLAY_FPS[0]:g}, {REPLAY_FPS[1]:g}], got {fps!r:.60}"
         )
     _integer("dpi", dpi, *REPLAY_DPI)
+
+
+def _by_design(ep: Episode, designs: Sequence[dict]) -> str:
+    """One line: each design's deliveries and pick-ups in the episode (`Episode.credits`)."""
+    counts = ep.credit_counts()
+    prog = ep.robots.program[0]
+    parts = []
+    for d, rec in enumerate(designs):
+        mine = counts[(prog == d) & ep.robots.present[0]]
+        if mine.shape[0]:
+            parts.append(
+                f"species {rec.get('species', '?')} ({mine.shape[0]} robots): "
+                f"{int(mine[:, :2].sum())} delivered, {int(mine[:, 2:].sum())} picked up"
+            )
+    return "By design: " + "; ".join(parts)
 
 
 def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:
@@ -131,6 +147,8 @@ def replay_run(
     fps: float = 10,
     dpi: int = 80,
     html: bool = False,
+    progress: ProgressFn | None = None,
+    report: Callable[[str], None] | None = None,
 ) -> tuple[Path, dict]:
     """Render the best team of a run (summary.json "designs"), or the best team of one
     `generation` (teams.jsonl), as a GIF, or (`html`) as an interactive page.
@@ -146,6 +164,11 @@ def replay_run(
     team and its baseline team (the focal design's slots refilled by its partners) side by side
     in the same environment, every tick, with each robot's design, energy, load and behavior
     tree; `every`, `fps` and `dpi` do not apply. The metrics returned are the focal team's.
+
+    The episodes run on the CPU's tick (`sim.runtime.tick_function`, as evolution's).
+    `progress(stage, done, total)` is told of the ticks recorded and the frames drawn;
+    `report(line)` gets lines that explain the replay: deliveries and pick-ups by design and,
+    for the page, the tick at which the two arenas part.
     """
     check_replay_options(seed=seed, ticks=ticks, every=every, fps=fps, dpi=dpi)
     run_dir = Path(run_dir)
@@ -208,14 +231,19 @@ def replay_run(
             ticks=ticks,
             title=f"SwarmCoDe replay: {run_dir.name}, {what}",
             record={k: v for k, v in rec.items() if v is not None},
+            progress=progress,
         )
         write_page(data, out)
+        for line in explain_lines(data) if report is not None else ():
+            report(line)
         return out, dict(data["panels"]["focal"]["metrics"])
     genome, team = team_genome(designs, cfg.tag_length)
-    ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every)
+    ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every, progress=progress)
     ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
     buf = io.BytesIO()
-    save_gif(ep, buf, fps=fps, dpi=dpi)
+    save_gif(ep, buf, fps=fps, dpi=dpi, progress=progress)
+    if report is not None:
+        report(_by_design(ep, designs))
     # replaced whole (a temporary file renamed over it): a link at `out` is replaced, never
     # written through, and a reader never sees half a GIF
     atomic_write_bytes(out, buf.getvalue())

@@ -33,6 +33,7 @@ import json
 import math
 import re
 from collections.abc import Sequence
+from functools import partial
 from importlib import resources
 from pathlib import Path
 
@@ -45,8 +46,17 @@ from ..coevo.population import PINCHER, genome_phenotype
 from ..sim import bt
 from ..sim.scenario import Scenario
 from ..sim.state import DELIVERED, capabilities
+from .episodes import (
+    CREDIT_KINDS,
+    DIVERGENCE_EPS,
+    Episode,
+    ProgressFn,
+    divergence,
+    record_episode,
+    team_genome,
+)
 from .files import atomic_write_bytes, check_output_path
-from .render import Episode, design_colors, record_episode, team_genome
+from .render import design_colors
 
 HTML_FILE = "team.html"  # the default output of `replay --html`
 _EFFECTOR = {PINCHER: "pincher"}
@@ -117,6 +127,10 @@ def _recorded_refill(
 def _species_count(designs: Sequence[dict], team: Tensor) -> int:
     rows = sorted(set(team[team >= 0].tolist()))
     return len({designs[r].get("species", r) for r in rows})
+
+
+def _stage(progress: ProgressFn, stage: str, _: str, done: int, total: int) -> None:
+    progress(stage, done, total)
 
 
 # ------------------------------------------------------------------ episode -> page data
@@ -193,6 +207,9 @@ def _panel(
         "holder": stack["holder"].reshape(-1).tolist(),  # [T+1, Q, G]
         "p_picked": stack["p_picked"].long().reshape(-1).tolist(),
         "combo": combos,  # [T, N] ticks 1..T, -1: no tree ran
+        # (tick, robot, package, kind) of each pick-up and delivery, flat (episodes.CREDIT_KINDS)
+        "credits": [x for c in ep.credits for x in c],
+        "tick_mode": ep.tick,
         "metrics": {k: _round(v) for k, v in m.items()},
         "terms": {k: _round(v) for k, v in terms.items()},
         "raw": _round(float(sum(terms[k] for k, _ in _TERMS) * terms["activity"])),
@@ -212,9 +229,13 @@ def page_data(
     ticks: int | None = None,
     title: str = "",
     record: dict | None = None,
+    progress: ProgressFn | None = None,
 ) -> dict:
     """Everything the page shows, as JSON-friendly data: both teams' episodes in the environment
-    of `seed`, the designs, the layout, the scores. `cfg`: the run's SwarmCoDeConfig."""
+    of `seed`, the designs, the layout, the scores, who picked up and delivered what, and the
+    tick at which the two arenas part (`episodes.divergence`: the first at which a robot of a
+    slot both teams share stands apart). `cfg`: the run's SwarmCoDeConfig.
+    `progress(stage, done, total)`: stages "focal ticks" and "baseline ticks"."""
     genome, _ = team_genome(designs, cfg.tag_length)
     focal, team, base, recorded = focal_and_baseline(designs, seed)
     ticks = scenario.episode_ticks if ticks is None else int(ticks)
@@ -224,7 +245,10 @@ def page_data(
     traces: list[dict] = [{} for _ in designs]
     panels, eps = {}, {}
     for name, t in (("focal", team), ("baseline", base)):
-        ep = record_episode(genome, t, scenario, seed, ticks=ticks, every=1, leaves=True)
+        tell = None if progress is None else partial(_stage, progress, f"{name} ticks")
+        ep = record_episode(
+            genome, t, scenario, seed, ticks=ticks, every=1, leaves=True, progress=tell
+        )
         present = t >= 0
         counts = torch.tensor([_species_count(designs, t)])
         cost = float(
@@ -233,6 +257,7 @@ def page_data(
         panels[name] = _panel(ep, t, genome.bt, traces, cost, int(counts[0]), cfg, scenario)
         eps[name] = ep
     f, b = panels["focal"]["score"], panels["baseline"]["score"]
+    part = divergence(eps["focal"], eps["baseline"], (team == base) & (team >= 0))
     gated = float(gate(torch.tensor([f]), torch.tensor([b]), cfg.p_marginal)[0])
     lay = eps["focal"].layout
     present = lay.p_present[0]
@@ -331,6 +356,10 @@ def page_data(
         "panels": panels,
         "gated": _round(gated),
         "marginal": _round(f - b),
+        # the first tick the arenas part at, and the slot of the robot that stands apart first
+        "divergence": None if part is None else {"tick": part[0], "robot": part[1]},
+        "divergence_eps": DIVERGENCE_EPS,
+        "shared_slots": int(((team == base) & (team >= 0)).sum()),
         "p_marginal": cfg.p_marginal,
     }
 
@@ -357,6 +386,45 @@ def final_counts(data: dict, panel: str) -> dict:
         out["picked_" + kind] += picked[q]
     out["energy_used"] = 100.0 - p["team_energy"][T]
     return out
+
+
+def design_credits(data: dict, panel: str) -> list[list[int]]:
+    """Per design, its robots' credits in a panel at the end ([design][kind], CREDIT_KINDS)."""
+    p = data["panels"][panel]
+    out = [[0] * len(CREDIT_KINDS) for _ in data["designs"]]
+    c = p["credits"]
+    for i in range(0, len(c), 4):
+        d = p["robots"]["design"][c[i + 1]]
+        if d >= 0:
+            out[d][c[i + 3]] += 1
+    return out
+
+
+def explain_lines(data: dict) -> list[str]:
+    """What the page explains, as lines to print: where the arenas part, and who delivered."""
+    part = data["divergence"]
+    if part is not None:
+        d = data["panels"]["focal"]["robots"]["design"][part["robot"]]
+        g = data["designs"][d]
+        lines = [
+            f"The arenas part at tick {part['tick']} of {data['ticks']}: robot {part['robot']} "
+            f"(species {g['species']}, {g['effector']}), in a slot both teams share, stands more "
+            f"than {data['divergence_eps'] * 1000:g} mm apart"
+        ]
+    elif data["shared_slots"] == 0:
+        lines = ["The teams share no slot (the focal has no partner): no divergence to show"]
+    else:
+        lines = [f"The arenas never part in {data['ticks']} ticks"]
+    for name in ("focal", "baseline"):
+        per = design_credits(data, name)
+        shown = [
+            f"species {data['designs'][d]['species']} {data['designs'][d]['effector']}: "
+            f"{c[0] + c[1]} delivered, {c[2] + c[3]} picked up"
+            for d, c in enumerate(per)
+            if any(r == d for r in data["panels"][name]["robots"]["design"])
+        ]
+        lines.append(f"{name.capitalize()} arena, by design: " + ("; ".join(shown) or "no robot"))
+    return lines
 
 
 # ------------------------------------------------------------------ the file
