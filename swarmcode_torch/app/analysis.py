@@ -234,8 +234,9 @@ def replay_run(
             progress=progress,
         )
         write_page(data, out)
-        for line in explain_lines(data) if report is not None else ():
-            report(line)
+        if report is not None:
+            for line in explain_lines(data):
+                report(line)
         return out, dict(data["panels"]["focal"]["metrics"])
     genome, team = team_genome(designs, cfg.tag_length)
     ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every, progress=progress)
