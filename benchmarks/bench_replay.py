@@ -43,7 +43,11 @@ def _env(reference: bool, root: Path = ROOT) -> dict:
 def make_run(logdir: Path, seed: int) -> Path:
     cmd = [sys.executable, "-m", "swarmcode_torch", "evolve", *EVOLVE, "--seed", str(seed)]
     subprocess.run(
-        [*cmd, "--logdir", str(logdir)], check=True, capture_output=True, env=_env(False)
+        [*cmd, "--logdir", str(logdir)],
+        check=True,
+        capture_output=True,
+        env=_env(False),
+        cwd=str(ROOT),
     )
     (run,) = [p for p in logdir.iterdir() if p.is_dir()]
     return run
@@ -54,7 +58,10 @@ def replay_once(run: Path, out: Path, html: bool, reference: bool, root: Path) -
     cmd = [sys.executable, "-m", "swarmcode_torch", "replay", str(run), "--out", str(out)]
     cmd += ["--html"] if html else []
     t0 = time.perf_counter()
-    res = subprocess.run(cmd, capture_output=True, text=True, env=_env(reference, root))
+    # run from the tree's folder: `python -m` puts the working directory first on the path
+    res = subprocess.run(
+        cmd, capture_output=True, text=True, env=_env(reference, root), cwd=str(root)
+    )
     seconds = time.perf_counter() - t0
     if res.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)} failed: {res.stderr or res.stdout}")
