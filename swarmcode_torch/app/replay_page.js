@@ -400,7 +400,7 @@
   }
 
   // ------------------------------------------------------------------ state and controls
-  const state = {t: 0, playing: false, speed: 2, sel: null, acc: 0, last: 0};
+  const state = {t: 0, playing: false, speed: 2, sel: null, acc: 0, last: 0, credKey: null};
   let D = null;
 
   function render() {
@@ -412,7 +412,10 @@
       $("live-" + name).innerHTML = liveText(D, name, t);
     }
     $("inspector").innerHTML = inspectorHtml(D, t);
-    $("credits").innerHTML = creditsHtml(D, t);
+    // the tables change only at a tick with a credit: redrawn then (a swarm's table is long)
+    const key = PANELS.map((n) => D.panels[n].cred.filter((c) => c[0] <= t).length).join(",");
+    if (key !== state.credKey || !$("credits").firstChild) { $("credits").innerHTML = creditsHtml(D, t); state.credKey = key; }
+    else $("credits").querySelector('[data-testid="credits-tick"]').textContent = String(t);
     document.body.dataset.tick = String(t);
   }
 
