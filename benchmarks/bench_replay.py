@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(1, str(ROOT))  # in process: this tree's swarmcode_torch, not an installed one
 from common import RESULTS_DIR, run_metadata, write_json  # noqa: E402
+
 EVOLVE = ["--scenario", "budget", "--budget", "4000", "--generations", "20", "--population", "30"]
 
 

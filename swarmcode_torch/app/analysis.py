@@ -25,7 +25,8 @@ from .files import (
 )
 from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
-from .replay_page import HTML_FILE, explain_lines, page_data, write_page
+from .replay_explain import MAX_REPLAY_SEEDS, explain_lines, seed_marginals
+from .replay_page import HTML_FILE, page_data, write_page
 from .runconfig import _size, estimate_bytes, memory_limit, read_config, run_scenario
 from .summary import check_capability_classes, generation_team, read_summary, read_teams
 
@@ -149,6 +150,7 @@ def replay_run(
     html: bool = False,
     progress: ProgressFn | None = None,
     report: Callable[[str], None] | None = None,
+    seeds: int = 1,
 ) -> tuple[Path, dict]:
     """Render the best team of a run (summary.json "designs"), or the best team of one
     `generation` (teams.jsonl), as a GIF, or (`html`) as an interactive page.
@@ -168,9 +170,12 @@ def replay_run(
     The episodes run on the CPU's tick (`sim.runtime.tick_function`, as evolution's).
     `progress(stage, done, total)` is told of the ticks recorded and the frames drawn;
     `report(line)` gets lines that explain the replay: deliveries and pick-ups by design and,
-    for the page, the tick at which the two arenas part.
+    for the page, the tick at which the two arenas part. `seeds` > 1: the focal's marginal
+    contribution over that many environments (seeds `seed`, `seed` + 1, ...), its mean on the
+    page and in a reported line (`replay_seeds`).
     """
     check_replay_options(seed=seed, ticks=ticks, every=every, fps=fps, dpi=dpi)
+    _integer("seeds", seeds, 1, min(MAX_REPLAY_SEEDS, MAX_SEED - seed + 1))
     run_dir = Path(run_dir)
     default = run_dir / (HTML_FILE if html else REPLAY_FILE)
     out = Path(out) if out is not None else default
@@ -191,7 +196,7 @@ def replay_run(
     )
     check_capability_classes(designs, len(scenario.packages), source)
     robots = sum(d["count"] for d in designs)
-    need = estimate_bytes(replace(cfg, population=1, trials=1, swarm_size=robots), scenario)
+    need = estimate_bytes(replace(cfg, population=1, trials=seeds, swarm_size=robots), scenario)
     limit, what = memory_limit("cpu")
     if need > limit:
         raise RunError(
@@ -232,6 +237,7 @@ def replay_run(
             title=f"SwarmCoDe replay: {run_dir.name}, {what}",
             record={k: v for k, v in rec.items() if v is not None},
             progress=progress,
+            seeds=seeds,
         )
         write_page(data, out)
         if report is not None:
@@ -245,6 +251,13 @@ def replay_run(
     save_gif(ep, buf, fps=fps, dpi=dpi, progress=progress)
     if report is not None:
         report(_by_design(ep, designs))
+        if seeds > 1:
+            sm = seed_marginals(designs, scenario, cfg, seed, seeds, ticks)
+            sd = f", sd {sm['sd']:.1f}" if sm["sd"] is not None else ""
+            report(
+                f"Marginal contribution over {seeds} environments (seeds {seed}-"
+                f"{seed + seeds - 1}): mean {sm['mean']:.1f}{sd}"
+            )
     # replaced whole (a temporary file renamed over it): a link at `out` is replaced, never
     # written through, and a reader never sees half a GIF
     atomic_write_bytes(out, buf.getvalue())

@@ -405,6 +405,7 @@ def replay(
     ticks: Replay.ticks = None,
     every: Replay.every = 2,
     html: Replay.html = False,
+    seeds: Replay.seeds = 1,
 ) -> None:
     """Render a rollout of the best team headless, as an animated GIF (or, --html, an
     interactive page)."""
@@ -440,6 +441,7 @@ def replay(
                 html=html,
                 progress=progress,
                 report=lines.append,
+                seeds=seeds,
             )
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))

@@ -235,8 +235,17 @@
         : "(the team has no partner to refill the focal's slots: the baseline team has no robot)") +
       `, marginal contribution ` +
       `<b class="${cls}" data-testid="marginal">${m >= 0 ? "+" : ""}${fmtS(m)}</b>; ` +
-      `gated fitness ${fmtS(D.gated)} (${kept}).${recTxt}` +
+      `gated fitness ${fmtS(D.gated)} (${kept}).${recTxt}` + seedsText(D) +
       (D.custom_fitness ? ` <br><b>Note:</b> the run was scored by ${esc(D.custom_fitness)}; the scores here are the built-in fitness.` : "");
+  }
+
+  function seedsText(D) {   // replay --seeds N: the same two teams in N environments
+    const sm = D.seed_marginals;
+    if (!sm) return "";
+    const n = sm.marginal.length, beat = sm.marginal.filter((x) => x > 0).length;
+    return ` Over ${esc(n)} environments (seeds ${esc(sm.seeds[0])}–${esc(sm.seeds[1])}) the marginal contribution is ` +
+      `<b data-testid="mean-marginal">${sm.mean >= 0 ? "+" : ""}${fmtS(sm.mean)}</b> on average` +
+      (sm.sd !== null ? ` (sd ${fmtS(sm.sd)})` : "") + `; the focal's team beats its baseline in ${esc(beat)} of them.`;
   }
 
   function legendHtml(D) {

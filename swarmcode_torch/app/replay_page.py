@@ -46,17 +46,10 @@ from ..coevo.population import PINCHER, genome_phenotype
 from ..sim import bt
 from ..sim.scenario import Scenario
 from ..sim.state import DELIVERED, capabilities
-from .episodes import (
-    CREDIT_KINDS,
-    DIVERGENCE_EPS,
-    Episode,
-    ProgressFn,
-    divergence,
-    record_episode,
-    team_genome,
-)
+from .episodes import DIVERGENCE_EPS, Episode, ProgressFn, divergence, record_episode, team_genome
 from .files import atomic_write_bytes, check_output_path
 from .render import design_colors
+from .replay_explain import seed_marginals
 
 HTML_FILE = "team.html"  # the default output of `replay --html`
 _EFFECTOR = {PINCHER: "pincher"}
@@ -127,6 +120,15 @@ def _recorded_refill(
 def _species_count(designs: Sequence[dict], team: Tensor) -> int:
     rows = sorted(set(team[team >= 0].tolist()))
     return len({designs[r].get("species", r) for r in rows})
+
+
+def _rounded(x):
+    """Floats (in lists and dicts) rounded as the page's scores are (`_round`)."""
+    if isinstance(x, float):
+        return _round(x)
+    if isinstance(x, list):
+        return [_rounded(v) for v in x]
+    return {k: _rounded(v) for k, v in x.items()} if isinstance(x, dict) else x
 
 
 def _stage(progress: ProgressFn, stage: str, _: str, done: int, total: int) -> None:
@@ -230,12 +232,14 @@ def page_data(
     title: str = "",
     record: dict | None = None,
     progress: ProgressFn | None = None,
+    seeds: int = 1,
 ) -> dict:
     """Everything the page shows, as JSON-friendly data: both teams' episodes in the environment
     of `seed`, the designs, the layout, the scores, who picked up and delivered what, and the
     tick at which the two arenas part (`episodes.divergence`: the first at which a robot of a
     slot both teams share stands apart). `cfg`: the run's SwarmCoDeConfig.
-    `progress(stage, done, total)`: stages "focal ticks" and "baseline ticks"."""
+    `progress(stage, done, total)`: stages "focal ticks" and "baseline ticks". `seeds` > 1:
+    the two teams' marginal over that many environments too (`replay_seeds.seed_marginals`)."""
     genome, _ = team_genome(designs, cfg.tag_length)
     focal, team, base, recorded = focal_and_baseline(designs, seed)
     ticks = scenario.episode_ticks if ticks is None else int(ticks)
@@ -359,6 +363,9 @@ def page_data(
         # the first tick the arenas part at, and the slot of the robot that stands apart first
         "divergence": None if part is None else {"tick": part[0], "robot": part[1]},
         "divergence_eps": DIVERGENCE_EPS,
+        "seed_marginals": _rounded(seed_marginals(designs, scenario, cfg, seed, seeds, ticks))
+        if seeds > 1
+        else None,
         "shared_slots": int(((team == base) & (team >= 0)).sum()),
         "p_marginal": cfg.p_marginal,
     }
@@ -386,45 +393,6 @@ def final_counts(data: dict, panel: str) -> dict:
         out["picked_" + kind] += picked[q]
     out["energy_used"] = 100.0 - p["team_energy"][T]
     return out
-
-
-def design_credits(data: dict, panel: str) -> list[list[int]]:
-    """Per design, its robots' credits in a panel at the end ([design][kind], CREDIT_KINDS)."""
-    p = data["panels"][panel]
-    out = [[0] * len(CREDIT_KINDS) for _ in data["designs"]]
-    c = p["credits"]
-    for i in range(0, len(c), 4):
-        d = p["robots"]["design"][c[i + 1]]
-        if d >= 0:
-            out[d][c[i + 3]] += 1
-    return out
-
-
-def explain_lines(data: dict) -> list[str]:
-    """What the page explains, as lines to print: where the arenas part, and who delivered."""
-    part = data["divergence"]
-    if part is not None:
-        d = data["panels"]["focal"]["robots"]["design"][part["robot"]]
-        g = data["designs"][d]
-        lines = [
-            f"The arenas part at tick {part['tick']} of {data['ticks']}: robot {part['robot']} "
-            f"(species {g['species']}, {g['effector']}), in a slot both teams share, stands more "
-            f"than {data['divergence_eps'] * 1000:g} mm apart"
-        ]
-    elif data["shared_slots"] == 0:
-        lines = ["The teams share no slot (the focal has no partner): no divergence to show"]
-    else:
-        lines = [f"The arenas never part in {data['ticks']} ticks"]
-    for name in ("focal", "baseline"):
-        per = design_credits(data, name)
-        shown = [
-            f"species {data['designs'][d]['species']} {data['designs'][d]['effector']}: "
-            f"{c[0] + c[1]} delivered, {c[2] + c[3]} picked up"
-            for d, c in enumerate(per)
-            if any(r == d for r in data["panels"][name]["robots"]["design"])
-        ]
-        lines.append(f"{name.capitalize()} arena, by design: " + ("; ".join(shown) or "no robot"))
-    return lines
 
 
 # ------------------------------------------------------------------ the file

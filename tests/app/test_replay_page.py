@@ -16,10 +16,9 @@ from swarmcode_torch.app.analysis import replay_run
 from swarmcode_torch.app.cli import app
 from swarmcode_torch.app.episodes import divergence, record_episode
 from swarmcode_torch.app.render import team_genome
+from swarmcode_torch.app.replay_explain import design_credits, explain_lines, seed_marginals
 from swarmcode_torch.app.replay_page import (
     decode_page,
-    design_credits,
-    explain_lines,
     final_counts,
     focal_and_baseline,
     page_data,
@@ -218,6 +217,23 @@ def test_the_page_credits_each_robot_and_names_the_tick_the_arenas_part(two_nich
     assert lines[1].startswith("Focal arena, by design: ") and "delivered" in lines[1]
 
 
+def test_the_marginal_over_several_environments_starts_with_the_pages_own(two_niche):
+    data, cfg = two_niche
+    assert data["seed_marginals"] is None  # one environment unless asked
+    sm = seed_marginals(DESIGNS, load_scenario("two-niche"), cfg, seed=1, seeds=3)
+    assert sm["seeds"] == [1, 3] and len(sm["marginal"]) == 3
+    # the first environment is the page's: the same episodes, the same scores (one batch or not)
+    assert sm["focal"][0] == pytest.approx(data["panels"]["focal"]["score"], abs=1e-5)
+    assert sm["baseline"][0] == pytest.approx(data["panels"]["baseline"]["score"], abs=1e-5)
+    assert sm["marginal"] == [f - b for f, b in zip(sm["focal"], sm["baseline"])]
+    assert sm["mean"] == pytest.approx(sum(sm["marginal"]) / 3)
+    assert sm["sd"] == pytest.approx(torch.tensor(sm["marginal"]).std().item(), rel=1e-6)
+    # each environment is that of its seed: seed 2's first is the next one's (the focal's team
+    # is the same; this record's baseline is drawn from the seed, so it may not be)
+    again = seed_marginals(DESIGNS, load_scenario("two-niche"), cfg, seed=2, seeds=1)
+    assert again["focal"] == sm["focal"][1:2] and again["sd"] is None
+
+
 def test_the_file_is_self_contained_and_small(two_niche):
     data, _ = two_niche
     text = render_html(data)
@@ -290,6 +306,30 @@ def test_replay_run_html_and_the_command(tmp_path):
     # the command says where the arenas part and who delivered, as the page does
     for line in explain_lines(data):
         assert line in " ".join(res.output.split()), line
+    # --seeds N: the marginal over N environments, printed and on the page
+    res = CliRunner().invoke(
+        app,
+        [
+            "replay",
+            str(run),
+            "--html",
+            "--ticks",
+            "12",
+            "--seeds",
+            "3",
+            "--out",
+            str(tmp_path / "s.html"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    sm = decode_page((tmp_path / "s.html").read_text())["seed_marginals"]
+    assert sm["seeds"] == [0, 2] and len(sm["marginal"]) == 3
+    assert f"Marginal contribution over 3 environments (seeds 0-2): mean {sm['mean']:.1f}" in (
+        " ".join(res.output.split())
+    )
+    res = CliRunner().invoke(app, ["replay", str(run), "--seeds", "0"])
+    assert res.exit_code == 2 and "seeds must be an integer in [1, 1000], got 0" in res.output
+    assert "Traceback" not in res.output
     assert data["ticks"] == 12 and data["seed"] == 3 and len(data["designs"]) == 2
     assert data["record"]["generation"] == 2 and data["record"]["fitness"] == 3.0
     # the GIF stays the default

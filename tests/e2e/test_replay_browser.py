@@ -228,6 +228,25 @@ def test_the_page_shows_deliveries_per_robot_and_design_and_the_divergence_tick(
         assert f"#{q} at tick {t0}" in text
 
 
+def test_the_mean_marginal_over_several_environments_is_shown(tmp_path):
+    data = page_data(
+        DESIGNS,
+        load_scenario("two-niche"),
+        SwarmCoDeConfig(scenario="two-niche"),
+        seed=1,
+        ticks=40,
+        seeds=3,
+    )
+    drv = _driver()
+    try:
+        _open(drv, write_page(data, tmp_path / "team.html"))
+        sm = data["seed_marginals"]
+        assert float(_text(drv, "mean-marginal")) == pytest.approx(sm["mean"], abs=0.06)
+        assert "Over 3 environments (seeds 1–3)" in drv.find_element("id", "summary").text
+    finally:
+        drv.quit()
+
+
 # ------------------------------------------------------------------ hostile run data
 PLANTED = "<img src=x onerror=window.__planted=1><svg onload=window.__planted=2>"
 
