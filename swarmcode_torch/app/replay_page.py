@@ -1,9 +1,12 @@
 """An interactive replay page: one self-contained HTML file (`swarmcode-torch replay RUN --html`).
 
 The best team of a run (or of one generation) and its baseline team run through the same
-environment, every tick recorded by `render.record_episode` (the rollout code of the
-evaluation). The page draws both on canvases driven by one scrubber, and shows, for a clicked
-robot, its design, energy, load and behavior tree with the node that acted that tick.
+environment, every tick recorded by `episodes.record_episode` (the rollout code of the
+evaluation, on the CPU's tick: the fused tick where it builds). The page draws both on canvases
+driven by one scrubber, and shows, for a clicked robot, its design, energy, load and behavior
+tree with the node that acted that tick; who picked up and delivered each package, per robot
+and per design, up to the tick shown (`Episode.credits`); and the tick at which the two arenas
+part (`episodes.divergence`).
 
 The focal individual and the baseline. A run made since the replay page records, with each design of a best
 team, whether it is the focal individual's (``"focal"``) and its robots in the baseline team the
