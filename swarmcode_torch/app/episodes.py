@@ -212,13 +212,6 @@ def record_episode(
         seen = episode_leaves(every_state, layout, robots, params) if leaves else []
     metrics = {k: float(v[0]) for k, v in m.items()}
 
-    labels = []
-    for r in range(genome.size):
-        n = int((teams == r).sum())
-        labels.append(
-            f"{_EFFECTOR_NAMES.get(int(genome.effector[r]), '?')} "
-            f"r={float(genome.radius[r]):.2f} x{n}"
-        )
     return Episode(
         layout,
         robots,
@@ -226,11 +219,20 @@ def record_episode(
         snaps,
         metrics,
         scenario.name,
-        labels,
+        _labels(genome, teams),
         seen,
         credits,
         tick_mode(step_fn, compiled),
     )
+
+
+def _labels(genome: Population, teams: Tensor) -> list[str]:
+    """The legend text of each design row: effector, radius, robots in the team."""
+    return [
+        f"{_EFFECTOR_NAMES.get(int(genome.effector[r]), '?')} "
+        f"r={float(genome.radius[r]):.2f} x{int((teams == r).sum())}"
+        for r in range(genome.size)
+    ]
 
 
 # ------------------------------------------------------------------ two arenas compared
