@@ -164,18 +164,10 @@ def record_episode(
     too (`Episode.leaves`). `step_fn`: the tick (default the CPU's, `tick_function`).
     `progress("ticks", t, ticks)` is called as the ticks run.
     """
-    if every < 1:
-        raise ValueError(f"every must be >= 1, got {every}")
     ticks = scenario.episode_ticks if ticks is None else int(ticks)
-    if ticks < 0:
-        raise ValueError(f"ticks must be >= 0, got {ticks}")
     genome = genome.to("cpu")
-    teams = torch.as_tensor(team, dtype=torch.long).reshape(1, -1).cpu()
+    teams = _checked(genome, team, ticks, every)
     S = teams.shape[1]
-    if S == 0:
-        raise ValueError("the team has no robot slot")
-    if int(teams.max()) >= genome.size:
-        raise ValueError(f"team refers to row {int(teams.max())} of a genome of {genome.size}")
     params = params or WorldParams.for_scenario(scenario)
     layout = make_layouts(
         dataclasses.replace(scenario, num_robots=S), 1, torch.Generator().manual_seed(int(seed))
@@ -224,6 +216,20 @@ def record_episode(
         credits,
         tick_mode(step_fn, compiled),
     )
+
+
+def _checked(genome: Population, team: Tensor, ticks: int, every: int) -> Tensor:
+    """The team as a ``[1, S]`` long tensor; ValueError for a bad team, `ticks` or `every`."""
+    if every < 1:
+        raise ValueError(f"every must be >= 1, got {every}")
+    if ticks < 0:
+        raise ValueError(f"ticks must be >= 0, got {ticks}")
+    teams = torch.as_tensor(team, dtype=torch.long).reshape(1, -1).cpu()
+    if teams.shape[1] == 0:
+        raise ValueError("the team has no robot slot")
+    if int(teams.max()) >= genome.size:
+        raise ValueError(f"team refers to row {int(teams.max())} of a genome of {genome.size}")
+    return teams
 
 
 def _labels(genome: Population, teams: Tensor) -> list[str]:
