@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -14,6 +14,7 @@ from ..coevo.config import MAX_SEED
 from ..coevo.dynamics import median, niche_count, replay, window_stats
 from ..sim.scenario import Scenario
 from .checkpoints import load_checkpoint
+from .episodes import Episode, ProgressFn
 from .files import (
     REPLAY_FILE,
     SUMMARY_FILE,
@@ -24,6 +25,7 @@ from .files import (
 )
 from .records import design_capabilities
 from .render import record_episode, save_gif, team_genome
+from .replay_explain import MAX_REPLAY_SEEDS, explain_lines, seed_marginals
 from .replay_page import HTML_FILE, page_data, write_page
 from .runconfig import _size, estimate_bytes, memory_limit, read_config, run_scenario
 from .summary import check_capability_classes, generation_team, read_summary, read_teams
@@ -60,6 +62,21 @@ def check_replay_options(seed=0, ticks=None, every=2, fps: float = 10, dpi: int 
             f"fps must be a number in [{REPLAY_FPS[0]:g}, {REPLAY_FPS[1]:g}], got {fps!r:.60}"
         )
     _integer("dpi", dpi, *REPLAY_DPI)
+
+
+def _by_design(ep: Episode, designs: Sequence[dict]) -> str:
+    """One line: each design's deliveries and pick-ups in the episode (`Episode.credits`)."""
+    counts = ep.credit_counts()
+    prog = ep.robots.program[0]
+    parts = []
+    for d, rec in enumerate(designs):
+        mine = counts[(prog == d) & ep.robots.present[0]]
+        if mine.shape[0]:
+            parts.append(
+                f"species {rec.get('species', '?')} ({mine.shape[0]} robots): "
+                f"{int(mine[:, :2].sum())} delivered, {int(mine[:, 2:].sum())} picked up"
+            )
+    return "By design: " + "; ".join(parts)
 
 
 def team_records(run_dir: Path, scenario: Scenario) -> dict[int, dict]:
@@ -131,6 +148,9 @@ def replay_run(
     fps: float = 10,
     dpi: int = 80,
     html: bool = False,
+    progress: ProgressFn | None = None,
+    report: Callable[[str], None] | None = None,
+    seeds: int = 1,
 ) -> tuple[Path, dict]:
     """Render the best team of a run (summary.json "designs"), or the best team of one
     `generation` (teams.jsonl), as a GIF, or (`html`) as an interactive page.
@@ -146,8 +166,16 @@ def replay_run(
     team and its baseline team (the focal design's slots refilled by its partners) side by side
     in the same environment, every tick, with each robot's design, energy, load and behavior
     tree; `every`, `fps` and `dpi` do not apply. The metrics returned are the focal team's.
+
+    The episodes run on the CPU's tick (`sim.runtime.tick_function`, as evolution's).
+    `progress(stage, done, total)` is told of the ticks recorded and the frames drawn;
+    `report(line)` gets lines that explain the replay: deliveries and pick-ups by design and,
+    for the page, the tick at which the two arenas part. `seeds` > 1: the focal's marginal
+    contribution over that many environments (seeds `seed`, `seed` + 1, ...), its mean on the
+    page and in a reported line (`replay_seeds`).
     """
     check_replay_options(seed=seed, ticks=ticks, every=every, fps=fps, dpi=dpi)
+    _integer("seeds", seeds, 1, min(MAX_REPLAY_SEEDS, MAX_SEED - seed + 1))
     run_dir = Path(run_dir)
     default = run_dir / (HTML_FILE if html else REPLAY_FILE)
     out = Path(out) if out is not None else default
@@ -168,7 +196,7 @@ def replay_run(
     )
     check_capability_classes(designs, len(scenario.packages), source)
     robots = sum(d["count"] for d in designs)
-    need = estimate_bytes(replace(cfg, population=1, trials=1, swarm_size=robots), scenario)
+    need = estimate_bytes(replace(cfg, population=1, trials=seeds, swarm_size=robots), scenario)
     limit, what = memory_limit("cpu")
     if need > limit:
         raise RunError(
@@ -208,14 +236,28 @@ def replay_run(
             ticks=ticks,
             title=f"SwarmCoDe replay: {run_dir.name}, {what}",
             record={k: v for k, v in rec.items() if v is not None},
+            progress=progress,
+            seeds=seeds,
         )
         write_page(data, out)
+        if report is not None:
+            for line in explain_lines(data):
+                report(line)
         return out, dict(data["panels"]["focal"]["metrics"])
     genome, team = team_genome(designs, cfg.tag_length)
-    ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every)
+    ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every, progress=progress)
     ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
     buf = io.BytesIO()
-    save_gif(ep, buf, fps=fps, dpi=dpi)
+    save_gif(ep, buf, fps=fps, dpi=dpi, progress=progress)
+    if report is not None:
+        report(_by_design(ep, designs))
+        if seeds > 1:
+            sm = seed_marginals(designs, scenario, cfg, seed, seeds, ticks)
+            sd = f", sd {sm['sd']:.1f}" if sm["sd"] is not None else ""
+            report(
+                f"Marginal contribution over {seeds} environments (seeds {seed}-"
+                f"{seed + seeds - 1}): mean {sm['mean']:.1f}{sd}"
+            )
     # replaced whole (a temporary file renamed over it): a link at `out` is replaced, never
     # written through, and a reader never sees half a GIF
     atomic_write_bytes(out, buf.getvalue())

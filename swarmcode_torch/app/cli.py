@@ -414,6 +414,7 @@ def replay(
     ticks: Replay.ticks = None,
     every: Replay.every = 2,
     html: Replay.html = False,
+    seeds: Replay.seeds = 1,
 ) -> None:
     """Render a rollout of the best team headless, as an animated GIF (or, --html, an
     interactive page)."""
@@ -434,10 +435,23 @@ def replay(
         fail(f"--generation must be >= 0, got {generation}")
     if not run_dir.is_dir():
         fail(f"{run_dir} is not a directory")
+    from .replay_view import replay_progress
+
+    lines: list[str] = []
     try:
-        path, m = replay_run(
-            run_dir, out=out, seed=seed, ticks=ticks, every=every, generation=generation, html=html
-        )
+        with replay_progress() as progress:
+            path, m = replay_run(
+                run_dir,
+                out=out,
+                seed=seed,
+                ticks=ticks,
+                every=every,
+                generation=generation,
+                html=html,
+                progress=progress,
+                report=lines.append,
+                seeds=seeds,
+            )
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
     except OSError as e:
@@ -451,6 +465,8 @@ def replay(
         highlight=False,
         soft_wrap=True,
     )
+    for line in lines:  # where the arenas part, who delivered
+        console.print(line, markup=False, highlight=False, soft_wrap=True)
 
 
 @app.command()

@@ -368,6 +368,12 @@ class Replay:
             help="Write an interactive page instead: one self-contained HTML file with the team and its baseline team side by side, every tick, each robot's design and behavior tree.",
         ),
     ]
+    seeds = Annotated[
+        int,
+        typer.Option(
+            help="Also score the team and its baseline team in N environments (seeds SEED .. SEED+N-1): the mean marginal contribution, printed and on the page."
+        ),
+    ]
 
 
 class EvaluateTeam(str, Enum):

@@ -1,9 +1,9 @@
 """Replays of one team in one environment: recording, drawing, GIF / PNG export.
 
-`record_episode` runs a team (rows of a :class:`~swarmcode_torch.coevo.population.Population`) through one
-random environment of a scenario on the CPU and keeps snapshots of the state; `draw_frame`
-draws a snapshot in true arena coordinates; `save_gif`, `save_png` and `frame_image` turn
-an episode into pictures (`analysis.replay_run` does it all for the best team of a run
+`record_episode` (`episodes`) runs a team through one random environment of a scenario on the
+CPU and keeps snapshots of the state; `draw_frame` draws a snapshot on a matplotlib Axes in true
+arena coordinates; `save_gif`, `save_png` and `frame_image` turn an episode into pictures
+(`frames.FrameRenderer`: the same drawing, the still part drawn once) (`analysis.replay_run` does it all for the best team of a run
 directory).
 
 Matplotlib (Agg canvas, no pyplot) and PIL are imported inside the functions that need them.
@@ -11,137 +11,28 @@ Matplotlib (Agg canvas, no pyplot) and PIL are imported inside the functions tha
 
 from __future__ import annotations
 
-import dataclasses
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import torch
 from torch import Tensor
 
-from ..coevo.evaluation import team_robots
-from ..coevo.population import PINCHER, SUCTION, Population, from_designs
-from ..sim import bt
-from ..sim.layout import Layout, make_layouts
-from ..sim.rollout import rollout
-from ..sim.scenario import Scenario
-from ..sim.state import DELIVERED, Robots, State, WorldParams
+from ..coevo.population import PINCHER, SUCTION
+from ..sim.state import DELIVERED, State
+from .episodes import _EFFECTOR_NAMES, Episode, record_episode, team_genome
 
-_EFFECTOR_NAMES = {SUCTION: "suction", PINCHER: "pincher"}
+__all__ = [
+    "Episode",
+    "design_colors",
+    "draw_frame",
+    "frame_image",
+    "record_episode",
+    "save_gif",
+    "save_png",
+    "team_genome",
+]
 # tab10, most distinct hues first; brown / olive / grey last (packages are drawn in browns).
 _TAB10_ORDER = (0, 2, 3, 4, 6, 9, 1, 7, 8, 5)
-
-
-# ------------------------------------------------------------------ teams from summary.json
-def team_genome(designs: Sequence[dict], tag_length: int = 16) -> tuple[Population, Tensor]:
-    """A Population with one row per design of a run summary, and the team's slots.
-
-    `designs` are summary.json "designs" entries (tiers 1..3, effector by name, "bt" opcode
-    list, "count" robots each). Returns the genome (tags all zero) and a ``[S]`` long tensor of
-    the design row of every robot, `count` robots per design in design order.
-    """
-    genome, counts = from_designs(designs, tag_length)
-    return genome, torch.arange(counts.numel()).repeat_interleave(counts)
-
-
-# ------------------------------------------------------------------ recording
-@dataclass
-class Episode:
-    """One recorded episode of one environment.
-
-    `layout` and `robots` are the simulated batch of one environment (leading dimension 1);
-    each snapshot is a :class:`~swarmcode_torch.sim.state.State` of that environment *without*
-    the environment dimension (``pos [N, 2]``, ``p_pos [P, 2]``, ``holder [P, G]``, ...).
-    `metrics` are the episode metrics of the final state, as floats.
-    """
-
-    layout: Layout
-    robots: Robots
-    params: WorldParams
-    snapshots: list[State]
-    metrics: dict[str, float]
-    name: str = ""  # shown in frame titles (scenario name)
-    labels: list[str] = field(default_factory=list)  # legend text per design row
-    #: with record_episode(leaves=True): the leaf statuses ``[N, 14]`` the trees read at ticks
-    #: 1 .. T (`rollout`'s observe_leaf), for `bt.trace`
-    leaves: list[Tensor] = field(default_factory=list)
-
-    @property
-    def num_designs(self) -> int:
-        return int(self.robots.program.max()) + 1 if self.robots.program.numel() else 0
-
-
-def _env0(state: State) -> State:
-    return State(*(x.clone() if x.dim() == 0 else x[0].clone() for x in state))
-
-
-def record_episode(
-    genome: Population,
-    team: Tensor,
-    scenario: Scenario,
-    seed: int,
-    ticks: int | None = None,
-    every: int = 1,
-    params: WorldParams | None = None,
-    leaves: bool = False,
-) -> Episode:
-    """Run the team (``[S]`` genome rows, -1 = empty slot) in one random environment on the CPU.
-
-    The environment is ``make_layouts(replace(scenario, num_robots=S), 1, Generator(seed))``;
-    a snapshot is kept at tick 0, every `every` ticks, and at the last tick. `leaves`: keep
-    the leaf statuses of every tick too (`Episode.leaves`).
-    """
-    if every < 1:
-        raise ValueError(f"every must be >= 1, got {every}")
-    ticks = scenario.episode_ticks if ticks is None else int(ticks)
-    if ticks < 0:
-        raise ValueError(f"ticks must be >= 0, got {ticks}")
-    genome = genome.to("cpu")
-    teams = torch.as_tensor(team, dtype=torch.long).reshape(1, -1).cpu()
-    S = teams.shape[1]
-    if S == 0:
-        raise ValueError("the team has no robot slot")
-    if int(teams.max()) >= genome.size:
-        raise ValueError(f"team refers to row {int(teams.max())} of a genome of {genome.size}")
-    params = params or WorldParams.for_scenario(scenario)
-    layout = make_layouts(
-        dataclasses.replace(scenario, num_robots=S), 1, torch.Generator().manual_seed(int(seed))
-    )
-
-    robots = team_robots(genome, teams, scenario.hardware)  # as the evaluation builds them
-    tables = bt.build_tables(genome.bt)
-
-    snaps = []
-
-    def keep(t: int, state: State) -> None:
-        if t % every == 0 or t == ticks:
-            snaps.append(_env0(state))
-
-    seen: list[Tensor] = []
-
-    def keep_leaf(t: int, leaf: Tensor) -> None:
-        seen.append(leaf[0].clone())
-
-    with torch.no_grad():
-        m = rollout(
-            layout,
-            robots,
-            tables,
-            params,
-            ticks,
-            observe=keep,
-            observe_leaf=keep_leaf if leaves else None,
-        )
-    metrics = {k: float(v[0]) for k, v in m.items()}
-
-    labels = []
-    for r in range(genome.size):
-        n = int((teams == r).sum())
-        labels.append(
-            f"{_EFFECTOR_NAMES.get(int(genome.effector[r]), '?')} "
-            f"r={float(genome.radius[r]):.2f} x{n}"
-        )
-    return Episode(layout, robots, params, snaps, metrics, scenario.name, labels, seen)
 
 
 # ------------------------------------------------------------------ drawing
@@ -178,14 +69,19 @@ def draw_frame(
     effector (an inner square outline: pincher, an inner ring: suction, the shapes of the
     packages each lifts); a thick black outline when carrying, faded when the battery is flat.
     """
-    from matplotlib.collections import PatchCollection
-    from matplotlib.colors import to_rgba
-    from matplotlib.patches import Circle, Rectangle, RegularPolygon
-
-    lay, rob, prm = episode.layout, episode.robots, episode.params
-    W = prm.arena
-    s = snapshot
     colors = list(colors) if colors is not None else design_colors(max(episode.num_designs, 1))
+    draw_static(ax, episode, colors, legend)
+    _draw_moving(ax, episode, snapshot, colors)
+
+
+def draw_static(ax, episode: Episode, colors: Sequence, legend: bool = True) -> None:
+    """What stays put over an episode (the Axes cleared first): arena, base, obstacles, and the
+    legend of the designs and package kinds."""
+    from matplotlib.collections import PatchCollection
+    from matplotlib.patches import Circle, Rectangle
+
+    lay, prm = episode.layout, episode.params
+    W = prm.arena
     ax.clear()
     ax.set_xlim(-0.2, W + 0.2)
     ax.set_ylim(-0.2, W + 0.2)
@@ -216,6 +112,18 @@ def draw_frame(
         ax.add_collection(
             PatchCollection(obst, facecolor="#9a9a9a", edgecolor="#555555", lw=0.8, zorder=2)
         )
+    if legend and episode.labels:
+        _legend(ax, episode, colors)
+
+
+def _draw_moving(ax, episode: Episode, snapshot: State, colors: Sequence) -> None:
+    """Packages, robots and the title of one snapshot (over `draw_static`)."""
+    from matplotlib.collections import PatchCollection
+    from matplotlib.colors import to_rgba
+    from matplotlib.patches import Circle, Rectangle, RegularPolygon
+
+    lay, rob = episode.layout, episode.robots
+    s = snapshot
 
     # packages (not delivered)
     present = lay.p_present[0] & (s.p_status != DELIVERED)
@@ -305,173 +213,166 @@ def draw_frame(
                 PatchCollection(patches, facecolor=fills, edgecolor="black", lw=0.7, zorder=6)
             )
 
-    # title: tick and deliveries so far
+    ax.set_title(frame_title(episode, s), fontsize=9)
+
+
+def frame_title(episode: Episode, s: State) -> str:
+    """A frame's title: the scenario, the tick and the deliveries so far."""
+    lay = episode.layout
     done = (s.p_status == DELIVERED) & lay.p_present[0]
     collab = lay.p_collab[0]
     n_ind, n_col = int((done & ~collab).sum()), int((done & collab).sum())
     total = int(lay.p_present[0].sum())
     extra = f" ({n_ind} indiv, {n_col} collab)" if bool(collab.any()) else ""
     name = f"{episode.name}  " if episode.name else ""
-    ax.set_title(f"{name}tick {int(s.t)}   delivered {n_ind + n_col}/{total}{extra}", fontsize=9)
+    return f"{name}tick {int(s.t)}   delivered {n_ind + n_col}/{total}{extra}"
 
-    if legend and episode.labels:
-        from matplotlib.lines import Line2D
 
-        used = sorted(set(p for p, k in zip(prog, keep) if k))
-        eff_of = {p: e for p, e, k in zip(prog, effector, keep) if k}
-        handles = [
-            (
+def _legend(ax, episode: Episode, colors: Sequence) -> None:
+    """The legend: each design present with its mark, then the package kinds present."""
+    lay, rob = episode.layout, episode.robots
+    keep = rob.present[0].tolist()
+    prog = rob.program[0].tolist()
+    effector = rob.effector[0].tolist()
+    g_eff = lay.g_effector[0]
+    collab = lay.p_collab[0]
+    from matplotlib.lines import Line2D
+
+    used = sorted(set(p for p, k in zip(prog, keep) if k))
+    eff_of = {p: e for p, e, k in zip(prog, effector, keep) if k}
+    handles = [
+        (
+            Line2D(
+                [],
+                [],
+                marker="o",
+                ls="",
+                markersize=9,
+                markeredgecolor="#333333",
+                markerfacecolor=colors[r % len(colors)],
+            ),
+            Line2D(
+                [],
+                [],
+                marker="s" if eff_of[r] == PINCHER else "o",
+                ls="",
+                markersize=4,
+                markeredgecolor="#1a1a1a",
+                markerfacecolor="none",
+                markeredgewidth=0.9,
+            ),
+        )
+        for r in used
+    ]
+    labels = [episode.labels[r] if r < len(episode.labels) else f"design {r}" for r in used]
+    kinds = lay.p_present[0]
+    indiv_eff = set(g_eff[kinds & ~collab, 0].tolist())
+    pkg = "#d9a35b"
+    for e, m in ((PINCHER, "s"), (SUCTION, "o")):
+        if e in indiv_eff:
+            handles.append(
                 Line2D(
                     [],
                     [],
-                    marker="o",
+                    marker=m,
                     ls="",
-                    markersize=9,
-                    markeredgecolor="#333333",
-                    markerfacecolor=colors[r % len(colors)],
-                ),
-                Line2D(
-                    [],
-                    [],
-                    marker="s" if eff_of[r] == PINCHER else "o",
-                    ls="",
-                    markersize=4,
-                    markeredgecolor="#1a1a1a",
-                    markerfacecolor="none",
-                    markeredgewidth=0.9,
-                ),
+                    markersize=6,
+                    markeredgecolor="black",
+                    markerfacecolor=pkg,
+                )
             )
-            for r in used
-        ]
-        labels = [episode.labels[r] if r < len(episode.labels) else f"design {r}" for r in used]
-        kinds = lay.p_present[0]
-        indiv_eff = set(g_eff[kinds & ~collab, 0].tolist())
-        pkg = "#d9a35b"
+            labels.append(f"{_EFFECTOR_NAMES[e]} package")
+    if bool((kinds & collab).any()):
+        handles.append(
+            Line2D(
+                [],
+                [],
+                marker="h",
+                ls="",
+                markersize=8,
+                markeredgecolor="black",
+                markerfacecolor=pkg,
+            )
+        )
+        labels.append("collab package")
+        grip_eff = set(g_eff[kinds & collab].flatten().tolist())
         for e, m in ((PINCHER, "s"), (SUCTION, "o")):
-            if e in indiv_eff:
+            if e in grip_eff:
                 handles.append(
                     Line2D(
                         [],
                         [],
                         marker=m,
                         ls="",
-                        markersize=6,
+                        markersize=4,
                         markeredgecolor="black",
-                        markerfacecolor=pkg,
+                        markerfacecolor="white",
                     )
                 )
-                labels.append(f"{_EFFECTOR_NAMES[e]} package")
-        if bool((kinds & collab).any()):
-            handles.append(
-                Line2D(
-                    [],
-                    [],
-                    marker="h",
-                    ls="",
-                    markersize=8,
-                    markeredgecolor="black",
-                    markerfacecolor=pkg,
-                )
+                labels.append(f"{_EFFECTOR_NAMES[e]} grip")
+        handles.append(
+            Line2D(
+                [],
+                [],
+                marker="o",
+                ls="",
+                markersize=4,
+                markeredgecolor="black",
+                markerfacecolor="black",
             )
-            labels.append("collab package")
-            grip_eff = set(g_eff[kinds & collab].flatten().tolist())
-            for e, m in ((PINCHER, "s"), (SUCTION, "o")):
-                if e in grip_eff:
-                    handles.append(
-                        Line2D(
-                            [],
-                            [],
-                            marker=m,
-                            ls="",
-                            markersize=4,
-                            markeredgecolor="black",
-                            markerfacecolor="white",
-                        )
-                    )
-                    labels.append(f"{_EFFECTOR_NAMES[e]} grip")
-            handles.append(
-                Line2D(
-                    [],
-                    [],
-                    marker="o",
-                    ls="",
-                    markersize=4,
-                    markeredgecolor="black",
-                    markerfacecolor="black",
-                )
-            )
-            labels.append("held grip")
-        ax.legend(
-            handles,
-            labels,
-            loc="upper left",
-            bbox_to_anchor=(1.01, 1.0),
-            fontsize=8,
-            frameon=False,
-            handletextpad=0.3,
-            borderaxespad=0.0,
-            title="darker = heavier",
-            title_fontsize=8,
         )
-
-
-class _Canvas:
-    """One reusable Agg figure for rendering many frames quickly."""
-
-    def __init__(self, episode: Episode, dpi: int, size: tuple[float, float] = (7.0, 5.2)):
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-
-        self.fig = Figure(figsize=size, dpi=dpi)
-        self.canvas = FigureCanvasAgg(self.fig)
-        self.ax = self.fig.add_axes((0.01, 0.01, 0.71, 0.93))
-        self.episode = episode
-        self.colors = design_colors(max(episode.num_designs, 1))
-
-    def render(self, snapshot: State):
-        import numpy as np
-
-        draw_frame(self.ax, self.episode, snapshot, self.colors)
-        self.canvas.draw()
-        return np.asarray(self.canvas.buffer_rgba())[..., :3].copy()
+        labels.append("held grip")
+    ax.legend(
+        handles,
+        labels,
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        fontsize=8,
+        frameon=False,
+        handletextpad=0.3,
+        borderaxespad=0.0,
+        title="darker = heavier",
+        title_fontsize=8,
+    )
 
 
 def frame_image(episode: Episode, index: int = -1, dpi: int = 80):
     """Snapshot `index` as a numpy uint8 array ``[H, W, 3]`` (TensorBoard: dataformats="HWC")."""
-    return _Canvas(episode, dpi).render(episode.snapshots[index])
+    from .frames import FrameRenderer
+
+    return FrameRenderer(episode, dpi).render(episode.snapshots[index])
 
 
 def save_png(episode: Episode, path: str | Path, index: int = -1, dpi: int = 100) -> Path:
     """Write snapshot `index` (default the last) as a PNG."""
-    from PIL import Image
+    from .frames import FrameRenderer
 
     path = Path(path)
-    Image.fromarray(frame_image(episode, index, dpi)).save(path)
+    FrameRenderer(episode, dpi).image(episode.snapshots[index]).save(path, format="PNG")
     return path
 
 
-def save_gif(episode: Episode, path: str | Path, fps: float = 10, dpi: int = 80) -> Path:
+def save_gif(
+    episode: Episode,
+    path: str | Path,
+    fps: float = 10,
+    dpi: int = 80,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> Path:
     """Write every snapshot of the episode as an animated GIF (looping) to `path` (a file name,
-    or a binary file object)."""
-    from PIL import Image
+    or a binary file object); `progress("frames", done, total)` as the frames are drawn."""
+    from .frames import gif_frames
 
     path = Path(path) if isinstance(path, (str, Path)) else path
-    cv = _Canvas(episode, dpi)
-    frames = [
-        Image.fromarray(cv.render(s)).quantize(colors=128, method=Image.Quantize.MEDIANCUT)
-        for s in episode.snapshots
-    ]
+    frames = gif_frames(episode, dpi, progress)
     duration = max(int(round(1000.0 / fps)), 20)
     frames[0].save(
         path,
         format="GIF",
         save_all=True,
-        append_images=frames[1:],
+        append_images=list(frames[1:]),
         duration=duration,
         loop=0,
         optimize=False,
     )
     return path
-
-
-# ------------------------------------------------------------------ run directories

@@ -47,6 +47,10 @@
       p.posA = undelta(p.pos, N * 2, 100);
       p.energyA = undelta(p.energy, N, 10);
       p.pposA = undelta(p.p_pos, Q * 2, 100);
+      // each pick-up and delivery: [tick, robot, package, kind] (kind: 0 delivered individual,
+      // 1 delivered collaborative, 2 picked individual, 3 picked collaborative)
+      p.cred = [];
+      for (let i = 0; i + 3 < (p.credits || []).length; i += 4) p.cred.push(p.credits.slice(i, i + 4));
       // per tick counts, as episode_metrics counts them at the end
       p.counts = [];
       for (let t = 0; t <= D.ticks; t++) {
@@ -231,8 +235,17 @@
         : "(the team has no partner to refill the focal's slots: the baseline team has no robot)") +
       `, marginal contribution ` +
       `<b class="${cls}" data-testid="marginal">${m >= 0 ? "+" : ""}${fmtS(m)}</b>; ` +
-      `gated fitness ${fmtS(D.gated)} (${kept}).${recTxt}` +
+      `gated fitness ${fmtS(D.gated)} (${kept}).${recTxt}` + seedsText(D) +
       (D.custom_fitness ? ` <br><b>Note:</b> the run was scored by ${esc(D.custom_fitness)}; the scores here are the built-in fitness.` : "");
+  }
+
+  function seedsText(D) {   // replay --seeds N: the same two teams in N environments
+    const sm = D.seed_marginals;
+    if (!sm) return "";
+    const n = sm.marginal.length, beat = sm.marginal.filter((x) => x > 0).length;
+    return ` Over ${esc(n)} environments (seeds ${esc(sm.seeds[0])}–${esc(sm.seeds[1])}) the marginal contribution is ` +
+      `<b data-testid="mean-marginal">${sm.mean >= 0 ? "+" : ""}${fmtS(sm.mean)}</b> on average` +
+      (sm.sd !== null ? ` (sd ${fmtS(sm.sd)})` : "") + `; the focal's team beats its baseline in ${esc(beat)} of them.`;
   }
 
   function legendHtml(D) {
@@ -273,6 +286,75 @@
     return h + "</table>";
   }
 
+  // credits up to tick t: per robot and per design, [delivered, of them collaborative, picked, of them collaborative]
+  function creditCounts(D, name, t) {
+    const p = D.panels[name], robot = [], design = D.designs.map(() => [0, 0, 0, 0]);
+    for (let i = 0; i < D.robots; i++) robot.push([0, 0, 0, 0]);
+    for (const [tk, r, , k] of p.cred) {
+      if (tk > t) break;
+      const col = k < 2 ? 0 : 2, d = p.robots.design[r];
+      robot[r][col]++; if (k % 2) robot[r][col + 1]++;
+      if (d >= 0) { design[d][col]++; if (k % 2) design[d][col + 1]++; }
+    }
+    return {robot, design};
+  }
+
+  const credCell = (c, col, id) => `<td class="num" data-testid="${id}">${esc(c[col])}` +
+    (c[col + 1] ? `<span class="muted"> (${esc(c[col + 1])} collab)</span>` : "") + `</td>`;
+
+  function creditsHtml(D, t) {
+    const f = creditCounts(D, "focal", t), b = creditCounts(D, "baseline", t);
+    const F = D.panels.focal.robots.design, B = D.panels.baseline.robots.design;
+    const head = `<tr><th></th><th colspan="3">focal arena</th><th colspan="3">baseline arena</th></tr>`;
+    let h = `<h3>Who picked up and delivered, to tick <span data-testid="credits-tick">${esc(t)}</span></h3>` +
+      `<table data-testid="credits-design">${head}<tr><th>design</th><th class="num">robots</th><th class="num">delivered</th>` +
+      `<th class="num">picked up</th><th class="num">robots</th><th class="num">delivered</th><th class="num">picked up</th></tr>`;
+    D.designs.forEach((g, d) => {
+      const nf = F.filter((x) => x === d).length, nb = B.filter((x) => x === d).length;
+      if (!nf && !nb) return;
+      h += `<tr><td>${swatch(D, d, 14)} ${esc(designLabel(D, d))}</td><td class="num">${esc(nf)}</td>` +
+           credCell(f.design[d], 0, `deliv-focal-d${d}`) + credCell(f.design[d], 2, `picked-focal-d${d}`) +
+           `<td class="num">${esc(nb)}</td>` +
+           credCell(b.design[d], 0, `deliv-baseline-d${d}`) + credCell(b.design[d], 2, `picked-baseline-d${d}`) + `</tr>`;
+    });
+    h += `</table><table data-testid="credits-robot" style="margin-top:8px">${head}<tr><th>robot</th>` +
+         `<th>design</th><th class="num">delivered</th><th class="num">picked up</th>` +
+         `<th>design</th><th class="num">delivered</th><th class="num">picked up</th></tr>`;
+    const who = (ds, i) => ds[i] >= 0 ? `${swatch(D, ds[i], 12)} sp ${esc(D.designs[ds[i]].species)}` : "–";
+    for (let i = 0; i < D.robots; i++) {
+      if (F[i] < 0 && B[i] < 0) continue;
+      h += `<tr><td class="num">${esc(i)}</td><td>${who(F, i)}</td>` +
+           credCell(f.robot[i], 0, `deliv-focal-r${i}`) + credCell(f.robot[i], 2, `picked-focal-r${i}`) +
+           `<td>${who(B, i)}</td>` +
+           credCell(b.robot[i], 0, `deliv-baseline-r${i}`) + credCell(b.robot[i], 2, `picked-baseline-r${i}`) + `</tr>`;
+    }
+    return h + `</table><p class="muted">A delivery counts for every robot holding the package the tick before it ` +
+      `was delivered (each carrier of a collaborative package); a pick-up for every robot holding a grip when the package ` +
+      `was first lifted (as the metrics count pick-ups). The individual columns sum to the team's counts.</p>`;
+  }
+
+  function divergeHtml(D) {
+    const v = D.divergence;
+    if (v === null || v === undefined)
+      return D.shared_slots ? `The two arenas never part in ${esc(D.ticks)} ticks: the focal's robots change nothing for the others.`
+        : "The teams share no slot (the focal has no partner), so there is no tick at which the arenas part.";
+    const d = D.panels.focal.robots.design[v.robot];
+    return `The two arenas part at tick <b data-testid="divergence-tick">${esc(v.tick)}</b>: robot ${esc(v.robot)} ` +
+      `(${swatch(D, d, 12)} ${esc(designLabel(D, d))}), in a slot both teams share, is first more than ` +
+      `${fmt(D.divergence_eps * 1000, 0)} mm from where it is in the other arena. Before that, only the focal's slots differ; ` +
+      `after it, small differences grow and the arenas are no longer comparable tick by tick. ` +
+      `<button id="goto-divergence" type="button">Go to tick ${esc(v.tick)}</button>`;
+  }
+
+  function robotCredits(D, name, i, t) {
+    const p = D.panels[name], dl = [], pk = [];
+    for (const [tk, r, q, k] of p.cred) {
+      if (tk > t) break;
+      if (r === i) (k < 2 ? dl : pk).push(`#${esc(q)} at tick ${esc(tk)}`);
+    }
+    return `delivered ${dl.length ? dl.join(", ") : "none"}; picked up ${pk.length ? pk.join(", ") : "none"}`;
+  }
+
   function inspectorHtml(D, t) {
     if (!state.sel) return `<h3>Robot</h3><p class="muted">Click a robot in either arena to see its design, energy, load and behavior tree.</p>`;
     const {panel, robot: i} = state.sel, p = D.panels[panel], N = D.robots, Q = D.Q, G = D.G;
@@ -300,7 +382,8 @@
       `<tr><td>lifts</td><td>${can}</td></tr>` +
       `<tr><td>mass, payload, force</td><td>${fmt(p.robots.mass[i], 1)} kg, ${fmt(p.robots.payload[i], 1)} kg, ${fmt(p.robots.force[i], 1)} N</td></tr>` +
       `<tr><td>energy (tick ${t})</td><td data-testid="robot-energy">${fmt(e, 1)}% of ${fmt(p.robots.capacity[i], 0)} J</td></tr>` +
-      `<tr><td>holds</td><td data-testid="robot-holds">${holdTxt}</td></tr></table>`;
+      `<tr><td>holds</td><td data-testid="robot-holds">${holdTxt}</td></tr>` +
+      `<tr><td>to tick ${t}</td><td data-testid="robot-credits">${robotCredits(D, panel, i, t)}</td></tr></table>`;
     // the behavior tree, as `inspect` prints it, with the nodes ticked at tick t
     let acting = -1, seen = new Map(), note;
     if (t === 0) note = "tick 0: no tree has run yet";
@@ -326,7 +409,7 @@
   }
 
   // ------------------------------------------------------------------ state and controls
-  const state = {t: 0, playing: false, speed: 2, sel: null, acc: 0, last: 0};
+  const state = {t: 0, playing: false, speed: 2, sel: null, acc: 0, last: 0, credKey: null};
   let D = null;
 
   function render() {
@@ -338,6 +421,10 @@
       $("live-" + name).innerHTML = liveText(D, name, t);
     }
     $("inspector").innerHTML = inspectorHtml(D, t);
+    // the tables change only at a tick with a credit: redrawn then (a swarm's table is long)
+    const key = PANELS.map((n) => D.panels[n].cred.filter((c) => c[0] <= t).length).join(",");
+    if (key !== state.credKey || !$("credits").firstChild) { $("credits").innerHTML = creditsHtml(D, t); state.credKey = key; }
+    else $("credits").querySelector('[data-testid="credits-tick"]').textContent = String(t);
     document.body.dataset.tick = String(t);
   }
 
@@ -489,13 +576,15 @@
     $("score-focal").textContent = `score ${fmtS(D.panels.focal.score)}`;
     $("score-baseline").textContent = `score ${fmtS(D.panels.baseline.score)}`;
     $("summary").innerHTML = summaryHtml(D);
+    $("divergence").innerHTML = divergeHtml(D);
+    if ($("goto-divergence")) $("goto-divergence").addEventListener("click", () => { setPlaying(false); setTick(D.divergence.tick); });
     $("legend").innerHTML = legendHtml(D);
     $("terms").innerHTML = termsHtml(D);
     $("footer").textContent = "Written by swarmcode-torch replay --html. The baseline team: the focal design's slots " +
       (!D.panels.baseline.robots.design.some((d) => d >= 0) ? "left empty: the team has no partner. "
        : D.baseline_recorded ? "refilled by its partners as the run recorded them. "
        : "refilled by the team's other designs in proportion to their dominance (app/replay_page.py). ") +
-      "Both teams ran through the same environment with the evaluation's rollout.";
+      `Both teams ran through the same environment with the evaluation's rollout (the ${D.panels.focal.tick_mode || "Python"} tick).`;
     $("scrub").max = String(D.ticks);
     resize(D);
     wire();

@@ -1,9 +1,12 @@
 """An interactive replay page: one self-contained HTML file (`swarmcode-torch replay RUN --html`).
 
 The best team of a run (or of one generation) and its baseline team run through the same
-environment, every tick recorded by `render.record_episode` (the rollout code of the
-evaluation). The page draws both on canvases driven by one scrubber, and shows, for a clicked
-robot, its design, energy, load and behavior tree with the node that acted that tick.
+environment, every tick recorded by `episodes.record_episode` (the rollout code of the
+evaluation, on the CPU's tick: the fused tick where it builds). The page draws both on canvases
+driven by one scrubber, and shows, for a clicked robot, its design, energy, load and behavior
+tree with the node that acted that tick; who picked up and delivered each package, per robot
+and per design, up to the tick shown (`Episode.credits`); and the tick at which the two arenas
+part (`episodes.divergence`).
 
 The focal individual and the baseline. A run made since the replay page records, with each design of a best
 team, whether it is the focal individual's (``"focal"``) and its robots in the baseline team the
@@ -33,6 +36,7 @@ import json
 import math
 import re
 from collections.abc import Sequence
+from functools import partial
 from importlib import resources
 from pathlib import Path
 
@@ -45,8 +49,10 @@ from ..coevo.population import PINCHER, genome_phenotype
 from ..sim import bt
 from ..sim.scenario import Scenario
 from ..sim.state import DELIVERED, capabilities
+from .episodes import DIVERGENCE_EPS, Episode, ProgressFn, divergence, record_episode, team_genome
 from .files import atomic_write_bytes, check_output_path
-from .render import Episode, design_colors, record_episode, team_genome
+from .render import design_colors
+from .replay_explain import seed_marginals
 
 HTML_FILE = "team.html"  # the default output of `replay --html`
 _EFFECTOR = {PINCHER: "pincher"}
@@ -117,6 +123,19 @@ def _recorded_refill(
 def _species_count(designs: Sequence[dict], team: Tensor) -> int:
     rows = sorted(set(team[team >= 0].tolist()))
     return len({designs[r].get("species", r) for r in rows})
+
+
+def _rounded(x):
+    """Floats (in lists and dicts) rounded as the page's scores are (`_round`)."""
+    if isinstance(x, float):
+        return _round(x)
+    if isinstance(x, list):
+        return [_rounded(v) for v in x]
+    return {k: _rounded(v) for k, v in x.items()} if isinstance(x, dict) else x
+
+
+def _stage(progress: ProgressFn, stage: str, _: str, done: int, total: int) -> None:
+    progress(stage, done, total)
 
 
 # ------------------------------------------------------------------ episode -> page data
@@ -193,6 +212,9 @@ def _panel(
         "holder": stack["holder"].reshape(-1).tolist(),  # [T+1, Q, G]
         "p_picked": stack["p_picked"].long().reshape(-1).tolist(),
         "combo": combos,  # [T, N] ticks 1..T, -1: no tree ran
+        # (tick, robot, package, kind) of each pick-up and delivery, flat (episodes.CREDIT_KINDS)
+        "credits": [x for c in ep.credits for x in c],
+        "tick_mode": ep.tick,
         "metrics": {k: _round(v) for k, v in m.items()},
         "terms": {k: _round(v) for k, v in terms.items()},
         "raw": _round(float(sum(terms[k] for k, _ in _TERMS) * terms["activity"])),
@@ -212,9 +234,15 @@ def page_data(
     ticks: int | None = None,
     title: str = "",
     record: dict | None = None,
+    progress: ProgressFn | None = None,
+    seeds: int = 1,
 ) -> dict:
     """Everything the page shows, as JSON-friendly data: both teams' episodes in the environment
-    of `seed`, the designs, the layout, the scores. `cfg`: the run's SwarmCoDeConfig."""
+    of `seed`, the designs, the layout, the scores, who picked up and delivered what, and the
+    tick at which the two arenas part (`episodes.divergence`: the first at which a robot of a
+    slot both teams share stands apart). `cfg`: the run's SwarmCoDeConfig.
+    `progress(stage, done, total)`: stages "focal ticks" and "baseline ticks". `seeds` > 1:
+    the two teams' marginal over that many environments too (`replay_seeds.seed_marginals`)."""
     genome, _ = team_genome(designs, cfg.tag_length)
     focal, team, base, recorded = focal_and_baseline(designs, seed)
     ticks = scenario.episode_ticks if ticks is None else int(ticks)
@@ -224,7 +252,10 @@ def page_data(
     traces: list[dict] = [{} for _ in designs]
     panels, eps = {}, {}
     for name, t in (("focal", team), ("baseline", base)):
-        ep = record_episode(genome, t, scenario, seed, ticks=ticks, every=1, leaves=True)
+        tell = None if progress is None else partial(_stage, progress, f"{name} ticks")
+        ep = record_episode(
+            genome, t, scenario, seed, ticks=ticks, every=1, leaves=True, progress=tell
+        )
         present = t >= 0
         counts = torch.tensor([_species_count(designs, t)])
         cost = float(
@@ -233,6 +264,7 @@ def page_data(
         panels[name] = _panel(ep, t, genome.bt, traces, cost, int(counts[0]), cfg, scenario)
         eps[name] = ep
     f, b = panels["focal"]["score"], panels["baseline"]["score"]
+    part = divergence(eps["focal"], eps["baseline"], (team == base) & (team >= 0))
     gated = float(gate(torch.tensor([f]), torch.tensor([b]), cfg.p_marginal)[0])
     lay = eps["focal"].layout
     present = lay.p_present[0]
@@ -331,6 +363,13 @@ def page_data(
         "panels": panels,
         "gated": _round(gated),
         "marginal": _round(f - b),
+        # the first tick the arenas part at, and the slot of the robot that stands apart first
+        "divergence": None if part is None else {"tick": part[0], "robot": part[1]},
+        "divergence_eps": DIVERGENCE_EPS,
+        "seed_marginals": _rounded(seed_marginals(designs, scenario, cfg, seed, seeds, ticks))
+        if seeds > 1
+        else None,
+        "shared_slots": int(((team == base) & (team >= 0)).sum()),
         "p_marginal": cfg.p_marginal,
     }
 

@@ -160,3 +160,38 @@ def test_replay_run(tmp_path):
     assert path.is_file()
     with pytest.raises(ValueError, match="no record of generation 7"):
         replay_run(run, generation=7)
+
+
+def test_frames_draw_each_robot_in_its_design_colour_where_it_stands():
+    from swarmcode_torch.app.frames import FrameRenderer
+    from swarmcode_torch.app.render import design_colors
+
+    g, team = team_genome(DESIGNS)
+    ep = record_episode(g, team, load_scenario("budget"), seed=2, ticks=40, every=20)
+    cv = FrameRenderer(ep, dpi=100)
+    colors = design_colors(2)
+    for s in ep.snapshots:
+        img = cv.render(s).astype(int)
+        for i, (x, y) in enumerate(s.pos.tolist()):
+            if int(s.holding[i]) >= 0:
+                continue  # its package is drawn on top
+            # the disc's fill between the centre mark and the rim (pixels of the reduced frame)
+            px = (cv.ox + cv.sx * (x + 0.7 * float(ep.robots.radius[0, i]))) / 2
+            py = (cv.h - (cv.oy + cv.sy * y)) / 2
+            want = np.array(colors[int(team[i])][:3]) * 255
+            got = img[int(round(py)), int(round(px))]
+            assert np.abs(got - want).max() < 40, (int(s.t), i, got, want)
+
+
+def test_a_gifs_frames_are_its_snapshots_drawn(tmp_path):
+    g, team = team_genome(DESIGNS)
+    ep = record_episode(g, team, load_scenario("budget"), seed=2, ticks=30, every=10)
+    path = save_gif(ep, tmp_path / "ep.gif", fps=5)
+    with Image.open(path) as im:
+        frames = []
+        for k in range(im.n_frames):
+            im.seek(k)
+            frames.append(np.asarray(im.convert("RGB")).astype(int))
+    for k in range(len(ep.snapshots)):  # each frame is its snapshot, drawn
+        assert np.abs(frames[k] - frame_image(ep, k)).mean() < 3
+    assert np.abs(frames[0] - frames[-1]).max() > 100  # robots moved

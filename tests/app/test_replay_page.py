@@ -14,7 +14,9 @@ from typer.testing import CliRunner
 
 from swarmcode_torch.app.analysis import replay_run
 from swarmcode_torch.app.cli import app
+from swarmcode_torch.app.episodes import divergence, record_episode
 from swarmcode_torch.app.render import team_genome
+from swarmcode_torch.app.replay_explain import design_credits, explain_lines, seed_marginals
 from swarmcode_torch.app.replay_page import (
     decode_page,
     final_counts,
@@ -28,6 +30,7 @@ from swarmcode_torch.coevo.evaluation import simulate_teams, team_scores
 from swarmcode_torch.coevo.fitness import raw_fitness, raw_fitness_terms
 from swarmcode_torch.sim import bt
 from swarmcode_torch.sim.layout import make_layouts
+from swarmcode_torch.sim.runtime import tick_function
 from swarmcode_torch.sim.scenario import load_scenario
 from swarmcode_torch.sim.state import WorldParams
 
@@ -109,7 +112,8 @@ def test_page_counts_equal_episode_metrics_of_the_evaluation_rollout(two_niche):
     s = load_scenario("two-niche")
     genome, _ = team_genome(DESIGNS, cfg.tag_length)
     _, team, base, _ = focal_and_baseline(DESIGNS, seed=1)
-    # the evaluation's own rollout of both teams in the page's environment
+    # the evaluation's own rollout of both teams in the page's environment, on the CPU's tick
+    # (the fused tick where it builds), as a run evaluates them and the page records them
     layouts = make_layouts(
         s.__class__(**{**s.__dict__, "num_robots": 20}), 1, torch.Generator().manual_seed(1)
     )
@@ -122,6 +126,7 @@ def test_page_counts_equal_episode_metrics_of_the_evaluation_rollout(two_niche):
         WorldParams.for_scenario(s),
         s.episode_ticks,
         catalog=s.hardware,
+        step_fn=tick_function(torch.device("cpu"), compile=False)[0],
     )
     assert float(m["delivered_individual"][0]) > 0  # a meaningful episode
     for k, name in enumerate(("focal", "baseline")):
@@ -177,6 +182,56 @@ def test_every_tick_of_every_robot_has_the_trace_of_its_tree(two_niche):
     # tree lines are `inspect`'s
     for d in data["designs"]:
         assert "\n".join(t for t, _ in d["tree"]) == bt.format_tree(d["ops"], root=True)
+
+
+def test_the_page_credits_each_robot_and_names_the_tick_the_arenas_part(two_niche):
+    data, cfg = two_niche
+    designs = data["designs"]
+    for name in ("focal", "baseline"):
+        p = data["panels"][name]
+        assert p["tick_mode"] in ("fused", "eager")
+        c = [p["credits"][i : i + 4] for i in range(0, len(p["credits"]), 4)]
+        assert all(0 < t <= data["ticks"] and p["robots"]["design"][r] >= 0 for t, r, _, _ in c)
+        per = design_credits(data, name)
+        # the individual packages' credits, summed over robots or designs, are the metrics
+        assert sum(k == 0 for *_, k in c) == sum(d[0] for d in per)
+        assert sum(d[0] for d in per) == p["metrics"]["delivered_individual"]
+        assert sum(d[2] for d in per) == p["metrics"]["picked_individual"]
+        assert len({q for _, _, q, k in c if k == 1}) == p["metrics"]["delivered_collab"]
+        for d, row in enumerate(per):  # only robots of a design earn its credits
+            if not any(x == d for x in p["robots"]["design"]):
+                assert row == [0, 0, 0, 0]
+    assert sum(d[0] for d in design_credits(data, "focal")) > 0  # a meaningful episode
+    # the arenas part where a robot of a slot both teams share stands apart: episodes.divergence
+    genome, _ = team_genome(DESIGNS, cfg.tag_length)
+    _, team, base, _ = focal_and_baseline(DESIGNS, seed=1)
+    s = load_scenario("two-niche")
+    a, b = (record_episode(genome, t, s, 1) for t in (team, base))
+    shared = (team == base) & (team >= 0)
+    assert data["shared_slots"] == int(shared.sum()) == 8
+    t, slot = divergence(a, b, shared)
+    assert data["divergence"] == {"tick": t, "robot": slot}
+    assert 0 < t < data["ticks"] and designs[team[slot]]["focal"] is False
+    lines = explain_lines(data)
+    assert f"The arenas part at tick {t} of {data['ticks']}: robot {slot} " in lines[0]
+    assert lines[1].startswith("Focal arena, by design: ") and "delivered" in lines[1]
+
+
+def test_the_marginal_over_several_environments_starts_with_the_pages_own(two_niche):
+    data, cfg = two_niche
+    assert data["seed_marginals"] is None  # one environment unless asked
+    sm = seed_marginals(DESIGNS, load_scenario("two-niche"), cfg, seed=1, seeds=3)
+    assert sm["seeds"] == [1, 3] and len(sm["marginal"]) == 3
+    # the first environment is the page's: the same episodes, the same scores (one batch or not)
+    assert sm["focal"][0] == pytest.approx(data["panels"]["focal"]["score"], abs=1e-5)
+    assert sm["baseline"][0] == pytest.approx(data["panels"]["baseline"]["score"], abs=1e-5)
+    assert sm["marginal"] == [f - b for f, b in zip(sm["focal"], sm["baseline"])]
+    assert sm["mean"] == pytest.approx(sum(sm["marginal"]) / 3)
+    assert sm["sd"] == pytest.approx(torch.tensor(sm["marginal"]).std().item(), rel=1e-6)
+    # each environment is that of its seed: seed 2's first is the next one's (the focal's team
+    # is the same; this record's baseline is drawn from the seed, so it may not be)
+    again = seed_marginals(DESIGNS, load_scenario("two-niche"), cfg, seed=2, seeds=1)
+    assert again["focal"] == sm["focal"][1:2] and again["sd"] is None
 
 
 def test_the_file_is_self_contained_and_small(two_niche):
@@ -248,11 +303,39 @@ def test_replay_run_html_and_the_command(tmp_path):
     )
     assert res.exit_code == 0, res.output
     data = decode_page((tmp_path / "g2.html").read_text())
+    # the command says where the arenas part and who delivered, as the page does
+    for line in explain_lines(data):
+        assert line in " ".join(res.output.split()), line
+    # --seeds N: the marginal over N environments, printed and on the page
+    res = CliRunner().invoke(
+        app,
+        [
+            "replay",
+            str(run),
+            "--html",
+            "--ticks",
+            "12",
+            "--seeds",
+            "3",
+            "--out",
+            str(tmp_path / "s.html"),
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    sm = decode_page((tmp_path / "s.html").read_text())["seed_marginals"]
+    assert sm["seeds"] == [0, 2] and len(sm["marginal"]) == 3
+    assert f"Marginal contribution over 3 environments (seeds 0-2): mean {sm['mean']:.1f}" in (
+        " ".join(res.output.split())
+    )
+    res = CliRunner().invoke(app, ["replay", str(run), "--seeds", "0"])
+    assert res.exit_code == 2 and "seeds must be an integer in [1, 1000], got 0" in res.output
+    assert "Traceback" not in res.output
     assert data["ticks"] == 12 and data["seed"] == 3 and len(data["designs"]) == 2
     assert data["record"]["generation"] == 2 and data["record"]["fitness"] == 3.0
     # the GIF stays the default
     res = CliRunner().invoke(app, ["replay", str(run), "--ticks", "4"])
     assert res.exit_code == 0 and (run / "team.gif").is_file()
+    assert "By design: species 3 (12 robots): " in " ".join(res.output.split())
 
 
 def test_html_into_a_missing_folder_or_a_directory_is_one_line(tmp_path):

@@ -4,6 +4,7 @@ Marked `browser`: in the default suite, skipped where selenium, chromium or chro
 not installed (.ci/run installs them: `apt-get install chromium chromium-driver`, the `dev`
 extra's selenium)."""
 
+import re
 import shutil
 import time
 
@@ -128,6 +129,8 @@ def test_clicking_a_robot_shows_its_design_and_tree(browser, page):
     data = page[1]
     _scrub(browser, 40)
     canvas = browser.find_element("id", "canvas-baseline")
+    # all of the canvas in view: the pointer's offset is from the centre of its visible part
+    browser.execute_script("arguments[0].scrollIntoView({block: 'center'})", canvas)
     robot = 15  # a partner slot: design 1 (suction)
     pos = browser.execute_script("return window.replay.screenPos('baseline', arguments[0])", robot)
     size = canvas.size
@@ -177,6 +180,73 @@ def test_focal_and_baseline_advance_together(browser, page):
     assert browser.find_element("id", "tick").text == f"tick {t + 1} / {data['ticks']}"
 
 
+def test_the_page_shows_deliveries_per_robot_and_design_and_the_divergence_tick(browser, page):
+    data = page[1]
+    part = data["divergence"]
+    assert part is not None and 0 < part["tick"] < data["ticks"]
+    assert int(_text(browser, "divergence-tick")) == part["tick"]
+    assert f"robot {part['robot']} " in _text(browser, "divergence")
+    button = browser.find_element("id", "goto-divergence")
+    browser.execute_script("arguments[0].scrollIntoView({block: 'center'})", button)
+    button.click()
+    assert browser.execute_script("return window.replay.tick") == part["tick"]
+    assert browser.find_element("id", "tick").text == f"tick {part['tick']} / {data['ticks']}"
+    for t in (part["tick"], data["ticks"]):  # the tables count what happened up to the tick
+        _scrub(browser, t)
+        assert int(_text(browser, "credits-tick")) == t
+        for name in ("focal", "baseline"):
+            p = data["panels"][name]
+            c = [p["credits"][i : i + 4] for i in range(0, len(p["credits"]), 4)]
+            for r, d in enumerate(p["robots"]["design"]):
+                want = sum(tk <= t and rr == r and k < 2 for tk, rr, _, k in c)
+                if d >= 0:
+                    cell = _text(browser, f"deliv-{name}-r{r}").split()[0]
+                    assert int(cell) == want, (name, r, t)
+            for d in set(p["robots"]["design"]) - {-1}:
+                want = sum(
+                    tk <= t and p["robots"]["design"][rr] == d and k >= 2 for tk, rr, _, k in c
+                )
+                assert int(_text(browser, f"picked-{name}-d{d}").split()[0]) == want
+    # at the end, the individual deliveries per robot add up to the team's
+    for name in ("focal", "baseline"):
+        p = data["panels"][name]
+        total = 0
+        for r, d in enumerate(p["robots"]["design"]):
+            if d >= 0:
+                m = re.fullmatch(
+                    r"(\d+)(?: \((\d+) collab\))?", _text(browser, f"deliv-{name}-r{r}")
+                )
+                total += int(m[1]) - int(m[2] or 0)
+        assert total == p["metrics"]["delivered_individual"]
+    # a clicked robot lists what it delivered
+    p = data["panels"]["focal"]
+    r = p["credits"][1] if p["credits"] else 0
+    browser.execute_script("window.replay.select('focal', arguments[0])", r)
+    text = _text(browser, "robot-credits")
+    if p["credits"]:
+        t0, _, q, k = p["credits"][:4]
+        assert f"#{q} at tick {t0}" in text
+
+
+def test_the_mean_marginal_over_several_environments_is_shown(tmp_path):
+    data = page_data(
+        DESIGNS,
+        load_scenario("two-niche"),
+        SwarmCoDeConfig(scenario="two-niche"),
+        seed=1,
+        ticks=40,
+        seeds=3,
+    )
+    drv = _driver()
+    try:
+        _open(drv, write_page(data, tmp_path / "team.html"))
+        sm = data["seed_marginals"]
+        assert float(_text(drv, "mean-marginal")) == pytest.approx(sm["mean"], abs=0.06)
+        assert "Over 3 environments (seeds 1–3)" in drv.find_element("id", "summary").text
+    finally:
+        drv.quit()
+
+
 # ------------------------------------------------------------------ hostile run data
 PLANTED = "<img src=x onerror=window.__planted=1><svg onload=window.__planted=2>"
 
@@ -213,12 +283,14 @@ def test_a_page_of_hostile_run_data_runs_no_planted_script(tmp_path):
         # the planted markup is shown as text, not made into elements
         assert (
             drv.execute_script(
-                "return document.querySelectorAll('#summary img, #legend img').length"
+                "return document.querySelectorAll('#summary img, #legend img, #credits img,"
+                " #divergence img').length"
             )
             == 0
         )
         assert PLANTED in drv.find_element("id", "summary").text
         assert PLANTED in drv.find_element("id", "legend").text
+        assert PLANTED in drv.find_element("id", "credits").text
     finally:
         drv.quit()
 
