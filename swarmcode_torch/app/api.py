@@ -337,9 +337,15 @@ def _result(
     )
 
 
-def _bounds(max_time, patience, snapshot_every, stop=(), callback=None) -> session.Bounds | None:
+def _bounds(
+    max_time, patience, snapshot_every, stop=(), callback=None, keep_checkpoints=None
+) -> session.Bounds | None:
     """The run's `session.Bounds` (None without max_time, patience, the early-stopping settings
-    `stop` (`stopping.metric_stop`'s) and a callback); ValueError otherwise."""
+    `stop` (`stopping.metric_stop`'s) and a callback); ValueError otherwise, and for a bad
+    `keep_checkpoints` (`keep.check_keep`)."""
+    from .keep import check_keep
+
+    check_keep(keep_checkpoints)
     from .stopping import CallbackStop, metric_stop
 
     metric = metric_stop(patience, *(tuple(stop) or (None,) * 4))
@@ -454,10 +460,8 @@ def evolve(
         snapshot_every,
         (stop_metric, stop_min_delta, stop_warmup, stop_mode),
         callback,
+        keep_checkpoints,
     )
-    from .keep import check_keep
-
-    check_keep(keep_checkpoints)
     shown = _progress(progress)
     set_threads(threads)
     reporters = [*([shown] if shown else []), *reporters, *wandb_reporters]
@@ -634,10 +638,8 @@ def resume(
         snapshot_every,
         (stop_metric, stop_min_delta, stop_warmup, stop_mode),
         callback,
+        keep_checkpoints,
     )
-    from .keep import check_keep
-
-    check_keep(keep_checkpoints)
     shown = _progress(progress)
     if generations is not None and (
         not isinstance(generations, int) or isinstance(generations, bool) or generations < 1
