@@ -20,12 +20,14 @@ _FULL_MATRIX_MAX = 1 << 24
 @dataclass(frozen=True, eq=False)
 class SpeciationResult:
     """species [P] long ids; proto_ids [K] long (carried-over first, then new in founding order);
-    proto_index [K] long prototype rows; next_species_id: the next unused id."""
+    proto_index [K] long prototype rows; next_species_id: the next unused id; distance [P, P]
+    float32: D between the population's genomes where it was computed (else None)."""
 
     species: Tensor
     proto_ids: Tensor
     proto_index: Tensor
     next_species_id: int
+    distance: Tensor | None = None
 
 
 def hamming(a: Tensor, b: Tensor) -> Tensor:
@@ -186,6 +188,7 @@ def speciate(
         proto_ids=proto_ids,
         proto_index=proto_index,
         next_species_id=next_species_id + n_new,
+        distance=full,
     )
 
 

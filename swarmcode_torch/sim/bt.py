@@ -19,6 +19,7 @@ the children of an implicit root SEQ. Every array of opcodes 0..13 is a valid pr
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 
@@ -331,6 +332,13 @@ def combo_index(leaf_status: torch.Tensor) -> torch.Tensor:
     return (cond * w2).sum(-1) + (act * w3).sum(-1)
 
 
+@functools.lru_cache(maxsize=8)
+def _combo_columns(device: torch.device) -> torch.Tensor:
+    """[14 * NUM_COMBOS] long: `combo_statuses` by opcode, then combination (the tables' column
+    of each opcode; built once per device, never written to)."""
+    return combo_statuses(device).t().reshape(-1).contiguous()
+
+
 def combo_statuses(device: torch.device | str | None = None) -> torch.Tensor:
     """-> [NUM_COMBOS, 14] long: the leaf_status of every combination (non-leaf entries SUCCESS)."""
     c = torch.arange(NUM_COMBOS, device=device)
@@ -474,7 +482,7 @@ def build_tables(
             return native
     compact = on_cpu if compact is None else compact
     chunk = chunk or (32 if on_cpu else 512)
-    col_status = combo_statuses(ops.device).t().reshape(-1)
+    col_status = _combo_columns(ops.device)
     parts = [
         _build_chunk(ops[i : i + chunk], col_status, compact) for i in range(0, ops.shape[0], chunk)
     ]
@@ -496,7 +504,7 @@ def _native_tables(ops: torch.Tensor) -> torch.Tensor | None:
     if walk is None:
         return None
     start, cont = _continuations(ops)
-    col_status = combo_statuses(ops.device).t().reshape(-1).contiguous()
+    col_status = _combo_columns(ops.device)
     return walk(ops.contiguous(), start, cont, col_status)
 
 
