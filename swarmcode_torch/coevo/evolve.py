@@ -9,7 +9,6 @@ imports a CLI or logging library.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
@@ -28,6 +27,8 @@ from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeC
 from .dynamics import Turnover, median, replay
 from .evaluation import EvalResult, ScoreFn, evaluate, score_fn_name, team_scores
 from .fitness import beats_baseline, ema
+from .hooks import AfterEvaluation, AfterReproduction, AfterSpeciation, Hooks
+from .hooks import call as call_hooks
 from .population import Population, genome_phenotype
 from .readout import BestTeam, read_generation
 from .reproduction import Quotas, mutate_bt, quotas, reproduce
@@ -201,52 +202,6 @@ class GenerationResult:
     (`app.records.step`, `app.best_team`); 0 here."""
 
 
-# ------------------------------------------------------------------ observer hooks
-@dataclass(frozen=True, eq=False)
-class AfterSpeciation:
-    """What a generation has after its speciation (`Hooks.after_speciation`)."""
-
-    generation: int  # the generation (0-based)
-    state: EvolutionState  # the state it started from (its population: `state.genome`)
-    speciation: SpeciationResult  # the population's species and prototypes
-
-
-@dataclass(frozen=True, eq=False)
-class AfterEvaluation(AfterSpeciation):
-    """... and after its evaluation (`Hooks.after_evaluation`)."""
-
-    evaluation: EvalResult  # every individual's scores and teams
-    fitness: Tensor  # [P] the smoothed fitness reproduction selects by
-
-
-@dataclass(frozen=True, eq=False)
-class AfterReproduction(AfterEvaluation):
-    """... and after its reproduction (`Hooks.after_reproduction`)."""
-
-    next_state: EvolutionState  # the state of the next generation (its offspring, their
-    #                                species hints, the prototypes)
-    is_elite: Tensor  # [P] bool: the offspring copied unchanged
-    parent: Tensor  # [P] each offspring's (first) parent, a row of state.genome
-
-
-@dataclass
-class Hooks:
-    """Observers of a generation, called in order after each of its three steps with what the
-    step has at that point: `after_speciation(AfterSpeciation)`,
-    `after_evaluation(AfterEvaluation)`, `after_reproduction(AfterReproduction)`, each once per
-    generation. What they receive is the algorithm's own state: read it, never change it.
-    Register one with `evolution.hooks.after_speciation.append(fn)`."""
-
-    after_speciation: list[Callable[[AfterSpeciation], None]] = field(default_factory=list)
-    after_evaluation: list[Callable[[AfterEvaluation], None]] = field(default_factory=list)
-    after_reproduction: list[Callable[[AfterReproduction], None]] = field(default_factory=list)
-
-
-def _call(hooks: list, event) -> None:
-    for fn in hooks:
-        fn(event)
-
-
 def generation(
     state: EvolutionState, ctx: Context, hooks: Hooks | None = None
 ) -> tuple[EvolutionState, GenerationResult]:
@@ -261,7 +216,7 @@ def generation(
 
     # 1. dynamic speciation
     sp = _speciation(state, ctx)
-    _call(hooks.after_speciation, AfterSpeciation(state.generation, state, sp))
+    call_hooks(hooks.after_speciation, AfterSpeciation(state.generation, state, sp))
     # the population's phenotype, once a generation: evaluation and the best team read it
     ph = genome_phenotype(state.genome, ctx.scenario.hardware)
 
@@ -270,7 +225,7 @@ def generation(
     res, adm = _evaluation(state, ctx, sp, ph, g)
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, ctx.cfg.alpha)
-    _call(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
+    call_hooks(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
 
     # 3. reproduction: the quotas (`_quotas`), the generation's report read with the number of
     # elites they keep, the offspring (`_reproduction`)
@@ -287,7 +242,7 @@ def generation(
     new_state = replace(
         new_state, history=state.history + [composition], turnover=turnover, admission=adm
     )
-    _call(
+    call_hooks(
         hooks.after_reproduction,
         AfterReproduction(state.generation, state, sp, res, fit, new_state, is_elite, parent),
     )
@@ -390,11 +345,6 @@ def _quotas(ctx: Context, sp: SpeciationResult, adm: Admission | None, fit: Tens
     return quotas(fit, sp.species, sp.proto_ids, ctx.repro, essential, priority, present=True)
 
 
-def _known(d: Tensor) -> Callable[[Population, Population], Tensor]:
-    """A distance function of the population with itself that returns `d` (speciation's)."""
-    return lambda a, b: d
-
-
 def _reproduction(
     state: EvolutionState,
     ctx: Context,
@@ -407,6 +357,8 @@ def _reproduction(
     """Step 3, the offspring (`reproduction.reproduce` of the `plan`, whose `n_elites` elites are
     known on the host): the next state (its history, turnover and admission still the previous
     generation's), which offspring are elites, and each one's parent."""
+    known = sp.distance  # speciation's D of the population, where it computed it
+    dist = partial(distance, w=ctx.speciation.weights) if known is None else lambda a, b: known
     children, hint, is_elite, parent = reproduce(
         state.genome,
         fit,
@@ -415,7 +367,7 @@ def _reproduction(
         sp.proto_ids,
         ctx.repro,
         g,
-        partial(distance, w=ctx.speciation.weights) if sp.distance is None else _known(sp.distance),
+        dist,
         plan=plan,
         n_elites=n_elites,
     )

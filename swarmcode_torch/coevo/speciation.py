@@ -147,20 +147,9 @@ def speciate(
         min_d = d_cur.min(1).values
     else:
         d_cur, carried, min_d = None, torch.zeros(p, dtype=torch.bool, device=dev), None
-    # (2) a candidate founds a species unless a founder before it is within delta (a greedy pass
-    # in row order, on the host: sequential by definition, and cheap there)
+    # (2) a candidate founds a species unless a founder before it is within delta
     cand = ~carried if min_d is None else ~carried & (min_d > delta)
-    flags = [cand] + ([alive] if alive is not None else []) + [(full <= delta).T.reshape(-1)]
-    host = torch.cat(flags).to(torch.uint8).cpu().numpy().astype(bool)
-    kp = 0 if alive is None else alive.numel()
-    alive_at = np.flatnonzero(host[p : p + kp])
-    near = host[p + kp :].reshape(p, p)  # near[f]: the rows within delta of row f
-    founders: list[int] = []
-    blocked = np.zeros(p, dtype=bool)
-    for r in np.flatnonzero(host[:p]):
-        if not blocked[r]:
-            founders.append(int(r))
-            blocked |= near[r]
+    alive_at, founders = _founders(cand, alive, full <= delta)
     k, n_new = len(alive_at), len(founders)
     picks = _to_device(np.concatenate([alive_at, founders]).astype(np.int64), dev)
     new_rows = picks[k:]
@@ -190,6 +179,25 @@ def speciate(
         next_species_id=next_species_id + n_new,
         distance=full,
     )
+
+
+def _founders(cand: Tensor, alive: Tensor | None, near: Tensor) -> tuple[np.ndarray, list[int]]:
+    """cand [P] bool, alive [Kp] bool (None: no previous species), near [P, P] bool (D <= delta)
+    -> the positions of the alive species and the founders' rows, read on the host in one
+    transfer: a candidate founds a species unless a founder before it is near it (a greedy pass
+    in row order, sequential by definition)."""
+    p = cand.numel()
+    flags = [cand] + ([alive] if alive is not None else []) + [near.T.reshape(-1)]
+    host = torch.cat(flags).to(torch.uint8).cpu().numpy().astype(bool)
+    kp = 0 if alive is None else alive.numel()
+    near_h = host[p + kp :].reshape(p, p)  # near_h[f]: the rows near row f
+    founders: list[int] = []
+    blocked = np.zeros(p, dtype=bool)
+    for r in np.flatnonzero(host[:p]):
+        if not blocked[r]:
+            founders.append(int(r))
+            blocked |= near_h[r]
+    return np.flatnonzero(host[p : p + kp]), founders
 
 
 def _to_device(a: np.ndarray, device: torch.device) -> Tensor:
