@@ -181,11 +181,12 @@ def update(
     pair = clashing & (nearest >= 0)
     if near is not None:
         pair = pair & near
-    if bool(pair.any()):
-        other = nearest.clamp_min(0)
-        loser = torch.where(rank[other] < rank, other, torch.arange(k, device=rank.device))
-        low = torch.where(pair, rank[loser], torch.full_like(rank, int(rank.max()) + 1))
-        demote[loser[low.argmin()]] = True
+    # the lowest-ranked loser of a clashing pair, if any (no value is read on the host: where
+    # there is no pair, False is written)
+    other = nearest.clamp_min(0)
+    loser = torch.where(rank[other] < rank, other, torch.arange(k, device=rank.device))
+    low = torch.where(pair, rank[loser], rank.max() + 1)
+    demote[loser[low.argmin()]] = pair.any()
     new_partner = (partner | admit) & ~demote
     reset = admit | demote
     out = Admission(adm.partner.clone(), adm.gated.clone(), adm.calm.clone(), adm.clash.clone())

@@ -226,8 +226,13 @@ def plan_evaluation(
     P = genome.size
     dev = genome.bt.device
     S, T = cfg.swarm_size, cfg.trials
-    elites = elite_rows(
-        fitness, has_fitness, species, proto_ids, lambda n: elite_count(n, cfg.max_elite)
+    elites = elite_rows(  # elite_count is at most max(1, max_elite)
+        fitness,
+        has_fitness,
+        species,
+        proto_ids,
+        lambda n: elite_count(n, cfg.max_elite),
+        width=max(cfg.max_elite, 1),
     )
     if cfg.partners_per_niche == "one":
         oracle = niche_partners(

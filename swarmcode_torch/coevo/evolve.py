@@ -9,8 +9,7 @@ imports a CLI or logging library.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any
 
@@ -28,9 +27,13 @@ from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeC
 from .dynamics import Turnover, median, replay
 from .evaluation import EvalResult, ScoreFn, evaluate, score_fn_name, team_scores
 from .fitness import beats_baseline, ema
-from .population import GENE_BOUNDS, GENE_VALUES, Population, genome_phenotype
-from .reproduction import mutate_bt, reproduce
+from .hooks import AfterEvaluation, AfterReproduction, AfterSpeciation, Hooks
+from .hooks import call as call_hooks
+from .population import Population, genome_phenotype
+from .readout import BestTeam, read_generation
+from .reproduction import Quotas, mutate_bt, quotas, reproduce
 from .speciation import SpeciationResult, design_distance, distance, speciate
+from .state_check import check_state_dict
 
 CHECKPOINT_VERSION = 1
 
@@ -166,25 +169,6 @@ def init_state(ctx: Context) -> EvolutionState:
 
 
 @dataclass(frozen=True, eq=False)
-class BestTeam:
-    """This generation's best team, the focal team of the individual with the highest (gated)
-    fitness, on the host: each of its distinct population rows (sorted) with what the
-    generation computed of it. The application builds its report record from this
-    (`app.records.team_record`)."""
-
-    rows: Tensor  # [R] population rows of the team's robots
-    genome: Population  # [R] their genes
-    phenotype: Phenotype  # [R] their phenotype (of the generation's one computation)
-    species: Tensor  # [R] their species
-    count: Tensor  # [R] robots of each row in the team
-    baseline_count: Tensor  # [R] of each row in the baseline team it was scored against
-    focal: Tensor  # [R] bool: the focal individual's row
-    metrics: dict  # the team's metrics (means over trials), floats
-    fitness: float  # the team's score (ungated)
-    cost: float  # the team's cost
-
-
-@dataclass(frozen=True, eq=False)
 class GenerationResult:
     """What one generation measured (`generation` returns it; `app.records` turns it into
     TensorBoard tags, metrics.csv rows, summary.json and teams.jsonl)."""
@@ -218,67 +202,77 @@ class GenerationResult:
     (`app.records.step`, `app.best_team`); 0 here."""
 
 
-# ------------------------------------------------------------------ observer hooks
-@dataclass(frozen=True, eq=False)
-class AfterSpeciation:
-    """What a generation has after its speciation (`Hooks.after_speciation`)."""
-
-    generation: int  # the generation (0-based)
-    state: EvolutionState  # the state it started from (its population: `state.genome`)
-    speciation: SpeciationResult  # the population's species and prototypes
-
-
-@dataclass(frozen=True, eq=False)
-class AfterEvaluation(AfterSpeciation):
-    """... and after its evaluation (`Hooks.after_evaluation`)."""
-
-    evaluation: EvalResult  # every individual's scores and teams
-    fitness: Tensor  # [P] the smoothed fitness reproduction selects by
-
-
-@dataclass(frozen=True, eq=False)
-class AfterReproduction(AfterEvaluation):
-    """... and after its reproduction (`Hooks.after_reproduction`)."""
-
-    next_state: EvolutionState  # the state of the next generation (its offspring, their
-    #                                species hints, the prototypes)
-    is_elite: Tensor  # [P] bool: the offspring copied unchanged
-    parent: Tensor  # [P] each offspring's (first) parent, a row of state.genome
-
-
-@dataclass
-class Hooks:
-    """Observers of a generation, called in order after each of its three steps with what the
-    step has at that point: `after_speciation(AfterSpeciation)`,
-    `after_evaluation(AfterEvaluation)`, `after_reproduction(AfterReproduction)`, each once per
-    generation. What they receive is the algorithm's own state: read it, never change it.
-    Register one with `evolution.hooks.after_speciation.append(fn)`."""
-
-    after_speciation: list[Callable[[AfterSpeciation], None]] = field(default_factory=list)
-    after_evaluation: list[Callable[[AfterEvaluation], None]] = field(default_factory=list)
-    after_reproduction: list[Callable[[AfterReproduction], None]] = field(default_factory=list)
-
-
-def _call(hooks: list, event) -> None:
-    for fn in hooks:
-        fn(event)
-
-
 def generation(
     state: EvolutionState, ctx: Context, hooks: Hooks | None = None
 ) -> tuple[EvolutionState, GenerationResult]:
     """Advance one generation; the new state and what this generation measured. `hooks`:
-    observers called after speciation, evaluation and reproduction (`Hooks`)."""
+    observers called after speciation, evaluation and reproduction (`Hooks`). Two values are
+    read on the host, each a device sync on a GPU: in speciation (which pairs are within δ)
+    and in `readout.read_generation` (what the generation reports, and the number of elites)."""
     hooks = hooks or Hooks()
     t0 = time.perf_counter()
-    cfg = ctx.cfg
     g = torch.Generator(device=ctx.device)
     g.set_state(state.rng_state)
-    genome = state.genome
 
     # 1. dynamic speciation
-    sp = speciate(
-        genome,
+    sp = _speciation(state, ctx)
+    call_hooks(hooks.after_speciation, AfterSpeciation(state.generation, state, sp))
+    # the population's phenotype, once a generation: evaluation and the best team read it
+    ph = genome_phenotype(state.genome, ctx.scenario.hardware)
+
+    # 2. evaluation of every individual, all teams and trials in one batch
+    t_eval = time.perf_counter()
+    res, adm = _evaluation(state, ctx, sp, ph, g)
+    eval_seconds = time.perf_counter() - t_eval
+    fit = ema(state.fitness, res.fitness, state.has_fitness, ctx.cfg.alpha)
+    call_hooks(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
+
+    # 3. reproduction: the quotas (`_quotas`), the generation's report read with the number of
+    # elites they keep, the offspring (`_reproduction`)
+    plan = _quotas(ctx, sp, adm, fit)
+    out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
+    composition: dict[str, Any] = {
+        "generation": state.generation,
+        "population": out.population,
+        "team": out.team,
+    }
+    turnover = state.turnover.copy()
+    founded, extinct = turnover.advance(state.generation, composition["population"])
+    new_state, is_elite, parent = _reproduction(state, ctx, sp, fit, plan, out.n_elites, g)
+    new_state = replace(
+        new_state, history=state.history + [composition], turnover=turnover, admission=adm
+    )
+    call_hooks(
+        hooks.after_reproduction,
+        AfterReproduction(state.generation, state, sp, res, fit, new_state, is_elite, parent),
+    )
+    return new_state, GenerationResult(
+        generation=state.generation,
+        best_fitness=out.fit_max,
+        mean_fitness=out.fit_mean,
+        num_species=len(out.population),
+        founded=founded,
+        extinct=extinct,
+        species_median_age=median(turnover.ages(state.generation, composition["population"])),
+        best_team=out.best_team,
+        team_rows=out.team_rows,
+        team_median_age=median(turnover.ages(state.generation, composition["team"])),
+        focal_max=out.focal_max,
+        composition=composition,
+        budget=ctx.cfg.budget,
+        seconds=time.perf_counter() - t0,
+        eval_seconds=eval_seconds,
+        sim_seconds=res.sim_seconds,
+        radius=out.radius,
+        dominance=out.dominance,
+        selectivity=out.selectivity,
+    )
+
+
+def _speciation(state: EvolutionState, ctx: Context) -> SpeciationResult:
+    """Step 1: the population's species (`speciation.speciate`)."""
+    return speciate(
+        state.genome,
         state.species_hint,
         state.proto,
         state.proto_ids,
@@ -286,27 +280,23 @@ def generation(
         ctx.speciation.delta,
         w=ctx.speciation.weights,
     )
-    _call(hooks.after_speciation, AfterSpeciation(state.generation, state, sp))
 
+
+def _evaluation(
+    state: EvolutionState, ctx: Context, sp: SpeciationResult, ph: Phenotype, g: torch.Generator
+) -> tuple[EvalResult, Admission | None]:
+    """Step 2: every individual's scores (`evaluation.evaluate`), and the partner admission
+    after them (None where `partner_admission` is "open")."""
     # which species may be partners (`admission`): the species of generation 0 and, on a run
     # resumed from a checkpoint without the state, the species it had, are partners
-    adm = None
-    if cfg.partner_admission != "open":
+    adm = allowed = designs_d = None
+    if ctx.cfg.partner_admission != "open":
         adm = state.admission or Admission.empty(ctx.device).grow(state.next_species_id, True)
         adm = adm.grow(sp.next_species_id, partner=state.generation == 0)
-    allowed = None if adm is None else adm.allowed(sp.proto_ids)
-    designs_d = (
-        design_distance(genome.index(sp.proto_index), ctx.speciation.weights)
-        if adm is not None
-        else None
-    )
-    # the population's phenotype, once a generation: evaluation and the best team read it
-    ph = genome_phenotype(genome, ctx.scenario.hardware)
-
-    # 2. evaluation of every individual, all teams and trials in one batch
-    t_eval = time.perf_counter()
+        allowed = adm.allowed(sp.proto_ids)
+        designs_d = design_distance(state.genome.index(sp.proto_index), ctx.speciation.weights)
     res = evaluate(
-        genome,
+        state.genome,
         sp.species,
         sp.proto_ids,
         sp.proto_index,
@@ -323,177 +313,80 @@ def generation(
         proto_distance=designs_d,
         phenotype=ph,
     )
-    if adm is not None:
-        assert designs_d is not None and allowed is not None  # both set with `adm`
-        gated = ~beats_baseline(res.focal, res.baseline)
-        nearest = admission.nearest_partner(designs_d, allowed)
-        # a substitute pair: the nearest partner's design within δ of the species' own
-        near = designs_d.gather(1, nearest.clamp_min(0)[:, None]).squeeze(1) <= ctx.speciation.delta
-        adm = admission.update(
-            adm,
-            sp.species,
-            sp.proto_ids,
-            gated,
-            nearest,
-            admission.SUBSTITUTE,
-            near=near,
-            elite=state.has_fitness if cfg.admission_basis == "elites" else None,
-        )
-    eval_seconds = time.perf_counter() - t_eval
-    fit = ema(state.fitness, res.fitness, state.has_fitness, cfg.alpha)
-    _call(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
-
-    # the best team of this generation: the team of the individual with the highest fitness
-    # score (gated: a focal whose marginal contribution is not positive is penalised, so a strong
-    # team carried by its partners is not credited to a focal that weakens it)
-    b = res.fitness.argmax()
-    team = res.swarms.focal_team[b]
-    rows, counts = torch.unique(team[team >= 0], return_counts=True)
-    # the baseline team it was scored against: robots of each of the team's rows
-    base_counts = (res.swarms.baseline_team[b][None, :] == rows[:, None]).sum(1)
-    ids, sizes = torch.unique(sp.species, return_counts=True)
-    # every value the result needs, to the host in one transfer (each transfer is a device sync)
-    sel = genome.index(rows)
-    names = [f.name for f in fields(Population)]
-    n_ph = len(Phenotype._fields)
-    h = _to_host(
-        [getattr(sel, n) for n in names]
-        + [t[rows] for t in ph]
-        + [
-            rows,
-            sp.species[rows],
-            counts,
-            base_counts,
-            rows == b,
-            torch.stack([v[b].float() for v in res.team_metrics.values()]),
-            res.focal[b],
-            res.team_cost[b],
-            ids,
-            sizes,
-            fit.max(),
-            fit.mean(),
-            res.focal.max(),
-            genome.radius.detach(),
-            genome.dominance.detach(),
-            genome.selectivity.detach(),
-        ]
+    if adm is None:
+        return res, None
+    assert designs_d is not None and allowed is not None  # both set with `adm`
+    gated = ~beats_baseline(res.focal, res.baseline)
+    nearest = admission.nearest_partner(designs_d, allowed)
+    # a substitute pair: the nearest partner's design within δ of the species' own
+    near = designs_d.gather(1, nearest.clamp_min(0)[:, None]).squeeze(1) <= ctx.speciation.delta
+    adm = admission.update(
+        adm,
+        sp.species,
+        sp.proto_ids,
+        gated,
+        nearest,
+        admission.SUBSTITUTE,
+        near=near,
+        elite=state.has_fitness if ctx.cfg.admission_basis == "elites" else None,
     )
-    host, h = Population(**dict(zip(names, h))), h[len(names) :]
-    host_ph, h = Phenotype(*h[:n_ph]), h[n_ph:]
-    (
-        team_at,
-        team_species,
-        team_counts,
-        team_base,
-        team_focal,
-        team_m,
-        focal_b,
-        team_cost_b,
-        ids,
-        sizes,
-        fit_max,
-        fit_mean,
-        focal_max,
-        radius,
-        dominance,
-        selectivity,
-    ) = h
-    best_team = BestTeam(
-        rows=team_at,
-        genome=host,
-        phenotype=host_ph,
-        species=team_species,
-        count=team_counts,
-        baseline_count=team_base,
-        focal=team_focal,
-        metrics=dict(zip(res.team_metrics, team_m.tolist())),
-        fitness=float(focal_b),
-        cost=float(team_cost_b),
-    )
+    return res, adm
 
-    # the team's species, most robots first (the first of equals: the lower row)
-    in_team = sorted(zip(team_species.tolist(), team_counts.tolist()), key=lambda sc: -sc[1])
-    composition: dict[str, Any] = {
-        "generation": state.generation,
-        "population": {int(i): int(n) for i, n in zip(ids.tolist(), sizes.tolist())},
-        "team": {str(s): n for s, n in in_team},
-    }
-    turnover = state.turnover.copy()
-    founded, extinct = turnover.advance(state.generation, composition["population"])
 
+def _quotas(ctx: Context, sp: SpeciationResult, adm: Admission | None, fit: Tensor) -> Quotas:
+    """Step 3, its first part: each species' share of the next generation and its elites
+    (`reproduction.quotas`), on the device."""
     # 3. reproduction; essential species (partners that beat their baselines: they do a job no
     # partner does) keep a quota floor, so that a hard niche's holder is not starved out
     essential = priority = None
-    if adm is not None and cfg.essential_floor > 0:
+    if adm is not None and ctx.cfg.essential_floor > 0:
         priority = adm.gated[sp.proto_ids]
-        essential = adm.partner[sp.proto_ids] & (priority < cfg.essential_below)
+        essential = adm.partner[sp.proto_ids] & (priority < ctx.cfg.essential_below)
+    return quotas(fit, sp.species, sp.proto_ids, ctx.repro, essential, priority, present=True)
+
+
+def _reproduction(
+    state: EvolutionState,
+    ctx: Context,
+    sp: SpeciationResult,
+    fit: Tensor,
+    plan: Quotas,
+    n_elites: int,
+    g: torch.Generator,
+) -> tuple[EvolutionState, Tensor, Tensor]:
+    """Step 3, the offspring (`reproduction.reproduce` of the `plan`, whose `n_elites` elites are
+    known on the host): the next state (its history, turnover and admission still the previous
+    generation's), which offspring are elites, and each one's parent."""
+    known = sp.distance  # speciation's D of the population, where it computed it
+    dist = partial(distance, w=ctx.speciation.weights) if known is None else lambda a, b: known
     children, hint, is_elite, parent = reproduce(
-        genome,
+        state.genome,
         fit,
         sp.species,
         sp.proto_index,
         sp.proto_ids,
         ctx.repro,
         g,
-        partial(distance, w=ctx.speciation.weights),
-        essential=essential,
-        priority=priority,
+        dist,
+        plan=plan,
+        n_elites=n_elites,
     )
     new_state = EvolutionState(
         generation=state.generation + 1,
         genome=children,
         species_hint=hint,
-        proto=genome.index(sp.proto_index),
+        proto=state.genome.index(sp.proto_index),
         proto_ids=sp.proto_ids,
         next_species_id=sp.next_species_id,
         fitness=torch.where(is_elite, fit[parent], 0.0),
         has_fitness=is_elite,
         rng_state=g.get_state(),
         best=state.best,
-        history=state.history + [composition],
-        turnover=turnover,
-        admission=adm,
+        history=state.history,
+        turnover=state.turnover,
+        admission=state.admission,
     )
-    _call(
-        hooks.after_reproduction,
-        AfterReproduction(state.generation, state, sp, res, fit, new_state, is_elite, parent),
-    )
-
-    result = GenerationResult(
-        generation=state.generation,
-        best_fitness=float(fit_max),
-        mean_fitness=float(fit_mean),
-        num_species=int(ids.numel()),
-        founded=founded,
-        extinct=extinct,
-        species_median_age=median(turnover.ages(state.generation, composition["population"])),
-        best_team=best_team,
-        team_rows=team,
-        team_median_age=median(turnover.ages(state.generation, composition["team"])),
-        focal_max=float(focal_max),
-        composition=composition,
-        budget=cfg.budget,
-        seconds=time.perf_counter() - t0,
-        eval_seconds=eval_seconds,
-        sim_seconds=res.sim_seconds,
-        radius=radius,
-        dominance=dominance,
-        selectivity=selectivity,
-    )
-    return new_state, result
-
-
-def _to_host(tensors: list[Tensor]) -> list[Tensor]:
-    """CPU copies of tensors of one device, in one transfer: their bytes are concatenated on the
-    device, copied, and split (bit for bit the tensors, their dtypes and shapes)."""
-    flat = [t.detach().contiguous().reshape(-1) for t in tensors]
-    data = torch.cat([t.view(torch.uint8) for t in flat]).cpu()
-    out, i = [], 0
-    for t, src in zip(flat, tensors):
-        n = t.numel() * t.element_size()
-        out.append(data[i : i + n].clone().view(t.dtype).view(src.shape))
-        i += n
-    return out
+    return new_state, is_elite, parent
 
 
 # ------------------------------------------------------------------ checkpoints
@@ -517,116 +410,12 @@ def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
     }
 
 
-def _check_population(d, cfg: SwarmCoDeConfig, what: str, rows: int | None) -> int:
-    """ValueError unless `d` is a genome state dict of `rows` rows (any number when None) of
-    `cfg`'s tag and tree lengths, each field of its dtype and within its range; its rows."""
-    if not isinstance(d, dict):
-        raise ValueError(f"{what}: expected a table of tensors")
-    names = [f.name for f in fields(Population)]
-    missing = [n for n in names if not isinstance(d.get(n), Tensor)]
-    if missing:
-        raise ValueError(f"{what}: missing or not a tensor: {', '.join(missing)}")
-    n = int(d["selectivity"].shape[0]) if d["selectivity"].dim() == 1 else -1
-    if n < 0 or (rows is not None and n != rows):
-        raise ValueError(
-            f"{what}: {tuple(d['selectivity'].shape)} rows, expected "
-            f"{rows if rows is not None else 'one dimension'}"
-        )
-    shapes = {"tag": (n, cfg.tag_length), "bt": (n, cfg.bt_length)}
-    for name in names:
-        t = d[name]
-        want = shapes.get(name, (n,))
-        if tuple(t.shape) != want:
-            raise ValueError(
-                f"{what}: {name} has shape {tuple(t.shape)}, expected {want} "
-                "(population, tag_length and bt_length of the run's config)"
-            )
-        if name == "tag":
-            if t.dtype != torch.bool:
-                raise ValueError(f"{what}: tag has dtype {t.dtype}, expected torch.bool")
-        elif name == "bt" or name in GENE_VALUES:
-            hi = bt.NUM_OPCODES if name == "bt" else GENE_VALUES[name]
-            if t.dtype != torch.long:
-                raise ValueError(f"{what}: {name} has dtype {t.dtype}, expected torch.int64")
-            if t.numel() and (int(t.min()) < 0 or int(t.max()) >= hi):
-                raise ValueError(
-                    f"{what}: {name} holds values outside 0..{hi - 1} "
-                    f"({int(t.min())}..{int(t.max())})"
-                )
-        else:
-            low, high = GENE_BOUNDS[name]
-            if not t.dtype.is_floating_point:
-                raise ValueError(f"{what}: {name} has dtype {t.dtype}, expected a float")
-            if t.numel() and not (
-                bool(torch.isfinite(t).all())
-                and float(t.min()) >= low - 1e-6
-                and float(t.max()) <= high + 1e-6
-            ):
-                raise ValueError(f"{what}: {name} holds values outside [{low}, {high}] (or NaN)")
-    return n
-
-
-def _check_state_dict(d: dict, cfg: SwarmCoDeConfig) -> None:
-    """ValueError naming the entry of a checkpoint whose tensors do not fit `cfg` (shapes,
-    dtypes, value ranges: a population of cfg.population rows with cfg's tag and tree lengths,
-    genes in their bounds, opcodes known, fitness finite, a generation in [0, generations])."""
-    P = cfg.population
-    gen = d.get("generation")
-    if not isinstance(gen, int) or isinstance(gen, bool) or gen < 0:
-        raise ValueError(f"generation must be an integer >= 0, got {gen!r:.40}")
-    nid = d.get("next_species_id")
-    if not isinstance(nid, int) or isinstance(nid, bool) or nid < 0:
-        raise ValueError(f"next_species_id must be an integer >= 0, got {nid!r:.40}")
-    _check_population(d.get("genome"), cfg, "genome", P)
-    for name, dtype, want in (
-        ("species_hint", torch.long, (P,)),
-        ("fitness", None, (P,)),
-        ("has_fitness", torch.bool, (P,)),
-        ("rng_state", torch.uint8, None),
-    ):
-        t = d.get(name)
-        if not isinstance(t, Tensor):
-            raise ValueError(f"{name}: expected a tensor")
-        if want is not None and tuple(t.shape) != want:
-            raise ValueError(
-                f"{name} has shape {tuple(t.shape)}, expected {want} (the run's population)"
-            )
-        if dtype is not None and t.dtype != dtype:
-            raise ValueError(f"{name} has dtype {t.dtype}, expected {dtype}")
-    if d["rng_state"].dim() != 1:
-        raise ValueError(
-            f"rng_state has shape {tuple(d['rng_state'].shape)}, expected a generator state"
-        )
-    f = d["fitness"]
-    if not f.dtype.is_floating_point or not bool(torch.isfinite(f).all()):
-        raise ValueError("fitness holds NaN or infinite values (or is not a float tensor)")
-    if P and (int(d["species_hint"].min()) < -1 or int(d["species_hint"].max()) >= max(nid, 1)):
-        raise ValueError(f"species_hint holds ids outside -1..{nid - 1} (next_species_id {nid})")
-    ids = d.get("proto_ids")
-    if not isinstance(ids, Tensor) or ids.dim() != 1 or ids.dtype != torch.long:
-        raise ValueError("proto_ids: expected a one-dimensional int64 tensor")
-    if ids.numel() and (int(ids.min()) < 0 or int(ids.max()) >= max(nid, 1)):
-        raise ValueError(f"proto_ids hold ids outside 0..{nid - 1} (next_species_id {nid})")
-    if d.get("proto") is None:
-        if ids.numel():
-            raise ValueError("proto_ids without prototypes (proto is None)")
-    else:
-        _check_population(d["proto"], cfg, "proto", int(ids.numel()))
-    history = d.get("history")
-    if (
-        not isinstance(history, list)
-        or len(history) != gen
-        or not all(isinstance(h, dict) and h.get("generation") == i for i, h in enumerate(history))
-    ):
-        raise ValueError(f"history must hold one record per generation 0..{gen - 1}")
-
-
 def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
     """Rebuild a state from `state_dict` output; ValueError if it does not fit this run."""
     if not isinstance(d, dict) or d.get("version") != CHECKPOINT_VERSION:
         raise ValueError("checkpoint has an unknown format or version")
     dev = ctx.device
-    _check_state_dict(d, ctx.cfg)
+    check_state_dict(d, ctx.cfg)
     genome = Population.from_state_dict(d["genome"]).to(dev)
     rng = d["rng_state"]
     if rng.numel() != torch.Generator(device=dev).get_state().numel():

@@ -105,9 +105,11 @@ def elite_rows(
     species: Tensor,
     proto_ids: Tensor,
     n_elite_fn: Callable[[Tensor], Tensor] = elite_count,
+    width: int | None = None,
 ) -> Tensor:
     """fitness [P], has_fitness [P] bool, species [P], proto_ids [K] -> [K, M] long elite rows
-    per species, best first, -1 padded.
+    per species, best first, -1 padded; M = `width` where given (a bound of n_elite_fn: no value
+    is then read on the host), else the largest N_k.
 
     N_k = n_elite_fn(sizes [K] long) (capped by the size); individuals without fitness rank below
     those with it; ties by lowest row; individuals whose species is not in proto_ids are ignored.
@@ -127,7 +129,7 @@ def elite_rows(
     n_wanted = torch.as_tensor(n_elite_fn(sizes[:k]), device=dev)
     f = ranking_fitness(fitness, has_fitness)
     order, rank = rank_within_groups(pos, f, sizes, first=has_fitness)
-    return top_table(order, rank, pos, torch.minimum(n_wanted.long(), sizes[:k]))
+    return top_table(order, rank, pos, torch.minimum(n_wanted.long(), sizes[:k]), width)
 
 
 def assemble_swarms(

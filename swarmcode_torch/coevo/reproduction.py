@@ -4,7 +4,7 @@ crossover and mutation of whole populations as batched tensor operations."""
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import fields
+from dataclasses import dataclass, fields
 
 import torch
 from torch import Tensor
@@ -260,6 +260,65 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
     return Population(**out)
 
 
+@dataclass(frozen=True, eq=False)
+class Quotas:
+    """The species' shares of the next generation (`quotas`): pos [P] each individual's species
+    position, sizes [K], fit [P] float32, quota [K] long (elites counted in it), n_elite [K] long
+    elites kept of each species."""
+
+    pos: Tensor
+    sizes: Tensor
+    fit: Tensor
+    quota: Tensor
+    n_elite: Tensor
+
+
+def quotas(
+    fitness: Tensor,
+    species: Tensor,
+    proto_ids: Tensor,
+    params: ReproductionParams,
+    essential: Tensor | None = None,
+    priority: Tensor | None = None,
+    present: bool = False,
+) -> Quotas:
+    """`reproduce`'s quotas and elite counts (see there). `present`: every individual's species is
+    in proto_ids and every species there has a member (as `speciate` gives them), so nothing is
+    checked and no value is read on the host; else ValueError for a species not listed, and
+    empty species get 0."""
+    p = fitness.numel()
+    dev = fitness.device
+    k = proto_ids.numel()
+    ids = proto_ids.to(dev).long()
+    match = species[:, None] == ids[None, :]
+    if p and not present and not bool(match.any(1).all()):
+        raise ValueError("every individual's species must be listed in proto_ids")
+    pos = match.to(torch.int32).argmax(1).long()
+    sizes = group_sizes(pos, k)
+    fit = fitness.float()
+    fsum = torch.zeros(k, dtype=torch.float64, device=dev).index_add_(0, pos, fit.double())
+    if params.quota_size_exponent is not None:  # mean x size ** exponent
+        n = sizes.clamp(min=1).double()
+        adjusted = fsum / n * n.pow(params.quota_size_exponent)
+    else:  # the paper's total
+        adjusted = fsum
+    quota = torch.zeros(k, dtype=torch.long, device=dev)
+    # empty species get 0
+    nonempty = torch.arange(k, device=dev) if present else (sizes > 0).nonzero().squeeze(1)
+    if p:
+        best_pos = pos[fit.argmax()]
+        protect = (nonempty == best_pos).to(torch.int32).argmax()
+        q = offspring_quotas(adjusted[nonempty], p, protect=protect, min_share=params.min_share)
+        if essential is not None and params.essential_floor > 0:
+            pri = priority if priority is not None else torch.zeros(k, device=dev)
+            q = floor_quotas(
+                q, essential[nonempty], pri[nonempty], params.essential_floor, protect=protect
+            )
+        quota[nonempty] = q
+    n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
+    return Quotas(pos, sizes, fit, quota, n_elite)
+
+
 def reproduce(
     genome: Population,
     fitness: Tensor,
@@ -271,6 +330,8 @@ def reproduce(
     distance_fn: DistanceFn = distance,
     essential: Tensor | None = None,
     priority: Tensor | None = None,
+    plan: Quotas | None = None,
+    n_elites: int | None = None,
 ) -> tuple[Population, Tensor, Tensor, Tensor]:
     """Population [P], fitness [P], species [P], prototypes [K] -> (children [P],
     child_species_hint [P], is_elite [P], parent_index [P]).
@@ -286,43 +347,25 @@ def reproduce(
     `params.essential_floor` slots at least (`floor_quotas`), exempt from `min_share`.
     Hints: the elite's own species / p1's species; parent_index: the elite row / p1.
     `distance_fn(genome, genome)` is called once ([P, P]). Fitness must be finite for every
-    individual.
+    individual. `plan`: the `quotas` already computed (then `essential` and `priority` are not
+    read); `n_elites`: their number of elites, `plan.n_elite.sum()`, known on the host (then no
+    value is read on the host here).
     """
     p = genome.size
     dev = genome.bt.device
     k = proto_ids.numel()
-    ids = proto_ids.to(dev).long()
-    match = species[:, None] == ids[None, :]
-    if p and not bool(match.any(1).all()):
-        raise ValueError("every individual's species must be listed in proto_ids")
-    pos = match.to(torch.int32).argmax(1).long()
-    sizes = group_sizes(pos, k)
-    fit = fitness.float()
-    fsum = torch.zeros(k, dtype=torch.float64, device=dev).index_add_(0, pos, fit.double())
-    if params.quota_size_exponent is not None:  # mean x size ** exponent
-        n = sizes.clamp(min=1).double()
-        adjusted = fsum / n * n.pow(params.quota_size_exponent)
-    else:  # the paper's total
-        adjusted = fsum
-    quota = torch.zeros(k, dtype=torch.long, device=dev)
-    nonempty = (sizes > 0).nonzero().squeeze(1)  # empty species get 0
-    if p:
-        best_pos = pos[fit.argmax()]
-        protect = (nonempty == best_pos).to(torch.int32).argmax()
-        q = offspring_quotas(adjusted[nonempty], p, protect=protect, min_share=params.min_share)
-        if essential is not None and params.essential_floor > 0:
-            pri = priority if priority is not None else torch.zeros(k, device=dev)
-            q = floor_quotas(
-                q, essential[nonempty], pri[nonempty], params.essential_floor, protect=protect
-            )
-        quota[nonempty] = q
-    n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
+    if plan is None:
+        plan = quotas(fitness, species, proto_ids, params, essential, priority)
+    pos, sizes, fit, quota, n_elite = plan.pos, plan.sizes, plan.fit, plan.quota, plan.n_elite
 
     order, rank = rank_within_groups(pos, fit, sizes)  # by (species, fitness desc, row)
-    elite = top_per_group(order, rank, pos, n_elite)
+    elite = top_per_group(order, rank, pos, n_elite, n_elites)
     starts = sizes.cumsum(0) - sizes
 
-    off_pos = torch.repeat_interleave(torch.arange(k, device=dev), quota - n_elite)
+    n_off = None if n_elites is None else p - n_elites  # quotas sum to p
+    off_pos = torch.repeat_interleave(
+        torch.arange(k, device=dev), quota - n_elite, output_size=n_off
+    )
     n_off = off_pos.numel()
     ts = params.tournament_size
 

@@ -56,18 +56,27 @@ def rank_within_groups(
     return order, rank
 
 
-def top_per_group(order: Tensor, rank: Tensor, group: Tensor, n: Tensor) -> Tensor:
+def top_per_group(
+    order: Tensor, rank: Tensor, group: Tensor, n: Tensor, total: int | None = None
+) -> Tensor:
     """`rank_within_groups`' (order, rank) of `group` [P], n [G] -> the rows of the best n[g] of
-    every group g, by group, best first (every row's group must be < G)."""
-    return order[rank < n[group[order]]]
+    every group g, by group, best first (every row's group must be < G). `total`: their number,
+    where known on the host (no value is then read on the host here)."""
+    keep = rank < n[group[order]]
+    if total is None:
+        return order[keep]
+    return order[torch.sort((~keep).to(torch.uint8), stable=True).indices[:total]]
 
 
-def top_table(order: Tensor, rank: Tensor, group: Tensor, n: Tensor) -> Tensor:
+def top_table(
+    order: Tensor, rank: Tensor, group: Tensor, n: Tensor, width: int | None = None
+) -> Tensor:
     """`rank_within_groups`' (order, rank) of `group` [P], n [G] (G >= 1) -> [G, M] long: row g
-    holds the rows of the best n[g] of group g, best first, -1 padded; M = max(n). Rows of group
-    G (no group) are left out."""
+    holds the rows of the best n[g] of group g, best first, -1 padded; M = `width` where given
+    (no n may exceed it: no value is read on the host), else max(n). Rows of group G (no group)
+    are left out."""
     k = n.numel()
-    m = int(n.max())
+    m = int(n.max()) if width is None else width
     dev = order.device
     g = group[order]
     keep = rank < torch.cat([n, torch.zeros(1, dtype=n.dtype, device=dev)])[g]

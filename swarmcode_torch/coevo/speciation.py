@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -19,12 +20,14 @@ _FULL_MATRIX_MAX = 1 << 24
 @dataclass(frozen=True, eq=False)
 class SpeciationResult:
     """species [P] long ids; proto_ids [K] long (carried-over first, then new in founding order);
-    proto_index [K] long prototype rows; next_species_id: the next unused id."""
+    proto_index [K] long prototype rows; next_species_id: the next unused id; distance [P, P]
+    float32: D between the population's genomes where it was computed (else None)."""
 
     species: Tensor
     proto_ids: Tensor
     proto_index: Tensor
     next_species_id: int
+    distance: Tensor | None = None
 
 
 def hamming(a: Tensor, b: Tensor) -> Tensor:
@@ -110,48 +113,135 @@ def speciate(
     the member closest to the old prototype (ties: lowest row); memberless species go extinct.
     (2) Every other individual, in row order, joins the closest current prototype if D <= delta,
     else founds a new species (id next_species_id, next_species_id + 1, ...). Ties between
-    prototypes go to the earliest prototype in `proto_ids` order. Computed exactly in rounds
-    (one per new species + 1), each a batched [P] update, not a loop over individuals; the [P, P]
-    distance matrix is precomputed when P * P <= 2**24, else one [P, 1] column per round.
+    prototypes go to the earliest prototype in `proto_ids` order.
+
+    When P * P <= 2**24, the [P, P] distance matrix is computed once and the founders are found
+    on the host from which pairs are within delta (one transfer, the only one: the number of
+    species, which sizes what follows, is then known there); everything else is batched on the
+    device. Else in rounds, one per new species + 1, each a [P, 1] distance column and a read on
+    the host.
     """
     p = genome.size
     dev = genome.bt.device
-    idx = torch.arange(p, device=dev)
     long_empty = torch.zeros(0, dtype=torch.long, device=dev)
-
-    # (1) carry-over of surviving species.
-    if prev_proto is not None and prev_proto_ids.numel() > 0 and p > 0:
+    if p == 0:
+        return SpeciationResult(long_empty, long_empty, long_empty, next_species_id)
+    # (1) carry-over of surviving species: alive [Kp], closest [Kp] (the new prototype's row)
+    prev_ids: Tensor | None = None
+    alive: Tensor | None = None
+    closest: Tensor | None = None
+    if prev_proto is not None and prev_proto_ids.numel() > 0:
         prev_ids = prev_proto_ids.to(dev).long()
         d_prev = distance(genome, prev_proto.to(dev), w)  # [P, Kp]
         member = species_hint.to(dev)[:, None] == prev_ids[None, :]  # [P, Kp]
         alive = member.any(0)
         closest = d_prev.masked_fill(~member, math.inf).argmin(0)  # first min = lowest row
+    if p * p > _FULL_MATRIX_MAX:
+        return _speciate_in_rounds(genome, prev_ids, alive, closest, next_species_id, delta, w)
+    full = distance(genome, genome, w)
+    idx = torch.arange(p, device=dev)
+    if closest is not None:
+        assert alive is not None and prev_ids is not None
+        d_cur = full[:, closest].masked_fill(~alive[None, :], math.inf)  # [P, Kp]
+        carried = ((closest[None, :] == idx[:, None]) & alive[None, :]).any(1)
+        min_d = d_cur.min(1).values
+    else:
+        d_cur, carried, min_d = None, torch.zeros(p, dtype=torch.bool, device=dev), None
+    # (2) a candidate founds a species unless a founder before it is within delta
+    cand = ~carried if min_d is None else ~carried & (min_d > delta)
+    alive_at, founders = _founders(cand, alive, full <= delta)
+    k, n_new = len(alive_at), len(founders)
+    picks = _to_device(np.concatenate([alive_at, founders]).astype(np.int64), dev)
+    new_rows = picks[k:]
+    # every other row joins the closest of the carried prototypes and the founders before it
+    d_new = full[:, new_rows].masked_fill(new_rows[None, :] >= idx[:, None], math.inf)
+    if d_cur is not None:
+        assert prev_ids is not None and closest is not None
+        at = picks[:k]
+        carried_ids, carried_rows = prev_ids[at], closest[at]
+        d_new = torch.cat([d_cur[:, at], d_new], 1)
+    else:
+        carried_ids = carried_rows = long_empty
+    proto_index = torch.cat([carried_rows, new_rows])
+    own = torch.full((p,), -1, dtype=torch.long, device=dev)
+    own[proto_index] = torch.arange(k + n_new, device=dev)
+    assign_pos = torch.where(own >= 0, own, d_new.argmin(1))
+    proto_ids = torch.cat(
+        [
+            carried_ids,
+            torch.arange(next_species_id, next_species_id + n_new, dtype=torch.long, device=dev),
+        ]
+    )
+    return SpeciationResult(
+        species=proto_ids[assign_pos],
+        proto_ids=proto_ids,
+        proto_index=proto_index,
+        next_species_id=next_species_id + n_new,
+        distance=full,
+    )
+
+
+def _founders(cand: Tensor, alive: Tensor | None, near: Tensor) -> tuple[np.ndarray, list[int]]:
+    """cand [P] bool, alive [Kp] bool (None: no previous species), near [P, P] bool (D <= delta)
+    -> the positions of the alive species and the founders' rows, read on the host in one
+    transfer: a candidate founds a species unless a founder before it is near it (a greedy pass
+    in row order, sequential by definition)."""
+    p = cand.numel()
+    flags = [cand] + ([alive] if alive is not None else []) + [near.T.reshape(-1)]
+    host = torch.cat(flags).to(torch.uint8).cpu().numpy().astype(bool)
+    kp = 0 if alive is None else alive.numel()
+    near_h = host[p + kp :].reshape(p, p)  # near_h[f]: the rows near row f
+    founders: list[int] = []
+    blocked = np.zeros(p, dtype=bool)
+    for r in np.flatnonzero(host[:p]):
+        if not blocked[r]:
+            founders.append(int(r))
+            blocked |= near_h[r]
+    return np.flatnonzero(host[p : p + kp]), founders
+
+
+def _to_device(a: np.ndarray, device: torch.device) -> Tensor:
+    """A host array on `device`, without waiting for the device: from pinned memory on CUDA."""
+    t = torch.from_numpy(a)
+    if device.type != "cuda":
+        return t.to(device)
+    return t.pin_memory().to(device, non_blocking=True)
+
+
+def _speciate_in_rounds(
+    genome: Population,
+    prev_ids: Tensor | None,
+    alive: Tensor | None,
+    closest: Tensor | None,
+    next_species_id: int,
+    delta: float,
+    w: DistanceWeights,
+) -> SpeciationResult:
+    """`speciate` of a population too large for its [P, P] distance matrix: the founders in
+    rounds, one [P, 1] distance column and one read on the host per round."""
+    p = genome.size
+    dev = genome.bt.device
+    idx = torch.arange(p, device=dev)
+    if closest is not None:
+        assert alive is not None and prev_ids is not None
         carried_rows, carried_ids = closest[alive], prev_ids[alive]
     else:
-        carried_rows, carried_ids = long_empty, long_empty
+        carried_rows = carried_ids = torch.zeros(0, dtype=torch.long, device=dev)
     k = int(carried_rows.numel())
 
     assigned = torch.zeros(p, dtype=torch.bool, device=dev)
     assign_pos = torch.full((p,), -1, dtype=torch.long, device=dev)  # position in the proto list
     assigned[carried_rows] = True
     assign_pos[carried_rows] = torch.arange(k, device=dev)
-    # Precompute all pairwise distances when that is cheap.
-    full = distance(genome, genome, w) if 0 < p * p <= _FULL_MATRIX_MAX else None
     if k > 0:
-        d_cur = (
-            full[:, carried_rows]
-            if full is not None
-            else distance(genome, genome.index(carried_rows), w)
-        )  # [P, Kc]
+        d_cur = distance(genome, genome.index(carried_rows), w)  # [P, Kc]
         arg = d_cur.argmin(1)
         min_d = d_cur.gather(1, arg[:, None]).squeeze(1)
     else:
         arg = torch.zeros(p, dtype=torch.long, device=dev)
         min_d = torch.full((p,), math.inf, device=dev)
-
-    # (2) sequential founding, in rounds.
     new_rows: list[int] = []
-    while p > 0:
+    while True:
         cand = ~assigned & (min_d > delta)
         # the first founder candidate, -1 if none: one read on the host per round
         f = int(torch.where(cand.any(), cand.to(torch.int32).argmax(), -1))
@@ -163,11 +253,7 @@ def speciate(
         assigned[f] = True
         assign_pos[f] = k
         new_rows.append(f)
-        d_new = (
-            full[:, f]
-            if full is not None
-            else distance(genome, genome.index(slice(f, f + 1)), w)[:, 0]
-        )
+        d_new = distance(genome, genome.index(slice(f, f + 1)), w)[:, 0]
         better = d_new < min_d  # strict: ties keep older
         arg = torch.where(better, torch.full_like(arg, k), arg)
         min_d = torch.where(better, d_new, min_d)
@@ -182,9 +268,8 @@ def speciate(
         ]
     )
     proto_index = torch.cat([carried_rows, torch.tensor(new_rows, dtype=torch.long, device=dev)])
-    species = proto_ids[assign_pos] if p > 0 else long_empty
     return SpeciationResult(
-        species=species,
+        species=proto_ids[assign_pos],
         proto_ids=proto_ids,
         proto_index=proto_index,
         next_species_id=next_species_id + n_new,

@@ -70,6 +70,39 @@ def _first_valid(cand: torch.Tensor, ok: torch.Tensor) -> torch.Tensor:
     return cand.gather(1, pick[:, None, :, None].expand(-1, 1, -1, 2)).squeeze(1)
 
 
+@functools.lru_cache(maxsize=16)
+def _package_constants(packages: tuple, G: int, device: torch.device) -> tuple[torch.Tensor, ...]:
+    """The per-package constants of a scenario's package classes, one row per package (built
+    once per scenario and device, never written to): distance and mass ranges, size,
+    distance weighting, radius band, collab, grip effectors [Q, G] and grip offsets [Q, G, 2]."""
+    rows = [c for c in packages for _ in range(c.count)]
+    Q = len(rows)
+
+    def col(values: list) -> torch.Tensor:
+        return torch.tensor(values, device=device)
+
+    g_eff = torch.full((Q, G), -1, dtype=torch.long)  # built on the CPU
+    g_off = torch.zeros(Q, G, 2)
+    for i, c in enumerate(rows):
+        k = len(c.grips)
+        g_eff[i, :k] = torch.tensor(c.grips)
+        if c.kind == "collab":
+            a = torch.arange(k) * (2 * math.pi / k)
+            g_off[i, :k] = (c.size + 0.1) * torch.stack([a.cos(), a.sin()], -1)
+    return (
+        col([c.distance[0] for c in rows]),
+        col([c.distance[1] for c in rows]),
+        col([c.size for c in rows]),
+        col([c.mass[0] for c in rows]),
+        col([c.mass[1] for c in rows]),
+        col([c.distance_weighting for c in rows]),
+        col([c.radius_band for c in rows]),
+        col([c.kind == "collab" for c in rows]),
+        g_eff.to(device),
+        g_off.to(device),
+    )
+
+
 def make_layouts(
     scenario: Scenario, num: int, generator: torch.Generator, device: torch.device | str = "cpu"
 ) -> Layout:
@@ -95,12 +128,11 @@ def make_layouts(
 
     # Packages, class by class.
     Q, G = scenario.num_packages, scenario.max_grips
-    cls_rows = []
-    for c in scenario.packages:
-        cls_rows += [c] * c.count
-    d_lo = torch.tensor([c.distance[0] for c in cls_rows], device=gdev)
-    d_hi = torch.tensor([c.distance[1] for c in cls_rows], device=gdev)
-    size = torch.tensor([c.size for c in cls_rows], device=gdev)
+    try:
+        k = _package_constants(scenario.packages, G, gdev)
+    except TypeError:  # a package class that cannot be hashed: not cached
+        k = _package_constants.__wrapped__(scenario.packages, G, gdev)
+    d_lo, d_hi, size, m_lo, m_hi, weighted, band, collab, g_eff, g_off = k
     u = torch.rand(E, _CANDIDATES, Q, generator=g, device=gdev)
     ang = torch.rand(E, _CANDIDATES, Q, generator=g, device=gdev) * 2 * math.pi
     dist = d_lo + (d_hi - d_lo) * u
@@ -113,9 +145,6 @@ def make_layouts(
     p_pos = _first_valid(cand, ok)
     d0 = (p_pos - base).norm(dim=-1)
 
-    m_lo = torch.tensor([c.mass[0] for c in cls_rows], device=gdev)
-    m_hi = torch.tensor([c.mass[1] for c in cls_rows], device=gdev)
-    weighted = torch.tensor([c.distance_weighting for c in cls_rows], device=gdev)
     frac = ((d0 - d_lo) / (d_hi - d_lo).clamp_min(1e-6)).clamp(0, 1)
     mass = torch.where(
         weighted,
@@ -123,17 +152,7 @@ def make_layouts(
         m_lo + (m_hi - m_lo) * torch.rand(E, Q, generator=g, device=gdev),
     )
 
-    band = torch.tensor([c.radius_band for c in cls_rows], device=gdev).expand(E, Q, 2)
-    collab = torch.tensor([c.kind == "collab" for c in cls_rows], device=gdev).expand(E, Q)
-    g_eff = torch.full((Q, G), -1, dtype=torch.long)  # per-class constants, built on the CPU
-    g_off = torch.zeros(Q, G, 2)
-    for i, c in enumerate(cls_rows):
-        k = len(c.grips)
-        g_eff[i, :k] = torch.tensor(c.grips)
-        if c.kind == "collab":
-            a = torch.arange(k) * (2 * math.pi / k)
-            g_off[i, :k] = (c.size + 0.1) * torch.stack([a.cos(), a.sin()], -1)
-    g_eff, g_off = g_eff.to(gdev), g_off.to(gdev)
+    band, collab = band.expand(E, Q, 2), collab.expand(E, Q)
     # a random orientation of each package's grip ring
     rot = torch.rand(E, Q, generator=g, device=gdev) * 2 * math.pi
     cs, sn = rot.cos()[..., None], rot.sin()[..., None]

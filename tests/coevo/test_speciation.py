@@ -2,6 +2,7 @@ import pytest
 import torch
 from genomekit import random_genomes as _random_genomes
 
+from swarmcode_torch.coevo import speciation
 from swarmcode_torch.coevo.population import R_MAX, R_MIN, Population
 from swarmcode_torch.coevo.speciation import DistanceWeights, distance, hamming, speciate
 from swarmcode_torch.sim.bt import ACT_DROP, ACT_PICK_UP, NOP, SEQ
@@ -219,7 +220,12 @@ def reference_speciate(g, hint, prev, prev_ids, next_id, delta, w):
 
 @pytest.mark.parametrize("seed", range(6))
 @pytest.mark.parametrize("delta", [0.4, 0.8, 1.2])
-def test_speciate_matches_sequential_reference(seed, delta):
+@pytest.mark.parametrize("rounds", [False, True], ids=["full-matrix", "rounds"])
+def test_speciate_matches_sequential_reference(seed, delta, rounds, monkeypatch):
+    """Both ways: the [P, P] matrix and founders found on the host, and (a population too large
+    for the matrix) the founders in rounds of [P, 1] columns."""
+    if rounds:
+        monkeypatch.setattr(speciation, "_FULL_MATRIX_MAX", 0)
     gen = torch.Generator().manual_seed(seed)
     g = random_genomes(40, gen)
     prev = random_genomes(5, gen)

@@ -327,6 +327,26 @@ def test_lookup_matches_interpret_random() -> None:
         assert torch.equal(w, x)
 
 
+def test_tables_of_deep_and_ragged_trees_match_interpret() -> None:
+    """The tables' control flow (`_continuations`, resolved without a loop over slots) on trees
+    of many blocks, nested deep, with stray and missing ENDs, against the interpreter."""
+    g = torch.Generator().manual_seed(11)
+    weights = torch.tensor([4.0, 4.0] + [1.0] * 10 + [5.0, 1.0])  # many SEQ / SEL and END
+    P, L, robots = 60, 48, 4000
+    ops = torch.multinomial(weights, P * L, replacement=True, generator=g).view(P, L)
+    ops[0] = SEL
+    ops[1, : L // 2], ops[1, L // 2 :] = SEQ, END
+    ops[2, :] = END
+    tables = build_tables(ops, chunk=16)
+    assert torch.equal(tables, build_tables(ops, chunk=16, compact=False))
+    prog_idx = torch.randint(0, P, (robots,), generator=g)
+    ls = torch.randint(0, 3, (robots, NUM_OPCODES), generator=g)
+    ls[:, 2:6] = ls[:, 2:6].clamp(max=F)  # conditions SUCCESS / FAILURE only
+    want = interpret(ops[prog_idx], compute_jumps(ops)[prog_idx], ls)
+    for w, x in zip(want, lookup(tables, prog_idx, ls)):
+        assert torch.equal(w, x)
+
+
 @pytest.mark.parametrize("compact", [True, False])
 def test_build_tables_edge_cases(compact) -> None:
     assert build_tables(torch.zeros(0, 8, dtype=torch.long), compact=compact).shape == (

@@ -6,6 +6,7 @@ gather per robot per tick)."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
@@ -35,6 +36,44 @@ from .ops import (
 )
 
 
+def _nesting(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """ops [B, L] long -> (close [B, L] bool: an END that closes a block; encl [B, L + 1] long:
+    the opener slot of the innermost block open on arriving at slot i (i = L: the array's end),
+    -1 at top level; end [B, L] long: at an opener, the slot of its matching END, L if unclosed).
+
+    A fixed number of batched ops, no loop over slots: the depth is the walk of +1 (SEQ / SEL)
+    and -1 (END) clamped at 0 (the prefix sum less its running minimum below 0, so an END with
+    no open block is ignored); the block open at slot i is the last opener before i whose depth
+    after it is the depth on arriving at i (found by one sort and a running maximum), and a
+    block's END is the closing END whose innermost open block it is."""
+    B, L = ops.shape
+    dev = ops.device
+    push = ops <= SEL
+    s = (push.long() - (ops == END).long()).cumsum(1)
+    after = s - torch.cummin(s, 1).values.clamp(max=0)  # depth after each slot
+    before = torch.cat([torch.zeros(B, 1, dtype=torch.long, device=dev), after], 1)  # [B, L + 1]
+    close = (ops == END) & (before[:, :L] > 0)
+    # openers and the arrivals at every slot in one order, by (depth, slot): an opener at o sorts
+    # after the arrival at o and before the arrival at o + 1; the running maximum of the openers'
+    # (depth, slot + 1) read at an arrival is the last opener before it at the largest depth up
+    # to its own: its innermost open block where that depth is its own
+    slot = torch.arange(L + 1, device=dev)
+    span = 2 * L + 2
+    q_key = before * span + 2 * slot
+    o_key = torch.where(push, after * span + 2 * slot[:L] + 1, (L + 1) * span)
+    o_val = torch.where(push, after * (L + 1) + slot[:L] + 1, 0)
+    keys = torch.cat([q_key, o_key], 1)
+    vals = torch.cat([torch.zeros_like(q_key), o_val], 1)
+    order = keys.argsort(1)
+    run = torch.cummax(vals.gather(1, order), 1).values
+    seen = torch.empty_like(run).scatter_(1, order, run)[:, : L + 1]
+    encl = torch.where(seen // (L + 1) == before, seen % (L + 1) - 1, -1)
+    target = torch.where(close, encl[:, :L], L)
+    end = torch.full((B, L + 1), L, dtype=torch.long, device=dev)
+    end.scatter_(1, target, slot[:L].expand(B, L).clone())
+    return close, encl, end[:, :L]
+
+
 def compute_jumps(opcodes: torch.Tensor) -> torch.Tensor:
     """opcodes [..., L] -> jumps [..., L] long.
 
@@ -44,21 +83,11 @@ def compute_jumps(opcodes: torch.Tensor) -> torch.Tensor:
     L = shape[-1]
     B = math.prod(shape[:-1])
     ops = opcodes.reshape(B, L).long()
-    dev = ops.device
-    jumps = torch.arange(1, L + 1, device=dev).expand(B, L).clone()
-    jumps = torch.where(ops <= SEL, L, jumps)
-    stack = torch.zeros(B, L + 1, dtype=torch.long, device=dev)  # stack[d]: opener slot at depth d
-    depth = torch.zeros(B, dtype=torch.long, device=dev)
-    for i in range(L):
-        op = ops[:, i]
-        push = op <= SEL
-        close = (op == END) & (depth > 0)
-        opener = _gather1(stack, depth)
-        jumps = _set1(jumps, opener, torch.full_like(opener, i + 1), close)
-        depth = depth - close.long()
-        depth = depth + push.long()
-        stack = _set1(stack, depth, torch.full_like(depth, i), push)
-    return jumps.reshape(shape)
+    if L == 0 or B == 0:
+        return ops.clone().reshape(shape)
+    _, _, end = _nesting(ops)
+    jumps = torch.arange(1, L + 1, device=ops.device).expand(B, L)
+    return torch.where(ops <= SEL, end + (end < L).long(), jumps).reshape(shape)
 
 
 def interpret(
@@ -146,6 +175,13 @@ def combo_index(leaf_status: torch.Tensor) -> torch.Tensor:
     return (cond * w2).sum(-1) + (act * w3).sum(-1)
 
 
+@functools.lru_cache(maxsize=8)
+def _combo_columns(device: torch.device) -> torch.Tensor:
+    """[14 * NUM_COMBOS] long: `combo_statuses` by opcode, then combination (the tables' column
+    of each opcode; built once per device, never written to)."""
+    return combo_statuses(device).t().reshape(-1).contiguous()
+
+
 def combo_statuses(device: torch.device | str | None = None) -> torch.Tensor:
     """-> [NUM_COMBOS, 14] long: the leaf_status of every combination (non-leaf entries SUCCESS)."""
     c = torch.arange(NUM_COMBOS, device=device)
@@ -161,44 +197,53 @@ def combo_statuses(device: torch.device | str | None = None) -> torch.Tensor:
 
 def _continuations(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """ops [P, L] -> start [P], cont [P, L, 2]: the first leaf / the leaf after leaf i on SUCCESS,
-    FAILURE.
+    FAILURE (rows of the other slots: as if that slot were a leaf; no walk reads them).
 
     Codes: 0..L-1 = visit that leaf slot next; L + s = the tick ends with root status s.
-    A forward pass records each slot's depth and enclosing block types; a backward pass keeps,
-    per depth d, R[d, s] = where to go when the open block at depth d returns s.
+    Each program's control flow is a graph whose every node has one successor, resolved by
+    pointer doubling (a fixed number of gathers, no loop over slots). Nodes: A(j), arriving at
+    slot j (j = L: the array's end); T(e, s), the block closed by the END at e returns s to its
+    parent (which continues after the END if s is its default, else returns s itself; a block
+    with no closed parent ends the tick with root status s); the codes, which are final.
     """
     P, L = ops.shape
     dev = ops.device
-    ar = torch.arange(P, device=dev)
-    depth = torch.zeros(P, dtype=torch.long, device=dev)
-    types = torch.full((P, L + 2), SEQ, dtype=torch.long, device=dev)  # types[d]: block at depth d
-    deps, btypes, ptypes, closes = [], [], [], []
-    for i in range(L):
-        op = ops[:, i]
-        close = (op == END) & (depth > 0)
-        deps.append(depth)
-        btypes.append(types[ar, depth])
-        ptypes.append(types[ar, (depth - 1).clamp(min=0)])
-        closes.append(close)
-        push = op <= SEL
-        depth = depth - close.long() + push.long()
-        types = _set1(types, depth, op, push)
-    R = (L + torch.arange(2, device=dev)).expand(P, L + 1, 2).clone()  # unclosed: propagate to root
-    nxt = L + _default(types[ar, depth])  # arriving at the array end closes the innermost block
+    if L == 0:  # the empty program: the root SEQ ends at once
+        return ops.new_full((P,), SUCCESS), ops.new_zeros(P, 0, 2)
+    close, encl, end = _nesting(ops)
+    n_t = L + 1  # first node of T(e, s)
+    n_c = 3 * L + 1  # first code node
     s = torch.arange(2, device=dev)
-    cont = torch.zeros(P, L, 2, dtype=torch.long, device=dev)
-    for i in reversed(range(L)):
-        k = deps[i]
-        d_blk = _default(btypes[i]).unsqueeze(1)
-        d_par = _default(ptypes[i]).unsqueeze(1)
-        r_k = R[ar, k]
-        cont[:, i] = torch.where(s == d_blk, nxt.unsqueeze(1), r_k)
-        new_r = torch.where(s == d_par, nxt.unsqueeze(1), R[ar, (k - 1).clamp(min=0)])
-        close = closes[i]
-        R[ar, k] = torch.where(close.unsqueeze(1), new_r, r_k)
-        here = torch.where(close, new_r.gather(1, d_blk).squeeze(1), nxt)
-        nxt = torch.where(_is_leaf(ops[:, i]), i, here)
-    return nxt, cont
+
+    def block_type(b: torch.Tensor) -> torch.Tensor:  # a block's opcode; the root's: SEQ
+        return torch.where(b >= 0, ops.gather(1, b.clamp(min=0)), SEQ)
+
+    def block_end(b: torch.Tensor) -> torch.Tensor:  # a block's END; L: none (or the root)
+        return torch.where(b >= 0, end.gather(1, b.clamp(min=0)), L)
+
+    def returns(b: torch.Tensor, after: torch.Tensor) -> torch.Tensor:
+        """[P, N] blocks, [P, N] slots -> [P, N, 2]: a child of block b, ending just before
+        `after`, returns s: continue there if s is b's default, else b returns s."""
+        e = block_end(b).unsqueeze(-1)
+        up = torch.where(e < L, n_t + 2 * e.clamp(max=L - 1) + s, n_c + L + s)
+        return torch.where(s == _default(block_type(b)).unsqueeze(-1), after.unsqueeze(-1), up)
+
+    slot = torch.arange(L, device=dev).expand(P, L)
+    enc = encl[:, :L]
+    parent = torch.where(enc >= 0, encl.gather(1, enc.clamp(min=0)), -1)
+    arrive = torch.where(
+        _is_leaf(ops),
+        n_c + slot,
+        torch.where(close, n_t + 2 * slot + _default(block_type(enc)), slot + 1),
+    )
+    at_end = n_c + L + _default(block_type(encl[:, L:]))
+    ret = torch.where(close.unsqueeze(-1), returns(parent, slot + 1), n_c + L + s)
+    codes = torch.arange(n_c, n_c + L + 2, device=dev).expand(P, L + 2)
+    nxt = torch.cat([arrive, at_end, ret.reshape(P, 2 * L), codes], 1)  # [P, 4L + 3]
+    for _ in range(nxt.shape[1].bit_length()):
+        nxt = nxt.gather(1, nxt)
+    cont = nxt.gather(1, returns(enc, slot + 1).reshape(P, 2 * L)).reshape(P, L, 2) - n_c
+    return nxt[:, 0] - n_c, cont
 
 
 def _build_chunk(ops: torch.Tensor, col_status: torch.Tensor, compact: bool = True) -> torch.Tensor:
@@ -280,7 +325,7 @@ def build_tables(
             return native
     compact = on_cpu if compact is None else compact
     chunk = chunk or (32 if on_cpu else 512)
-    col_status = combo_statuses(ops.device).t().reshape(-1)
+    col_status = _combo_columns(ops.device)
     parts = [
         _build_chunk(ops[i : i + chunk], col_status, compact) for i in range(0, ops.shape[0], chunk)
     ]
@@ -302,7 +347,7 @@ def _native_tables(ops: torch.Tensor) -> torch.Tensor | None:
     if walk is None:
         return None
     start, cont = _continuations(ops)
-    col_status = combo_statuses(ops.device).t().reshape(-1).contiguous()
+    col_status = _combo_columns(ops.device)
     return walk(ops.contiguous(), start, cont, col_status)
 
 

@@ -1,0 +1,173 @@
+"""What a generation reports, read on the host in one transfer (`read_generation`).
+
+Each read of a device value on the host waits for the device; a generation makes this one
+(besides speciation's, `speciation.speciate`): the best team, the species' sizes, the summary
+numbers and the genes the records keep, and the number of elites that reproduction keeps
+(which sizes its offspring). Everything is gathered on the device in fixed shapes, copied in
+one transfer, and taken apart on the host.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from ..sim.hardware import Phenotype
+from .evaluation import EvalResult
+from .population import Population
+
+_NUMPY = {
+    torch.bool: np.bool_,
+    torch.uint8: np.uint8,
+    torch.int8: np.int8,
+    torch.int16: np.int16,
+    torch.int32: np.int32,
+    torch.int64: np.int64,
+    torch.float16: np.float16,
+    torch.float32: np.float32,
+    torch.float64: np.float64,
+}
+
+
+@dataclass(frozen=True, eq=False)
+class BestTeam:
+    """This generation's best team, the focal team of the individual with the highest (gated)
+    fitness, on the host: each of its distinct population rows (sorted) with what the
+    generation computed of it. The application builds its report record from this
+    (`app.records.team_record`)."""
+
+    rows: Tensor  # [R] population rows of the team's robots
+    genome: Population  # [R] their genes
+    phenotype: Phenotype  # [R] their phenotype (of the generation's one computation)
+    species: Tensor  # [R] their species
+    count: Tensor  # [R] robots of each row in the team
+    baseline_count: Tensor  # [R] of each row in the baseline team it was scored against
+    focal: Tensor  # [R] bool: the focal individual's row
+    metrics: dict  # the team's metrics (means over trials), floats
+    fitness: float  # the team's score (ungated)
+    cost: float  # the team's cost
+
+
+@dataclass(frozen=True, eq=False)
+class Readout:
+    """What `read_generation` read, on the host (but `team_rows`)."""
+
+    best_team: BestTeam
+    team_rows: Tensor  # [S] population rows of the best team's robots (-1: empty slot), device
+    population: dict[int, int]  # members of each species, by id (ascending)
+    team: dict[str, int]  # the best team's robots of each species, most first (the first of
+    #                       equals: the lower row)
+    fit_max: float  # highest smoothed fitness in the population
+    fit_mean: float
+    focal_max: float  # highest focal team score (ungated)
+    radius: Tensor  # [P] genes of the evaluated population
+    dominance: Tensor  # [P]
+    selectivity: Tensor  # [P]
+    n_elites: int  # elites that reproduction keeps
+
+
+def read_generation(
+    genome: Population,
+    species: Tensor,
+    res: EvalResult,
+    phenotype: Phenotype,
+    fitness: Tensor,
+    n_elites: Tensor,
+) -> Readout:
+    """The generation's report, in one transfer: the best team (the team of the individual with
+    the highest fitness score, gated: a focal whose marginal contribution is not positive is
+    penalised, so a strong team carried by its partners is not credited to a focal that weakens
+    it), the species' sizes, the summary numbers of `fitness` (the smoothed fitness) and
+    `res`, three genes of every individual, and `n_elites` (0-d)."""
+    b = res.fitness.argmax()
+    team = res.swarms.focal_team[b]
+    slots = team.clamp(min=0)  # the genes of each slot's robot; the team's rows on the host
+    sel = genome.index(slots)
+    names = [f.name for f in fields(Population)]
+    n_g, n_ph = len(names), len(Phenotype._fields)
+    h = to_host(
+        [getattr(sel, n) for n in names]
+        + [t[slots] for t in phenotype]
+        + [
+            b,
+            team,
+            res.swarms.baseline_team[b],
+            species,
+            torch.stack([v[b].float() for v in res.team_metrics.values()]),
+            torch.stack([res.focal[b], res.focal.max()]),
+            res.team_cost[b],
+            torch.stack([fitness.max(), fitness.mean()]),
+            genome.radius,
+            genome.dominance,
+            genome.selectivity,
+            n_elites,
+        ]
+    )
+    genes, ph = h[:n_g], h[n_g : n_g + n_ph]
+    (b_h, team_h, base_h, species_h, metrics, focal, cost, fit) = h[n_g + n_ph : n_g + n_ph + 8]
+    radius, dominance, selectivity, n_el = h[n_g + n_ph + 8 :]
+    valid = team_h >= 0
+    rows, first, counts = np.unique(team_h[valid], return_index=True, return_counts=True)
+    at = np.flatnonzero(valid)[first]  # a slot of each row
+    ids, sizes = np.unique(species_h, return_counts=True)
+
+    def t(a: np.ndarray) -> Tensor:
+        return torch.from_numpy(np.ascontiguousarray(a))
+
+    best_team = BestTeam(
+        rows=t(rows),
+        genome=Population(**{n: t(x[at]) for n, x in zip(names, genes)}),
+        phenotype=Phenotype(*(t(x[at]) for x in ph)),
+        species=t(species_h[rows]),
+        count=t(counts.astype(np.int64)),
+        baseline_count=t((base_h[None, :] == rows[:, None]).sum(1, dtype=np.int64)),
+        focal=t(rows == b_h),
+        metrics=dict(zip(res.team_metrics, metrics.tolist())),
+        fitness=float(focal[0]),
+        cost=float(cost),
+    )
+    return Readout(
+        best_team=best_team,
+        team_rows=team,
+        population={int(i): int(n) for i, n in zip(ids.tolist(), sizes.tolist())},
+        team={
+            str(s): n
+            for s, n in sorted(
+                zip(species_h[rows].tolist(), counts.tolist()), key=lambda sc: -sc[1]
+            )
+        },
+        fit_max=float(fit[0]),
+        fit_mean=float(fit[1]),
+        focal_max=float(focal[1]),
+        radius=t(radius),
+        dominance=t(dominance),
+        selectivity=t(selectivity),
+        n_elites=int(n_el),
+    )
+
+
+def to_host(tensors: list[Tensor]) -> list[np.ndarray]:
+    """Host (numpy) copies of tensors of one device, in one transfer: the values of each dtype
+    concatenated, their bytes concatenated (the widest dtype first, so that every part stays
+    aligned), copied, and split (bit for bit the tensors, their dtypes and shapes)."""
+    groups: dict[torch.dtype, list[int]] = {}
+    for i, x in enumerate(tensors):
+        groups.setdefault(x.dtype, []).append(i)
+    order = sorted(groups, key=lambda d: -d.itemsize)
+    flat = [
+        torch.cat([tensors[i] if tensors[i].dim() == 1 else tensors[i].reshape(-1) for i in ix])
+        for ix in (groups[d] for d in order)
+    ]
+    data = torch.cat([f.view(torch.uint8) for f in flat]).cpu().numpy()
+    out: list[np.ndarray] = [np.empty(0)] * len(tensors)
+    pos = 0
+    for d in order:
+        for i in groups[d]:
+            x = tensors[i]
+            n = x.numel() * d.itemsize
+            out[i] = data[pos : pos + n].view(_NUMPY[d]).reshape(x.shape)
+            pos += n
+    return out
