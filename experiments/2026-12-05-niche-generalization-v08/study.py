@@ -65,6 +65,14 @@ ARMS = {
         "--set",
         "essential_below=0.5",
     ],
+    "v11": [
+        "--set",
+        "essential_floor=0",
+        "--set",
+        "admission_basis=members",
+        "--set",
+        "refound_after=5",
+    ],
     "paper": ["--preset", "paper"],
 }
 BUILTIN = {"one-niche": 1, "two-niche": 2, "four-niche": 4}

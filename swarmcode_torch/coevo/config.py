@@ -112,6 +112,11 @@ class SwarmCoDeConfig:
     nearest partner design refills its slots; 0.5, the clash threshold above which two partners
     count as substitutes: a holder keeps its floor until it is gated as often as a perfect
     substitute is)."""
+    refound_after: int = 0
+    """Re-founding (`coevo.refound`): the champion of a species that dies while a partner (its
+    members beat their baselines) is archived, and this many generations after its death a
+    few offspring become copies of it, founding a species with a trial quota floor; 0: never
+    (the default). Needs `partner_admission = "substitute"`."""
     hw_sigma: float = 0.05
     """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
     social_sigma: float = 0.05
@@ -234,6 +239,7 @@ class SwarmCoDeConfig:
             ("ticks", 1),
             ("seed", 0),
             ("essential_floor", 0),
+            ("refound_after", 0),
             ("reeval_trials", 0),
         ):
             v = getattr(self, key)
@@ -403,6 +409,7 @@ UPPER_BOUNDS = {
     "social_sigma": 1e6,
     "min_share": 1e9,
     "essential_floor": 1_000_000,
+    "refound_after": 10_000_000,
     "w_tag": 1e6,
     "w_hw": 1e6,
     "w_bt": 1e6,

@@ -21,7 +21,7 @@ from ..sim.hardware import Phenotype
 from ..sim.runtime import resolve_device, tick_function, tick_mode
 from ..sim.scenario import Scenario, load_scenario
 from ..sim.state import WorldParams
-from . import admission
+from . import admission, refound
 from .admission import Admission
 from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
 from .dynamics import Turnover, median, replay
@@ -31,7 +31,8 @@ from .hooks import AfterEvaluation, AfterReproduction, AfterSpeciation, Hooks
 from .hooks import call as call_hooks
 from .population import Population, genome_phenotype
 from .readout import BestTeam, read_generation
-from .reproduction import Quotas, mutate_bt, quotas, reproduce
+from .refound import Archive
+from .reproduction import Quotas, mutate, mutate_bt, quotas, reproduce
 from .speciation import SpeciationResult, design_distance, distance, speciate
 from .state_check import check_state_dict
 
@@ -71,6 +72,8 @@ class EvolutionState:
     #                                                       from history; not saved)
     admission: Admission | None = None  # partner admission by species id (`partner_admission =
     #                                     "substitute"`); None: not used yet
+    archive: Archive | None = None  # re-founding of extinct partners (`refound_after`); None:
+    #                                 not used yet
 
 
 @dataclass
@@ -216,6 +219,14 @@ def generation(
 
     # 1. dynamic speciation
     sp = _speciation(state, ctx)
+    arc = refound.observe(
+        state.archive,
+        sp.species,
+        sp.proto_ids,
+        state.next_species_id,
+        sp.next_species_id,
+        state.generation,
+    )
     call_hooks(hooks.after_speciation, AfterSpeciation(state.generation, state, sp))
     # the population's phenotype, once a generation: evaluation and the best team read it
     ph = genome_phenotype(state.genome, ctx.scenario.hardware)
@@ -225,11 +236,24 @@ def generation(
     res, adm = _evaluation(state, ctx, sp, ph, g)
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, ctx.cfg.alpha)
+    if adm is not None and ctx.cfg.refound_after > 0:
+        # a species that dies as a partner beating its baselines is worth re-founding
+        useful = adm.partner & (adm.gated < admission.SUBSTITUTE.admit_below)
+        arc = refound.champions(
+            arc,
+            state.genome,
+            fit,
+            sp.species,
+            sp.proto_ids,
+            useful,
+            sp.next_species_id,
+            state.generation,
+        )
     call_hooks(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
 
     # 3. reproduction: the quotas (`_quotas`), the generation's report read with the number of
     # elites they keep, the offspring (`_reproduction`)
-    plan = _quotas(ctx, sp, adm, fit)
+    plan = _quotas(ctx, sp, adm, fit, refound.on_trial(arc, sp.proto_ids, state.generation))
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
     composition: dict[str, Any] = {
         "generation": state.generation,
@@ -239,8 +263,24 @@ def generation(
     turnover = state.turnover.copy()
     founded, extinct = turnover.advance(state.generation, composition["population"])
     new_state, is_elite, parent = _reproduction(state, ctx, sp, fit, plan, out.n_elites, g)
+    if arc is not None:
+        arc, children, hint = refound.inject(
+            arc,
+            new_state.genome,
+            new_state.species_hint,
+            fit[parent],
+            is_elite,
+            state.generation,
+            ctx.cfg.refound_after,
+            partial(mutate, params=ctx.repro, generator=g),
+        )
+        new_state = replace(new_state, genome=children, species_hint=hint, rng_state=g.get_state())
     new_state = replace(
-        new_state, history=state.history + [composition], turnover=turnover, admission=adm
+        new_state,
+        history=state.history + [composition],
+        turnover=turnover,
+        admission=adm,
+        archive=arc,
     )
     call_hooks(
         hooks.after_reproduction,
@@ -333,16 +373,29 @@ def _evaluation(
     return res, adm
 
 
-def _quotas(ctx: Context, sp: SpeciationResult, adm: Admission | None, fit: Tensor) -> Quotas:
+def _quotas(
+    ctx: Context,
+    sp: SpeciationResult,
+    adm: Admission | None,
+    fit: Tensor,
+    trial: Tensor | None = None,
+) -> Quotas:
     """Step 3, its first part: each species' share of the next generation and its elites
-    (`reproduction.quotas`), on the device."""
+    (`reproduction.quotas`), on the device. `trial` [K] bool: species founded by re-founding
+    copies that keep their trial floor (`refound`)."""
     # 3. reproduction; essential species (partners that beat their baselines: they do a job no
     # partner does) keep a quota floor, so that a hard niche's holder is not starved out
     essential = priority = None
     if adm is not None and ctx.cfg.essential_floor > 0:
         priority = adm.gated[sp.proto_ids]
         essential = adm.partner[sp.proto_ids] & (priority < ctx.cfg.essential_below)
-    return quotas(fit, sp.species, sp.proto_ids, ctx.repro, essential, priority, present=True)
+    repro = ctx.repro
+    if trial is not None:  # a trial species first, at a floor of at least the trial's
+        essential = trial if essential is None else essential | trial
+        priority = torch.where(trial, -1.0, 0.0 if priority is None else priority)
+        floor = max(repro.essential_floor, refound.REFOUND.floor)
+        repro = replace(repro, essential_floor=floor)
+    return quotas(fit, sp.species, sp.proto_ids, repro, essential, priority, present=True)
 
 
 def _reproduction(
@@ -385,6 +438,7 @@ def _reproduction(
         history=state.history,
         turnover=state.turnover,
         admission=state.admission,
+        archive=state.archive,
     )
     return new_state, is_elite, parent
 
@@ -407,6 +461,7 @@ def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
         "best": state.best,
         "history": state.history,
         "admission": state.admission.state_dict() if state.admission is not None else None,
+        "archive": state.archive.state_dict() if state.archive is not None else None,
     }
 
 
@@ -432,6 +487,11 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
         adm = Admission.from_state_dict(d["admission"], dev)
         if adm.partner.numel() != int(d["next_species_id"]):
             raise ValueError("checkpoint's partner admission state does not cover its species")
+    arc = None
+    if d.get("archive") is not None:
+        arc = Archive.from_state_dict(d["archive"], dev)
+        if arc.lineage.numel() > int(d["next_species_id"]):
+            raise ValueError("checkpoint's re-founding archive covers species it does not have")
     return EvolutionState(
         generation=int(d["generation"]),
         genome=genome,
@@ -446,6 +506,7 @@ def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
         history=list(d["history"]),
         turnover=replay(d["history"])[0],
         admission=adm,
+        archive=arc,
     )
 
 

@@ -1,0 +1,303 @@
+"""Re-founding extinct partner species from an archive of their champions (`refound_after`).
+
+A niche whose only holder starves out early stays empty for the rest of a run: nothing in the
+population is near it any more, and mutation rarely walks back (issue 38's first failure). This
+rule keeps the last champion (its member of the highest smoothed fitness) of every species that
+dies while it is a *partner* in the admission's sense (`coevo.admission`: its members beat the
+baselines in which the nearest partner design refills their slots, so it did a job no partner
+did), and gives it a second life:
+
+- **Archive.** Up to `capacity` champions of extinct partners, with the generation they died;
+  a full archive replaces its oldest entry.
+- **Re-founding.** Once an entry has been dead `refound_after` generations, `clones` offspring
+  of the next generation (those of the least fit parents) are replaced by copies of it (the
+  first exact, the others mutated), without a species hint: speciation puts them in a species
+  within δ, or founds one. One entry a generation, the longest dead first; the entry leaves the
+  archive.
+- **Trial.** A species founded by the copies keeps a quota floor of `floor` slots for `trial`
+  generations (exempt from `min_share`, as an essential species' floor), and is on probation as
+  every new species is: admitted as a partner only if its members beat their baselines. A
+  copy of a champion whose job another species now does stays gated, is never admitted and dies
+  after its trial; a re-founded species that is admitted and dies again is archived again, up
+  to `tries` re-foundings of one lineage.
+
+It reads only what the algorithm has (fitness, species, admission); it knows no niche. All of it
+runs on the device with shapes known on the host: it adds no host read to a generation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from .population import Population
+
+
+@dataclass(frozen=True)
+class RefoundParams:
+    clones: int = 3
+    trial: int = 10
+    floor: int = 3
+    tries: int = 2
+    capacity: int = 8
+    min_age: int = 5
+
+
+REFOUND = RefoundParams()
+
+
+@dataclass(frozen=True, eq=False)
+class Archive:
+    """The rule's state. Archive slots [C]: genome, died (generation; -1: empty), tries (of
+    the lineage). The champions of the last generation's species [K]: champ, champ_ids,
+    champ_partner, champ_tries. By species id [N]: lineage (re-foundings before it),
+    trial_until (the generation up to which it keeps its trial floor; -1: none), born (the
+    generation it was founded). The copies
+    put into the population to evaluate next: injected_rows [clones], injected (whether they
+    are copies), injected_tries (their lineage's re-foundings)."""
+
+    genome: Population
+    died: Tensor
+    tries: Tensor
+    champ: Population
+    champ_ids: Tensor
+    champ_partner: Tensor
+    champ_tries: Tensor
+    lineage: Tensor
+    trial_until: Tensor
+    born: Tensor
+    injected_rows: Tensor
+    injected: Tensor
+    injected_tries: Tensor
+
+    # ------------------------------------------------------------------ state dicts
+    _POP = ("genome", "champ")
+    _TENSORS = (
+        "died",
+        "tries",
+        "champ_ids",
+        "champ_partner",
+        "champ_tries",
+        "lineage",
+        "trial_until",
+        "born",
+        "injected_rows",
+        "injected",
+        "injected_tries",
+    )
+
+    def state_dict(self) -> dict:
+        d: dict = {k: getattr(self, k).state_dict() for k in self._POP}
+        d.update({k: getattr(self, k).detach().cpu() for k in self._TENSORS})
+        return d
+
+    @classmethod
+    def from_state_dict(cls, d: dict, device: torch.device | str = "cpu") -> Archive:
+        """ValueError unless d has every part, tensors of consistent sizes."""
+        if not isinstance(d, dict) or set(d) != set(cls._POP) | set(cls._TENSORS):
+            raise ValueError("checkpoint's re-founding archive is malformed")
+        try:
+            pops = {k: Population.from_state_dict(d[k]).to(device) for k in cls._POP}
+        except (TypeError, ValueError, AttributeError):
+            raise ValueError("checkpoint's re-founding archive is malformed") from None
+        ts = {k: d[k] for k in cls._TENSORS}
+        if not all(isinstance(t, Tensor) and t.dim() <= 1 for t in ts.values()):
+            raise ValueError("checkpoint's re-founding archive is malformed")
+        c, k = pops["genome"].size, pops["champ"].size
+        sizes = {"died": c, "tries": c, "champ_ids": k, "champ_partner": k, "champ_tries": k}
+        if any(ts[n].numel() != m for n, m in sizes.items()) or (
+            ts["lineage"].numel() != ts["trial_until"].numel()
+            or ts["lineage"].numel() != ts["born"].numel()
+        ):
+            raise ValueError("checkpoint's re-founding archive is malformed")
+        return cls(**pops, **{n: t.to(device) for n, t in ts.items()})
+
+
+def _grow(t: Tensor, n: int, fill: int) -> Tensor:
+    m = t.numel()
+    return t if n <= m else torch.cat([t, t.new_full((n - m,), fill)])
+
+
+def observe(
+    arc: Archive | None,
+    species: Tensor,
+    proto_ids: Tensor,
+    old_next_id: int,
+    next_id: int,
+    generation: int,
+    params: RefoundParams = REFOUND,
+) -> Archive | None:
+    """After speciation: the species founded by last generation's copies start their trial; the
+    champions of species that died since the last generation (absent from `proto_ids`) that
+    were partners go into the archive. None (no state yet) stays None."""
+    if arc is None:
+        return None
+    lineage = _grow(arc.lineage, next_id, 0)
+    trial_until = _grow(arc.trial_until, next_id, -1)
+    born = _grow(arc.born, next_id, generation)
+    # the copies' species, where the copies founded it this generation
+    sid = species[arc.injected_rows]
+    new = arc.injected & (sid >= old_next_id)
+    target = torch.where(new, sid, next_id)  # next_id: a scratch slot
+    lineage = torch.cat([lineage, lineage.new_zeros(1)]).scatter(
+        0, target, arc.injected_tries.expand_as(sid)
+    )[:next_id]
+    trial_until = torch.cat([trial_until, trial_until.new_zeros(1)]).scatter(
+        0, target, torch.full_like(sid, generation + params.trial - 1)
+    )[:next_id]
+    # the dead partners' champions, into the empty slots and then over the oldest entries
+    dead = ~torch.isin(arc.champ_ids, proto_ids)
+    keep = dead & arc.champ_partner & (arc.champ_tries < params.tries)
+    c = arc.died.numel()
+    rank = keep.long().cumsum(0) - 1
+    key = torch.where(arc.died < 0, torch.iinfo(torch.long).min, arc.died)
+    slots = torch.sort(key, stable=True).indices
+    dest = torch.where(keep & (rank < c), slots[rank.clamp(0, c - 1)], c)
+    k = arc.champ_ids.numel()
+    src = torch.full((c + 1,), -1, dtype=torch.long, device=dest.device)
+    src = src.scatter(0, dest, torch.arange(k, device=dest.device))[:c]
+    fresh = src >= 0
+    genome = arc.champ.index(src.clamp(min=0)).where(fresh, arc.genome)
+    died = torch.where(fresh, generation, arc.died)
+    tries = torch.where(fresh, arc.champ_tries[src.clamp(min=0)], arc.tries)
+    return Archive(
+        genome,
+        died,
+        tries,
+        arc.champ,
+        arc.champ_ids,
+        arc.champ_partner,
+        arc.champ_tries,
+        lineage,
+        trial_until,
+        born,
+        arc.injected_rows,
+        torch.zeros_like(arc.injected),
+        arc.injected_tries,
+    )
+
+
+def champions(
+    arc: Archive | None,
+    genome: Population,
+    fitness: Tensor,
+    species: Tensor,
+    proto_ids: Tensor,
+    partner: Tensor,
+    next_id: int,
+    generation: int,
+    params: RefoundParams = REFOUND,
+) -> Archive:
+    """After evaluation: each species' champion (its member of the highest `fitness`), whether
+    it would be archived on its death (`partner` [N] by species id, and founded `min_age`
+    generations ago or more: a species of a few generations is noise of the search, not a job
+    done) and its lineage's re-foundings. Starts the state (an empty archive) where `arc` is
+    None."""
+    dev = fitness.device
+    k = proto_ids.numel()
+    pos = (species[:, None] == proto_ids[None, :]).to(torch.int32).argmax(1).long()
+    # the best member of each species: the highest fitness, the first row on ties
+    order = torch.sort(fitness.float(), descending=True, stable=True).indices
+    first = torch.full((k,), fitness.numel(), dtype=torch.long, device=dev)
+    first = first.scatter_reduce(0, pos[order], torch.arange(order.numel(), device=dev), "amin")
+    champ_row = order[first.clamp(max=max(order.numel() - 1, 0))]
+    if arc is None:
+        c = params.capacity
+        arc = Archive(
+            genome.index(torch.zeros(c, dtype=torch.long, device=dev)),
+            torch.full((c,), -1, dtype=torch.long, device=dev),
+            torch.zeros(c, dtype=torch.long, device=dev),
+            genome.index(champ_row),
+            proto_ids,
+            partner[proto_ids],
+            torch.zeros(k, dtype=torch.long, device=dev),
+            torch.zeros(next_id, dtype=torch.long, device=dev),
+            torch.full((next_id,), -1, dtype=torch.long, device=dev),
+            torch.full((next_id,), generation, dtype=torch.long, device=dev),
+            torch.zeros(params.clones, dtype=torch.long, device=dev),
+            torch.zeros((), dtype=torch.bool, device=dev),
+            torch.zeros((), dtype=torch.long, device=dev),
+        )
+    lineage = _grow(arc.lineage, next_id, 0)
+    born = _grow(arc.born, next_id, generation)
+    return Archive(
+        arc.genome,
+        arc.died,
+        arc.tries,
+        genome.index(champ_row),
+        proto_ids,
+        partner[proto_ids] & (generation - born[proto_ids] >= params.min_age),
+        lineage[proto_ids],
+        lineage,
+        _grow(arc.trial_until, next_id, -1),
+        born,
+        arc.injected_rows,
+        arc.injected,
+        arc.injected_tries,
+    )
+
+
+def on_trial(arc: Archive | None, proto_ids: Tensor, generation: int) -> Tensor | None:
+    """[K] bool: the species proto_ids that keep their trial floor this generation."""
+    if arc is None:
+        return None
+    return arc.trial_until[proto_ids] >= generation
+
+
+def inject(
+    arc: Archive,
+    children: Population,
+    hint: Tensor,
+    parent_fitness: Tensor,
+    is_elite: Tensor,
+    generation: int,
+    after: int,
+    mutate,
+    params: RefoundParams = REFOUND,
+) -> tuple[Archive, Population, Tensor]:
+    """After reproduction: where an archive entry has been dead `after` generations, the
+    `clones` offspring of the least fit parents become copies of it (the first exact, the
+    others `mutate`d) with no species hint, and the entry leaves the archive. `mutate` is
+    called on every generation, copies or not, so that the run's random stream does not depend
+    on the archive."""
+    dev = hint.device
+    m = min(params.clones, int(children.size))
+    due = (arc.died >= 0) & (arc.died + after <= generation)
+    key = torch.where(due, arc.died, torch.iinfo(torch.long).max)
+    pick = key.argmin()
+    has = due.any()
+    copies = arc.genome.index(pick.expand(m))
+    mutated = mutate(copies)
+    first = torch.arange(m, device=dev) == 0
+    copies = copies.where(first, mutated)
+    # the offspring of the least fit parents (never an elite)
+    score = torch.where(is_elite, torch.inf, parent_fitness.float())
+    rows = torch.sort(score, stable=True).indices[:m]
+    put = torch.zeros(children.size, dtype=torch.bool, device=dev).scatter(0, rows, has.expand(m))
+    src = torch.zeros(children.size, dtype=torch.long, device=dev).scatter(
+        0, rows, torch.arange(m, device=dev)
+    )
+    children = copies.index(src).where(put, children)
+    hint = torch.where(put, -1, hint)
+    died = torch.where(has & (torch.arange(arc.died.numel(), device=dev) == pick), -1, arc.died)
+    return (
+        Archive(
+            arc.genome,
+            died,
+            arc.tries,
+            arc.champ,
+            arc.champ_ids,
+            arc.champ_partner,
+            arc.champ_tries,
+            arc.lineage,
+            arc.trial_until,
+            arc.born,
+            rows,
+            has,
+            arc.tries[pick] + 1,
+        ),
+        children,
+        hint,
+    )
