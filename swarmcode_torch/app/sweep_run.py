@@ -222,20 +222,52 @@ def sweep_on_ray(
     a line as each ends; ([(budget, seed, run directory)] of the finished runs, in the sweep's
     order, [(run name, error)] of the failed ones)."""
     from .distributed import RayUnavailable, check_resources, ray_session, run_tasks
+    from .unshared import mark_storage, read_tree, write_tree
 
     todo = [p for p in plans if p[4] != "done"]
-    # absolute paths: a worker's working directory may not be this one
+    out = todo[0][2].parent if todo else Path()
+    try:
+        token = mark_storage(out) if todo else ""
+        resume = {id(p): read_tree(p[2]) for p in todo if p[4] == "resume"}
+    except OSError as e:
+        os_fail(e, f"--out {out}: cannot prepare the runs for Ray")
+    # absolute paths: a worker's working directory may not be this one; a run to resume
+    # carries its files, for a node that does not see --out (`unshared`)
     jobs = [
-        (run_dir.resolve(), cfg, data, state, checkpoint_every, log_every, again)
-        for _, _, run_dir, cfg, state in todo
+        (
+            run_dir.resolve(),
+            cfg,
+            data,
+            state,
+            checkpoint_every,
+            log_every,
+            again,
+            token,
+            resume.get(id(p)),
+        )
+        for p in todo
+        for _, _, run_dir, cfg, state in [p]
     ]
     what = f"--workers {workers}" if workers > 1 else "--ray-address"
+    sent_back: set[int] = set()
+
+    def on_result(i: int, value) -> str | None:
+        if isinstance(value, tuple):  # ran on a node without --out: its files, written here
+            error, files = value
+            write_tree(todo[i][2], files)
+            sent_back.add(i)
+            return error
+        return value
 
     def on_finish(i: int, error: str | None, n: dict) -> None:
         name = todo[i][2].name
         counts = f"{n['done']} done, {n['running']} running, {n['failed']} failed of {n['total']}"
+        if i in sent_back:
+            counts += f"; it ran where {out.resolve()} is not, its files were written here"
         if error is None:
-            console.print(f"{name}: finished ({counts})", markup=False, highlight=False)
+            console.print(
+                f"{name}: finished ({counts})", markup=False, highlight=False, soft_wrap=True
+            )
         else:
             console.print(
                 f"{name}: failed: {error} ({counts})", markup=False, highlight=False, soft_wrap=True
@@ -265,6 +297,7 @@ def sweep_on_ray(
                     num_gpus=gpus,
                     on_finish=on_finish,
                     what=what,
+                    on_result=on_result,
                 )
         except RayUnavailable as e:
             fail(str(e))
@@ -285,11 +318,30 @@ def sweep_on_ray(
 
 
 def sweep_task(
-    run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int, log_every: int, again: str
-) -> str | None:
+    run_dir: Path,
+    cfg,
+    data: bytes,
+    state: str,
+    checkpoint_every: int,
+    log_every: int,
+    again: str,
+    token: str = "",
+    files: dict | None = None,
+):
     """One run of a sweep as a Ray task (`distributed.run_tasks`): `run_sweep_run`, as the
     sweep runs it in this process. None when the run finished; else its error in one line (a
-    failed start or write; a stop by Ctrl-C or SIGTERM, after its checkpoint was written)."""
+    failed start or write; a stop by Ctrl-C or SIGTERM, after its checkpoint was written).
+    On a node that does not see the sweep directory (its mark does not hold `token`), the run
+    is made in a local temporary directory from `files` and the task returns (error, the run
+    directory's files) for the driver to write (`unshared`)."""
+    from .unshared import run_elsewhere, sees_storage
+
+    if token and not sees_storage(run_dir.parent, token):
+        return run_elsewhere(
+            run_dir,
+            files,
+            lambda local: sweep_task(local, cfg, data, state, checkpoint_every, log_every, again),
+        )
     try:
         run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
     except Failed as e:
