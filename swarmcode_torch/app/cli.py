@@ -268,6 +268,8 @@ def sweep(
     gpus_per_run: Sweep.gpus_per_run = None,
     ray_address: Sweep.ray_address = None,
     threads: Sweep.threads = None,
+    wandb: Evolve.wandb = False,
+    wandb_project: Evolve.wandb_project = "swarmcode-torch",
 ) -> None:
     """One evolution per budget (and seed); writes the paper's Table III as Markdown and CSV, and a plot."""
     from .sweep_run import run_sweep
@@ -295,6 +297,8 @@ def sweep(
         gpus_per_run,
         ray_address,
         threads,
+        wandb=wandb,
+        wandb_project=wandb_project,
     )
 
 

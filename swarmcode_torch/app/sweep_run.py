@@ -65,8 +65,12 @@ def run_sweep(
     gpus_per_run,
     ray_address,
     threads,
+    wandb: bool = False,
+    wandb_project: str = "swarmcode-torch",
 ) -> None:
     """The body of `swarmcode-torch sweep` (its options as parsed)."""
+    from .evolve_start import wandb_option
+
     set_threads_option(threads)
     import time
 
@@ -86,6 +90,7 @@ def run_sweep(
     if checkpoint_every < 1 or log_every < 1:
         fail("--checkpoint-every and --log-every must be >= 1")
     on_ray = sweep_ray_options(workers, cpus_per_run, gpus_per_run, ray_address, device)
+    project = wandb_option(wandb, wandb_project)  # before anything is made
     if logdir is not None and out is not None:
         fail(
             f"--logdir and --out cannot both be given: --out is the sweep directory itself "
@@ -143,13 +148,19 @@ def run_sweep(
             soft_wrap=True,
         )
         failed: list[tuple[str, str]] = []
+        wb = {id(p): sweep_wandb(project, out, p) for p in plans}
         if on_ray is None:
-            for b, sd, run_dir, cfg, state in plans:
+            for p in plans:
+                b, sd, run_dir, cfg, state = p
                 if state != "done":
-                    run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
+                    run_sweep_run(
+                        run_dir, cfg, data, state, checkpoint_every, log_every, again, wb[id(p)]
+                    )
                 runs.append((b, sd, run_dir))
         else:
-            runs, failed = sweep_on_ray(plans, data, checkpoint_every, log_every, again, *on_ray)
+            runs, failed = sweep_on_ray(
+                plans, data, checkpoint_every, log_every, again, *on_ray, wb=wb
+            )
             if not runs:
                 fail(
                     f"every run of the sweep failed ({failed[0][0]}: {failed[0][1]}); fix the "
@@ -174,6 +185,19 @@ def run_sweep(
             f"{len(failed)} of {len(plans)} runs failed ({names}); the table has the "
             f"{len(runs)} that finished; fix the cause, then resume them: {again}"
         )
+
+
+def sweep_wandb(project: str | None, out: Path, plan) -> tuple[str, dict] | None:
+    """(W&B project, `wandb.init` keywords) of a run of a sweep (`plan`: `plan_sweep_run`'s),
+    None without --wandb: the sweep's group and tags (`wandb_runs.sweep_init`) and the W&B id of
+    its run directory here, also when a node without --out runs it in a directory of its own."""
+    if project is None:
+        return None
+    from .reporting import _wandb_run_id
+    from .wandb_runs import sweep_init
+
+    b, sd, run_dir = plan[:3]
+    return project, {**sweep_init(out, b, sd), "id": _wandb_run_id(run_dir)}
 
 
 def sweep_ray_options(
@@ -217,6 +241,7 @@ def sweep_on_ray(
     cpus: float,
     gpus: float,
     address: str | None,
+    wb: dict | None = None,
 ):
     """Run the unfinished runs of a sweep as Ray tasks (`sweep_task`, up to `workers` at once),
     a line as each ends; ([(budget, seed, run directory)] of the finished runs, in the sweep's
@@ -244,6 +269,7 @@ def sweep_on_ray(
             again,
             token,
             resume.get(id(p)),
+            (wb or {}).get(id(p)),
         )
         for p in todo
         for _, _, run_dir, cfg, state in [p]
@@ -327,6 +353,7 @@ def sweep_task(
     again: str,
     token: str = "",
     files: dict | None = None,
+    wb: tuple[str, dict] | None = None,
 ):
     """One run of a sweep as a Ray task (`distributed.run_tasks`): `run_sweep_run`, as the
     sweep runs it in this process. None when the run finished; else its error in one line (a
@@ -340,10 +367,12 @@ def sweep_task(
         return run_elsewhere(
             run_dir,
             files,
-            lambda local: sweep_task(local, cfg, data, state, checkpoint_every, log_every, again),
+            lambda local: sweep_task(
+                local, cfg, data, state, checkpoint_every, log_every, again, wb=wb
+            ),
         )
     try:
-        run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
+        run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again, wb)
     except Failed as e:
         return e.message
     except typer.Exit as e:
@@ -376,10 +405,18 @@ def plan_sweep_run(out: Path, cfg, scenario, data: bytes):
 
 
 def run_sweep_run(
-    run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int, log_every: int, again: str
+    run_dir: Path,
+    cfg,
+    data: bytes,
+    state: str,
+    checkpoint_every: int,
+    log_every: int,
+    again: str,
+    wb: tuple[str, dict] | None = None,
 ) -> None:
     """One run of a sweep, started (`state` 'new': its config and `data` checked by the sweep)
-    or resumed through `session`, then run with the command line's progress and messages."""
+    or resumed through `session`, then run with the command line's progress and messages (and
+    logged to W&B with `wb`, `sweep_wandb`'s)."""
     from .files import RunError
 
     def make_dir(ev) -> Path:
@@ -402,4 +439,13 @@ def run_sweep_run(
             f"{cfg.generations}",
             soft_wrap=True,
         )
-        execute(ev, run_dir, checkpoint_every, log_every, saved=saved, again=again)
+        execute(
+            ev,
+            run_dir,
+            checkpoint_every,
+            log_every,
+            saved=saved,
+            again=again,
+            wandb_project=wb[0] if wb else None,
+            wandb_init=wb[1] if wb else None,
+        )

@@ -309,9 +309,10 @@ def execute(
     wandb_project: str | None = None,
     snapshot_every: int = 0,
     bounds: session.Bounds | None = None,
+    wandb_init: dict | None = None,
 ) -> None:
     """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints
-    (and Weights & Biases with `wandb_project`).
+    (and Weights & Biases with `wandb_project`, `wandb_init` more `wandb.init` keywords).
     Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
     failed write (a full disk: OSError from the checkpoint, summary.json, teams.jsonl or
     TensorBoard) ends the run with a one-line error that names the last checkpointed generation
@@ -336,7 +337,7 @@ def execute(
     if wandb_project is not None:  # after the checkpoints: outside the step
         from .reporting import WandbReporter
 
-        extra.append(WandbReporter(wandb_project, run_dir, render_every))
+        extra.append(WandbReporter(wandb_project, run_dir, render_every, **(wandb_init or {})))
     if where is not None:
         where.run_dir, where.checkpoints, where.again = run_dir, checkpoints, again
     reporters: list = []
