@@ -13,6 +13,7 @@ from rich.markup import escape
 
 from ..sim.scenario import ScenarioError
 from . import session
+from .eta import Eta
 from .signals import TERMINATED, terminate_as_interrupt
 from .terminal import (
     Failed,
@@ -150,11 +151,18 @@ def run_sweep(
         failed: list[tuple[str, str]] = []
         wb = {id(p): sweep_wandb(project, out, p) for p in plans}
         if on_ray is None:
+            eta, ran = Eta(sum(p[4] != "done" for p in plans)), 0
             for p in plans:
                 b, sd, run_dir, cfg, state = p
                 if state != "done":
                     run_sweep_run(
                         run_dir, cfg, data, state, checkpoint_every, log_every, again, wb[id(p)]
+                    )
+                    ran += 1
+                    console.print(
+                        f"{run_dir.name}: finished ({ran} of {eta.total} runs)  {eta.text(ran)}",
+                        markup=False,
+                        highlight=False,
                     )
                 runs.append((b, sd, run_dir))
         else:
@@ -276,6 +284,7 @@ def sweep_on_ray(
     ]
     what = f"--workers {workers}" if workers > 1 else "--ray-address"
     sent_back: set[int] = set()
+    eta = Eta(len(jobs))
 
     def on_result(i: int, value) -> str | None:
         if isinstance(value, tuple):  # ran on a node without --out: its files, written here
@@ -290,13 +299,14 @@ def sweep_on_ray(
         counts = f"{n['done']} done, {n['running']} running, {n['failed']} failed of {n['total']}"
         if i in sent_back:
             counts += f"; it ran where {out.resolve()} is not, its files were written here"
+        counts += f")  {eta.text(n['done'] + n['failed'])}"
         if error is None:
             console.print(
-                f"{name}: finished ({counts})", markup=False, highlight=False, soft_wrap=True
+                f"{name}: finished ({counts}", markup=False, highlight=False, soft_wrap=True
             )
         else:
             console.print(
-                f"{name}: failed: {error} ({counts})", markup=False, highlight=False, soft_wrap=True
+                f"{name}: failed: {error} ({counts}", markup=False, highlight=False, soft_wrap=True
             )
 
     errors: list = []

@@ -118,17 +118,21 @@ class _FittedProgress(Progress):
 
 class ProgressReporter:
     """Rich progress line on a terminal (`out`, default the command line's console); a plain
-    line every few generations otherwise."""
+    line every few generations otherwise, with the elapsed and remaining time (`eta.Eta`)."""
 
     def __init__(self, total: int, start: int, every: int, out: Console | None = None):
+        from .eta import Eta
+
         self.tty = sys.stdout.isatty() if out is None else out.is_terminal
         self.every = every
+        self.eta = Eta(total, start)
         self.bar = None
         if self.tty:
             self.bar = _FittedProgress(out if out is not None else console)
             self.task = self.bar.add_task("", total=total, completed=start)
 
     def on_start(self, ev) -> None:
+        self.eta.restart()
         if self.bar:
             self.bar.start()
 
@@ -147,7 +151,8 @@ class ProgressReporter:
         if self.bar:
             self.bar.update(self.task, completed=ev.state.generation, description=text)
         elif r.generation % self.every == 0 or ev.done:
-            print(f"done {ev.state.generation}/{ev.cfg.generations}  {text}", flush=True)
+            done = ev.state.generation
+            print(f"done {done}/{ev.cfg.generations}  {self.eta.text(done)}  {text}", flush=True)
 
     def on_end(self, ev) -> None:
         self.stop()

@@ -123,7 +123,9 @@ def _same_runs(out: Path, ref: Path) -> None:
 def test_sweep_with_shared_out(two_nodes, in_process, tmp_path):
     out = tmp_path / "sweep"  # outside driver_disk: the nodes see it
     r = ok(invoke(*SWEEP, "--out", out, "--workers", 2))
-    assert "finished (2 done, 0 running, 0 failed of 2)" in r.output
+    assert "finished (2 done, 0 running, 0 failed of 2)  elapsed " in r.output
+    ends = [ln for ln in r.output.splitlines() if ": finished (" in ln]
+    assert len(ends) == 2 and all(", left " in ln for ln in ends), r.output
     assert "files were written here" not in r.output
     _same_runs(out, in_process[0])
 
