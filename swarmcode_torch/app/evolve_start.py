@@ -72,8 +72,10 @@ def bound_line(bounds, ev, run_dir: Path) -> str:
         )
     else:
         why = f"--max-time reached ({bounds.elapsed:.1f}s of {bounds.max_time:g}s)"
+    from .terminal import generations_done  # a count, and the numbers from 0
+
     return (
-        f"Stopped after {g} generations: {why}; checkpoint of generation {g} is in "
+        f"Stopped after {generations_done(g)}: {why}; its checkpoint is in "
         f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}"
     )
 

@@ -189,6 +189,14 @@ def checkpoint_words(saved: int) -> str:
     return f"checkpoint after generation {saved - 1} ({done})"
 
 
+def generations_done(done: int) -> str:
+    """'3 generations (0-2)': how many generations finished, and their numbers, from 0 as
+    summary.json, teams.jsonl and TensorBoard number them (never the count as a number)."""
+    if done < 1:
+        return "no generation"
+    return "1 generation (generation 0)" if done == 1 else f"{done} generations (0-{done - 1})"
+
+
 def last_checkpoint(saved: int | None) -> str:
     """'the last checkpoint ...' of a failed run (`checkpoint_words`), or that there is none."""
     if saved is None:

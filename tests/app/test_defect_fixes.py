@@ -59,3 +59,32 @@ def test_budgets_with_cents_keep_matplotlib_ticks(monkeypatch):
     fit_ax, species_ax = _drawn_axes([_row(2500.5, 2.0), _row(2501.0, 3.0)], monkeypatch)
     xs = _visible_ticks(species_ax.get_xticks(), species_ax.get_xlim())
     assert any(x != int(x) for x in xs), xs  # the budget axis is not forced to whole dollars
+
+
+def test_stop_lines_count_generations_and_number_them_from_0(monkeypatch, tmp_path):
+    """A run stopped by --max-time: the line counts the generations that finished and numbers
+    them as summary.json and teams.jsonl do (from 0); inspect says the same."""
+    import json
+    import re
+
+    from test_cli import TINY, invoke
+    from test_workflow import FakeClock
+
+    from swarmcode_torch.app import session, terminal
+
+    monkeypatch.setattr(session, "clock", FakeClock())  # 10 s a generation: 3 in 30 s
+    r = invoke("evolve", *TINY, "--generations", 5, "--max-time", "30s", "--logdir", tmp_path)
+    assert r.exit_code == 0, r.output
+    (run,) = tmp_path.iterdir()
+    text = " ".join(r.output.split())
+    m = re.search(r"Stopped after (\d+) generations \(0-(\d+)\): --max-time reached", text)
+    assert m, text
+    summary = json.loads((run / "summary.json").read_text())
+    numbers = [json.loads(ln)["generation"] for ln in (run / "teams.jsonl").open()]
+    assert int(m[1]) == len(numbers) == summary["stop"]["generation"]  # the count
+    assert int(m[2]) == summary["generation"] == numbers[-1]  # the last one's number
+    r = invoke("inspect", run)
+    assert r.exit_code == 0, r.output
+    assert f"Stopped early by max_time after {m[1]} generations (0-{m[2]})" in r.output
+    assert terminal.generations_done(1) == "1 generation (generation 0)"
+    assert terminal.generations_done(0) == "no generation"
