@@ -262,7 +262,7 @@ def start_evolve(
 
         def make_dir(ev) -> Path:
             try:
-                return new_run_dir(logdir, cfg)
+                return new_run_dir(logdir, cfg, branch)
             except OSError as e:
                 os_fail(e, f"--logdir {logdir}: cannot make a run directory")
 

@@ -88,3 +88,32 @@ def test_stop_lines_count_generations_and_number_them_from_0(monkeypatch, tmp_pa
     assert f"Stopped early by max_time after {m[1]} generations (0-{m[2]})" in r.output
     assert terminal.generations_done(1) == "1 generation (generation 0)"
     assert terminal.generations_done(0) == "no generation"
+
+
+def test_branch_directory_is_named_after_its_parent(tmp_path):
+    """A branch's directory (`--from RUN@G`, `sc.evolve(from_run=...)`) starts with its
+    parent's name and says where it branched: PARENT__branch-gG__TIME; a fresh run's does not."""
+    import json
+    import re
+    from types import SimpleNamespace
+
+    from test_workflow import new_run
+
+    import swarmcode_torch as sc
+    from swarmcode_torch.app.files import MAX_PARENT_NAME, branch_dir_name, new_run_dir
+
+    parent = new_run(tmp_path / "runs", "--generations", 3, "--snapshot-every", 2)
+    assert "__branch-" not in parent.name
+    child = new_run(
+        tmp_path / "runs", "--from", f"{parent}@2", "--generations", 4, "--snapshot-every", 2
+    )
+    assert re.fullmatch(re.escape(parent.name) + r"__branch-g2__\d{8}-\d{6}", child.name)
+    assert json.loads((child / "summary.json").read_text())["parent"]["generation"] == 2
+    api = sc.evolve(from_run=f"{child}@4", logdir=tmp_path / "api", generations=5)
+    assert api.run_dir.name.startswith(child.name + "__branch-g4__")
+    # a long chain of branches keeps a valid name; two at the same second get -1
+    long = SimpleNamespace(run_dir=tmp_path / ("x" * 240), generation=7)
+    made = [new_run_dir(tmp_path / "chain", None, long) for _ in range(2)]
+    assert made[0].name.startswith("x" * MAX_PARENT_NAME + "__branch-g7__")
+    assert made[1].name == made[0].name + "-1" and len(made[0].name) < 200
+    assert branch_dir_name(parent, 5, when=0).startswith(parent.name + "__branch-g5__")
