@@ -149,7 +149,7 @@ def run_sweep(
             soft_wrap=True,
         )
         failed: list[tuple[str, str]] = []
-        wb = {id(p): sweep_wandb(project, out, p) for p in plans}
+        wb = {id(p): sweep_wandb(project, p) for p in plans}
         if on_ray is None:
             eta, ran = Eta(sum(p[4] != "done" for p in plans)), 0
             for p in plans:
@@ -166,8 +166,18 @@ def run_sweep(
                     )
                 runs.append((b, sd, run_dir))
         else:
+            ray_workers, cpus, gpus, address = on_ray
             runs, failed = sweep_on_ray(
-                plans, data, checkpoint_every, log_every, again, *on_ray, wb=wb
+                plans,
+                data,
+                checkpoint_every,
+                log_every,
+                again,
+                ray_workers,
+                cpus,
+                gpus,
+                address,
+                wb,
             )
             if not runs:
                 fail(
@@ -195,7 +205,7 @@ def run_sweep(
         )
 
 
-def sweep_wandb(project: str | None, out: Path, plan) -> tuple[str, dict] | None:
+def sweep_wandb(project: str | None, plan) -> tuple[str, dict] | None:
     """(W&B project, `wandb.init` keywords) of a run of a sweep (`plan`: `plan_sweep_run`'s),
     None without --wandb: the sweep's group and tags (`wandb_runs.sweep_init`) and the W&B id of
     its run directory here, also when a node without --out runs it in a directory of its own."""
@@ -205,7 +215,7 @@ def sweep_wandb(project: str | None, out: Path, plan) -> tuple[str, dict] | None
     from .wandb_runs import sweep_init
 
     b, sd, run_dir = plan[:3]
-    return project, {**sweep_init(out, b, sd), "id": _wandb_run_id(run_dir)}
+    return project, {**sweep_init(run_dir.parent, b, sd), "id": _wandb_run_id(run_dir)}
 
 
 def sweep_ray_options(
