@@ -565,7 +565,7 @@ def _branch(
     if logdir == "runs":  # the default: beside the parent
         logdir = branch.run_dir.parent
     folder = None if logdir is None else _logdir(logdir)
-    make_dir = None if folder is None else (lambda ev: new_run_dir(folder, cfg))
+    make_dir = None if folder is None else (lambda ev: new_run_dir(folder, cfg, branch))
     history = _History()  # the callback is `bounds`'
     with ExitStack() as stack:
         start = session.start_branch(stack, branch, cfg, make_dir, fitness=fitness)

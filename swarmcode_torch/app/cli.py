@@ -275,6 +275,8 @@ def sweep(
     threads: Sweep.threads = None,
     grid: Sweep.grid = None,
     config: Sweep.config = None,
+    wandb: Evolve.wandb = False,
+    wandb_project: Evolve.wandb_project = "swarmcode-torch",
 ) -> None:
     """One evolution per budget (and seed, and --grid setting); writes the paper's Table III as Markdown and CSV, and a plot."""
     from .sweep_run import run_sweep
@@ -304,6 +306,8 @@ def sweep(
         threads,
         grid=grid,
         config=config,
+        wandb=wandb,
+        wandb_project=wandb_project,
     )
 
 

@@ -83,8 +83,10 @@ def bound_line(bounds, ev, run_dir: Path) -> str:
         )
     else:
         why = f"--max-time reached ({bounds.elapsed:.1f}s of {bounds.max_time:g}s)"
+    from .stop_lines import generations_done  # a count, and the numbers from 0
+
     return (
-        f"Stopped after {g} generations: {why}; checkpoint of generation {g} is in "
+        f"Stopped after {generations_done(g)}: {why}; its checkpoint is in "
         f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}"
     )
 
@@ -271,7 +273,7 @@ def start_evolve(
 
         def make_dir(ev) -> Path:
             try:
-                return new_run_dir(logdir, cfg)
+                return new_run_dir(logdir, cfg, branch)
             except OSError as e:
                 os_fail(e, f"--logdir {logdir}: cannot make a run directory")
 

@@ -64,7 +64,9 @@ def test_the_progress_says_why_a_callback_stopped_the_run(capsys):
                     **{k: v for k, v in API_TINY.items() if k != "progress"})  # fmt: skip
     assert res.stopped == "callback" and res.generations == 1
     out = capsys.readouterr().out.splitlines()
-    assert out[-1] == "Stopped after 1 generations: the callback asked to stop: enough"
+    assert (
+        out[-1] == "Stopped after 1 generation (generation 0): the callback asked to stop: enough"
+    )
 
 
 def test_a_callback_returning_other_values_lets_the_run_go_on():
