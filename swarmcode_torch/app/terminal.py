@@ -222,12 +222,6 @@ def stopped(where: Where, terminated: bool) -> None:
     raise typer.Exit(code=143 if terminated else 130)
 
 
-THREADS_HELP = (
-    "CPU threads of this process [default: OMP_NUM_THREADS if set, else the cores "
-    "less the load average, at least 1]."
-)
-
-
 def set_threads_option(threads: int | None) -> None:
     from ..sim.runtime import set_threads
 
