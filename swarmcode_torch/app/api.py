@@ -37,7 +37,7 @@ from ..sim.scenario import Scenario
 from . import records, session
 from .checkpoints import load_run
 from .files import RunError, new_run_dir
-from .optspec import Intervals, Values, api_signature, api_values, check_values
+from .optspec import Intervals, Values, api_values, check_values, declare_keywords
 from .run_options import EVOLVE_OPTIONS
 from .runconfig import scenario_to_toml  # noqa: F401 - the API's, as before
 from .session import make_config  # noqa: F401 - the API's, as before
@@ -365,6 +365,9 @@ def evolve(
         population=30, seed=0, budget=4000.0, delta=0.5, ...` (any key of SwarmCoDeConfig / a
         run's config.toml).
     scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
+    budget, objective, generations, population, swarm_size, trials, ticks, seed, device,
+        compile, preset: the settings `swarmcode-torch evolve` has options for (UNSET: the
+        config's), as any other key of `settings`.
     logdir: where the run directory is created (named as by the CLI,
         `SCENARIO[__bBUDGET][__OBJECTIVE]__SEED__TIME`); None: run in memory, write no file.
     checkpoint_every, render_every, figure_every: as `swarmcode-torch evolve`'s options
@@ -430,10 +433,12 @@ def evolve(
             wandb_reporters,
             shown,
         )
+    names: dict[str, str] = {}  # a bad value from a settings file is named FILE: key
     if isinstance(config, (str, os.PathLike)):
-        from .runconfig import read_config_file
+        from .runconfig import read_config_file_keys
 
-        config = read_config_file(Path(config))
+        path, (config, keys) = Path(config), read_config_file_keys(Path(config))
+        names = {k: f"{path}: {k}" for k in keys if k not in settings}
     scenario_obj = scenario if isinstance(scenario, Scenario) else None
     if scenario is not None and scenario_obj is None:
         settings["scenario"] = scenario
@@ -445,13 +450,15 @@ def evolve(
     make_dir = None if folder is None else (lambda ev: new_run_dir(folder, name))
     history = _History(callback)
     with ExitStack() as stack:
-        start = session.start_new(stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness)
+        start = session.start_new(
+            stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness, names=names or None
+        )
         return _run_started(start, history, reporters, wandb_reporters, shown, bounds, every)
 
 
 #: evolve's signature shows every keyword it takes: those declared in
 #: `run_options.RUN_OPTIONS` (`api=True`) before its own
-evolve.__signature__ = api_signature(evolve, EVOLVE_OPTIONS)  # type: ignore[attr-defined]
+declare_keywords(evolve, EVOLVE_OPTIONS)
 
 
 def _run_started(start, history, reporters, wandb_reporters, shown, bounds, every) -> RunResult:

@@ -208,17 +208,26 @@ def _what(o: Opt) -> str:
 def api_signature(
     func: Callable, options: Iterable[Opt], before: str = "reporters"
 ) -> inspect.Signature:
-    """The signature of `func` with the keywords of `options` (those with `api`) inserted
-    before its parameter `before`; `func`'s own parameters stay as they are."""
-    own = list(inspect.signature(func).parameters.values())
+    """The signature of `func` as written (before `declare_keywords`) with the keywords of
+    `options` (those with `api`) inserted before its parameter `before`."""
+    sig = getattr(func, "__own_signature__", None) or inspect.signature(func)
+    own = list(sig.parameters.values())
     at = next((i for i, p in enumerate(own) if p.name == before), len(own))
     added = [o.keyword() for o in options if o.api]
     names = {p.name for p in own}
     clash = [p.name for p in added if p.name in names]
     if clash:
         raise TypeError(f"{func.__name__} declares {', '.join(clash)} itself")
-    params = [*own[:at], *added, *own[at:]]
-    return inspect.signature(func).replace(parameters=params)
+    return sig.replace(parameters=[*own[:at], *added, *own[at:]])
+
+
+def declare_keywords(func: Callable, options: Iterable[Opt]) -> None:
+    """Show the keywords of `options` in `func`'s signature (`api_signature`), as
+    `inspect.signature`, `help()` and the documentation read it; `func` takes them in its
+    `**kwargs` (`api_values`)."""
+    sig = api_signature(func, options)
+    func.__own_signature__ = getattr(func, "__own_signature__", None) or inspect.signature(func)  # type: ignore[attr-defined]
+    func.__signature__ = sig  # type: ignore[attr-defined]
 
 
 def api_values(options: Iterable[Opt], kwargs: dict[str, Any]) -> tuple[Values, dict[str, Any]]:
