@@ -270,6 +270,7 @@ def start_evolve(stack: ExitStack, o: Values, *, where: Where, attach=None):
                 on_dir=on_dir,
             )
         ev, run_dir = start.ev, start.run_dir
+        assert ev is not None  # a new run's start has its Evolution
         console.print(
             f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
             f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
