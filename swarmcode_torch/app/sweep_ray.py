@@ -20,9 +20,7 @@ def sweep_ray_options(
 ):
     """(workers, CPUs per run, GPUs per run, address) of a sweep on Ray, or None for the runs
     one after the other in this process; a one-line error for bad values or Ray options without
-    Ray."""
-    if workers < 1:
-        fail(f"--workers must be >= 1, got {workers}")
+    Ray (--workers >= 1 is checked with the other declared bounds, `run_options`)."""
     if workers == 1 and address is None:
         if cpus is not None or gpus is not None:
             fail(

@@ -12,6 +12,7 @@ from rich.markup import escape
 
 from ..sim.scenario import ScenarioError
 from . import session
+from .run_options import DEFAULT_BUDGETS
 from .signals import TERMINATED
 from .terminal import check_path, console, execute, fail, os_fail, set_threads_option
 
@@ -29,11 +30,6 @@ def parse_list(text: str, kind, option: str) -> list:
         if vals.count(v) > 1:
             fail(f"{option} lists {v:g} twice (each run is one budget and one seed)")
     return vals
-
-
-#: --budgets of a sweep of budgets alone (the paper's Table III); a sweep with --grid or
-#: --config runs the budget of its config unless --budgets is given.
-DEFAULT_BUDGETS = "2500,3000,4000,5000,6000,8000"
 
 
 def run_sweep(
@@ -64,9 +60,10 @@ def run_sweep(
     wandb: bool = False,
     wandb_project: str = "swarmcode-torch",
 ) -> None:
-    """The body of `swarmcode-torch sweep` (its options as parsed; `grid`: the --grid
-    KEY=V1,V2 pairs, `sweep_grid`; `config`: --config FILE, the runs' settings to start from;
-    `wandb`, `wandb_project`: each run logged to W&B, grouped by the sweep, `wandb_runs`)."""
+    """The body of `swarmcode-torch sweep`: its options as parsed (`run_options.SWEEP_OPTIONS`,
+    their declared bounds checked); `grid`: the --grid KEY=V1,V2 pairs, `sweep_grid`; `config`:
+    --config FILE, the runs' settings to start from; `wandb`, `wandb_project`: each run logged
+    to W&B, grouped by the sweep, `wandb_runs`."""
     from .evolve_start import wandb_option
     from .sweep_ray import sweep_on_ray, sweep_ray_options
 
@@ -87,8 +84,6 @@ def run_sweep(
     TERMINATED.clear()
     budget_list = None if budgets is None else parse_list(budgets, float, "--budgets")
     seed_list = parse_list(seeds, int, "--seeds")
-    if checkpoint_every < 1 or log_every < 1:
-        fail("--checkpoint-every and --log-every must be >= 1")
     on_ray = sweep_ray_options(workers, cpus_per_run, gpus_per_run, ray_address, device)
     project = wandb_option(wandb, wandb_project)  # before anything is made
     if logdir is not None and out is not None:
@@ -115,10 +110,13 @@ def run_sweep(
         grid_spec = parse_grid(grid, given)
         if config_file is None:
             base = session.resolve_config(preset, settings, names, **given)
-        else:
-            from .evolve_start import new_config
+        else:  # as evolve --config: a bad value the file gives is named FILE: key
+            from .evolve_start import config_from
 
-            base = new_config(config_file, None, preset, settings, **given)[0]
+            base, _, names = config_from(config_file, None, preset, settings, given)
+            names["seed"] = "--seeds"
+            if budgets is not None or names["budget"] == "--budget":
+                names["budget"] = "--budgets"
         if budget_list is None:
             budget_list = (
                 [base.budget]

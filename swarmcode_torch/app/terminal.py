@@ -1,7 +1,7 @@
 """What the commands of the command line share: its consoles, one-line errors, path options
 (`cli_output`), the progress line and a run executed under it (`execute`, here: its reporters,
 and the line a stopped or failed run prints, `stop_lines`), the best team's table
-(`team_table`), and the thread and Ray options of a run (`run_options`). Every public name is
+(`team_table`), and the thread and Ray options of a run (`process_options`). Every public name is
 importable from here."""
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from rich.table import Column
 
 from . import session
 from .cli_output import MAX_PATH, Failed, check_path, console, err, fail, os_fail
-from .run_options import (
+from .process_options import (
     THREADS_HELP,
     attach_shards,
     eval_shards_option,

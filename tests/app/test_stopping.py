@@ -123,7 +123,7 @@ def test_resumed_metric_stop_reads_the_earlier_generations_back(tmp_path):
         (["--stop-metric", "team/fitness"], "--stop-metric needs --patience K"),
         (["--patience", 2, "--stop-metric", "nope"], "unknown metric 'nope'"),
         (["--patience", 2, "--stop-min-delta", -1], "--stop-min-delta must be a finite number"),
-        (["--patience", 2, "--stop-warmup", -1], "--stop-warmup must be an integer >= 0"),
+        (["--patience", 2, "--stop-warmup", -1], "--stop-warmup must be >= 0"),
         (["--patience", 2, "--stop-mode", "up"], "--stop-mode must be max or min"),
         (["--keep-checkpoints", -1], "--keep-checkpoints must be >= 0"),
     ],
