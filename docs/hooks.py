@@ -4,6 +4,8 @@ at every build from the code, so that it cannot go stale:
 - the tutorials: notebooks/*.ipynb, added as pages (mkdocs-jupyter renders them, without
   executing them), and CHANGELOG.md;
 - the CLI reference: the `--help` of every command, in place of `<!-- cli-reference -->`;
+- the keywords `swarmcode_torch.evolve` takes from the option declarations
+  (`app/run_options.py`), in place of `<!-- evolve-keywords -->`;
 - the hardware catalog's fields with their bounds and built-in values, in place of
   `<!-- hardware-catalog -->`;
 - links to repository files that are not part of the site (`../examples/three-niche.toml`,
@@ -34,6 +36,7 @@ TUTORIALS = "notebooks"
 _REPO = "repo-file:"
 CLI_MARKER = "<!-- cli-reference -->"
 HARDWARE_MARKER = "<!-- hardware-catalog -->"
+KEYWORDS_MARKER = "<!-- evolve-keywords -->"
 #: the width the CLI's help is rendered at
 HELP_COLUMNS = 100
 
@@ -64,6 +67,8 @@ def on_page_markdown(markdown, page, config, files):
         markdown = markdown.replace(CLI_MARKER, cli_reference())
     if HARDWARE_MARKER in markdown:
         markdown = markdown.replace(HARDWARE_MARKER, hardware_table())
+    if KEYWORDS_MARKER in markdown:
+        markdown = markdown.replace(KEYWORDS_MARKER, evolve_keywords())
     return rewrite_repo_links(markdown, page.file.src_uri, config, files)
 
 
@@ -182,6 +187,25 @@ def cli_reference() -> str:
 
     walk(typer.main.get_command(app), [])
     return "\n".join(parts)
+
+
+def evolve_keywords() -> str:
+    """Markdown: a table of the keywords of `swarmcode_torch.evolve` that are declared with the
+    command line's options (`run_options.RUN_OPTIONS`, `api=True`): keyword, default, the option
+    it matches and its help."""
+    from swarmcode_torch.app.run_options import EVOLVE_OPTIONS
+
+    def cell(text: str) -> str:
+        return text.replace("|", "\\|")
+
+    rows = ["| keyword | default | as the option | what it is |", "|---|---|---|---|"]
+    for o in EVOLVE_OPTIONS:
+        if o.api:
+            default = o.keyword().default
+            rows.append(
+                f"| `{o.name}` | `{default!r}` | `{o.spelling}` | {cell(' '.join(o.help.split()))} |"
+            )
+    return "\n".join(rows)
 
 
 # --- the hardware catalog -------------------------------------------------------------------

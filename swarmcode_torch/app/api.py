@@ -37,6 +37,8 @@ from ..sim.scenario import Scenario
 from . import records, session
 from .checkpoints import load_run
 from .files import RunError, new_run_dir
+from .optspec import Intervals, Values, api_values, check_values, declare_keywords
+from .run_options import EVOLVE_OPTIONS
 from .runconfig import scenario_to_toml  # noqa: F401 - the API's, as before
 from .session import make_config  # noqa: F401 - the API's, as before
 
@@ -225,16 +227,20 @@ def _logdir(logdir) -> Path:
     return Path(logdir)
 
 
-def _check_every(checkpoint_every: int, render_every: int, figure_every: int) -> None:
-    for name, v in (
-        ("checkpoint_every", checkpoint_every),
-        ("render_every", render_every),
-        ("figure_every", figure_every),
-    ):
-        if not isinstance(v, int) or isinstance(v, bool):
-            raise TypeError(f"{name} must be an integer, got {v!r:.40}")
-    if checkpoint_every < 1 or render_every < 0 or figure_every < 1:
-        raise ValueError("checkpoint_every and figure_every must be >= 1, render_every >= 0")
+def _declared(**given: Any) -> Values:
+    """The API's keywords that `run_options` declares (checkpoint_every=, patience=, ...) as
+    `Values`, each checked against its declared bound (`optspec.check_values`): TypeError for
+    one that is not an integer, ValueError below its bound."""
+    opts = [o for o in EVOLVE_OPTIONS if o.name in given]
+    values = Values(opts, given)
+    check_values(opts, values)
+    return values
+
+
+def _intervals(**given: Any) -> Intervals:
+    """The `Intervals` of the API's keywords (checkpoint_every=, render_every=, ...; the others
+    at their defaults), each checked (`_declared`)."""
+    return _declared(**given).intervals(EVOLVE_OPTIONS)
 
 
 def _check_hooks(callback, reporters) -> list:
@@ -317,8 +323,23 @@ def file_reporters(
     summary.json and teams.jsonl, metrics.csv, TensorBoard events (a replay image every
     `render_every` generations, 0: never; the composition figure every `figure_every`) and
     checkpoint.pt every `checkpoint_every` generations and at the end."""
-    _check_every(checkpoint_every, render_every, figure_every)
-    return session.file_reporters(run_dir, checkpoint_every, render_every, figure_every)
+    every = _intervals(
+        checkpoint_every=checkpoint_every, render_every=render_every, figure_every=figure_every
+    )
+    return _file_reporters(run_dir, every)
+
+
+def _file_reporters(run_dir: Path, every: Intervals, keep: int = 0) -> list:
+    """The reporters that write a run directory (`session.file_reporters`) at `every`, keeping
+    the last `keep` checkpoints (`keep`)."""
+    return session.file_reporters(
+        run_dir,
+        every.checkpoint,
+        every.render,
+        every.figure,
+        snapshot_every=every.snapshot,
+        keep_checkpoints=keep,
+    )
 
 
 def _result(
@@ -337,28 +358,16 @@ def _result(
     )
 
 
-def _bounds(
-    max_time, patience, snapshot_every, stop=(), callback=None, keep_checkpoints=None
-) -> session.Bounds | None:
+def _bounds(max_time, patience, stop=(), callback=None) -> session.Bounds | None:
     """The run's `session.Bounds` (None without max_time, patience, the early-stopping settings
-    `stop` (`stopping.metric_stop`'s) and a callback); ValueError otherwise, and for a bad
-    `keep_checkpoints` (`keep.check_keep`)."""
-    from .keep import check_keep
-
-    check_keep(keep_checkpoints)
+    `stop` (`stopping.metric_stop`'s) and a callback); ValueError otherwise. The declared
+    bounds (patience >= 1, stop_warmup >= 0) are checked with the other keywords'
+    (`optspec.check_values`)."""
     from .stopping import CallbackStop, metric_stop
 
     metric = metric_stop(patience, *(tuple(stop) or (None,) * 4))
     stops = [metric] if metric is not None else []
     stops += [CallbackStop(callback)] if callback is not None else []
-    if (
-        not isinstance(snapshot_every, int)
-        or isinstance(snapshot_every, bool)
-        or snapshot_every < 0
-    ):
-        raise ValueError(
-            f"snapshot_every must be an integer >= 0 (0: no snapshots), got {snapshot_every!r:.40}"
-        )
     if max_time is None and patience is None and not stops:
         return None
     return session.Bounds(max_time=max_time, patience=patience, stops=stops)
@@ -368,26 +377,11 @@ def _bounds(
 def evolve(
     config: SwarmCoDeConfig | str | os.PathLike | None = None,
     *,
-    scenario: str | os.PathLike | Scenario | None = None,
-    logdir: str | os.PathLike | None = "runs",
-    checkpoint_every: int = 10,
-    render_every: int = 50,
-    figure_every: int = 50,
     reporters: Iterable = (),
     callback: Callable[[GenerationResult], Any] | None = None,
     fitness: ScoreFn | None = None,
-    threads: int | None = None,
-    from_run: str | os.PathLike | None = None,
-    snapshot_every: int = 0,
-    max_time: float | str | None = None,
-    patience: int | None = None,
     wandb: str | None = None,
     progress: bool | None = None,
-    stop_metric: str | None = None,
-    stop_min_delta: float | None = None,
-    stop_warmup: int | None = None,
-    stop_mode: str | None = None,
-    keep_checkpoints: int = 0,
     **settings,
 ) -> RunResult:
     """Run an evolution and return its `RunResult`.
@@ -399,6 +393,9 @@ def evolve(
         population=30, seed=0, budget=4000.0, delta=0.5, ...` (any key of SwarmCoDeConfig / a
         run's config.toml).
     scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
+    budget, objective, generations, population, swarm_size, trials, ticks, seed, device,
+        compile, preset: the settings `swarmcode-torch evolve` has options for (UNSET: the
+        config's), as any other key of `settings`.
     logdir: where the run directory is created (named as by the CLI,
         `SCENARIO[__bBUDGET][__OBJECTIVE]__SEED__TIME`); None: run in memory, write no file.
     checkpoint_every, render_every, figure_every: as `swarmcode-torch evolve`'s options
@@ -448,42 +445,43 @@ def evolve(
     file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
     generation (continue with `resume`) and re-raises KeyboardInterrupt.
     """
-    _check_every(checkpoint_every, render_every, figure_every)
+    o, settings = api_values(EVOLVE_OPTIONS, settings)
+    check_values(o.options.values(), o)
+    every = o.intervals(EVOLVE_OPTIONS)
     reporters = _check_hooks(callback, reporters)
-    if wandb is not None and logdir is None:
+    if wandb is not None and o.logdir is None:
         raise ValueError("wandb needs a run directory for its files: give a logdir")
-    wandb_reporters = _wandb_reporters(wandb, None, render_every)
+    wandb_reporters = _wandb_reporters(wandb, None, every.render)
     fitness = _checked_fitness(fitness)
     bounds = _bounds(
-        max_time,
-        patience,
-        snapshot_every,
-        (stop_metric, stop_min_delta, stop_warmup, stop_mode),
+        o.max_time,
+        o.patience,
+        (o.stop_metric, o.stop_min_delta, o.stop_warmup, o.stop_mode),
         callback,
-        keep_checkpoints,
     )
     shown = _progress(progress)
-    set_threads(threads)
+    set_threads(o.threads)
     reporters = [*([shown] if shown else []), *reporters, *wandb_reporters]
-    if from_run is not None:
+    scenario = settings.pop("scenario", None)
+    if o.from_run is not None:
         return _branch(
             config,
             scenario,
-            logdir,
-            from_run,
+            o,
             settings,
             fitness,
             reporters,
             callback,
             bounds,
-            (checkpoint_every, render_every, figure_every, snapshot_every, keep_checkpoints),
             wandb_reporters,
             shown,
         )
+    names: dict[str, str] = {}  # a bad value from a settings file is named FILE: key
     if isinstance(config, (str, os.PathLike)):
-        from .runconfig import read_config_file
+        from .runconfig import read_config_file_keys
 
-        config = read_config_file(Path(config))
+        path, (config, keys) = Path(config), read_config_file_keys(Path(config))
+        names = {k: f"{path}: {k}" for k in keys if k not in settings}
     scenario_obj = scenario if isinstance(scenario, Scenario) else None
     if scenario is not None and scenario_obj is None:
         settings["scenario"] = scenario
@@ -491,42 +489,33 @@ def evolve(
     if scenario_obj is not None:
         cfg = replace(cfg, scenario=scenario_obj.name)
     name = cfg if scenario_obj is None else replace(cfg, scenario=_scenario_stem(scenario_obj))
-    folder = None if logdir is None else _logdir(logdir)
+    folder = None if o.logdir is None else _logdir(o.logdir)
     make_dir = None if folder is None else (lambda ev: new_run_dir(folder, name))
     history = _History()  # the callback is `bounds`': it may stop the run
     with ExitStack() as stack:
-        start = session.start_new(stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness)
+        start = session.start_new(
+            stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness, names=names or None
+        )
         return _run_started(
-            start,
-            history,
-            reporters,
-            wandb_reporters,
-            shown,
-            bounds,
-            (checkpoint_every, render_every, figure_every, snapshot_every, keep_checkpoints),
+            start, history, reporters, wandb_reporters, shown, bounds, every, o.keep_checkpoints
         )
 
 
-def _run_started(start, history, reporters, wandb_reporters, shown, bounds, every) -> RunResult:
+#: evolve's signature shows every keyword it takes: those declared in
+#: `run_options.RUN_OPTIONS` (`api=True`) before its own
+declare_keywords(evolve, EVOLVE_OPTIONS)
+
+
+def _run_started(
+    start, history, reporters, wandb_reporters, shown, bounds, every, keep=0
+) -> RunResult:
     """Run a new or branched run that `session` started (its directory locked by the caller's
-    stack): the W&B reporters named after its directory, its file reporters (`every`: the
-    checkpoint, render, figure and snapshot intervals; none for a run in memory), the progress
-    line closed however the run ends. Its `RunResult`."""
+    stack): the W&B reporters named after its directory, its file reporters (at `every`, the
+    run's `Intervals`, keeping `keep` checkpoints; none for a run in memory), the progress line
+    closed however the run ends. Its `RunResult`."""
     for r in wandb_reporters:  # named after the run directory, if there is one
         r.run_dir = start.run_dir
-    checkpoint_every, render_every, figure_every, snapshot_every, keep = every
-    reps = (
-        []
-        if start.run_dir is None
-        else session.file_reporters(
-            start.run_dir,
-            checkpoint_every,
-            render_every,
-            figure_every,
-            snapshot_every=snapshot_every,
-            keep_checkpoints=keep,
-        )
-    )
+    reps = [] if start.run_dir is None else _file_reporters(start.run_dir, every, keep)
     with _closing(shown):
         session.run(start.ev, start.run_dir, [*reps, history, *reporters], bounds=bounds)
     return _result(start.ev, start.run_dir, history.rows, bounds)
@@ -535,19 +524,18 @@ def _run_started(start, history, reporters, wandb_reporters, shown, bounds, ever
 def _branch(
     config,
     scenario,
-    logdir,
-    from_run,
+    o: Values,
     settings,
     fitness,
     reporters,
     callback,
     bounds,
-    every,
     wandb_reporters,
     shown,
 ) -> RunResult:
-    """`evolve(from_run=...)`: a new run from a run's snapshot (`session.start_branch`); `every`,
-    `wandb_reporters`, `shown` as `_run_started` takes them."""
+    """`evolve(from_run=...)`: a new run from a run's snapshot (`session.start_branch`); `o`:
+    evolve's own keywords (`optspec.api_values`); `wandb_reporters`, `shown` as `_run_started`
+    takes them."""
     from .checkpoints import load_branch, parse_run_ref
 
     if config is not None:
@@ -559,17 +547,21 @@ def _branch(
         raise ValueError("a branch runs on its parent's scenario; scenario cannot change")
     if scenario is not None:
         settings["scenario"] = scenario
-    run, generation = parse_run_ref(os.fspath(from_run))
+    run, generation = parse_run_ref(os.fspath(o.from_run))
     branch = load_branch(run, generation)
     cfg = make_config(branch.config, **settings)
+    logdir = o.logdir
     if logdir == "runs":  # the default: beside the parent
         logdir = branch.run_dir.parent
     folder = None if logdir is None else _logdir(logdir)
-    make_dir = None if folder is None else (lambda ev: new_run_dir(folder, cfg))
+    make_dir = None if folder is None else (lambda ev: new_run_dir(folder, cfg, branch))
     history = _History()  # the callback is `bounds`'
     with ExitStack() as stack:
         start = session.start_branch(stack, branch, cfg, make_dir, fitness=fitness)
-        return _run_started(start, history, reporters, wandb_reporters, shown, bounds, every)
+        every = o.intervals(EVOLVE_OPTIONS)
+        return _run_started(
+            start, history, reporters, wandb_reporters, shown, bounds, every, o.keep_checkpoints
+        )
 
 
 def start_evolution(
@@ -626,19 +618,29 @@ def resume(
     checkpoint that cannot be used. `reporters`, `callback` (called with each generation's
     `GenerationResult`; it may stop the run), `threads`, `snapshot_every`, `max_time`,
     `patience`, the `stop_*` settings, `keep_checkpoints`, `wandb` and `progress`: as in
-    `evolve` (`max_time` counts from this call)."""
-    _check_every(checkpoint_every, render_every, figure_every)
+    `evolve` (`max_time` counts from this call); the keywords `run_options` declares are
+    checked against their declared bounds, as in `evolve`."""
+    d = _declared(
+        checkpoint_every=checkpoint_every,
+        render_every=render_every,
+        figure_every=figure_every,
+        snapshot_every=snapshot_every,
+        threads=threads,
+        max_time=max_time,
+        patience=patience,
+        stop_metric=stop_metric,
+        stop_min_delta=stop_min_delta,
+        stop_warmup=stop_warmup,
+        stop_mode=stop_mode,
+        keep_checkpoints=keep_checkpoints,
+    )
+    every = d.intervals(EVOLVE_OPTIONS)
     reporters = _check_hooks(callback, reporters) + _wandb_reporters(
-        wandb, Path(run_dir), render_every
+        wandb, Path(run_dir), every.render
     )
     fitness = _checked_fitness(fitness)
     bounds = _bounds(
-        max_time,
-        patience,
-        snapshot_every,
-        (stop_metric, stop_min_delta, stop_warmup, stop_mode),
-        callback,
-        keep_checkpoints,
+        max_time, patience, (stop_metric, stop_min_delta, stop_warmup, stop_mode), callback
     )
     shown = _progress(progress)
     if generations is not None and (
@@ -661,14 +663,7 @@ def resume(
         if ev.done:  # nothing to run: no file changes (as the CLI)
             return _result(ev, run_dir, earlier)
         history = _History()  # the callback is `bounds`'
-        reps = session.file_reporters(
-            run_dir,
-            checkpoint_every,
-            render_every,
-            figure_every,
-            snapshot_every=snapshot_every,
-            keep_checkpoints=keep_checkpoints,
-        )
+        reps = _file_reporters(run_dir, every, keep_checkpoints)
         with _closing(shown):
             session.run(
                 ev,

@@ -21,7 +21,9 @@ from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 from . import evolve_start
 from .inspect_view import capabilities, inspect_sweep, print_lineage
-from .options import Dynamics, Evaluate, Evolve, Replay, Sweep, Worlds, objective_value
+from .options import Dynamics, Evaluate, Replay, Worlds, command
+from .optspec import Values, check_values
+from .run_options import EVOLVE_OPTIONS, SWEEP_OPTIONS
 from .signals import TERMINATED, ignore_stop_signals, stop_once
 from .terminal import check_path, console, err, fail, os_fail, print_team
 
@@ -206,105 +208,38 @@ def world(
     )
 
 
-@app.command()
-def evolve(
-    scenario: Evolve.scenario = None,
-    budget: Evolve.budget = None,
-    objective: Evolve.objective = None,
-    generations: Evolve.generations = None,
-    population: Evolve.population = None,
-    swarm_size: Evolve.swarm_size = None,
-    trials: Evolve.trials = None,
-    ticks: Evolve.ticks = None,
-    seed: Evolve.seed = None,
-    device: Evolve.device = None,
-    compile: Evolve.compile = None,
-    logdir: Evolve.logdir = None,
-    checkpoint_every: Evolve.checkpoint_every = 10,
-    log_every: Evolve.log_every = 10,
-    render_every: Evolve.render_every = 50,
-    figure_every: Evolve.figure_every = 50,
-    resume: Evolve.resume = None,
-    preset: Evolve.preset = None,
-    settings: Evolve.settings = None,
-    eval_workers: Evolve.eval_workers = 1,
-    cpus_per_eval_worker: Evolve.cpus_per_eval_worker = None,
-    ray_address: Evolve.ray_address = None,
-    threads: Evolve.threads = None,
-    config: Evolve.config = None,
-    print_config: Evolve.print_config = False,
-    from_run: Evolve.from_run = None,
-    snapshot_every: Evolve.snapshot_every = 0,
-    max_time: Evolve.max_time = None,
-    patience: Evolve.patience = None,
-    stop_metric: Evolve.stop_metric = None,
-    stop_min_delta: Evolve.stop_min_delta = None,
-    stop_warmup: Evolve.stop_warmup = None,
-    stop_mode: Evolve.stop_mode = None,
-    keep_checkpoints: Evolve.keep_checkpoints = 0,
-    wandb: Evolve.wandb = False,
-    wandb_project: Evolve.wandb_project = "swarmcode-torch",
-) -> None:
-    """Evolve a heterogeneous swarm (defaults: the paper's budget experiment)."""
-    evolve_start.evolve_command(**locals())
+def _evolve(values: Values) -> None:
+    evolve_start.evolve_command(values)
 
 
-@app.command()
-def sweep(
-    budgets: Sweep.budgets = None,
-    seeds: Sweep.seeds = "0",
-    objective: Sweep.objective = None,
-    scenario: Sweep.scenario = None,
-    generations: Sweep.generations = None,
-    population: Sweep.population = None,
-    swarm_size: Sweep.swarm_size = None,
-    trials: Sweep.trials = None,
-    ticks: Sweep.ticks = None,
-    device: Sweep.device = None,
-    compile: Sweep.compile = None,
-    logdir: Sweep.logdir = None,
-    out: Sweep.out = None,
-    checkpoint_every: Sweep.checkpoint_every = 10,
-    log_every: Sweep.log_every = 50,
-    preset: Sweep.preset = None,
-    settings: Sweep.settings = None,
-    workers: Sweep.workers = 1,
-    cpus_per_run: Sweep.cpus_per_run = None,
-    gpus_per_run: Sweep.gpus_per_run = None,
-    ray_address: Sweep.ray_address = None,
-    threads: Sweep.threads = None,
-    grid: Sweep.grid = None,
-    config: Sweep.config = None,
-) -> None:
-    """One evolution per budget (and seed, and --grid setting); writes the paper's Table III as Markdown and CSV, and a plot."""
+def _sweep(values: Values) -> None:
     from .sweep_run import run_sweep
 
-    run_sweep(
-        budgets,
-        seeds,
-        objective_value(objective),
-        scenario,
-        generations,
-        population,
-        swarm_size,
-        trials,
-        ticks,
-        device,
-        compile,
-        logdir,
-        out,
-        checkpoint_every,
-        log_every,
-        preset,
-        settings,
-        workers,
-        cpus_per_run,
-        gpus_per_run,
-        ray_address,
-        threads,
-        grid=grid,
-        config=config,
+    try:
+        check_values(SWEEP_OPTIONS, values, lambda o: o.spelling)
+    except (TypeError, ValueError) as e:
+        fail(str(e))
+    run_sweep(**values.converted())
+
+
+#: evolve and sweep: their options from `run_options.RUN_OPTIONS`
+evolve = app.command("evolve")(
+    command(
+        EVOLVE_OPTIONS,
+        _evolve,
+        "evolve",
+        "Evolve a heterogeneous swarm (defaults: the paper's budget experiment).",
     )
+)
+sweep = app.command("sweep")(
+    command(
+        SWEEP_OPTIONS,
+        _sweep,
+        "sweep",
+        "One evolution per budget (and seed, and --grid setting); writes the paper's Table III "
+        "as Markdown and CSV, and a plot.",
+    )
+)
 
 
 @app.command()

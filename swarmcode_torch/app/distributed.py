@@ -6,7 +6,7 @@ used, never when the package is imported. docs/DISTRIBUTED.md shows local, multi
 clusters.
 
 - `run_tasks` runs a function once per job as Ray tasks, at most `workers` at once, each with
-  its CPUs and GPUs (the sweep's per-run function, `sweep_run.sweep_task`), and reports each as it
+  its CPUs and GPUs (the sweep's per-run function, `sweep_ray.sweep_task`), and reports each as it
   ends; a failed job does not stop the others.
 - `ShardedEvaluator` is an evaluator for `evolve.Context.evaluator`: it cuts a generation's
   evaluation plan (`evaluation.plan_evaluation`, drawn in the driver) into shards of whole
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from typing import Any
 
 import torch
 
@@ -106,14 +107,17 @@ def run_tasks(
     num_gpus: float,
     on_finish: Callable[[int, str | None, dict], None] | None = None,
     what: str = "running tasks on Ray",
+    on_result: Callable[[int, Any], str | None] | None = None,
 ) -> list[str | None]:
     """fn(*job) for every job as a Ray task (Ray connected: `ray_session`), at most `workers` at
     once, each reserving `num_cpus` CPUs and `num_gpus` GPUs; fn returns None when the job
     finished, else its error in one line. A task is not retried: its job is reported failed
     (a dead worker: the Ray error, in one line) and the others go on. `on_finish(index, error,
-    counts)` is called as each ends (counts: done, running, failed, total). Returns each job's
-    error (None: finished). Ctrl-C (KeyboardInterrupt) cancels the running tasks, which get
-    KeyboardInterrupt in turn (a run writes its checkpoint), waits up to INTERRUPT_GRACE seconds
+    counts)` is called as each ends (counts: done, running, failed, total). When fn returns
+    more than its error, `on_result(index, value)` turns what job `index` returned into its error
+    here, in the driver (writing files the task sent back; an exception it raises is the job's
+    error). Returns each job's error (None: finished). Ctrl-C (KeyboardInterrupt) cancels the
+    running tasks, which get KeyboardInterrupt in turn (a run writes its checkpoint), waits up to INTERRUPT_GRACE seconds
     for them, and re-raises. Before any job, as many probe tasks as will run at once (with the
     same CPUs and GPUs) must start within SWARMCODE_RAY_START_TIMEOUT seconds (`wait_started`),
     else RayUnavailable naming `what` (Ray would wait forever for workers that cannot start)."""
@@ -145,10 +149,7 @@ def run_tasks(
             ready, _ = ray.wait(list(running), num_returns=1)
             for ref in ready:
                 i = running.pop(ref)
-                try:
-                    errors[i] = ray.get(ref)
-                except ray.exceptions.RayError as e:
-                    errors[i] = one_line(e)
+                errors[i] = _task_error(ray, ref, i, on_result)
                 if errors[i] is None:
                     done += 1
                 else:
@@ -169,6 +170,20 @@ def run_tasks(
         for ref in refs:
             ray.cancel(ref)
         if refs:
-            ray.wait(refs, num_returns=len(refs), timeout=INTERRUPT_GRACE)
+            ended, _ = ray.wait(refs, num_returns=len(refs), timeout=INTERRUPT_GRACE)
+            if on_result is not None:  # what the stopped tasks sent back (their checkpoints)
+                for ref in ended:
+                    _task_error(ray, ref, running[ref], on_result)
         raise
     return errors
+
+
+def _task_error(ray, ref, i: int, on_result: Callable[[int, Any], str | None] | None):
+    """The error of task `ref` (job `i`) that has ended, in one line; None when it finished."""
+    try:
+        value = ray.get(ref)
+        return value if on_result is None else on_result(i, value)
+    except ray.exceptions.RayError as e:
+        return one_line(e)
+    except Exception as e:  # noqa: BLE001 - on_result's failure is this job's error
+        return one_line(e)

@@ -1,6 +1,6 @@
 """What `swarmcode-torch evolve` does before its run: its options checked and turned into the
 run's config (a preset or --config FILE, --from RUN[@GENERATION], the options, --set), the
-bounds (--max-time, --patience) and --wandb, and the new, resumed or branched run started
+bounds (--max-time, --patience, --stop-*) and --wandb, and the new, resumed or branched run started
 through `session` with its run directory locked."""
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from rich.markup import escape
 from ..coevo.config import with_overrides
 from ..sim.scenario import ScenarioError
 from . import session
-from .options import objective_value
-from .settings import parse_settings
+from .optspec import Values, check_values
+from .settings import option_names, parse_settings
 from .signals import TERMINATED, terminate_as_interrupt
 from .terminal import (
     Where,
@@ -48,31 +48,32 @@ def wandb_option(on: bool, project: str) -> str | None:
     return project
 
 
-def bounds_option(max_time: str | None, patience: int | None, snapshot_every: int, stop=None):
-    """The run's `session.Bounds` (None without --max-time, --patience and `stop`: the
-    --stop-* options, `stopping.metric_stop`'s arguments); one-line errors."""
+def bounds_option(o: Values):
+    """The run's `session.Bounds` of evolve's options (None without --max-time, --patience and
+    the --stop-* options, `stopping.metric_stop`'s); one-line errors. The declared bounds
+    (--patience >= 1, --stop-warmup >= 0) are checked with the other options'
+    (`optspec.check_values`)."""
     from .stopping import metric_stop
 
-    if snapshot_every < 0:
-        fail(f"--snapshot-every must be >= 0 (0: no snapshots), got {snapshot_every}")
+    stop = (o.stop_metric, o.stop_min_delta, o.stop_warmup, o.stop_mode)
     try:
-        metric = metric_stop(patience, *(stop or (None,) * 4), dash=True)
+        metric = metric_stop(o.patience, *stop, dash=True)
     except ValueError as e:
         fail(str(e))
-    if max_time is None and patience is None:
+    if o.max_time is None and o.patience is None:
         return None
-    if patience is not None and patience < 1:
-        fail(f"--patience must be >= 1 (generations without a better best team), got {patience}")
     try:
         return session.Bounds(
-            max_time=max_time, patience=patience, stops=[metric] if metric else []
+            max_time=o.max_time, patience=o.patience, stops=[metric] if metric else []
         )
     except ValueError as e:
         fail(f"--{e}".replace("--max_time", "--max-time"))
 
 
 def bound_line(bounds, ev, run_dir: Path) -> str:
-    """What a run stopped by --max-time or --patience prints."""
+    """What a run stopped by --max-time, --patience or a --stop-metric prints."""
+    from .stop_lines import generations_done  # a count, and the numbers from 0
+
     g = ev.state.generation
     if bounds.stopper is not None:
         why = bounds.stopper.why()
@@ -84,18 +85,30 @@ def bound_line(bounds, ev, run_dir: Path) -> str:
     else:
         why = f"--max-time reached ({bounds.elapsed:.1f}s of {bounds.max_time:g}s)"
     return (
-        f"Stopped after {g} generations: {why}; checkpoint of generation {g} is in "
+        f"Stopped after {generations_done(g)}: {why}; its checkpoint is in "
         f"{run_dir}; continue with: swarmcode-torch evolve --resume {run_dir}"
     )
 
 
-def new_config(config_file: Path | None, from_run: str | None, preset, settings, **given):
-    """(the config of a new run: --config FILE or the preset, or the --from run's, with
-    --preset, the options and --set on top; the `checkpoints.Branch` of --from, or None)."""
-    from .checkpoints import load_branch, parse_run_ref
-    from .runconfig import read_config_file
-    from .settings import option_names
+def _spell(o) -> str:
+    return o.spelling
 
+
+def new_config(o: Values):
+    """(the config of a new run of evolve's options `o`, its `checkpoints.Branch` or None, how
+    its checks name each key): `config_from`."""
+    return config_from(o.config, o.from_run, o.preset, o.settings, o.config_keys(skip=("preset",)))
+
+
+def config_from(config_file: Path | None, from_run: str | None, preset, settings, given: dict):
+    """(the config of a new run: --config FILE or the preset, or the --from run's, with
+    --preset, the options' config keys `given` and --set on top; the `checkpoints.Branch` of
+    --from, or None; how the errors of its checks name each key: --population, --set delta,
+    FILE: delta). evolve and sweep (its --config) make their configs here."""
+    from .checkpoints import load_branch, parse_run_ref
+    from .runconfig import read_config_file_keys
+
+    names = option_names()
     branch = None
     if from_run is not None:
         if config_file is not None:
@@ -114,35 +127,38 @@ def new_config(config_file: Path | None, from_run: str | None, preset, settings,
             )
         base = branch.config
     elif config_file is not None:
-        base = read_config_file(config_file)
+        base, keys = read_config_file_keys(config_file)
         if base.fitness_function is not None:
             fail(
                 f"{config_file}: fitness_function: a fitness function is given from Python "
                 "(swarmcode_torch.evolve(config=FILE, fitness=fn))"
             )
+        # a key the file sets is the file's to answer for, unless an option or --set replaces it
+        names.update({k: f"{config_file}: {k}" for k in keys})
     else:
-        return session.resolve_config(preset, settings, **given), None
+        return session.resolve_config(preset, settings, names, **given), None, names
     if preset is not None:
         base = session.make_config(base, preset=preset)
-    names = option_names()
-    return replace(with_overrides(base, **given), **parse_settings(settings or [], names)), branch
+    plain = option_names()
+    pairs = parse_settings(settings or [], plain)
+    names.update({k: plain[k] for k in (*given, *pairs)})
+    return replace(with_overrides(base, **given), **pairs), branch, names
 
 
-def print_resolved_config(config_file, from_run, resume, preset, settings, **given) -> None:
+def print_resolved_config(o: Values) -> None:
     """--print-config: the resolved config of a new run (checked), as TOML, on stdout."""
     from .files import RunError
     from .runconfig import config_to_toml
-    from .settings import option_names
 
-    if resume is not None:
+    if o.resume is not None:
         fail("--print-config is for a new run; a resumed run's config is its config.toml")
     try:
-        cfg, branch = new_config(config_file, from_run, preset, settings, **given)
+        cfg, branch, names = new_config(o)
         if branch is None:
-            session.check_start(cfg, names=option_names())
+            session.check_start(cfg, names=names)
         else:
-            session.check_branch(branch, cfg, option_names())
-            cfg.validate(option_names())
+            session.check_branch(branch, cfg, names)
+            cfg.validate()
     except (ScenarioError, RunError, ValueError) as e:
         fail(str(e))
     except OSError as e:
@@ -154,114 +170,87 @@ def print_resolved_config(config_file, from_run, resume, preset, settings, **giv
     sys.stdout.flush()
 
 
-def start_evolve(
-    stack: ExitStack,
-    *,
-    scenario,
-    budget,
-    objective,
-    generations,
-    population,
-    swarm_size,
-    trials,
-    ticks,
-    seed,
-    device,
-    compile,
-    logdir,
-    checkpoint_every,
-    log_every,
-    render_every,
-    resume,
-    settings,
-    attach=None,
-    figure_every=50,
-    where: Where,
-    preset=None,
-    config_file=None,
-    from_run=None,
-):
-    """Check the options, then make (or lock and reopen) the run directory: (Evolution, run
+#: The options a resumed run may change (its config is its own).
+RESUME_CHANGES = ("generations", "device")
+
+
+def _resume_conflicts(o: Values) -> list[str]:
+    """The options given with --resume that would change the run's config."""
+    taken = ("settings", "config", "from_run")
+    return [
+        opt.spelling
+        for name, opt in o.options.items()
+        if (opt.setting is not None and name not in RESUME_CHANGES or name in taken)
+        and o[name] not in (None, [])
+    ]
+
+
+def _start_resume(stack: ExitStack, o: Values, where: Where, attach):
+    """--resume: the run reopened (`start_evolve`)."""
+    resume, generations = o.resume, o.generations
+    if generations is not None and generations < 1:
+        fail(f"--generations must be >= 1 (the total to extend the run to), got {generations}")
+    extra = _resume_conflicts(o)
+    if extra:
+        fail(
+            f"--resume uses the run's saved config; only --generations and --device may "
+            f"change (got {', '.join(extra)})"
+        )
+    if o.logdir is not None:
+        fail(
+            f"--logdir cannot be used with --resume: the run continues in its own "
+            f"directory ({resume})"
+        )
+    if not resume.is_dir():
+        fail(f"--resume {resume} is not a run directory (no such directory)")
+
+    def locked(run_dir: Path) -> None:
+        where.run_dir, where.resuming = run_dir, True
+
+    def loaded(saved: int) -> None:
+        where.saved = saved
+
+    start = session.start_resume(
+        stack,
+        resume,
+        generations=generations,
+        device=o.device,
+        stop_if_done=True,
+        on_locked=locked,
+        on_loaded=loaded,
+        attach=attach,
+    )
+    if start.ev is None:
+        console.print(
+            f"{resume} already has {start.saved} generations"
+            f"{'' if generations is None else f' (asked for {generations})'}; "
+            "nothing to do, no file changed",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
+        return None, resume, None
+    ev = start.ev
+    console.print(
+        f"Resuming [bold]{escape(str(resume))}[/] at generation "
+        f"{ev.state.generation} of {ev.cfg.generations}",
+        soft_wrap=True,
+    )
+    return ev, resume, start.saved
+
+
+def start_evolve(stack: ExitStack, o: Values, *, where: Where, attach=None):
+    """Start the run of evolve's options `o` (paths already checked): (Evolution, run
     directory, generation of its checkpoint), or (None, ...) when a resume has nothing to do.
     The run directory's lock is held until `stack` closes. `attach(ev)`, if given, is called
     once the Evolution exists and before any file is written (evaluation shards)."""
     from .files import RunError, new_run_dir
-    from .settings import option_names
 
-    if checkpoint_every < 1 or log_every < 1 or figure_every < 1 or render_every < 0:
-        fail("--checkpoint-every, --log-every and --figure-every must be >= 1, --render-every >= 0")
-    given = dict(
-        scenario=scenario,
-        budget=budget,
-        objective=objective,
-        population=population,
-        swarm_size=swarm_size,
-        trials=trials,
-        ticks=ticks,
-        seed=seed,
-        compile=compile,
-    )
     try:
-        if resume is not None:
-            if generations is not None and generations < 1:
-                fail(
-                    f"--generations must be >= 1 (the total to extend the run to), got "
-                    f"{generations}"
-                )
-            extra = [k.replace("_", "-") for k, v in given.items() if v is not None]
-            extra += ["set"] if settings else []
-            extra += ["preset"] if preset is not None else []
-            extra += ["config"] if config_file is not None else []
-            extra += ["from"] if from_run is not None else []
-            if extra:
-                fail(
-                    f"--resume uses the run's saved config; only --generations and --device may "
-                    f"change (got --{', --'.join(extra)})"
-                )
-            if logdir is not None:
-                fail(
-                    f"--logdir cannot be used with --resume: the run continues in its own "
-                    f"directory ({resume})"
-                )
-            if not resume.is_dir():
-                fail(f"--resume {resume} is not a run directory (no such directory)")
-
-            def locked(run_dir: Path) -> None:
-                where.run_dir, where.resuming = run_dir, True
-
-            def loaded(saved: int) -> None:
-                where.saved = saved
-
-            start = session.start_resume(
-                stack,
-                resume,
-                generations=generations,
-                device=device,
-                stop_if_done=True,
-                on_locked=locked,
-                on_loaded=loaded,
-                attach=attach,
-            )
-            if start.ev is None:
-                console.print(
-                    f"{resume} already has {start.saved} generations"
-                    f"{'' if generations is None else f' (asked for {generations})'}; "
-                    "nothing to do, no file changed",
-                    markup=False,
-                    highlight=False,
-                    soft_wrap=True,
-                )
-                return None, resume, None
-            ev = start.ev
-            console.print(
-                f"Resuming [bold]{escape(str(resume))}[/] at generation "
-                f"{ev.state.generation} of {ev.cfg.generations}",
-                soft_wrap=True,
-            )
-            return ev, resume, start.saved
-        cfg, branch = new_config(
-            config_file, from_run, preset, settings, generations=generations, device=device, **given
-        )
+        if o.resume is not None:
+            return _start_resume(stack, o, where, attach)
+        cfg, branch, names = new_config(o)
+        logdir = o.logdir
         if logdir is None:  # a branch goes beside its parent
             logdir = branch.run_dir.parent if branch is not None else Path("runs")
 
@@ -271,7 +260,7 @@ def start_evolve(
 
         def make_dir(ev) -> Path:
             try:
-                return new_run_dir(logdir, cfg)
+                return new_run_dir(logdir, cfg, branch)
             except OSError as e:
                 os_fail(e, f"--logdir {logdir}: cannot make a run directory")
 
@@ -282,7 +271,7 @@ def start_evolve(
                 branch,
                 cfg,
                 make_dir,
-                names=option_names(),
+                names=names,
                 before_build=check_logdir,
                 attach=attach,
                 on_dir=on_dir,
@@ -296,12 +285,13 @@ def start_evolve(
                 stack,
                 cfg,
                 make_dir,
-                names=option_names(),
+                names=names,
                 before_build=check_logdir,
                 attach=attach,
                 on_dir=on_dir,
             )
         ev, run_dir = start.ev, start.run_dir
+        assert ev is not None  # a new run's start has its Evolution
         console.print(
             f"Run directory: [bold]{escape(str(run_dir))}[/]  (device {ev.ctx.device}, "
             f"scenario {escape(ev.ctx.scenario.name)}, population {cfg.population}, "
@@ -315,149 +305,83 @@ def start_evolve(
         os_fail(e, "cannot start the run")
 
 
-def evolve_command(
-    *,
-    scenario,
-    budget,
-    objective,
-    generations,
-    population,
-    swarm_size,
-    trials,
-    ticks,
-    seed,
-    device,
-    compile,
-    logdir,
-    checkpoint_every,
-    log_every,
-    render_every,
-    figure_every,
-    resume,
-    preset,
-    settings,
-    eval_workers,
-    cpus_per_eval_worker,
-    ray_address,
-    threads,
-    config,
-    print_config,
-    from_run,
-    snapshot_every,
-    max_time,
-    patience,
-    wandb,
-    wandb_project,
-    stop_metric=None,
-    stop_min_delta=None,
-    stop_warmup=None,
-    stop_mode=None,
-    keep_checkpoints=0,
-) -> None:
-    """The `evolve` command's work, with its options as `cli.evolve` parsed them: the run
-    started (new, resumed or branched), run with progress, and its end printed."""
-    logdir, resume = check_path(logdir, "--logdir"), check_path(resume, "--resume")
-    config_file = check_path(config, "--config")
-    wandb_project = wandb_option(wandb, wandb_project)
-    TERMINATED.clear()  # this command's SIGTERM, not an earlier one's
-    bounds = bounds_option(
-        max_time, patience, snapshot_every, (stop_metric, stop_min_delta, stop_warmup, stop_mode)
+def checked_options(o: Values) -> Values:
+    """evolve's options with their paths checked (`terminal.check_path`) and every bound
+    (`optspec.check_values`, the messages naming the options as the command line spells them);
+    a one-line error otherwise."""
+    o = o.replace(
+        logdir=check_path(o.logdir, "--logdir"),
+        resume=check_path(o.resume, "--resume"),
+        config=check_path(o.config, "--config"),
     )
-    if keep_checkpoints < 0:
-        fail(f"--keep-checkpoints must be >= 0 (0: none kept), got {keep_checkpoints}")
-    if print_config:
-        print_resolved_config(
-            config_file,
-            from_run,
-            resume,
-            preset,
-            settings,
-            generations=generations,
-            device=device,
-            scenario=scenario,
-            budget=budget,
-            objective=objective_value(objective),
-            population=population,
-            swarm_size=swarm_size,
-            trials=trials,
-            ticks=ticks,
-            seed=seed,
-            compile=compile,
-        )
+    try:
+        check_values(o.options.values(), o, _spell)
+    except (TypeError, ValueError) as e:
+        fail(str(e))
+    return o
+
+
+def evolve_command(o: Values) -> None:
+    """The `evolve` command's work, with its options as `cli.evolve` parsed them
+    (`run_options.EVOLVE_OPTIONS`): the run started (new, resumed or branched), run with
+    progress, and its end printed."""
+    o = checked_options(o)
+    wandb_project = wandb_option(o.wandb, o.wandb_project)
+    TERMINATED.clear()  # this command's SIGTERM, not an earlier one's
+    bounds = bounds_option(o)
+    if o.print_config:
+        print_resolved_config(o)
         return
-    set_threads_option(threads)
-    shards = eval_shards_option(eval_workers, cpus_per_eval_worker, ray_address)
+    set_threads_option(o.threads)
+    shards = eval_shards_option(o.eval_workers, o.cpus_per_eval_worker, o.ray_address)
+    every = o.intervals()
     where = Where()
     with terminate_as_interrupt() as terminated:
         try:
             with ExitStack() as stack:
                 attach = None if shards is None else (lambda ev: attach_shards(stack, ev, *shards))
-                ev, run_dir, saved = start_evolve(
-                    stack,
-                    scenario=scenario,
-                    budget=budget,
-                    objective=objective_value(objective),
-                    generations=generations,
-                    population=population,
-                    swarm_size=swarm_size,
-                    trials=trials,
-                    ticks=ticks,
-                    seed=seed,
-                    device=device,
-                    compile=compile,
-                    logdir=logdir,
-                    checkpoint_every=checkpoint_every,
-                    log_every=log_every,
-                    render_every=render_every,
-                    resume=resume,
-                    settings=settings,
-                    attach=attach,
-                    figure_every=figure_every,
-                    where=where,
-                    preset=preset,
-                    config_file=config_file,
-                    from_run=from_run,
-                )
+                ev, run_dir, saved = start_evolve(stack, o, where=where, attach=attach)
                 if ev is None:
                     return
                 execute(
                     ev,
                     run_dir,
-                    checkpoint_every,
-                    log_every,
-                    render_every,
+                    every.checkpoint,
+                    every.log,
+                    every.render,
                     saved=saved,
-                    figure_every=figure_every,
+                    figure_every=every.figure,
                     where=where,
-                    snapshot_every=snapshot_every,
+                    snapshot_every=every.snapshot,
                     bounds=bounds,
                     wandb_project=wandb_project,
-                    keep_checkpoints=keep_checkpoints,
+                    keep_checkpoints=o.keep_checkpoints,
                 )
                 if shards is not None:
                     print_shard_traffic(ev.ctx.evaluator)
-            if bounds is not None and bounds.reason is not None:
-                console.print(
-                    bound_line(bounds, ev, run_dir), markup=False, highlight=False, soft_wrap=True
-                )
-            else:
-                console.print(
-                    f"Done: {ev.state.generation} generations in {escape(str(run_dir))}",
-                    soft_wrap=True,
-                )
-            print_team(run_dir)
-            # commands and paths are never wrapped (soft_wrap): each stays one line to copy
-            console.print(
-                f"Inspect: swarmcode-torch inspect {run_dir}",
-                markup=False,
-                highlight=False,
-                soft_wrap=True,
-            )
-            console.print(
-                f"Watch: tensorboard --logdir {run_dir.parent}",
-                markup=False,
-                highlight=False,
-                soft_wrap=True,
-            )
+            print_end(bounds, ev, run_dir)
         except KeyboardInterrupt:
             stopped(where, bool(terminated))
+
+
+def print_end(bounds, ev, run_dir: Path) -> None:
+    """What a finished (or bounded) run prints: why it ended, its team, what to run next."""
+    if bounds is not None and bounds.reason is not None:
+        console.print(
+            bound_line(bounds, ev, run_dir), markup=False, highlight=False, soft_wrap=True
+        )
+    else:
+        console.print(
+            f"Done: {ev.state.generation} generations in {escape(str(run_dir))}", soft_wrap=True
+        )
+    print_team(run_dir)
+    # commands and paths are never wrapped (soft_wrap): each stays one line to copy
+    console.print(
+        f"Inspect: swarmcode-torch inspect {run_dir}", markup=False, highlight=False, soft_wrap=True
+    )
+    console.print(
+        f"Watch: tensorboard --logdir {run_dir.parent}",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
+    )

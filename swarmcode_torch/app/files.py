@@ -326,13 +326,29 @@ def run_dir_name(cfg: SwarmCoDeConfig, when: float | None = None) -> str:
     return "__".join(parts)
 
 
-def new_run_dir(logdir: Path, cfg: SwarmCoDeConfig) -> Path:
-    """A new, empty run directory under `logdir`, named `run_dir_name`, with -1, -2, ... added
+#: The most characters of a parent's name kept in a branch's (a branch of a branch of ... stays
+#: a valid file name).
+MAX_PARENT_NAME = 150
+
+
+def branch_dir_name(parent: Path, generation: int, when: float | None = None) -> str:
+    """PARENT__branch-gG__TIME: a run branched from the run directory `parent` at its snapshot
+    of generation G (`--from PARENT@G`), e.g. 'four-niche__0__20261201-223000__branch-g200__
+    20261205-101500' (without the break): it sorts beside its parent and says it is a branch."""
+    stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(when))
+    return f"{Path(parent).name[:MAX_PARENT_NAME]}__branch-g{int(generation)}__{stamp}"
+
+
+def new_run_dir(logdir: Path, cfg: SwarmCoDeConfig, branch=None) -> Path:
+    """A new, empty run directory under `logdir`, named `run_dir_name` (`branch_dir_name` for a
+    `branch`, a `checkpoints.Branch`: its parent's name and generation), with -1, -2, ... added
     when that exists. Each candidate is made with one mkdir that fails if it exists, so runs
     started at the same second (threads or processes) never share a directory."""
     logdir = Path(logdir)
     logdir.mkdir(parents=True, exist_ok=True)
-    base = run_dir_name(cfg)
+    base = (
+        run_dir_name(cfg) if branch is None else branch_dir_name(branch.run_dir, branch.generation)
+    )
     i = 0
     while True:
         d = logdir / (base if i == 0 else f"{base}-{i}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .terminal import console, fail, os_fail
+from .terminal import console, fail, generations_done, os_fail
 
 
 def print_lineage(run_dir: Path) -> None:
@@ -24,9 +24,10 @@ def print_lineage(run_dir: Path) -> None:
         )
     stop = read_summary(run_dir).get("stop")
     if isinstance(stop, dict) and stop.get("reason") in ("max_time", "patience", "callback"):
+        done = stop.get("generation")  # generations finished: a count (`session.Bounds`)
+        after = f" after {generations_done(done)}" if isinstance(done, int) else ""
         console.print(
-            f"Stopped early by {stop['reason']} at generation {stop.get('generation')}"
-            "; it can be continued with evolve --resume",
+            f"Stopped early by {stop['reason']}{after}; it can be continued with evolve --resume",
             markup=False,
             highlight=False,
         )

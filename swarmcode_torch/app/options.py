@@ -1,334 +1,56 @@
-"""The options of the `swarmcode-torch` commands, as Typer reads them: one `Annotated` type per
-option, grouped by command (`Evolve.population`, `Sweep.budgets`, ...), so that `cli` holds
-the commands and what they print."""
+"""The options of the `swarmcode-torch` commands, as Typer reads them. Those of evolve and
+sweep are declared once, in `run_options.RUN_OPTIONS`, and made into a command by `command`; the
+other commands' are one `Annotated` type per option, grouped by command (`Replay.seed`, ...),
+so that `cli` holds the commands and what they print."""
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Callable, Iterable
 from enum import Enum
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
-from ..coevo.config import SwarmCoDeConfig
-from .terminal import THREADS_HELP
-
-#: The defaults --help shows for the options that leave them to the run's config.
-_DEFAULT = SwarmCoDeConfig()
-
-
-class Objective(str, Enum):
-    """--objective: its choices, in --help and in shell completion."""
-
-    fitness = "fitness"
-    roi = "roi"
+from .optspec import Opt, Values
+from .run_options import (  # noqa: F401 - the command line's names, as before
+    DEVICE_METAVAR,
+    DEVICES,
+    THREADS_HELP,
+    Objective,
+    complete_device,
+    objective_value,
+)
 
 
-#: --device: shown in --help as its choices; the value is checked with the run's other settings
-#: (`SwarmCoDeConfig.validate`), so that its error reads as theirs.
-DEVICE_METAVAR = "[auto|cpu|cuda|cuda:N]"
-DEVICES = ("auto", "cpu", "cuda", "cuda:0")
+def typer_option(o: Opt) -> Any:
+    """The `Annotated` type Typer reads for the option `o`."""
+    info = typer.Option(*o.flags, help=o.help, metavar=o.metavar, autocompletion=o.complete)
+    return Annotated[o.type, info]
 
 
-def objective_value(value: Objective | None) -> str | None:
-    """--objective's value as the config takes it."""
-    return None if value is None else Objective(value).value
+def command(
+    options: Iterable[Opt], body: Callable[[Values], None], name: str, doc: str
+) -> Callable[..., None]:
+    """A Typer command function named `name` with one keyword per option of `options` (its
+    type, default and help from the declaration) that calls `body` with their `Values`;
+    `doc`: its help."""
+    options = tuple(options)
 
+    def run(**given: Any) -> None:
+        body(Values(options, given))
 
-def complete_device(incomplete: str) -> list[str]:
-    """Shell completion of --device."""
-    return [d for d in DEVICES if d.startswith(incomplete)]
-
-
-class Evolve:
-    """The options of `swarmcode-torch evolve` (`cli.evolve`)."""
-
-    scenario = Annotated[
-        str | None,
-        typer.Option(
-            help=f"Built-in scenario name or a scenario .toml file [default: {_DEFAULT.scenario}]."
-        ),
+    params = [
+        inspect.Parameter(
+            o.name, inspect.Parameter.KEYWORD_ONLY, default=o.default, annotation=typer_option(o)
+        )
+        for o in options
     ]
-    budget = Annotated[
-        float | None, typer.Option(help="Fabrication budget in $ (default: none, no penalty).")
-    ]
-    objective = Annotated[
-        Objective | None,
-        typer.Option(help="fitness, or roi: fitness / team cost [default: fitness]."),
-    ]
-    generations = Annotated[
-        int | None,
-        typer.Option(
-            help=f"Total generations [default: {_DEFAULT.generations}; with --resume: the run's, or extend to this many]."
-        ),
-    ]
-    population = Annotated[
-        int | None, typer.Option(help="Individuals in the population [default: 100].")
-    ]
-    swarm_size = Annotated[
-        int | None, typer.Option(help="Robots per team [default: the scenario's].")
-    ]
-    trials = Annotated[
-        int | None, typer.Option(help="Random environments per team evaluation [default: 3].")
-    ]
-    ticks = Annotated[
-        int | None, typer.Option(help="Episode length in ticks [default: the scenario's].")
-    ]
-    seed = Annotated[int | None, typer.Option(help="Random seed [default: 0].")]
-    device = Annotated[
-        str | None,
-        typer.Option(
-            metavar=DEVICE_METAVAR,
-            autocompletion=complete_device,
-            help="Where the run computes: auto (cuda if available), cpu, cuda or cuda:N [default: auto].",
-        ),
-    ]
-    compile = Annotated[
-        bool | None,
-        typer.Option(
-            "--compile/--no-compile",
-            help="torch.compile the Python tick [default: on CUDA; on the CPU the fused C++ tick runs, and --compile replaces it with the compiled Python tick (also where the C++ tick cannot be built, for runs of >= 50 generations)].",
-        ),
-    ]
-    logdir = Annotated[
-        str | None,
-        typer.Option(metavar="PATH", help="Directory that holds run directories [default: runs]."),
-    ]
-    checkpoint_every = Annotated[int, typer.Option(help="Generations between checkpoints.")]
-    log_every = Annotated[
-        int, typer.Option(help="Generations between log lines when not on a terminal.")
-    ]
-    render_every = Annotated[
-        int, typer.Option(help="Generations between replay images in TensorBoard (0: never).")
-    ]
-    figure_every = Annotated[
-        int,
-        typer.Option(
-            help="Generations between species-composition figures in TensorBoard (one is also drawn at the end of every run)."
-        ),
-    ]
-    resume = Annotated[
-        str | None, typer.Option(metavar="PATH", help="Continue the run in this directory.")
-    ]
-    preset = Annotated[
-        str | None,
-        typer.Option(
-            help="Algorithm settings to start from: default, or paper (the paper's text and nothing beyond it); --set goes on top [default: default]."
-        ),
-    ]
-    settings = Annotated[
-        list[str] | None,
-        typer.Option(
-            "--set",
-            metavar="KEY=VALUE",
-            help="Set an algorithm config key, e.g. --set p_tag_flip=0.0625 (repeatable; keys as in the run's config.toml).",
-        ),
-    ]
-    eval_workers = Annotated[
-        int,
-        typer.Option(
-            help="Evaluate each generation in this many shards on Ray actors, one GPU each on CUDA, else CPUs (needs Ray; same results as 1)."
-        ),
-    ]
-    cpus_per_eval_worker = Annotated[
-        float | None,
-        typer.Option(
-            help="Ray: CPUs (and torch threads) of each evaluation actor on the CPU [default: 1]."
-        ),
-    ]
-    ray_address = Annotated[
-        str | None,
-        typer.Option(
-            help="Ray: join the cluster at auto or HOST:PORT for the evaluation shards [default: start a local one]."
-        ),
-    ]
-    threads = Annotated[int | None, typer.Option(help=THREADS_HELP)]
-    config = Annotated[
-        str | None,
-        typer.Option(
-            "--config",
-            metavar="FILE",
-            help="Start a new run from this settings file, in the format of a run's config.toml (a run's own will do); --preset, the options and --set go on top.",
-        ),
-    ]
-    print_config = Annotated[
-        bool,
-        typer.Option(
-            "--print-config",
-            help="Print the resolved config as TOML (with --config, --from, the options and --set applied) and exit without running.",
-        ),
-    ]
-    from_run = Annotated[
-        str | None,
-        typer.Option(
-            "--from",
-            metavar="RUN[@GENERATION]",
-            help="Start a new run from this run's snapshot of GENERATION (--snapshot-every), or its latest checkpoint, with the options and --set changed; it is recorded as the new run's parent. The scenario, population, tag_length and bt_length stay the parent's [default --logdir: the parent's].",
-        ),
-    ]
-    snapshot_every = Annotated[
-        int,
-        typer.Option(
-            help="Keep a copy of the checkpoint every N generations in RUN_DIR/snapshots/ (0: none), to branch from with --from RUN@GENERATION."
-        ),
-    ]
-    max_time = Annotated[
-        str | None,
-        typer.Option(
-            metavar="DURATION",
-            help="Stop cleanly with a checkpoint (resumable) after the generation that ends past this time: 3600 (seconds), 90m, 2h, 1h30m.",
-        ),
-    ]
-    patience = Annotated[
-        int | None,
-        typer.Option(
-            metavar="K",
-            help="Stop cleanly with a checkpoint (resumable) when the best team has not improved for K generations.",
-        ),
-    ]
-    stop_metric = Annotated[
-        str | None,
-        typer.Option(
-            metavar="TAG",
-            help="--patience watches this metric instead of the best team: best/fitness, or a metrics.csv column such as team/fitness or fitness/mean [default: best/fitness].",
-        ),
-    ]
-    stop_min_delta = Annotated[
-        float | None,
-        typer.Option(
-            metavar="X",
-            help="--patience counts only improvements of the watched metric by more than X [default: 0].",
-        ),
-    ]
-    stop_warmup = Annotated[
-        int | None,
-        typer.Option(
-            metavar="N",
-            help="--patience watches from generation N on (the first N generations are not counted) [default: 0].",
-        ),
-    ]
-    stop_mode = Annotated[
-        str | None,
-        typer.Option(
-            metavar="[max|min]",
-            help="Whether the watched metric improves upwards (max) or downwards (min) [default: max].",
-        ),
-    ]
-    keep_checkpoints = Annotated[
-        int,
-        typer.Option(
-            metavar="K",
-            help="Also keep the last K checkpoints (RUN_DIR/checkpoints/generation-NNNNNN.pt) and the one that holds the run's best team (checkpoints/best.pt); 0: none.",
-        ),
-    ]
-    wandb = Annotated[
-        bool,
-        typer.Option(
-            "--wandb",
-            help="Also log to Weights & Biases (the scalars, the config, the replays; needs the wandb extra: pip install -e '.[wandb]'; WANDB_MODE=offline for no network).",
-        ),
-    ]
-    wandb_project = Annotated[str, typer.Option(help="Weights & Biases project of --wandb.")]
-
-
-class Sweep:
-    """The options of `swarmcode-torch sweep` (`cli.sweep`)."""
-
-    budgets = Annotated[
-        str | None,
-        typer.Option(
-            help="Comma-separated budgets in $ [default: 2500,3000,4000,5000,6000,8000; with --grid or --config: the config's budget]."
-        ),
-    ]
-    seeds = Annotated[str, typer.Option(help="Comma-separated seeds; one run per budget and seed.")]
-    objective = Annotated[
-        Objective | None,
-        typer.Option(help="fitness, or roi: fitness / team cost [default: fitness]."),
-    ]
-    scenario = Annotated[str | None, typer.Option(help=f"Scenario [default: {_DEFAULT.scenario}].")]
-    generations = Annotated[
-        int | None, typer.Option(help=f"Generations per run [default: {_DEFAULT.generations}].")
-    ]
-    population = Annotated[int | None, typer.Option(help="Population [default: 100].")]
-    swarm_size = Annotated[
-        int | None, typer.Option(help="Robots per team [default: the scenario's].")
-    ]
-    trials = Annotated[int | None, typer.Option(help="Environments per evaluation [default: 3].")]
-    ticks = Annotated[int | None, typer.Option(help="Episode length [default: the scenario's].")]
-    device = Annotated[
-        str | None,
-        typer.Option(
-            metavar=DEVICE_METAVAR,
-            autocompletion=complete_device,
-            help="auto (cuda if available), cpu, cuda or cuda:N [default: auto].",
-        ),
-    ]
-    compile = Annotated[
-        bool | None, typer.Option("--compile/--no-compile", help="torch.compile the tick.")
-    ]
-    logdir = Annotated[
-        str | None,
-        typer.Option(
-            metavar="PATH",
-            help="Directory that holds the new sweep directory, sweep-<time>, as evolve's --logdir holds run directories [default: runs].",
-        ),
-    ]
-    out = Annotated[
-        str | None,
-        typer.Option(
-            metavar="PATH",
-            help="The sweep directory itself [default: LOGDIR/sweep-<time>]; run again with the same --out to resume.",
-        ),
-    ]
-    checkpoint_every = Annotated[int, typer.Option(help="Generations between checkpoints.")]
-    log_every = Annotated[int, typer.Option(help="Generations between log lines off a terminal.")]
-    preset = Annotated[
-        str | None,
-        typer.Option(help="Algorithm settings to start from, as in evolve [default: default]."),
-    ]
-    settings = Annotated[
-        list[str] | None,
-        typer.Option(
-            "--set",
-            metavar="KEY=VALUE",
-            help="Set an algorithm config key of every run (repeatable), as in evolve.",
-        ),
-    ]
-    workers = Annotated[
-        int, typer.Option(help="Runs at once; > 1 runs them as Ray tasks (needs Ray).")
-    ]
-    cpus_per_run = Annotated[
-        float | None,
-        typer.Option(help="Ray: CPUs (and torch threads) each run reserves [default: 1]."),
-    ]
-    gpus_per_run = Annotated[
-        float | None,
-        typer.Option(
-            help="Ray: GPUs each run reserves; 0.25 packs four runs on a GPU [default: 0]."
-        ),
-    ]
-    ray_address = Annotated[
-        str | None,
-        typer.Option(
-            help="Ray: join the cluster at auto or HOST:PORT [default: start a local one]; the runs go to Ray."
-        ),
-    ]
-    threads = Annotated[int | None, typer.Option(help=THREADS_HELP)]
-    grid = Annotated[
-        list[str] | None,
-        typer.Option(
-            "--grid",
-            metavar="KEY=V1,V2,...",
-            help="Also sweep this setting over these values (repeatable: one run per combination, budget and seed), e.g. --grid delta=0.3,0.5 --grid population=50,100; keys as in a run's config.toml.",
-        ),
-    ]
-    config = Annotated[
-        str | None,
-        typer.Option(
-            "--config",
-            metavar="FILE",
-            help="The runs' settings to start from, in the format of a run's config.toml, as evolve --config; --preset, the options and --set go on top.",
-        ),
-    ]
+    run.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
+    run.__annotations__ = {p.name: p.annotation for p in params}
+    run.__name__ = run.__qualname__ = name
+    run.__doc__ = doc
+    return run
 
 
 class Dynamics:

@@ -66,10 +66,11 @@ class WandbReporter:
     generation's scalars under the TensorBoard tags (`records.SCALAR_TAGS` and the best team's,
     `HPARAM_METRICS`) and gene histograms, a replay of the generation's best team every
     `render_every` generations and one of the run's best team (`best/replay`) at its end (0:
-    never). Steps are generations. The W&B run is named after the run directory, and its id is
-    derived from it, so a resumed run continues its W&B run; `project`, `entity`, `mode`
-    ("online", "offline", or None: wandb's default and WANDB_MODE) and any other `wandb.init`
-    keyword (`init`) as wandb takes them. Needs the `wandb` package (`WANDB_INSTALL`), imported
+    never); at its end, the run directory's checkpoint and replays as an artifact
+    (`wandb_runs.log_run_files`). Steps are generations. The W&B run is named after the run
+    directory, and its id is derived from it, so a resumed run continues its W&B run; `project`,
+    `entity`, `mode` ("online", "offline", or None: wandb's default and WANDB_MODE) and any
+    other `wandb.init` keyword (`init`) as wandb takes them. Needs the `wandb` package (`WANDB_INSTALL`), imported
     when the reporter is made."""
 
     def __init__(
@@ -158,7 +159,17 @@ class WandbReporter:
                 },
                 step=step,
             )
+        error = None
+        if self.run_dir is not None:  # the checkpoint is written: the reporters before this
+            from .wandb_runs import log_run_files
+
+            try:
+                log_run_files(self.wandb, self.run, self.run_dir)
+            except Exception as e:  # noqa: BLE001 - the run's own files are written
+                error = e
         self.close()
+        if error is not None:
+            self._drop(error)
 
     def close(self) -> None:
         """Finish the W&B run (its files written; synced when online)."""

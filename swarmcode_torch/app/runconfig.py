@@ -170,8 +170,15 @@ def read_parent(run_dir: Path) -> dict | None:
 
 
 def read_config_file(path: Path, base: SwarmCoDeConfig | None = None) -> SwarmCoDeConfig:
-    """The config of a settings file in config.toml's format (`evolve --config FILE`; a run's own
-    config.toml will do: its [parent] table is ignored): its keys over `base` (default: the
+    """The config of a settings file (`read_config_file_keys`)."""
+    return read_config_file_keys(path, base)[0]
+
+
+def read_config_file_keys(
+    path: Path, base: SwarmCoDeConfig | None = None
+) -> tuple[SwarmCoDeConfig, frozenset[str]]:
+    """(the config, the keys the file sets) of a settings file in config.toml's format
+    (`evolve --config FILE`; a run's own config.toml will do: its [parent] table is ignored): its keys over `base` (default: the
     preset the file names, else the default preset), not yet checked (`check_start` does).
     RunError, one line, naming the file and the key for an unknown key or a malformed value."""
     from ..coevo.config import PRESETS, preset_config
@@ -195,7 +202,7 @@ def read_config_file(path: Path, base: SwarmCoDeConfig | None = None) -> SwarmCo
         preset = d.get("preset")
         base = preset_config(preset) if preset in PRESETS else SwarmCoDeConfig()
     try:
-        return SwarmCoDeConfig.from_dict({**base.to_dict(), **d})
+        return SwarmCoDeConfig.from_dict({**base.to_dict(), **d}), frozenset(d)
     except (TypeError, ValueError) as e:
         raise RunError(f"{path}: malformed config ({e})") from None
 

@@ -6,24 +6,13 @@ from __future__ import annotations
 from typing import Any
 
 from ..coevo.config import SETTING_TYPES, SettingError
+from . import run_options
 
-#: Config keys that `parse_settings` refuses because the command line has an option for them.
-OPTION_KEYS = frozenset(
-    {
-        "scenario",
-        "budget",
-        "objective",
-        "generations",
-        "population",
-        "swarm_size",
-        "trials",
-        "ticks",
-        "seed",
-        "device",
-        "compile",
-        "preset",
-    }
-)
+
+def option_keys() -> frozenset[str]:
+    """Config keys that `parse_settings` refuses because the command line has an option for them
+    (`run_options.RUN_OPTIONS`: the options with a `setting`)."""
+    return frozenset(run_options.option_keys())
 
 
 #: Config keys that only the Python API sets (`parse_settings` refuses them), and how.
@@ -37,9 +26,8 @@ def option_names(overrides: dict[str, str] | None = None) -> dict[str, str]:
     """Config key -> how the command line sets it (--population, --set delta), for
     `setting_message` and `runs.check_memory`; `overrides` respells some (a sweep's
     --seeds)."""
-    names = {
-        k: ("--" + k.replace("_", "-") if k in OPTION_KEYS else f"--set {k}") for k in SETTING_TYPES
-    }
+    options = run_options.option_keys()
+    names = {k: (options[k] if k in options else f"--set {k}") for k in SETTING_TYPES}
     names.update(overrides or {})
     return names
 
@@ -57,6 +45,7 @@ def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None)
     pair, an unknown key, a key that has its own option (named `option_names[key]`, default
     --key), or a value of the wrong type."""
     out: dict[str, Any] = {}
+    taken = option_keys()
     for pair in pairs:
         key, sep, text = pair.partition("=")
         key, text = key.strip().replace("-", "_"), text.strip()
@@ -64,13 +53,13 @@ def parse_settings(pairs: list[str], option_names: dict[str, str] | None = None)
             raise ValueError(f"--set expects KEY=VALUE, got {pair!r}")
         if key in out:
             raise ValueError(f"--set {key} is given twice")
-        if key in OPTION_KEYS:
+        if key in taken:
             option = (option_names or {}).get(key, "--" + key.replace("_", "-"))
             raise ValueError(f"--set {key}: use the {option} option")
         if key in API_KEYS:
             raise ValueError(f"--set {key}: {API_KEYS[key]}")
         if key not in SETTING_TYPES:
-            settable = ", ".join(sorted(set(SETTING_TYPES) - OPTION_KEYS - set(API_KEYS)))
+            settable = ", ".join(sorted(set(SETTING_TYPES) - taken - set(API_KEYS)))
             raise ValueError(f"--set: unknown key {key!r} (settable: {settable})")
         kind, nullable = SETTING_TYPES[key]
         try:

@@ -1,5 +1,6 @@
 """The line an interrupted, terminated or failed run prints: where it stands (`Where`) and the
-checkpoint its file really holds (`checkpoint_words`, `stop_line`, `stopped`)."""
+checkpoint its file really holds (`checkpoint_words`, `stop_line`, `stopped`); a count of
+finished generations with their numbers (`generations_done`)."""
 
 from __future__ import annotations
 
@@ -35,6 +36,14 @@ def checkpoint_words(saved: int) -> str:
         return "checkpoint before generation 0 (no generation finished yet)"
     done = "generation 0 finished" if saved == 1 else f"generations 0-{saved - 1} finished"
     return f"checkpoint after generation {saved - 1} ({done})"
+
+
+def generations_done(done: int) -> str:
+    """'3 generations (0-2)': how many generations finished, and their numbers, from 0 as
+    summary.json, teams.jsonl and TensorBoard number them (never the count as a number)."""
+    if done < 1:
+        return "no generation"
+    return "1 generation (generation 0)" if done == 1 else f"{done} generations (0-{done - 1})"
 
 
 def last_checkpoint(saved: int | None) -> str:

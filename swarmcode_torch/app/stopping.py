@@ -236,4 +236,7 @@ def stop_text(record: dict) -> str:
         )
     else:
         why = f"max_time reached ({record.get('elapsed_seconds')}s of {record.get('max_time_seconds')}s)"
-    return f"Stopped after {g} generations: {why}"
+    from .stop_lines import generations_done  # a count, and the numbers from 0
+
+    done = generations_done(g) if isinstance(g, int) else f"{g} generations"
+    return f"Stopped after {done}: {why}"

@@ -274,13 +274,30 @@ def csv_text(rows: list[dict], keys: tuple[str, ...] = ()) -> str:
     return buf.getvalue()
 
 
+def _whole_ticks():
+    """A tick locator of whole numbers only: matplotlib's MaxNLocator(integer=True) ticks
+    fractions on an axis that spans less than two integers; this keeps the whole ones (the
+    nearest to the middle when there is none)."""
+    import numpy as np
+    from matplotlib.ticker import MaxNLocator
+
+    class Whole(MaxNLocator):
+        def tick_values(self, vmin, vmax):
+            ticks = np.asarray(super().tick_values(vmin, vmax))
+            whole = np.round(ticks[np.abs(ticks - np.round(ticks)) < 1e-6])
+            return whole if whole.size else np.array([np.round((vmin + vmax) / 2)])
+
+    return Whole(integer=True, min_n_ticks=1)
+
+
 def plot(rows: list[dict], path: Path) -> None:
     """Best fitness and number of species against budget (errorbars: std over seeds), in two
     panels that share the budget axis (on twin axes one line could hide the other), drawn on a
     `matplotlib.figure.Figure` (no pyplot, no backend change) and written as a PNG. The species
-    panel has integer ticks: it counts species."""
+    panel has integer ticks (it counts species), and so has the budget axis when every budget
+    is a whole number: also where the axis spans less than two integers (one budget, equal
+    species counts), where matplotlib's default would tick fractions."""
     from matplotlib.figure import Figure
-    from matplotlib.ticker import MaxNLocator
 
     rows = [
         r
@@ -310,7 +327,9 @@ def plot(rows: list[dict], path: Path) -> None:
         capsize=3,
     )
     species_ax.set_ylabel("species in the best team")
-    species_ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    species_ax.yaxis.set_major_locator(_whole_ticks())
+    if all(float(b).is_integer() for b in x):
+        species_ax.xaxis.set_major_locator(_whole_ticks())
     species_ax.set_xlabel("budget ($)")
     fig.tight_layout()
     fig.savefig(path, dpi=120, format="png")

@@ -12,6 +12,8 @@ from dataclasses import replace
 from typing import Any
 
 from ..coevo.config import SETTING_TYPES, SwarmCoDeConfig
+from .eta import Eta
+from .eta import clock as duration
 from .settings import API_KEYS
 
 #: Keys a grid may not vary: --budgets and --seeds sweep those; how a run runs is no setting
@@ -106,34 +108,34 @@ def point_name(point: dict[str, Any]) -> str:
     return "".join(f"{k}-{_text(v)}_" for k, v in point.items())
 
 
-def _clock(seconds: float) -> str:
-    s = int(round(seconds))
-    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
-
-
 class SweepProgress:
-    """The sweep's own progress: "run k of n" as each run starts, with the generations of the
-    whole sweep done and about how long the rest takes (the seconds a generation has taken in
-    this invocation so far, times the generations left; "?" before one has finished)."""
+    """The sweep's own progress, in the generations of the whole sweep: "run k of n" as each
+    run starts, with the generations left and about how long they take, and the elapsed and
+    remaining time as each run ends (`eta.Eta` over the sweep's generations: the seconds a
+    generation has taken in this invocation so far, times the generations left; "?" before one
+    has finished). Runs done before this invocation count as nothing left."""
 
     def __init__(self, left: list[int], clock=time.monotonic):
         self.left = list(left)  # generations each run has to run, in order
         self.total = len(left)
-        self.clock = clock
-        self.t0 = clock()
-        self.ran = 0  # generations run by this invocation
+        self.eta = Eta(sum(self.left), now=clock)
+        self.ran = 0  # generations run (or given up: a failed run) by this invocation
 
     def line(self, k: int, name: str) -> str:
         """The line printed as run k (0-based) starts."""
         rest = sum(self.left[k:])
-        eta = "?"
-        if self.ran:
-            eta = _clock((self.clock() - self.t0) / self.ran * rest)
+        left = self.eta.left(self.eta.total - rest)
+        about = "?" if math.isnan(left) else duration(left)
         return (
             f"Sweep: run {k + 1} of {self.total}: {name} ({rest} generations left in the "
-            f"sweep, about {eta} left)"
+            f"sweep, about {about} left)"
         )
 
     def finished(self, k: int) -> None:
+        """Run k (0-based) ended: its generations are no longer left."""
         self.ran += self.left[k]
         self.left[k] = 0
+
+    def times(self) -> str:
+        """'elapsed 3m05s, left ~1m10s' of the whole sweep (`eta.Eta.text`)."""
+        return self.eta.text(self.ran)

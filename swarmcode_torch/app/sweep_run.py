@@ -1,6 +1,6 @@
 """A sweep from the command line (`swarmcode-torch sweep`): its options checked, its runs
-planned, run one after another here or as Ray tasks (`distributed.run_tasks`), each through
-the one start-up path (`session`), then its table and plot written."""
+planned, run one after another here or as Ray tasks (`sweep_ray`), each through the one
+start-up path (`session`), then its table and plot written."""
 
 from __future__ import annotations
 
@@ -8,23 +8,13 @@ import math
 from contextlib import ExitStack
 from pathlib import Path
 
-import typer
 from rich.markup import escape
 
 from ..sim.scenario import ScenarioError
 from . import session
-from .signals import TERMINATED, terminate_as_interrupt
-from .terminal import (
-    Failed,
-    check_path,
-    console,
-    err,
-    execute,
-    fail,
-    need_ray,
-    os_fail,
-    set_threads_option,
-)
+from .run_options import DEFAULT_BUDGETS
+from .signals import TERMINATED
+from .terminal import check_path, console, execute, fail, os_fail, set_threads_option
 
 
 def parse_list(text: str, kind, option: str) -> list:
@@ -40,11 +30,6 @@ def parse_list(text: str, kind, option: str) -> list:
         if vals.count(v) > 1:
             fail(f"{option} lists {v:g} twice (each run is one budget and one seed)")
     return vals
-
-
-#: --budgets of a sweep of budgets alone (the paper's Table III); a sweep with --grid or
-#: --config runs the budget of its config unless --budgets is given.
-DEFAULT_BUDGETS = "2500,3000,4000,5000,6000,8000"
 
 
 def run_sweep(
@@ -72,9 +57,16 @@ def run_sweep(
     threads,
     grid: list[str] | None = None,
     config: str | None = None,
+    wandb: bool = False,
+    wandb_project: str = "swarmcode-torch",
 ) -> None:
-    """The body of `swarmcode-torch sweep` (its options as parsed; `grid`: the --grid
-    KEY=V1,V2 pairs, `sweep_grid`; `config`: --config FILE, the runs' settings to start from)."""
+    """The body of `swarmcode-torch sweep`: its options as parsed (`run_options.SWEEP_OPTIONS`,
+    their declared bounds checked); `grid`: the --grid KEY=V1,V2 pairs, `sweep_grid`; `config`:
+    --config FILE, the runs' settings to start from; `wandb`, `wandb_project`: each run logged
+    to W&B, grouped by the sweep, `wandb_runs`."""
+    from .evolve_start import wandb_option
+    from .sweep_ray import sweep_on_ray, sweep_ray_options
+
     set_threads_option(threads)
     import time
 
@@ -92,9 +84,8 @@ def run_sweep(
     TERMINATED.clear()
     budget_list = None if budgets is None else parse_list(budgets, float, "--budgets")
     seed_list = parse_list(seeds, int, "--seeds")
-    if checkpoint_every < 1 or log_every < 1:
-        fail("--checkpoint-every and --log-every must be >= 1")
     on_ray = sweep_ray_options(workers, cpus_per_run, gpus_per_run, ray_address, device)
+    project = wandb_option(wandb, wandb_project)  # before anything is made
     if logdir is not None and out is not None:
         fail(
             f"--logdir and --out cannot both be given: --out is the sweep directory itself "
@@ -119,10 +110,13 @@ def run_sweep(
         grid_spec = parse_grid(grid, given)
         if config_file is None:
             base = session.resolve_config(preset, settings, names, **given)
-        else:
-            from .evolve_start import new_config
+        else:  # as evolve --config: a bad value the file gives is named FILE: key
+            from .evolve_start import config_from
 
-            base = new_config(config_file, None, preset, settings, **given)[0]
+            base, _, names = config_from(config_file, None, preset, settings, given)
+            names["seed"] = "--seeds"
+            if budgets is not None or names["budget"] == "--budget":
+                names["budget"] = "--budgets"
         if budget_list is None:
             budget_list = (
                 [base.budget]
@@ -168,22 +162,41 @@ def run_sweep(
             soft_wrap=True,
         )
         failed: list[tuple[str, str]] = []
+        wb = {id(p): sweep_wandb(project, p) for p in plans}
         if on_ray is None:
-            from .sweep_grid import SweepProgress
-
-            shown = SweepProgress(
-                [max(0, cfg.generations - (done or 0)) for *_, cfg, _, done in plans]
-            )
-            for k, (b, sd, run_dir, cfg, state, _) in enumerate(plans):
+            shown = sweep_progress(plans)
+            for k, p in enumerate(plans):
+                b, sd, run_dir, cfg, state, _ = p
                 if state != "done":
                     console.print(
                         shown.line(k, run_dir.name), markup=False, highlight=False, soft_wrap=True
                     )
-                    run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
+                    run_sweep_run(
+                        run_dir, cfg, data, state, checkpoint_every, log_every, again, wb[id(p)]
+                    )
                     shown.finished(k)
+                    console.print(
+                        f"{run_dir.name}: finished ({k + 1} of {shown.total} runs)  "
+                        f"{shown.times()}",
+                        markup=False,
+                        highlight=False,
+                        soft_wrap=True,
+                    )
                 runs.append((b, sd, run_dir))
         else:
-            runs, failed = sweep_on_ray(plans, data, checkpoint_every, log_every, again, *on_ray)
+            ray_workers, cpus, gpus, address = on_ray
+            runs, failed = sweep_on_ray(
+                plans,
+                data,
+                checkpoint_every,
+                log_every,
+                again,
+                ray_workers,
+                cpus,
+                gpus,
+                address,
+                wb,
+            )
             if not runs:
                 fail(
                     f"every run of the sweep failed ({failed[0][0]}: {failed[0][1]}); fix the "
@@ -212,129 +225,25 @@ def run_sweep(
         )
 
 
-def sweep_ray_options(
-    workers: int, cpus: float | None, gpus: float | None, address: str | None, device: str | None
-):
-    """(workers, CPUs per run, GPUs per run, address) of a sweep on Ray, or None for the runs
-    one after the other in this process; a one-line error for bad values or Ray options without
-    Ray."""
-    if workers < 1:
-        fail(f"--workers must be >= 1, got {workers}")
-    if workers == 1 and address is None:
-        if cpus is not None or gpus is not None:
-            fail(
-                "--cpus-per-run and --gpus-per-run are for runs on Ray: use them with "
-                "--workers N > 1 or --ray-address"
-            )
+def sweep_progress(plans):
+    """The sweep's progress (`sweep_grid.SweepProgress`) over its runs (`plan_sweep_run`'s):
+    the generations each has left."""
+    from .sweep_grid import SweepProgress
+
+    return SweepProgress([max(0, cfg.generations - (done or 0)) for *_, cfg, _, done in plans])
+
+
+def sweep_wandb(project: str | None, plan) -> tuple[str, dict] | None:
+    """(W&B project, `wandb.init` keywords) of a run of a sweep (`plan`: `plan_sweep_run`'s),
+    None without --wandb: the sweep's group and tags (`wandb_runs.sweep_init`) and the W&B id of
+    its run directory here, also when a node without --out runs it in a directory of its own."""
+    if project is None:
         return None
-    for name, v in (("--cpus-per-run", cpus), ("--gpus-per-run", gpus)):
-        if v is not None and not (v >= 0 and math.isfinite(v)):
-            fail(f"{name} must be a finite number >= 0, got {v}")
-    cpus = 1.0 if cpus is None else cpus
-    gpus = 0.0 if gpus is None else gpus
-    if gpus > 1 and gpus != int(gpus):
-        fail(f"--gpus-per-run above 1 must be a whole number of GPUs, got {gpus:g}")
-    if device is not None and device.startswith("cuda") and gpus == 0:
-        fail(
-            f"--device {device} on Ray needs --gpus-per-run > 0 (each run reserves its share "
-            "of a GPU; Ray hides the GPUs from a run that reserves none)"
-        )
-    need_ray(f"--workers {workers}" if workers > 1 else "--ray-address")
-    return workers, cpus, gpus, address
+    from .report_wandb import _wandb_run_id
+    from .wandb_runs import sweep_init
 
-
-def sweep_on_ray(
-    plans,
-    data: bytes,
-    checkpoint_every: int,
-    log_every: int,
-    again: str,
-    workers: int,
-    cpus: float,
-    gpus: float,
-    address: str | None,
-):
-    """Run the unfinished runs of a sweep as Ray tasks (`sweep_task`, up to `workers` at once),
-    a line as each ends; ([(budget, seed, run directory)] of the finished runs, in the sweep's
-    order, [(run name, error)] of the failed ones)."""
-    from .distributed import RayUnavailable, check_resources, ray_session, run_tasks
-
-    todo = [p for p in plans if p[4] != "done"]
-    # absolute paths: a worker's working directory may not be this one
-    jobs = [
-        (run_dir.resolve(), cfg, data, state, checkpoint_every, log_every, again)
-        for _, _, run_dir, cfg, state, _ in todo
-    ]
-    what = f"--workers {workers}" if workers > 1 else "--ray-address"
-
-    def on_finish(i: int, error: str | None, n: dict) -> None:
-        name = todo[i][2].name
-        counts = f"{n['done']} done, {n['running']} running, {n['failed']} failed of {n['total']}"
-        if error is None:
-            console.print(f"{name}: finished ({counts})", markup=False, highlight=False)
-        else:
-            console.print(
-                f"{name}: failed: {error} ({counts})", markup=False, highlight=False, soft_wrap=True
-            )
-
-    errors: list = []
-    terminated: list = []
-    if jobs:
-        try:
-            with ray_session(address, what) as ray, terminate_as_interrupt() as terminated:
-                check_resources(
-                    ray,
-                    {"CPU": cpus, "GPU": gpus},
-                    f"a run with --cpus-per-run {cpus:g} and --gpus-per-run {gpus:g}",
-                )
-                console.print(
-                    f"Ray: {len(jobs)} runs, up to {workers} at once ({cpus:g} CPU, "
-                    f"{gpus:g} GPU each)",
-                    markup=False,
-                    highlight=False,
-                )
-                errors = run_tasks(
-                    sweep_task,
-                    jobs,
-                    workers=workers,
-                    num_cpus=cpus,
-                    num_gpus=gpus,
-                    on_finish=on_finish,
-                    what=what,
-                )
-        except RayUnavailable as e:
-            fail(str(e))
-        except KeyboardInterrupt:
-            how = "Terminated" if terminated else "Interrupted"
-            err.print(
-                f"{how}: the running runs were stopped after writing their checkpoints; "
-                f"continue with: {again}",
-                markup=False,
-                highlight=False,
-                soft_wrap=True,
-            )
-            raise typer.Exit(code=143 if terminated else 130) from None
-    failed_at = {id(p): e for p, e in zip(todo, errors) if e is not None}
-    finished = [p[:3] for p in plans if id(p) not in failed_at]
-    failed = [(p[2].name, failed_at[id(p)]) for p in plans if id(p) in failed_at]
-    return finished, failed
-
-
-def sweep_task(
-    run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int, log_every: int, again: str
-) -> str | None:
-    """One run of a sweep as a Ray task (`distributed.run_tasks`): `run_sweep_run`, as the
-    sweep runs it in this process. None when the run finished; else its error in one line (a
-    failed start or write; a stop by Ctrl-C or SIGTERM, after its checkpoint was written)."""
-    try:
-        run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again)
-    except Failed as e:
-        return e.message
-    except typer.Exit as e:
-        return f"stopped (exit {e.exit_code}) after writing its checkpoint"
-    except Exception as e:  # noqa: BLE001 - the run's error; the sweep's other runs go on
-        return " ".join(f"{type(e).__name__}: {e}".split())
-    return None
+    b, sd, run_dir = plan[:3]
+    return project, {**sweep_init(run_dir.parent, b, sd), "id": _wandb_run_id(run_dir)}
 
 
 def plan_sweep_run(out: Path, cfg, scenario, data: bytes, prefix: str = ""):
@@ -361,10 +270,18 @@ def plan_sweep_run(out: Path, cfg, scenario, data: bytes, prefix: str = ""):
 
 
 def run_sweep_run(
-    run_dir: Path, cfg, data: bytes, state: str, checkpoint_every: int, log_every: int, again: str
+    run_dir: Path,
+    cfg,
+    data: bytes,
+    state: str,
+    checkpoint_every: int,
+    log_every: int,
+    again: str,
+    wb: tuple[str, dict] | None = None,
 ) -> None:
     """One run of a sweep, started (`state` 'new': its config and `data` checked by the sweep)
-    or resumed through `session`, then run with the command line's progress and messages."""
+    or resumed through `session`, then run with the command line's progress and messages (and
+    logged to W&B with `wb`, `sweep_wandb`'s)."""
     from .files import RunError
 
     def make_dir(ev) -> Path:
@@ -387,4 +304,13 @@ def run_sweep_run(
             f"{cfg.generations}",
             soft_wrap=True,
         )
-        execute(ev, run_dir, checkpoint_every, log_every, saved=saved, again=again)
+        execute(
+            ev,
+            run_dir,
+            checkpoint_every,
+            log_every,
+            saved=saved,
+            again=again,
+            wandb_project=wb[0] if wb else None,
+            wandb_init=wb[1] if wb else None,
+        )

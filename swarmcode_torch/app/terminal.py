@@ -1,7 +1,7 @@
 """What the commands of the command line share: its consoles, one-line errors, path options
 (`cli_output`), the progress line and a run executed under it (`execute`, here: its reporters,
 and the line a stopped or failed run prints, `stop_lines`), the best team's table
-(`team_table`), and the thread and Ray options of a run (`run_options`). Every public name is
+(`team_table`), and the thread and Ray options of a run (`process_options`). Every public name is
 importable from here."""
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from rich.table import Column
 
 from . import session
 from .cli_output import MAX_PATH, Failed, check_path, console, err, fail, os_fail
-from .run_options import (
+from .process_options import (
     THREADS_HELP,
     attach_shards,
     eval_shards_option,
@@ -34,7 +34,14 @@ from .run_options import (
     set_threads_option,
 )
 from .signals import TERMINATED, deferred_signals, terminate_as_interrupt
-from .stop_lines import Where, checkpoint_words, last_checkpoint, stop_line, stopped
+from .stop_lines import (
+    Where,
+    checkpoint_words,
+    generations_done,
+    last_checkpoint,
+    stop_line,
+    stopped,
+)
 from .team_table import best_interval, print_team
 
 __all__ = [
@@ -54,6 +61,7 @@ __all__ = [
     "eval_shards_option",
     "execute",
     "fail",
+    "generations_done",
     "last_checkpoint",
     "need_ray",
     "os_fail",
@@ -102,17 +110,21 @@ class _FittedProgress(Progress):
 
 class ProgressReporter:
     """Rich progress line on a terminal (`out`, default the command line's console); a plain
-    line every few generations otherwise."""
+    line every few generations otherwise, with the elapsed and remaining time (`eta.Eta`)."""
 
     def __init__(self, total: int, start: int, every: int, out: Console | None = None):
+        from .eta import Eta
+
         self.tty = sys.stdout.isatty() if out is None else out.is_terminal
         self.every = every
+        self.eta = Eta(total, start)
         self.bar = None
         if self.tty:
             self.bar = _FittedProgress(out if out is not None else console)
             self.task = self.bar.add_task("", total=total, completed=start)
 
     def on_start(self, ev) -> None:
+        self.eta.restart()
         if self.bar:
             self.bar.start()
 
@@ -131,7 +143,8 @@ class ProgressReporter:
         if self.bar:
             self.bar.update(self.task, completed=ev.state.generation, description=text)
         elif r.generation % self.every == 0 or ev.done:
-            print(f"done {ev.state.generation}/{ev.cfg.generations}  {text}", flush=True)
+            done = ev.state.generation
+            print(f"done {done}/{ev.cfg.generations}  {self.eta.text(done)}  {text}", flush=True)
 
     def on_end(self, ev) -> None:
         self.stop()
@@ -156,9 +169,10 @@ def execute(
     snapshot_every: int = 0,
     bounds: session.Bounds | None = None,
     keep_checkpoints: int = 0,
+    wandb_init: dict | None = None,
 ) -> None:
     """Run `ev` to its last generation with progress, summary, TensorBoard and checkpoints
-    (and Weights & Biases with `wandb_project`).
+    (and Weights & Biases with `wandb_project`, `wandb_init` more `wandb.init` keywords).
     Ctrl-C and SIGTERM write the checkpoint of the last finished generation (exit 130, 143). A
     failed write (a full disk: OSError from the checkpoint, summary.json, teams.jsonl or
     TensorBoard) ends the run with a one-line error that names the last checkpointed generation
@@ -184,7 +198,7 @@ def execute(
     if wandb_project is not None:  # after the checkpoints: outside the step
         from .reporting import WandbReporter
 
-        extra.append(WandbReporter(wandb_project, run_dir, render_every))
+        extra.append(WandbReporter(wandb_project, run_dir, render_every, **(wandb_init or {})))
     if where is not None:
         where.run_dir, where.checkpoints, where.again = run_dir, checkpoints, again
     reporters: list = []

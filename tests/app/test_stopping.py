@@ -64,7 +64,9 @@ def test_the_progress_says_why_a_callback_stopped_the_run(capsys):
                     **{k: v for k, v in API_TINY.items() if k != "progress"})  # fmt: skip
     assert res.stopped == "callback" and res.generations == 1
     out = capsys.readouterr().out.splitlines()
-    assert out[-1] == "Stopped after 1 generations: the callback asked to stop: enough"
+    assert (
+        out[-1] == "Stopped after 1 generation (generation 0): the callback asked to stop: enough"
+    )
 
 
 def test_a_callback_returning_other_values_lets_the_run_go_on():
@@ -121,7 +123,7 @@ def test_resumed_metric_stop_reads_the_earlier_generations_back(tmp_path):
         (["--stop-metric", "team/fitness"], "--stop-metric needs --patience K"),
         (["--patience", 2, "--stop-metric", "nope"], "unknown metric 'nope'"),
         (["--patience", 2, "--stop-min-delta", -1], "--stop-min-delta must be a finite number"),
-        (["--patience", 2, "--stop-warmup", -1], "--stop-warmup must be an integer >= 0"),
+        (["--patience", 2, "--stop-warmup", -1], "--stop-warmup must be >= 0"),
         (["--patience", 2, "--stop-mode", "up"], "--stop-mode must be max or min"),
         (["--keep-checkpoints", -1], "--keep-checkpoints must be >= 0"),
     ],

@@ -294,8 +294,8 @@ def test_max_time_message_and_exit(monkeypatch, tmp_path):
     assert r.exit_code == 0, r.output
     (run,) = tmp_path.iterdir()
     assert (
-        f"Stopped after 3 generations: --max-time reached (30.0s of 30s); checkpoint of "
-        f"generation 3 is in {run}; continue with: swarmcode-torch evolve --resume {run}"
+        f"Stopped after 3 generations (0-2): --max-time reached (30.0s of 30s); its checkpoint "
+        f"is in {run}; continue with: swarmcode-torch evolve --resume {run}"
         in " ".join(r.output.split())
     )
 

@@ -416,8 +416,8 @@ EXPECTED_TREES = {
 def test_templates_parse() -> None:
     assert set(EXPECTED_TREES) <= set(TEMPLATES)
     for name, tree in EXPECTED_TREES.items():
-        assert format_tree(TEMPLATES[name]) == tree
-        assert format_tree(template_tensor(name, 32)) == tree
+        assert format_tree(TEMPLATES[name], root=False) == tree
+        assert format_tree(template_tensor(name, 32), root=False) == tree
         assert TEMPLATES[name][-1] == END and TEMPLATES[name].count(END) == TEMPLATES[name].count(
             SEL
         ) + TEMPLATES[name].count(SEQ)
@@ -425,14 +425,16 @@ def test_templates_parse() -> None:
 
 def test_format_tree_rules() -> None:
     prog = [END, NOP, SEQ, SEL, END, COND_NEAR_BASE, END, END, SEL, ACT_PICK_UP, SEQ]
-    assert format_tree(prog) == "SEQ\n  SEL\n  COND_NEAR_BASE\nSEL\n  ACT_PICK_UP\n  SEQ"
-    assert format_tree([NOP, END]) == ""
-    # the implicit root: the top-level nodes are its children
-    assert (
-        format_tree(prog, root=True)
-        == "SEQ (root)\n  SEQ\n    SEL\n    COND_NEAR_BASE\n  SEL\n    ACT_PICK_UP\n    SEQ"
-    )
-    assert format_tree([NOP], root=True) == "SEQ (root)"
+    forest = "SEQ\n  SEL\n  COND_NEAR_BASE\nSEL\n  ACT_PICK_UP\n  SEQ"
+    assert format_tree(prog, root=False) == forest
+    assert format_tree([NOP, END], root=False) == ""
+    # by default, the implicit root: the top-level nodes are its children, one tree
+    tree = format_tree(prog)
+    assert tree == format_tree(prog, root=True)
+    assert tree == "SEQ (root)\n" + "\n".join("  " + line for line in forest.splitlines())
+    lines = tree.splitlines()
+    assert sum(not line.startswith(" ") for line in lines) == 1  # a single root
+    assert format_tree([NOP]) == "SEQ (root)"
 
 
 def test_encode() -> None:

@@ -155,11 +155,12 @@ def template_tensor(name: str, length: int) -> torch.Tensor:
     return encode(TEMPLATES[name], length)
 
 
-def format_tree(opcodes: torch.Tensor | Sequence[int], root: bool = False) -> str:
+def format_tree(opcodes: torch.Tensor | Sequence[int], root: bool = True) -> str:
     """opcodes [L] -> an indented tree, one node per line, two spaces per level (NOP, END omitted).
 
-    root: print the implicit root SEQ of the top-level nodes as the first line ("SEQ (root)")
-    and indent them under it, so that the program reads as one tree.
+    root (default): print the implicit root SEQ of the top-level nodes as the first line
+    ("SEQ (root)") and indent them under it, so that the program reads as the one tree it runs
+    as; False: the top-level nodes alone, each at the left margin (a forest).
     """
     program = opcodes.tolist() if isinstance(opcodes, torch.Tensor) else list(opcodes)
     lines = [text for text, _ in _slot_lines(program, 1 if root else 0)]
