@@ -17,6 +17,8 @@ from typing import NamedTuple
 
 import torch
 
+from .tensors import cast
+
 # Radius bounds of a robot chassis, in metres (the paper's R_min, R_max).
 R_MIN = 0.15
 R_MAX = 0.5
@@ -225,11 +227,6 @@ class Phenotype(NamedTuple):
     cost: torch.Tensor  # $
 
 
-def _as(t: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
-    """t in `dtype`: t itself where it is already (no op at all, not even a no-op copy)."""
-    return t if t.dtype == dtype else t.to(dtype)
-
-
 @lru_cache(maxsize=16)
 def _tier_tables(
     cat: Catalog, dtype: torch.dtype, device: torch.device
@@ -261,18 +258,18 @@ def phenotype(
 ) -> Phenotype:
     """Phenotype of robots given their hardware genes (tiers as indices 0..2)."""
     cat = catalog or default_catalog()
-    r = _as(radius, torch.float)
+    r = cast(radius, torch.float)
     area = math.pi * r * r
-    u_m = _as(torque_point, torch.float).clamp(0, 1)
-    u_b = _as(battery_point, torch.float).clamp(0, 1)
+    u_m = cast(torque_point, torch.float).clamp(0, 1)
+    u_b = cast(battery_point, torch.float).clamp(0, 1)
     try:
         chassis_t, motor_t, battery_t = _tier_tables(cat, r.dtype, r.device)
     except TypeError:  # a catalog that cannot be hashed: not cached
         chassis_t, motor_t, battery_t = _tier_tables.__wrapped__(cat, r.dtype, r.device)
     # each part's figures at each robot's tier, one gather a part
-    density, strength, area_cost = chassis_t[:, _as(chassis, torch.long)].unbind()
-    motor_force, efficiency, motor_kg, motor_usd = motor_t[:, _as(motor, torch.long)].unbind()
-    capacity_t, energy_density, kj_cost = battery_t[:, _as(battery, torch.long)].unbind()
+    density, strength, area_cost = chassis_t[:, cast(chassis, torch.long)].unbind()
+    motor_force, efficiency, motor_kg, motor_usd = motor_t[:, cast(motor, torch.long)].unbind()
+    capacity_t, energy_density, kj_cost = battery_t[:, cast(battery, torch.long)].unbind()
 
     chassis_mass = density * area
     payload = strength * area
@@ -289,4 +286,6 @@ def phenotype(
 
     mass = cat.base_mass + cat.effector_mass + chassis_mass + motor_mass + battery_mass
     cost = cat.base_cost + cat.effector_cost + chassis_cost + motor_cost + battery_cost
-    return Phenotype(r, mass, force, payload, capacity, efficiency, _as(effector, torch.long), cost)
+    return Phenotype(
+        r, mass, force, payload, capacity, efficiency, cast(effector, torch.long), cost
+    )
