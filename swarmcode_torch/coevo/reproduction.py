@@ -192,23 +192,38 @@ def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator
 
 def crossover(a: Population, b: Population, generator: torch.Generator) -> Population:
     """Parents [N], [N] -> child [N]: uniform per gene group, uniform per tag bit, one-point BT
-    crossover at the same cut in 1..L-1."""
+    crossover at the same cut in 1..L-1 (`mate` of every pair)."""
     n = a.size
-    dev = a.bt.device
-    out: dict[str, Tensor] = {}
+    rows = torch.arange(n, device=a.bt.device)
+    cross = torch.ones(n, dtype=torch.bool, device=rows.device)
+    return mate(Population.cat([a, b]), rows, rows + n, cross, generator)
+
+
+def mate(
+    genome: Population, p1: Tensor, p2: Tensor, do_cross: Tensor, generator: torch.Generator
+) -> Population:
+    """Rows p1 [N], p2 [N] of `genome`, do_cross [N] bool -> children [N]: where do_cross the
+    crossover of the two parents (uniform per gene group, uniform per tag bit, one-point BT
+    crossover at the same cut in 1..L-1), else a copy of p1 (the draws are made for every
+    child alike). Each gene is read once, from each child's row for it."""
+    n = p1.numel()
+    dev = genome.bt.device
+    keep = ~do_cross[:, None]  # [N, 1] a copy of p1
     pick = torch.rand(n, len(CROSSOVER_GROUPS), generator=generator, device=dev) < 0.5
-    for gi, group in enumerate(CROSSOVER_GROUPS):
+    group_rows = torch.where(pick | keep, p1[:, None], p2[:, None]).unbind(1)
+    out: dict[str, Tensor] = {}
+    for rows, group in zip(group_rows, CROSSOVER_GROUPS):
         for name in group:
-            out[name] = torch.where(pick[:, gi], getattr(a, name), getattr(b, name))
-    bits = torch.rand(a.tag.shape, generator=generator, device=dev) < 0.5
-    out["tag"] = torch.where(bits, a.tag, b.tag)
-    l = a.bt.shape[1]
+            out[name] = getattr(genome, name)[rows]
+    bits = torch.rand(n, genome.tag.shape[1], generator=generator, device=dev) < 0.5
+    out["tag"] = torch.where(bits | keep, genome.tag[p1], genome.tag[p2])
+    l = genome.bt.shape[1]
     if l >= 2:
         cut = torch.randint(1, l, (n, 1), generator=generator, device=dev)
-        t = torch.arange(l, device=dev)[None, :]
-        out["bt"] = torch.where(t < cut, a.bt, b.bt)
+        first = (torch.arange(l, device=dev) < cut) | keep
+        out["bt"] = torch.where(first, genome.bt[p1], genome.bt[p2])
     else:
-        out["bt"] = a.bt.clone()
+        out["bt"] = genome.bt[p1]
     return Population(**{f.name: out[f.name] for f in fields(Population)})
 
 
@@ -398,9 +413,7 @@ def reproduce(
         torch.full((n_off,), params.crossover_cross, device=dev),
     )
     do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
-    g1, g2 = genome.index(p1), genome.index(p2)
-    child = crossover(g1, g2, generator).where(do_cross, g1)
-    child = mutate(child, params, generator)
+    child = mutate(mate(genome, p1, p2, do_cross, generator), params, generator)
 
     children = Population.cat([genome.index(elite), child])
     hint = torch.cat([species[elite], species[p1]])
