@@ -294,7 +294,7 @@ def _evaluation(
         adm = state.admission or Admission.empty(ctx.device).grow(state.next_species_id, True)
         adm = adm.grow(sp.next_species_id, partner=state.generation == 0)
         allowed = adm.allowed(sp.proto_ids)
-        designs_d = design_distance(state.genome.index(sp.proto_index), ctx.speciation.weights)
+        designs_d = design_distance(sp.prototypes, ctx.speciation.weights)
     res = evaluate(
         state.genome,
         sp.species,
@@ -375,7 +375,7 @@ def _reproduction(
         generation=state.generation + 1,
         genome=children,
         species_hint=hint,
-        proto=state.genome.index(sp.proto_index),
+        proto=sp.prototypes,
         proto_ids=sp.proto_ids,
         next_species_id=sp.next_species_id,
         fitness=torch.where(is_elite, fit[parent], 0.0),

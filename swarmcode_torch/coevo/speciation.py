@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -10,6 +11,7 @@ import torch
 from torch import Tensor
 
 from ..sim.bt import NUM_OPCODES
+from ..sim.tensors import cast
 from .config import DistanceWeights, SwarmCoDeConfig
 from .population import R_MAX, R_MIN, Population
 
@@ -20,27 +22,54 @@ _FULL_MATRIX_MAX = 1 << 24
 @dataclass(frozen=True, eq=False)
 class SpeciationResult:
     """species [P] long ids; proto_ids [K] long (carried-over first, then new in founding order);
-    proto_index [K] long prototype rows; next_species_id: the next unused id; distance [P, P]
-    float32: D between the population's genomes where it was computed (else None)."""
+    proto_index [K] long prototype rows; next_species_id: the next unused id; prototypes [K]:
+    the prototypes' genomes (rows proto_index); distance [P, P] float32: D between the
+    population's genomes where it was computed (else None)."""
 
     species: Tensor
     proto_ids: Tensor
     proto_index: Tensor
     next_species_id: int
+    prototypes: Population
     distance: Tensor | None = None
 
 
 def hamming(a: Tensor, b: Tensor) -> Tensor:
-    """[Pa, L] bool, [Pb, L] bool -> [Pa, Pb] float32 Hamming distances (exact integer counts)."""
-    af, bf = a.float(), b.float()
-    return af @ (1.0 - bf).T + (1.0 - af) @ bf.T
+    """[Pa, L] bool, [Pb, L] bool -> [Pa, Pb] float32 Hamming distances (exact integer counts):
+    the bits set in a and not in b plus those set in b and not in a, in one product."""
+    af = a.float()
+    bf = af if b is a else b.float()
+    na = 1.0 - af
+    nb = na if b is a else 1.0 - bf
+    return torch.cat([af, na], 1) @ torch.cat([nb, bf], 1).T
+
+
+@functools.lru_cache(maxsize=8)
+def _opcode_rows(device: torch.device) -> Tensor:
+    """[NUM_OPCODES, NUM_OPCODES] float32 identity: row o is opcode o one-hot (built once per
+    device, never written to)."""
+    return torch.eye(NUM_OPCODES, device=device)
 
 
 def _one_hot_bt(bt: Tensor) -> Tensor:
     """[P, L] long opcodes -> [P, L * NUM_OPCODES] float32 one-hot."""
-    oh = torch.zeros(*bt.shape, NUM_OPCODES, dtype=torch.float32, device=bt.device)
-    oh.scatter_(-1, bt.long().unsqueeze(-1), 1.0)
-    return oh.flatten(1)
+    return _opcode_rows(bt.device)[cast(bt, torch.long)].flatten(1)
+
+
+def _weighted(w: float, d: Tensor) -> Tensor:
+    """w * d (d itself for a weight of 1: the product would be d exactly)."""
+    return d if w == 1.0 else w * d
+
+
+def _design_terms(a: Population, b: Population, w: DistanceWeights) -> tuple[Tensor, ...]:
+    """The hardware terms of D (`distance_terms`'): hw, tool, size, each [Pa, Pb] float32."""
+    ha = a.hardware_vector()
+    hb = ha if b is a else b.hardware_vector()
+    d_hw = torch.cdist(ha, hb, compute_mode="donot_use_mm_for_euclid_dist") / math.sqrt(ha.shape[1])
+    d_tool = (a.effector[:, None] != b.effector[None, :]).float()
+    ra, rb = cast(a.radius, torch.float), cast(b.radius, torch.float)
+    d_size = (ra[:, None] - rb[None, :]).abs() / (R_MAX - R_MIN)
+    return _weighted(w.w_hw, d_hw), _weighted(w.w_tool, d_tool), _weighted(w.w_size, d_size)
 
 
 def distance_terms(
@@ -48,7 +77,7 @@ def distance_terms(
 ) -> dict[str, Tensor]:
     """Genomes [Pa], [Pb] -> the weighted terms of D, each [Pa, Pb] float32, in the order of the
     sum: tag = w_tag (H/L)^gamma, hw = w_hw d_hw, bt = w_bt d_bt, tool = w_tool d_tool,
-    size = w_size d_size.
+    size = w_size d_size. (b may be a itself: what the two share is computed once.)
 
     H: tag Hamming distance, L: tag length; d_hw: Euclidean distance of `hardware_vector()`
     / sqrt(its dimension), the two continuous operating points;
@@ -62,22 +91,20 @@ def distance_terms(
         d_tag = (hamming(a.tag, b.tag) / l_tag) ** w.gamma
     else:
         d_tag = torch.zeros(pa, pb, device=dev)
-    ha, hb = a.hardware_vector(), b.hardware_vector()
-    d_hw = torch.cdist(ha, hb, compute_mode="donot_use_mm_for_euclid_dist") / math.sqrt(ha.shape[1])
     l_bt = a.bt.shape[1]
     if l_bt > 0:
-        matches = _one_hot_bt(a.bt) @ _one_hot_bt(b.bt).T
-        d_bt = 1.0 - matches / l_bt
+        oh_a = _one_hot_bt(a.bt)
+        oh_b = oh_a if b is a else _one_hot_bt(b.bt)
+        d_bt = 1.0 - (oh_a @ oh_b.T) / l_bt
     else:
         d_bt = torch.zeros(pa, pb, device=dev)
-    d_tool = (a.effector[:, None] != b.effector[None, :]).float()
-    d_size = (a.radius.float()[:, None] - b.radius.float()[None, :]).abs() / (R_MAX - R_MIN)
+    hw, tool, size = _design_terms(a, b, w)
     return {
-        "tag": w.w_tag * d_tag,
-        "hw": w.w_hw * d_hw,
-        "bt": w.w_bt * d_bt,
-        "tool": w.w_tool * d_tool,
-        "size": w.w_size * d_size,
+        "tag": _weighted(w.w_tag, d_tag),
+        "hw": hw,
+        "bt": _weighted(w.w_bt, d_bt),
+        "tool": tool,
+        "size": size,
     }
 
 
@@ -93,8 +120,8 @@ def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -
     d_tool + w_size d_size), how far apart their robots are as designs. The tag (a signal for
     partner choice, not a property of the robot) and the tree are left out: which partner's
     robots are most like a species' robots (`partner_admission = "substitute"`)."""
-    t = distance_terms(proto, proto, w)
-    return t["hw"] + t["tool"] + t["size"]
+    hw, tool, size = _design_terms(proto, proto, w)
+    return hw + tool + size
 
 
 def speciate(
@@ -125,7 +152,8 @@ def speciate(
     dev = genome.bt.device
     long_empty = torch.zeros(0, dtype=torch.long, device=dev)
     if p == 0:
-        return SpeciationResult(long_empty, long_empty, long_empty, next_species_id)
+        empty = genome.index(long_empty)
+        return SpeciationResult(long_empty, long_empty, long_empty, next_species_id, empty)
     # (1) carry-over of surviving species: alive [Kp], closest [Kp] (the new prototype's row)
     prev_ids: Tensor | None = None
     alive: Tensor | None = None
@@ -177,6 +205,7 @@ def speciate(
         proto_ids=proto_ids,
         proto_index=proto_index,
         next_species_id=next_species_id + n_new,
+        prototypes=genome.index(proto_index),
         distance=full,
     )
 
@@ -273,4 +302,5 @@ def _speciate_in_rounds(
         proto_ids=proto_ids,
         proto_index=proto_index,
         next_species_id=next_species_id + n_new,
+        prototypes=genome.index(proto_index),
     )
