@@ -10,6 +10,7 @@ import torch
 from torch import Tensor
 
 from ..sim.bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ, compute_jumps
+from ..sim.tensors import cast
 from .config import ReproductionParams
 from .population import CROSSOVER_GROUPS, GENE_BOUNDS, GENE_VALUES, SOCIAL_GENES, Population
 from .selection import elite_count, group_sizes, rank_within_groups, top_per_group
@@ -39,27 +40,37 @@ def offspring_quotas(
     if k == 0:
         return torch.zeros(0, dtype=torch.long, device=dev)
     # no value is read on the host here (each would be a device sync): the branches are
-    # torch.where over tensors, `protect` may be a 0-d tensor
-    f = torch.nan_to_num(adjusted_fitness_sum.double(), nan=0.0).clamp(min=0.0)
-    f = torch.where(f.sum() > 0, f, torch.ones_like(f))
+    # torch.where over tensors, `protect` may be a 0-d tensor (a position: a mask `is_p`)
+    if isinstance(protect, int) and not -k <= protect < k:
+        raise IndexError(f"protect {protect} is out of range for {k} species")
+    idx = torch.arange(k, device=dev)
+    is_p = (
+        None if protect is None else idx == (protect % k if isinstance(protect, int) else protect)
+    )
+    f = torch.nan_to_num(cast(adjusted_fitness_sum, torch.double), nan=0.0).clamp(min=0.0)
+    f = torch.where(f.sum() > 0, f, 1.0)
     if min_share > 0:
         # a relative tolerance, so that an exact share of min_share is not lost to rounding
         keep = f / f.sum() * population_size >= min_share * (1 - 1e-9)
         any_kept = (f * keep).sum() > 0  # else no species qualifies: no threshold
-        if protect is not None:
-            keep[protect] = True
-        f = torch.where(any_kept & ~keep, torch.zeros_like(f), f)
+        if is_p is not None:
+            keep = keep | is_p
+        f = torch.where(any_kept & ~keep, 0.0, f)
     share = f / f.sum() * population_size
     base = share.floor()
     q = base.long()
     rem = (population_size - q.sum()).clamp(0, k)  # +1 to the rem largest remainders
     order = torch.sort(share - base, descending=True, stable=True).indices
-    q[order] += (torch.arange(k, device=dev) < rem).long()
-    if protect is not None:
+    q = q.index_add(0, order, (idx < rem).long())
+    if is_p is not None:
         # take 1 from the largest quota (no host read: population_size may be a tensor)
-        need = (q[protect] == 0) & (torch.as_tensor(population_size, device=dev) > 0)
-        q[q.argmax()] -= need.long()
-        q[protect] = torch.where(need, 1, q[protect])
+        need = torch.where(is_p, q, 0).sum() == 0
+        if isinstance(population_size, Tensor):
+            need = need & (population_size > 0)
+        elif population_size <= 0:
+            need = need & False
+        q = q - ((idx == q.argmax()) & need).long()
+        q = torch.where(is_p & need, 1, q)
     return q
 
 
@@ -304,32 +315,36 @@ def quotas(
     p = fitness.numel()
     dev = fitness.device
     k = proto_ids.numel()
-    ids = proto_ids.to(dev).long()
+    ids = cast(proto_ids, torch.long, dev)
     match = species[:, None] == ids[None, :]
     if p and not present and not bool(match.any(1).all()):
         raise ValueError("every individual's species must be listed in proto_ids")
-    pos = match.to(torch.int32).argmax(1).long()
+    pos = match.to(torch.int32).argmax(1)
     sizes = group_sizes(pos, k)
-    fit = fitness.float()
+    fit = cast(fitness, torch.float)
     fsum = torch.zeros(k, dtype=torch.float64, device=dev).index_add_(0, pos, fit.double())
     if params.quota_size_exponent is not None:  # mean x size ** exponent
         n = sizes.clamp(min=1).double()
         adjusted = fsum / n * n.pow(params.quota_size_exponent)
     else:  # the paper's total
         adjusted = fsum
+    # empty species get 0 (`present`: there are none, every species is a position of its own)
+    nonempty = None if present else (sizes > 0).nonzero().squeeze(1)
+
+    def of_nonempty(t: Tensor) -> Tensor:
+        return t if nonempty is None else t[nonempty]
+
     quota = torch.zeros(k, dtype=torch.long, device=dev)
-    # empty species get 0
-    nonempty = torch.arange(k, device=dev) if present else (sizes > 0).nonzero().squeeze(1)
     if p:
-        best_pos = pos[fit.argmax()]
-        protect = (nonempty == best_pos).to(torch.int32).argmax()
-        q = offspring_quotas(adjusted[nonempty], p, protect=protect, min_share=params.min_share)
+        best_pos = pos.take(fit.argmax())  # the species of the global best (0-d, no host read)
+        protect = best_pos if nonempty is None else (nonempty == best_pos).int().argmax()
+        q = offspring_quotas(of_nonempty(adjusted), p, protect=protect, min_share=params.min_share)
         if essential is not None and params.essential_floor > 0:
             pri = priority if priority is not None else torch.zeros(k, device=dev)
             q = floor_quotas(
-                q, essential[nonempty], pri[nonempty], params.essential_floor, protect=protect
+                q, of_nonempty(essential), of_nonempty(pri), params.essential_floor, protect=protect
             )
-        quota[nonempty] = q
+        quota = q if nonempty is None else quota.index_put((nonempty,), q)
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
     return Quotas(pos, sizes, fit, quota, n_elite)
 
