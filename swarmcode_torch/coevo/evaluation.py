@@ -374,9 +374,10 @@ def score_plan(
         [swarms.focal_species_count, swarms.baseline_species_count]
     ).repeat_interleave(T)
     cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
-    scores = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1)
-    focal, base = scores[0], scores[1]
-    team_m = {k: v.view(2, P, T)[0].mean(-1) for k, v in m.items()}
+    focal, base = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1).unbind()
+    # every metric's mean over the focal team's trials, in one reduction
+    means = torch.stack(list(m.values())).view(len(m), 2, P, T)[:, 0].mean(-1).unbind()
+    team_m = dict(zip(m, means))
     return EvalResult(
         fitness=gate(focal, base, cfg.p_marginal),
         focal=focal,
