@@ -24,11 +24,6 @@ METRIC_KEYS = (
 )
 
 
-def _float(x) -> Tensor:
-    """x (a tensor, or what `torch.as_tensor` takes) as a float32 tensor, x itself where it is."""
-    return cast(x if isinstance(x, Tensor) else torch.as_tensor(x), torch.float)
-
-
 def raw_fitness_terms(
     m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()
 ) -> dict[str, Tensor]:
@@ -38,7 +33,7 @@ def raw_fitness_terms(
     missing = [k for k in METRIC_KEYS if k not in m]
     if missing:
         raise KeyError(f"raw_fitness is missing metrics: {', '.join(missing)}")
-    f = {k: _float(m[k]) for k in METRIC_KEYS}
+    f = {k: cast(m[k], torch.float) for k in METRIC_KEYS}
     picked = f["picked_individual"] + f["picked_collab"]
     return {
         "delivery": f["delivered_individual"] * w.W_delivery,
@@ -65,7 +60,7 @@ def budget_penalty(
 ) -> Tensor:
     """[...] team cost -> [...] factor: max(floor, exp(-lam (cost - budget))) over budget,
     else 1."""
-    cost = _float(cost)
+    cost = cast(cost, torch.float)
     if budget is None:
         return torch.ones_like(cost)
     if isinstance(budget, Tensor):
