@@ -3,6 +3,7 @@ crossover and mutation of whole populations as batched tensor operations."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
@@ -109,7 +110,7 @@ def floor_quotas(
 def subtree_end(bt: Tensor, start: Tensor) -> Tensor:
     """[N, L] opcodes, [N] start slot -> [N] end (exclusive) of the subtree rooted at start:
     the jump index (past the matching END for SEQ/SEL, L if unclosed; start + 1 otherwise)."""
-    return compute_jumps(bt).gather(1, start[:, None].long()).squeeze(1)
+    return compute_jumps(bt).gather(1, cast(start, torch.long)[:, None]).squeeze(1)
 
 
 def replace_subtree(bt: Tensor, start: Tensor, subtree: Tensor, subtree_len: Tensor) -> Tensor:
@@ -121,15 +122,20 @@ def replace_subtree(bt: Tensor, start: Tensor, subtree: Tensor, subtree_len: Ten
     n, l = bt.shape
     if l == 0 or n == 0:
         return bt.clone()
-    s_max = subtree.shape[1]
-    end = subtree_end(bt, start)
-    t = torch.arange(l, device=bt.device)[None, :]
-    s, m, e = start[:, None], subtree_len[:, None], end[:, None]
-    from_sub = subtree.gather(1, (t - s).clamp(0, s_max - 1))
-    tail = t - s - m + e
-    from_tail = bt.gather(1, tail.clamp(0, l - 1))
-    from_tail = torch.where(tail < l, from_tail, torch.full_like(from_tail, NOP))
-    return torch.where(t < s, bt, torch.where(t < s + m, from_sub, from_tail))
+    s = cast(start, torch.long)[:, None]
+    end = compute_jumps(bt).gather(1, s)  # [N, 1] `subtree_end`
+    d = torch.arange(l, device=bt.device) - s  # [N, L] each slot's place after the start
+    m = subtree_len[:, None]
+    from_sub = subtree.gather(1, d.clamp(0, subtree.shape[1] - 1))
+    tail = d + (end - m)  # the slot of the old program that shifts there
+    from_tail = torch.where(tail < l, bt.gather(1, tail.clamp(0, l - 1)), NOP)
+    return torch.where(d < 0, bt, torch.where(d < m, from_sub, from_tail))
+
+
+@functools.lru_cache(maxsize=8)
+def _leaf_ops(device: torch.device) -> Tensor:
+    """[len(LEAF_OPS)] long (built once per device, never written to)."""
+    return torch.tensor(LEAF_OPS, dtype=torch.long, device=device)
 
 
 def random_subtrees(
@@ -140,27 +146,21 @@ def random_subtrees(
 ) -> tuple[Tensor, Tensor]:
     """-> ([n, max_leaves + 2] long subtrees NOP-padded, [n] long lengths): a leaf, or SEQ/SEL +
     1..max leaves + END."""
+    device = torch.device(device)
     ml = params.subtree_max_leaves
     s_max = ml + 2
-    leaf_ops = torch.tensor(LEAF_OPS, dtype=torch.long, device=device)
     is_leaf = torch.rand(n, generator=generator, device=device) < params.subtree_leaf_prob
     ctrl = torch.randint(0, 2, (n,), generator=generator, device=device)  # SEQ=0 / SEL=1
     k = torch.randint(1, ml + 1, (n,), generator=generator, device=device)
-    leaves = leaf_ops[
+    leaves = _leaf_ops(device)[
         torch.randint(0, len(LEAF_OPS), (n, s_max), generator=generator, device=device)
     ]
-    t = torch.arange(s_max, device=device)[None, :]
-    kk = k[:, None]
-    nop = torch.full((n, s_max), NOP, dtype=torch.long, device=device)
-    ctrl_form = torch.where(
-        t == 0,
-        torch.where(ctrl[:, None] == 0, SEQ, SEL),
-        torch.where(t <= kk, leaves, torch.where(t == kk + 1, END, nop)),
-    )
-    leaf_form = torch.where(t == 0, leaves, nop)
-    sub = torch.where(is_leaf[:, None], leaf_form, ctrl_form)
-    length = torch.where(is_leaf, torch.ones_like(k), k + 2)
-    return sub, length
+    # a leaf: its leaf at slot 0; else SEQ / SEL at slot 0, leaves at 1..k and END at k + 1
+    head = torch.where(is_leaf, leaves[:, 0], torch.where(ctrl == 0, SEQ, SEL))
+    t, kk = torch.arange(s_max, device=device), k[:, None]
+    body = torch.where(t <= kk, leaves, torch.where(t == kk + 1, END, NOP))
+    sub = torch.where(t == 0, head[:, None], torch.where(is_leaf[:, None], NOP, body))
+    return sub, torch.where(is_leaf, 1, k + 2)
 
 
 def _random_node(bt: Tensor, generator: torch.Generator) -> Tensor:
@@ -169,8 +169,17 @@ def _random_node(bt: Tensor, generator: torch.Generator) -> Tensor:
     count = live.sum(1, keepdim=True)
     u = torch.rand(bt.shape[0], 1, generator=generator, device=bt.device)
     k = torch.minimum((u * count).long(), (count - 1).clamp(min=0))  # the k-th node
-    hit = live & (live.long().cumsum(1) - 1 == k)
-    return hit.to(torch.int32).argmax(1, keepdim=True).long()
+    # the k-th node is the first slot where the running count of nodes reaches k + 1
+    hit = live.cumsum(1) == k + 1
+    return hit.to(torch.int32).argmax(1, keepdim=True)
+
+
+@functools.lru_cache(maxsize=8)
+def _opcode_weights(weights: tuple[float, ...], device: torch.device) -> Tensor:
+    """The point mutation's opcode weights as a tensor (built once per setting and device)."""
+    if len(weights) != NUM_OPCODES:
+        raise ValueError(f"point_opcode_weights needs {NUM_OPCODES} entries")
+    return torch.tensor(weights, dtype=torch.float, device=device)
 
 
 def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator) -> Tensor:
@@ -182,19 +191,16 @@ def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator
     dev = bt.device
     do = torch.rand(n, generator=generator, device=dev) < params.bt_mutation_rate
     sub = torch.rand(n, generator=generator, device=dev) < params.bt_subtree_prob
-    weights = torch.tensor(params.point_opcode_weights, dtype=torch.float, device=dev)
-    if weights.numel() != NUM_OPCODES:
-        raise ValueError(f"point_opcode_weights needs {NUM_OPCODES} entries")
-    point = bt.clone()
+    weights = _opcode_weights(tuple(params.point_opcode_weights), dev)
+    point = bt
     for _ in range(params.bt_point_count):
         slot = _random_node(point, generator)
         op = torch.multinomial(weights, n, replacement=True, generator=generator)
-        point.scatter_(1, slot, op[:, None].to(bt.dtype))
+        point = point.scatter(1, slot, cast(op, bt.dtype)[:, None])
     start = torch.randint(0, l, (n,), generator=generator, device=dev)
     subtree, sub_len = random_subtrees(n, params, generator, dev)
-    replaced = replace_subtree(bt, start, subtree.to(bt.dtype), sub_len)
-    out = torch.where((do & ~sub)[:, None], point, bt)
-    return torch.where((do & sub)[:, None], replaced, out)
+    replaced = replace_subtree(bt, start, cast(subtree, bt.dtype), sub_len)
+    return torch.where(do[:, None], torch.where(sub[:, None], replaced, point), bt)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -238,14 +244,47 @@ def mate(
     return Population(**{f.name: out[f.name] for f in fields(Population)})
 
 
-def _gauss_clip(
-    x: Tensor, lo: float, hi: float, sigma: float, generator: torch.Generator, p: float = 1.0
-) -> Tensor:
-    """[N] -> [N] x + N(0, (sigma (hi - lo))^2), clipped to [lo, hi], each entry w.p. p."""
+def _gauss_draws(x: Tensor, generator: torch.Generator, p: float) -> tuple[Tensor, Tensor | None]:
+    """The draws of a Gaussian step of x [N]: standard normal noise [N] (x's dtype), and where
+    p < 1, uniforms [N] (the entries below p are stepped)."""
     noise = torch.randn(x.shape, generator=generator, device=x.device, dtype=x.dtype)
-    if p < 1.0:
-        noise = noise * (torch.rand(x.shape, generator=generator, device=x.device) < p)
-    return (x + noise * (sigma * (hi - lo))).clamp(lo, hi)
+    u = torch.rand(x.shape, generator=generator, device=x.device) if p < 1.0 else None
+    return noise, u
+
+
+@functools.lru_cache(maxsize=8)
+def _gauss_constants(
+    names: tuple[str, ...], sigmas: tuple[float, ...], dtype: torch.dtype, device: torch.device
+) -> tuple[Tensor, Tensor, Tensor]:
+    """[G, 1] lower and upper bounds (GENE_BOUNDS) and noise scales sigma (hi - lo) of the genes
+    `names` (built once per setting and device, never written to)."""
+    lo, hi = zip(*(GENE_BOUNDS[n] for n in names))
+    scale = [s * (h - l) for s, l, h in zip(sigmas, lo, hi)]
+
+    def column(v) -> Tensor:
+        return torch.tensor(v, dtype=dtype, device=device)[:, None]
+
+    return column(lo), column(hi), column(scale)
+
+
+def _gauss_steps(
+    genes: dict[str, Tensor],
+    draws: dict[str, tuple[Tensor, Tensor | None]],
+    params: ReproductionParams,
+) -> dict[str, Tensor]:
+    """The continuous genes `genes` ([N] each, one dtype) stepped by their `_gauss_draws`: x +
+    N(0, (sigma (hi - lo))^2), clipped to GENE_BOUNDS [lo, hi], each entry w.p.
+    p_gene_mutation (social_sigma for SOCIAL_GENES, else hw_sigma); all in one pass over
+    their stack."""
+    names = tuple(draws)
+    x = torch.stack([genes[n] for n in names])
+    noise = torch.stack([draws[n][0] for n in names])
+    if params.p_gene_mutation < 1.0:
+        u = torch.stack([u for _, u in draws.values() if u is not None])
+        noise = noise * (u < params.p_gene_mutation)
+    sigmas = tuple(params.social_sigma if n in SOCIAL_GENES else params.hw_sigma for n in names)
+    lo, hi, scale = _gauss_constants(names, sigmas, x.dtype, x.device)
+    return dict(zip(names, (x + noise * scale).clamp(lo, hi).unbind()))
 
 
 def _resample(x: Tensor, n_values: int, p: float, generator: torch.Generator) -> Tensor:
@@ -260,13 +299,14 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
     bits, selectivity, dominance).
 
     Genes are drawn in field order: tag bits flip w.p. p_tag_flip (None: 1 / L_tag), the BT by
-    `mutate_bt`, continuous genes by `_gauss_clip` in their GENE_BOUNDS (social_sigma for
-    SOCIAL_GENES, else hw_sigma; each w.p. p_gene_mutation), categorical ones by `_resample`
-    (w.p. p_categorical; the effector w.p. p_effector where that is set).
+    `mutate_bt`, continuous genes by `_gauss_draws` (stepped together by `_gauss_steps`, in
+    their GENE_BOUNDS), categorical ones by `_resample` (w.p. p_categorical; the effector w.p.
+    p_effector where that is set).
     """
     l_tag = g.tag.shape[1]
     p_flip = params.p_tag_flip if params.p_tag_flip is not None else (1.0 / l_tag if l_tag else 0.0)
     out = {}
+    draws = {}  # the continuous genes' draws
     for name in (f.name for f in fields(Population)):
         x = getattr(g, name)
         if name == "tag":
@@ -274,8 +314,7 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
         elif name == "bt":
             out[name] = mutate_bt(x, params, generator)
         elif name in GENE_BOUNDS:
-            sigma = params.social_sigma if name in SOCIAL_GENES else params.hw_sigma
-            out[name] = _gauss_clip(x, *GENE_BOUNDS[name], sigma, generator, params.p_gene_mutation)
+            draws[name] = _gauss_draws(x, generator, params.p_gene_mutation)
         else:
             p_cat = (
                 params.p_effector
@@ -283,7 +322,8 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
                 else params.p_categorical
             )
             out[name] = _resample(x, GENE_VALUES[name], p_cat, generator)
-    return Population(**out)
+    out.update(_gauss_steps({n: getattr(g, n) for n in draws}, draws, params))
+    return Population(**{f.name: out[f.name] for f in fields(Population)})
 
 
 @dataclass(frozen=True, eq=False)
