@@ -439,44 +439,37 @@ def reproduce(
     n_off = off_pos.numel()
     ts = params.tournament_size
 
-    def tournament(spos: Tensor, tries: int) -> Tensor:
-        """[N] species positions -> [N, tries] tournament winners (rows) within those species."""
-        u = torch.rand(spos.numel(), tries, ts, generator=generator, device=dev)
-        size = sizes[spos].view(-1, 1, 1)
-        local = (u * size).long().clamp(max=size - 1)
-        rows = order[starts[spos].view(-1, 1, 1) + local]
+    # each offspring's species: its size, its last rank and its first place in `order`
+    size = sizes[off_pos].view(-1, 1, 1)
+    last, first = size - 1, starts[off_pos].view(-1, 1, 1)
+
+    def tournament(tries: int) -> Tensor:
+        """-> [N, tries] tournament winners (rows) within each offspring's species."""
+        u = torch.rand(n_off, tries, ts, generator=generator, device=dev)
+        rows = order[first + (u * size).long().clamp(max=last)]
         win = fit[rows].argmax(-1, keepdim=True)
         return rows.gather(-1, win).squeeze(-1)
 
-    p1 = tournament(off_pos, 1)[:, 0]
-    cand = tournament(off_pos, params.mate_tries)  # [N, tries]
+    p1 = tournament(1)[:, 0]
+    cand = tournament(params.mate_tries)  # [N, tries]
     dmat = distance_fn(genome, genome)
-    ok = (dmat[p1[:, None], cand] <= params.delta) & (cand != p1[:, None])
-    local_p2 = cand.gather(1, ok.to(torch.int32).argmax(1, keepdim=True).long()).squeeze(1)
+    p1_col = p1[:, None]
+    ok = (dmat[p1_col, cand] <= params.delta) & (cand != p1_col)
+    local_p2 = cand.gather(1, ok.to(torch.int32).argmax(1, keepdim=True)).squeeze(1)
     if p > 1:
         g = torch.randint(0, p - 1, (n_off, ts), generator=generator, device=dev)
-        g = g + (g >= p1[:, None]).long()  # uniform over rows != p1
+        g = g + (g >= p1_col)  # uniform over rows != p1
     else:
         g = torch.zeros(n_off, ts, dtype=torch.long, device=dev)
     global_p2 = g.gather(1, fit[g].argmax(1, keepdim=True)).squeeze(1)
     p2 = torch.where(ok.any(1), local_p2, global_p2)
 
     same = species[p2] == species[p1]
-    p_cross = torch.where(
-        same,
-        torch.full((n_off,), params.crossover_same, device=dev),
-        torch.full((n_off,), params.crossover_cross, device=dev),
-    )
+    p_cross = torch.where(same, params.crossover_same, params.crossover_cross)
     do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
     child = mutate(mate(genome, p1, p2, do_cross, generator), params, generator)
 
     children = Population.cat([genome.index(elite), child])
-    hint = torch.cat([species[elite], species[p1]])
-    is_elite = torch.cat(
-        [
-            torch.ones(elite.numel(), dtype=torch.bool, device=dev),
-            torch.zeros(n_off, dtype=torch.bool, device=dev),
-        ]
-    )
     parent = torch.cat([elite, p1])
-    return children, hint, is_elite, parent
+    is_elite = torch.arange(parent.numel(), device=dev) < elite.numel()
+    return children, species[parent], is_elite, parent

@@ -66,9 +66,9 @@ def _design_terms(a: Population, b: Population, w: DistanceWeights) -> tuple[Ten
     ha = a.hardware_vector()
     hb = ha if b is a else b.hardware_vector()
     d_hw = torch.cdist(ha, hb, compute_mode="donot_use_mm_for_euclid_dist") / math.sqrt(ha.shape[1])
-    d_tool = (a.effector[:, None] != b.effector[None, :]).float()
+    d_tool = (a.effector[:, None] != b.effector).float()
     ra, rb = cast(a.radius, torch.float), cast(b.radius, torch.float)
-    d_size = (ra[:, None] - rb[None, :]).abs() / (R_MAX - R_MIN)
+    d_size = (ra[:, None] - rb).abs() / (R_MAX - R_MIN)
     return _weighted(w.w_hw, d_hw), _weighted(w.w_tool, d_tool), _weighted(w.w_size, d_size)
 
 
@@ -159,9 +159,9 @@ def speciate(
     alive: Tensor | None = None
     closest: Tensor | None = None
     if prev_proto is not None and prev_proto_ids.numel() > 0:
-        prev_ids = prev_proto_ids.to(dev).long()
+        prev_ids = cast(prev_proto_ids, torch.long, dev)
         d_prev = distance(genome, prev_proto.to(dev), w)  # [P, Kp]
-        member = species_hint.to(dev)[:, None] == prev_ids[None, :]  # [P, Kp]
+        member = cast(species_hint, device=dev)[:, None] == prev_ids  # [P, Kp]
         alive = member.any(0)
         closest = d_prev.masked_fill(~member, math.inf).argmin(0)  # first min = lowest row
     if p * p > _FULL_MATRIX_MAX:
@@ -170,8 +170,8 @@ def speciate(
     idx = torch.arange(p, device=dev)
     if closest is not None:
         assert alive is not None and prev_ids is not None
-        d_cur = full[:, closest].masked_fill(~alive[None, :], math.inf)  # [P, Kp]
-        carried = ((closest[None, :] == idx[:, None]) & alive[None, :]).any(1)
+        d_cur = full[:, closest].masked_fill(~alive, math.inf)  # [P, Kp]
+        carried = ((closest == idx[:, None]) & alive).any(1)
         min_d = d_cur.min(1).values
     else:
         d_cur, carried, min_d = None, torch.zeros(p, dtype=torch.bool, device=dev), None
@@ -182,7 +182,7 @@ def speciate(
     picks = _to_device(np.concatenate([alive_at, founders]).astype(np.int64), dev)
     new_rows = picks[k:]
     # every other row joins the closest of the carried prototypes and the founders before it
-    d_new = full[:, new_rows].masked_fill(new_rows[None, :] >= idx[:, None], math.inf)
+    d_new = full[:, new_rows].masked_fill(new_rows >= idx[:, None], math.inf)
     if d_cur is not None:
         assert prev_ids is not None and closest is not None
         at = picks[:k]
@@ -217,7 +217,7 @@ def _founders(cand: Tensor, alive: Tensor | None, near: Tensor) -> tuple[np.ndar
     in row order, sequential by definition)."""
     p = cand.numel()
     flags = [cand] + ([alive] if alive is not None else []) + [near.T.reshape(-1)]
-    host = torch.cat(flags).to(torch.uint8).cpu().numpy().astype(bool)
+    host = torch.cat(flags).cpu().numpy()
     kp = 0 if alive is None else alive.numel()
     near_h = host[p + kp :].reshape(p, p)  # near_h[f]: the rows near row f
     founders: list[int] = []
@@ -233,7 +233,7 @@ def _to_device(a: np.ndarray, device: torch.device) -> Tensor:
     """A host array on `device`, without waiting for the device: from pinned memory on CUDA."""
     t = torch.from_numpy(a)
     if device.type != "cuda":
-        return t.to(device)
+        return cast(t, device=device)
     return t.pin_memory().to(device, non_blocking=True)
 
 
