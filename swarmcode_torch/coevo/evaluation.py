@@ -28,6 +28,7 @@ from ..sim.layout import Layout, make_layouts
 from ..sim.rollout import rollout
 from ..sim.scenario import Scenario
 from ..sim.state import Robots, WorldParams, capabilities
+from ..sim.tensors import cast
 from .config import EvalConfig
 from .fitness import budget_penalty, gate, raw_fitness, team_cost
 from .partners import (
@@ -252,8 +253,8 @@ def plan_evaluation(
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
     near = None
     if proto_distance is not None:
-        pos = (species[:, None] == proto_ids[None, :]).long().argmax(1)  # [P] species index
-        near = proto_distance.to(dev)[pos]  # [P, K]
+        pos = (species[:, None] == proto_ids).to(torch.int32).argmax(1)  # [P] species index
+        near = cast(proto_distance, device=dev)[pos]  # [P, K]
     swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator, near)
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)
     return EvalPlan(swarms, layouts, T)
@@ -367,13 +368,12 @@ def score_plan(
     over trials, the marginal gate. `phenotype`: the genome's, if computed."""
     P, T = plan.size, plan.trials
     swarms = plan.swarms
-    teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
+    teams = torch.cat([swarms.focal_team, swarms.baseline_team])  # [2B, S]
     ph = phenotype if phenotype is not None else genome_phenotype(genome, scenario.hardware)
-    robot_cost = ph.cost[teams.clamp_min(0)]
-    counts = torch.cat(
-        [swarms.focal_species_count, swarms.baseline_species_count]
-    ).repeat_interleave(T)
-    cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
+    counts = torch.cat([swarms.focal_species_count, swarms.baseline_species_count])
+    # each team's cost, then each of its trials'
+    costs = team_cost(ph.cost[teams.clamp_min(0)], teams >= 0, counts, scenario.species_overhead)
+    cost = costs.repeat_interleave(T)
     focal, base = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1).unbind()
     # every metric's mean over the focal team's trials, in one reduction
     means = torch.stack(list(m.values())).view(len(m), 2, P, T)[:, 0].mean(-1).unbind()
@@ -382,7 +382,7 @@ def score_plan(
         fitness=gate(focal, base, cfg.p_marginal),
         focal=focal,
         baseline=base,
-        team_cost=cost.view(2, P, T)[0, :, 0],
+        team_cost=costs[:P],
         swarms=swarms,
         team_metrics=team_m,
         sim_seconds=sim_seconds,

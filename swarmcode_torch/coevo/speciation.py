@@ -37,11 +37,8 @@ class SpeciationResult:
 def hamming(a: Tensor, b: Tensor) -> Tensor:
     """[Pa, L] bool, [Pb, L] bool -> [Pa, Pb] float32 Hamming distances (exact integer counts):
     the bits set in a and not in b plus those set in b and not in a, in one product."""
-    af = a.float()
-    bf = af if b is a else b.float()
-    na = 1.0 - af
-    nb = na if b is a else 1.0 - bf
-    return torch.cat([af, na], 1) @ torch.cat([nb, bf], 1).T
+    af, bf = a.float(), b.float()
+    return torch.cat([af, 1.0 - af], 1) @ torch.cat([1.0 - bf, bf], 1).T
 
 
 @functools.lru_cache(maxsize=8)
@@ -51,9 +48,36 @@ def _opcode_rows(device: torch.device) -> Tensor:
     return torch.eye(NUM_OPCODES, device=device)
 
 
-def _one_hot_bt(bt: Tensor) -> Tensor:
-    """[P, L] long opcodes -> [P, L * NUM_OPCODES] float32 one-hot."""
-    return _opcode_rows(bt.device)[cast(bt, torch.long)].flatten(1)
+class _Genes:
+    """What D reads of a population, each part computed on its first use and kept: the
+    distances of one population to itself and to others read it once."""
+
+    def __init__(self, pop: Population):
+        self.pop = pop
+
+    @functools.cached_property
+    def bits(self) -> Tensor:
+        """[P, 2 L_tag] float32: the tag bits, then their complements (`hamming`'s left side)."""
+        t = self.pop.tag.float()
+        return torch.cat([t, 1.0 - t], 1)
+
+    @functools.cached_property
+    def flipped(self) -> Tensor:
+        """[P, 2 L_tag] float32: the complements, then the bits (`hamming`'s right side)."""
+        return self.bits.roll(self.pop.tag.shape[1], 1)
+
+    @functools.cached_property
+    def one_hot_bt(self) -> Tensor:
+        """[P, L * NUM_OPCODES] float32: the opcodes one-hot."""
+        return _opcode_rows(self.pop.bt.device)[cast(self.pop.bt, torch.long)].flatten(1)
+
+    @functools.cached_property
+    def hw(self) -> Tensor:
+        return self.pop.hardware_vector()
+
+    @functools.cached_property
+    def radius(self) -> Tensor:
+        return cast(self.pop.radius, torch.float)
 
 
 def _weighted(w: float, d: Tensor) -> Tensor:
@@ -61,15 +85,37 @@ def _weighted(w: float, d: Tensor) -> Tensor:
     return d if w == 1.0 else w * d
 
 
-def _design_terms(a: Population, b: Population, w: DistanceWeights) -> tuple[Tensor, ...]:
+def _design_terms(a: _Genes, b: _Genes, w: DistanceWeights) -> tuple[Tensor, ...]:
     """The hardware terms of D (`distance_terms`'): hw, tool, size, each [Pa, Pb] float32."""
-    ha = a.hardware_vector()
-    hb = ha if b is a else b.hardware_vector()
-    d_hw = torch.cdist(ha, hb, compute_mode="donot_use_mm_for_euclid_dist") / math.sqrt(ha.shape[1])
-    d_tool = (a.effector[:, None] != b.effector).float()
-    ra, rb = cast(a.radius, torch.float), cast(b.radius, torch.float)
-    d_size = (ra[:, None] - rb).abs() / (R_MAX - R_MIN)
+    d_hw = torch.cdist(a.hw, b.hw, compute_mode="donot_use_mm_for_euclid_dist")
+    d_hw = d_hw / math.sqrt(a.hw.shape[1])
+    d_tool = (a.pop.effector[:, None] != b.pop.effector).float()
+    d_size = (a.radius[:, None] - b.radius).abs() / (R_MAX - R_MIN)
     return _weighted(w.w_hw, d_hw), _weighted(w.w_tool, d_tool), _weighted(w.w_size, d_size)
+
+
+def _terms(a: _Genes, b: _Genes, w: DistanceWeights) -> dict[str, Tensor]:
+    """`distance_terms` of what D reads of two populations (b may be a)."""
+    pa, pb = a.pop.size, b.pop.size
+    dev = a.pop.bt.device
+    l_tag = a.pop.tag.shape[1]
+    if l_tag > 0:
+        d_tag = (a.bits @ b.flipped.T / l_tag) ** w.gamma  # the Hamming distance / L_tag
+    else:
+        d_tag = torch.zeros(pa, pb, device=dev)
+    l_bt = a.pop.bt.shape[1]
+    if l_bt > 0:
+        d_bt = 1.0 - (a.one_hot_bt @ b.one_hot_bt.T) / l_bt
+    else:
+        d_bt = torch.zeros(pa, pb, device=dev)
+    hw, tool, size = _design_terms(a, b, w)
+    return {
+        "tag": _weighted(w.w_tag, d_tag),
+        "hw": hw,
+        "bt": _weighted(w.w_bt, d_bt),
+        "tool": tool,
+        "size": size,
+    }
 
 
 def distance_terms(
@@ -84,35 +130,19 @@ def distance_terms(
     d_bt: fraction of BT slots whose opcode differs; d_tool: effectors differ;
     d_size: |dr| / (R_MAX - R_MIN).
     """
-    pa, pb = a.size, b.size
-    dev = a.bt.device
-    l_tag = a.tag.shape[1]
-    if l_tag > 0:
-        d_tag = (hamming(a.tag, b.tag) / l_tag) ** w.gamma
-    else:
-        d_tag = torch.zeros(pa, pb, device=dev)
-    l_bt = a.bt.shape[1]
-    if l_bt > 0:
-        oh_a = _one_hot_bt(a.bt)
-        oh_b = oh_a if b is a else _one_hot_bt(b.bt)
-        d_bt = 1.0 - (oh_a @ oh_b.T) / l_bt
-    else:
-        d_bt = torch.zeros(pa, pb, device=dev)
-    hw, tool, size = _design_terms(a, b, w)
-    return {
-        "tag": _weighted(w.w_tag, d_tag),
-        "hw": hw,
-        "bt": _weighted(w.w_bt, d_bt),
-        "tool": tool,
-        "size": size,
-    }
+    ga = _Genes(a)
+    return _terms(ga, ga if b is a else _Genes(b), w)
+
+
+def _sum(t: dict[str, Tensor]) -> Tensor:
+    """D, the sum of its terms in their order."""
+    return t["tag"] + t["hw"] + t["bt"] + t["tool"] + t["size"]
 
 
 def distance(a: Population, b: Population, w: DistanceWeights = DistanceWeights()) -> Tensor:
     """Genomes [Pa], [Pb] -> [Pa, Pb] float32 D = w_tag (H/L)^gamma + w_hw d_hw + w_bt d_bt
     + w_tool d_tool + w_size d_size (the sum of `distance_terms`)."""
-    t = distance_terms(a, b, w)
-    return t["tag"] + t["hw"] + t["bt"] + t["tool"] + t["size"]
+    return _sum(distance_terms(a, b, w))
 
 
 def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -> Tensor:
@@ -120,7 +150,8 @@ def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -
     d_tool + w_size d_size), how far apart their robots are as designs. The tag (a signal for
     partner choice, not a property of the robot) and the tree are left out: which partner's
     robots are most like a species' robots (`partner_admission = "substitute"`)."""
-    hw, tool, size = _design_terms(proto, proto, w)
+    g = _Genes(proto)
+    hw, tool, size = _design_terms(g, g, w)
     return hw + tool + size
 
 
@@ -154,19 +185,20 @@ def speciate(
     if p == 0:
         empty = genome.index(long_empty)
         return SpeciationResult(long_empty, long_empty, long_empty, next_species_id, empty)
+    genes = _Genes(genome)  # what D reads of the population, for both of its distances here
     # (1) carry-over of surviving species: alive [Kp], closest [Kp] (the new prototype's row)
     prev_ids: Tensor | None = None
     alive: Tensor | None = None
     closest: Tensor | None = None
     if prev_proto is not None and prev_proto_ids.numel() > 0:
         prev_ids = cast(prev_proto_ids, torch.long, dev)
-        d_prev = distance(genome, prev_proto.to(dev), w)  # [P, Kp]
+        d_prev = _sum(_terms(genes, _Genes(prev_proto.to(dev)), w))  # [P, Kp]
         member = cast(species_hint, device=dev)[:, None] == prev_ids  # [P, Kp]
         alive = member.any(0)
         closest = d_prev.masked_fill(~member, math.inf).argmin(0)  # first min = lowest row
     if p * p > _FULL_MATRIX_MAX:
         return _speciate_in_rounds(genome, prev_ids, alive, closest, next_species_id, delta, w)
-    full = distance(genome, genome, w)
+    full = _sum(_terms(genes, genes, w))
     idx = torch.arange(p, device=dev)
     if closest is not None:
         assert alive is not None and prev_ids is not None
