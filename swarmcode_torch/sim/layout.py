@@ -159,7 +159,7 @@ def make_layouts(
     o_r = lo + (hi - lo) * torch.rand(E, O, generator=g, device=gdev)
     cand = torch.rand(E, _CANDIDATES, O, 2, generator=g, device=gdev) * W
     dc = (cand - base).norm(dim=-1)
-    r4 = o_r[:, None, :, None]
+    r4 = o_r.view(E, 1, O, 1)
     margin_ok = ((cand > r4) & (cand < W - r4)).all(-1)
     o_pos = _first_valid(cand, margin_ok & (dc > spawn_r + o_r[:, None] + 0.5), order)
 
@@ -176,8 +176,8 @@ def make_layouts(
     cand = base + dist[..., None] * torch.stack([ang.cos(), ang.sin()], -1)
     ok = ((cand > k.clear) & (cand < W - k.clear)).all(-1)
     if O:
-        do = (cand[:, :, :, None] - o_pos[:, None, None]).norm(dim=-1)  # [E, _CANDIDATES, Q, O]
-        ok &= (do > o_r[:, None, None] + k.clear).all(-1)
+        do = (cand.unsqueeze(3) - o_pos.view(E, 1, 1, O, 2)).norm(dim=-1)  # [E, _CANDIDATES, Q, O]
+        ok &= (do > o_r.view(E, 1, 1, O) + k.clear).all(-1)
     p_pos = _first_valid(cand, ok, order)
     d0 = (p_pos - base).norm(dim=-1)
 
@@ -198,10 +198,10 @@ def make_layouts(
         p_present=torch.ones(E, Q, dtype=torch.bool, device=gdev),
         p_pos=p_pos,
         p_mass=mass,
-        p_band=k.band.expand(E, Q, 2).contiguous(),
-        p_size=k.size.expand(E, Q).contiguous(),
-        p_collab=k.collab.expand(E, Q).contiguous(),
-        g_effector=k.g_effector.expand(E, Q, G).contiguous(),
+        p_band=k.band.repeat(E, 1, 1),
+        p_size=k.size.repeat(E, 1),
+        p_collab=k.collab.repeat(E, 1),
+        g_effector=k.g_effector.repeat(E, 1, 1),
         g_offset=g_off,
         o_pos=o_pos,
         o_radius=o_r,

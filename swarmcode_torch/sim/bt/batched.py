@@ -44,12 +44,14 @@ class _Slots(NamedTuple):
 
     slot: torch.Tensor  # [L] 0..L-1
     next_slot: torch.Tensor  # [L] 1..L
+    next_col: torch.Tensor  # [L, 1] 1..L
     arrival_key: torch.Tensor  # [L + 1] 2 * slot: an arrival's place among equal depths
     opener_key: torch.Tensor  # [L] 2 * slot + 1: an opener's, just after the arrival at it
     s: torch.Tensor  # [2] the two statuses a child returns (SUCCESS, FAILURE)
     leaf_node: torch.Tensor  # [L] the code "visit leaf slot i"
     end_node: torch.Tensor  # [L] T(i, SUCCESS) of an END at slot i
     codes: torch.Tensor  # [L + 2] the code nodes
+    root_codes: torch.Tensor  # [2] the codes "the tick ends with root status s"
 
 
 def _slots(L: int, device: torch.device) -> _Slots:
@@ -66,12 +68,14 @@ def _build_slots(L: int, device: torch.device) -> _Slots:
     return _Slots(
         slot=slot[:L],
         next_slot=slot[1 : L + 1],
+        next_col=slot[1 : L + 1, None],
         arrival_key=2 * slot[: L + 1],
         opener_key=2 * slot[:L] + 1,
         s=slot[:2],
         leaf_node=n_c + slot[:L],
         end_node=n_t + 2 * slot[:L],
         codes=n_c + slot,
+        root_codes=n_c + L + slot[:2],
     )
 
 
@@ -109,7 +113,9 @@ def _nesting(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tenso
     order = keys.argsort(1)
     run = torch.cummax(vals.gather(1, order), 1).values
     seen = run.scatter(1, order, run)[:, : L + 1]  # `order` is a permutation: all written
-    encl = torch.where(seen // (L + 1) == before, seen % (L + 1) - 1, -1)
+    # the slot of that opener where its depth is the arrival's (seen = before (L + 1) + slot + 1),
+    # else -1 (a shallower one: seen is then at most before (L + 1) - 1)
+    encl = (seen - (before * (L + 1) + 1)).clamp(min=-1)
     target = torch.where(close, encl[:, :L], L)
     end = torch.full((B, L + 1), L, dtype=torch.long, device=ops.device)
     end.scatter_(1, target, k.slot.expand(B, L))
@@ -269,7 +275,7 @@ def _continuations(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """[P, L] blocks' columns -> [P, L, 2]: a child of that block ending just before slot
         i + 1 returns s: continue there if s is the block's default, else the block returns s."""
         to = outcome.gather(1, col[..., None].expand(P, L, 2))
-        return torch.where(to < 0, k.next_slot[:, None], to)
+        return torch.where(to < 0, k.next_col, to)
 
     col = encl % (L + 1)  # [P, L + 1] the innermost open block's column
     enc = col[:, :L]
@@ -279,7 +285,7 @@ def _continuations(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         _is_leaf(ops), k.leaf_node, torch.where(close, k.end_node + enc_dflt[:, :L], k.next_slot)
     )
     at_end = n_c + L + enc_dflt[:, L:]
-    ret = torch.where(close[..., None], returns(parent), n_c + L + k.s)
+    ret = torch.where(close[..., None], returns(parent), k.root_codes)
     nxt = torch.cat(
         [arrive, at_end, ret.reshape(P, 2 * L), k.codes.expand(P, L + 2)], 1
     )  # [P, 4L + 3]
