@@ -34,7 +34,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from ..sim.tensors import cast
+from ..sim.tensors import arange, cast
 
 
 @dataclass(frozen=True)
@@ -138,6 +138,14 @@ def nearest_partner(design_distance: Tensor, allowed: Tensor) -> Tensor:
     return torch.where(torch.isfinite(nearest.values), nearest.indices, -1)
 
 
+def near_partner(design_distance: Tensor, nearest: Tensor, delta: float) -> Tensor:
+    """design_distance [K, K], nearest [K] (`nearest_partner`) -> [K] bool: the nearest
+    partner's design is within delta of the species' own (where there is none: of the first
+    species', which no one reads)."""
+    k = nearest.numel()
+    return design_distance[arange(k, nearest.device), nearest.clamp_min(0)] <= delta
+
+
 def update(
     adm: Admission,
     species: Tensor,
@@ -181,7 +189,7 @@ def update(
         pair = pair & near
     # the lowest-ranked loser of a clashing pair, if any (no value is read on the host: where
     # there is no pair, no one is demoted)
-    idx = torch.arange(k, device=rank.device)
+    idx = arange(k, rank.device)
     other = nearest.clamp_min(0)
     loser = torch.where(rank[other] < rank, other, idx)
     low = torch.where(pair, rank[loser], rank.max() + 1)

@@ -28,7 +28,7 @@ from ..sim.layout import Layout, make_layouts
 from ..sim.rollout import rollout
 from ..sim.scenario import Scenario
 from ..sim.state import Robots, WorldParams, capabilities
-from ..sim.tensors import cast
+from ..sim.tensors import arange, cast
 from .config import EvalConfig
 from .fitness import budget_penalty, gate, raw_fitness, team_cost
 from .partners import (
@@ -255,7 +255,7 @@ def plan_evaluation(
     if proto_distance is not None:
         pos = (species[:, None] == proto_ids).to(torch.int32).argmax(1)  # [P] species index
         near = cast(proto_distance, device=dev)[pos]  # [P, K]
-    swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator, near)
+    swarms = assemble_swarms(arange(P, dev), partners, dominance, S, generator, near)
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)
     return EvalPlan(swarms, layouts, T)
 
@@ -296,9 +296,9 @@ def sim_batch(plan: EvalPlan, genome: Population, lo: int = 0, hi: int | None = 
     renumbered into them. The whole plan is the population and its teams as they are."""
     P, T = plan.size, plan.trials
     hi = P if hi is None else hi
-    focal, base = plan.swarms.focal_team[lo:hi], plan.swarms.baseline_team[lo:hi]
     if lo == 0 and hi == P:
-        return SimBatch(genome, focal, base, plan.layouts, T)
+        return SimBatch(genome, plan.swarms.focal_team, plan.swarms.baseline_team, plan.layouts, T)
+    focal, base = plan.swarms.focal_team[lo:hi], plan.swarms.baseline_team[lo:hi]
     teams = torch.cat([focal, base])
     rows = torch.unique(teams[teams >= 0])  # sorted
     local = [
@@ -325,7 +325,7 @@ def simulate_batch(
     T, B = batch.trials, batch.focal_team.shape[0]
     dev = batch.genome.bt.device
     teams = torch.cat([batch.focal_team, batch.baseline_team]).repeat_interleave(T, 0)
-    layout_ids = torch.arange(B * T, device=dev).repeat(2)
+    layout_ids = arange(B * T, dev).repeat(2)
     if tables is None:
         tables = bt.build_tables(batch.genome.bt)
     t0 = _now(dev)

@@ -319,7 +319,7 @@ def _evaluation(
     gated = ~beats_baseline(res.focal, res.baseline)
     nearest = admission.nearest_partner(designs_d, allowed)
     # a substitute pair: the nearest partner's design within δ of the species' own
-    near = designs_d.gather(1, nearest.clamp_min(0)[:, None]).squeeze(1) <= ctx.speciation.delta
+    near = admission.near_partner(designs_d, nearest, ctx.speciation.delta)
     adm = admission.update(
         adm,
         sp.species,

@@ -9,7 +9,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from ..sim.tensors import cast
+from ..sim.tensors import arange, cast
 from .selection import elite_count, group_sizes, rank_within_groups, top_table
 from .speciation import hamming
 
@@ -176,7 +176,7 @@ def assemble_swarms(
     refill = in_team
     if refill_distance is not None and k > 0:
         d = torch.where(refill, cast(refill_distance, torch.float, dev), torch.inf)
-        nearest = torch.arange(k, device=dev) == d.argmin(1, keepdim=True)
+        nearest = arange(k, dev) == d.argmin(1, keepdim=True)
         refill = refill & nearest
     has_p = refill.any(1, keepdim=True)
     if k > 0:

@@ -159,7 +159,7 @@ def to_host(tensors: list[Tensor]) -> list[np.ndarray]:
         torch.cat([tensors[i] if tensors[i].dim() == 1 else tensors[i].reshape(-1) for i in ix])
         for ix in (groups[d] for d in order)
     ]
-    data = torch.cat([f.view(torch.uint8) for f in flat]).cpu().numpy()
+    data = cast(torch.cat([f.view(torch.uint8) for f in flat]), device="cpu").numpy()
     out: list[np.ndarray] = [np.empty(0)] * len(tensors)
     pos = 0
     for d in order:

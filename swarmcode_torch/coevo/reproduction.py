@@ -11,7 +11,7 @@ import torch
 from torch import Tensor
 
 from ..sim.bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ, compute_jumps
-from ..sim.tensors import cast
+from ..sim.tensors import arange, cast
 from .config import ReproductionParams
 from .population import CROSSOVER_GROUPS, GENE_BOUNDS, GENE_VALUES, SOCIAL_GENES, Population
 from .selection import elite_count, group_sizes, rank_within_groups, top_per_group
@@ -44,7 +44,7 @@ def offspring_quotas(
     # torch.where over tensors, `protect` may be a 0-d tensor (a position: a mask `is_p`)
     if isinstance(protect, int) and not -k <= protect < k:
         raise IndexError(f"protect {protect} is out of range for {k} species")
-    idx = torch.arange(k, device=dev)
+    idx = arange(k, dev)
     is_p = (
         None if protect is None else idx == (protect % k if isinstance(protect, int) else protect)
     )
@@ -124,7 +124,7 @@ def replace_subtree(bt: Tensor, start: Tensor, subtree: Tensor, subtree_len: Ten
         return bt.clone()
     s = cast(start, torch.long)[:, None]
     end = compute_jumps(bt).gather(1, s)  # [N, 1] `subtree_end`
-    d = torch.arange(l, device=bt.device) - s  # [N, L] each slot's place after the start
+    d = arange(l, bt.device) - s  # [N, L] each slot's place after the start
     m = subtree_len[:, None]
     from_sub = subtree.gather(1, d.clamp(0, subtree.shape[1] - 1))
     tail = d + (end - m)  # the slot of the old program that shifts there
@@ -157,7 +157,7 @@ def random_subtrees(
     ]
     # a leaf: its leaf at slot 0; else SEQ / SEL at slot 0, leaves at 1..k and END at k + 1
     head = torch.where(is_leaf, leaves[:, 0], torch.where(ctrl == 0, SEQ, SEL))
-    t, kk = torch.arange(s_max, device=device), k[:, None]
+    t, kk = arange(s_max, device), k[:, None]
     body = torch.where(t <= kk, leaves, torch.where(t == kk + 1, END, NOP))
     sub = torch.where(t == 0, head[:, None], torch.where(is_leaf[:, None], NOP, body))
     return sub, torch.where(is_leaf, 1, k + 2)
@@ -237,7 +237,7 @@ def mate(
     l = genome.bt.shape[1]
     if l >= 2:
         cut = torch.randint(1, l, (n, 1), generator=generator, device=dev)
-        first = (torch.arange(l, device=dev) < cut) | keep
+        first = (arange(l, dev) < cut) | keep
         out["bt"] = torch.where(first, genome.bt[p1], genome.bt[p2])
     else:
         out["bt"] = genome.bt[p1]
@@ -433,9 +433,7 @@ def reproduce(
     starts = sizes.cumsum(0) - sizes
 
     n_off = None if n_elites is None else p - n_elites  # quotas sum to p
-    off_pos = torch.repeat_interleave(
-        torch.arange(k, device=dev), quota - n_elite, output_size=n_off
-    )
+    off_pos = torch.repeat_interleave(arange(k, dev), quota - n_elite, output_size=n_off)
     n_off = off_pos.numel()
     ts = params.tournament_size
 
@@ -471,5 +469,5 @@ def reproduce(
 
     children = Population.cat([genome.index(elite), child])
     parent = torch.cat([elite, p1])
-    is_elite = torch.arange(parent.numel(), device=dev) < elite.numel()
+    is_elite = arange(parent.numel(), dev) < elite.numel()
     return children, species[parent], is_elite, parent

@@ -10,6 +10,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from ..sim.tensors import arange
 from .config import SwarmCoDeConfig
 
 
@@ -56,7 +57,7 @@ def rank_within_groups(
     if sizes is None:
         sizes = torch.bincount(group)
     starts = sizes.cumsum(0) - sizes
-    rank = torch.arange(group.numel(), device=group.device) - starts[by_group.values]
+    rank = arange(group.numel(), group.device) - starts[by_group.values]
     return order, rank
 
 

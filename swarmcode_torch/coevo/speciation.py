@@ -11,7 +11,7 @@ import torch
 from torch import Tensor
 
 from ..sim.bt import NUM_OPCODES
-from ..sim.tensors import cast
+from ..sim.tensors import arange, cast
 from .config import DistanceWeights, SwarmCoDeConfig
 from .population import R_MAX, R_MIN, Population
 
@@ -199,7 +199,7 @@ def speciate(
     if p * p > _FULL_MATRIX_MAX:
         return _speciate_in_rounds(genome, prev_ids, alive, closest, next_species_id, delta, w)
     full = _sum(_terms(genes, genes, w))
-    idx = torch.arange(p, device=dev)
+    idx = arange(p, dev)
     if closest is not None:
         assert alive is not None and prev_ids is not None
         d_cur = full[:, closest].masked_fill(~alive, math.inf)  # [P, Kp]
@@ -224,7 +224,7 @@ def speciate(
         carried_ids = carried_rows = long_empty
     proto_index = torch.cat([carried_rows, new_rows])
     own = torch.full((p,), -1, dtype=torch.long, device=dev)
-    own[proto_index] = torch.arange(k + n_new, device=dev)
+    own[proto_index] = arange(k + n_new, dev)
     assign_pos = torch.where(own >= 0, own, d_new.argmin(1))
     proto_ids = torch.cat(
         [
@@ -249,7 +249,7 @@ def _founders(cand: Tensor, alive: Tensor | None, near: Tensor) -> tuple[np.ndar
     in row order, sequential by definition)."""
     p = cand.numel()
     flags = [cand] + ([alive] if alive is not None else []) + [near.T.reshape(-1)]
-    host = torch.cat(flags).cpu().numpy()
+    host = cast(torch.cat(flags), device="cpu").numpy()
     kp = 0 if alive is None else alive.numel()
     near_h = host[p + kp :].reshape(p, p)  # near_h[f]: the rows near row f
     founders: list[int] = []

@@ -267,13 +267,10 @@ def phenotype(
     except TypeError:  # a catalog that cannot be hashed: not cached
         chassis_t, motor_t, battery_t = _tier_tables.__wrapped__(cat, r.dtype, r.device)
     # each part's figures at each robot's tier, one gather a part
-    density, strength, area_cost = chassis_t[:, cast(chassis, torch.long)].unbind()
     motor_force, efficiency, motor_kg, motor_usd = motor_t[:, cast(motor, torch.long)].unbind()
     capacity_t, energy_density, kj_cost = battery_t[:, cast(battery, torch.long)].unbind()
-
-    chassis_mass = density * area
-    payload = strength * area
-    chassis_cost = area_cost * area
+    # the chassis' areal figures (density, strength, cost per area) times the area
+    chassis_mass, payload, chassis_cost = (chassis_t[:, cast(chassis, torch.long)] * area).unbind()
 
     force = motor_force * (cat.motor_force_floor + (1 - cat.motor_force_floor) * u_m)
     motor_scale = 0.5 + 0.5 * u_m
