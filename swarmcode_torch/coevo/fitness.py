@@ -24,6 +24,11 @@ METRIC_KEYS = (
 )
 
 
+def _weighted(w: float, x: Tensor) -> Tensor:
+    """x * w (x itself for a weight of 1: the product would be x exactly)."""
+    return x if w == 1.0 else x * w
+
+
 def raw_fitness_terms(
     m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()
 ) -> dict[str, Tensor]:
@@ -38,9 +43,9 @@ def raw_fitness_terms(
     return {
         "delivery": f["delivered_individual"] * w.W_delivery,
         "collab": f["grips_delivered"] * w.W_delivery + f["delivered_collab"] * w.W_collab_bonus,
-        "pickup": picked * w.W_pickup,
+        "pickup": _weighted(w.W_pickup, picked),
         "energy": f["mean_final_energy"] * w.W_energy,
-        "proximity": f["proximity"] * w.W_proximity,
+        "proximity": _weighted(w.W_proximity, f["proximity"]),
         "closeness": f["closeness"] * w.W_closeness,
         "activity": torch.where(picked <= 0, w.inactive_factor, 1.0),
     }

@@ -120,10 +120,11 @@ def elite_rows(
     match = species[:, None] == proto_ids
     pos = torch.where(match.any(1), match.to(torch.int32).argmax(1), k)  # k: not in any species
     sizes = group_sizes(pos, k + 1)
-    n_wanted = cast(n_elite_fn(sizes[:k]), torch.long, dev)
+    species_sizes = sizes[:k]  # (sizes[k]: no species)
+    n_wanted = cast(n_elite_fn(species_sizes), torch.long, dev)
     f = ranking_fitness(fitness, has_fitness)
     order, rank = rank_within_groups(pos, f, sizes, first=has_fitness)
-    return top_table(order, rank, pos, torch.minimum(n_wanted, sizes[:k]), width)
+    return top_table(order, rank, pos, torch.minimum(n_wanted, species_sizes), width)
 
 
 def assemble_swarms(

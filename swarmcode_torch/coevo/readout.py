@@ -155,11 +155,15 @@ def to_host(tensors: list[Tensor]) -> list[np.ndarray]:
     for i, x in enumerate(tensors):
         groups.setdefault(x.dtype, []).append(i)
     order = sorted(groups, key=lambda d: -d.itemsize)
-    flat = [
-        torch.cat([tensors[i] if tensors[i].dim() == 1 else tensors[i].reshape(-1) for i in ix])
+
+    def flat(i: int) -> Tensor:
+        return tensors[i] if tensors[i].dim() == 1 else tensors[i].reshape(-1)
+
+    parts = [
+        flat(ix[0]) if len(ix) == 1 else torch.cat([flat(i) for i in ix])
         for ix in (groups[d] for d in order)
     ]
-    data = cast(torch.cat([f.view(torch.uint8) for f in flat]), device="cpu").numpy()
+    data = cast(torch.cat([f.view(torch.uint8) for f in parts]), device="cpu").numpy()
     out: list[np.ndarray] = [np.empty(0)] * len(tensors)
     pos = 0
     for d in order:

@@ -356,7 +356,7 @@ def quotas(
     dev = fitness.device
     k = proto_ids.numel()
     ids = cast(proto_ids, torch.long, dev)
-    match = species[:, None] == ids[None, :]
+    match = species[:, None] == ids
     if p and not present and not bool(match.any(1).all()):
         raise ValueError("every individual's species must be listed in proto_ids")
     pos = match.to(torch.int32).argmax(1)

@@ -79,6 +79,16 @@ class _Genes:
     def radius(self) -> Tensor:
         return cast(self.pop.radius, torch.float)
 
+    @functools.cached_property
+    def effector_col(self) -> Tensor:
+        """[P, 1] the effectors, as the rows' side of a pairwise comparison."""
+        return self.pop.effector[:, None]
+
+    @functools.cached_property
+    def radius_col(self) -> Tensor:
+        """[P, 1] the radii, as the rows' side of a pairwise difference."""
+        return self.radius[:, None]
+
 
 def _weighted(w: float, d: Tensor) -> Tensor:
     """w * d (d itself for a weight of 1: the product would be d exactly)."""
@@ -89,8 +99,8 @@ def _design_terms(a: _Genes, b: _Genes, w: DistanceWeights) -> tuple[Tensor, ...
     """The hardware terms of D (`distance_terms`'): hw, tool, size, each [Pa, Pb] float32."""
     d_hw = torch.cdist(a.hw, b.hw, compute_mode="donot_use_mm_for_euclid_dist")
     d_hw = d_hw / math.sqrt(a.hw.shape[1])
-    d_tool = (a.pop.effector[:, None] != b.pop.effector).float()
-    d_size = (a.radius[:, None] - b.radius).abs() / (R_MAX - R_MIN)
+    d_tool = (a.effector_col != b.pop.effector).float()
+    d_size = (a.radius_col - b.radius).abs() / (R_MAX - R_MIN)
     return _weighted(w.w_hw, d_hw), _weighted(w.w_tool, d_tool), _weighted(w.w_size, d_size)
 
 
@@ -199,11 +209,11 @@ def speciate(
     if p * p > _FULL_MATRIX_MAX:
         return _speciate_in_rounds(genome, prev_ids, alive, closest, next_species_id, delta, w)
     full = _sum(_terms(genes, genes, w))
-    idx = arange(p, dev)
+    row = arange(p, dev)[:, None]  # [P, 1] each row's number
     if closest is not None:
         assert alive is not None and prev_ids is not None
         d_cur = full[:, closest].masked_fill(~alive, math.inf)  # [P, Kp]
-        carried = ((closest == idx[:, None]) & alive).any(1)
+        carried = ((closest == row) & alive).any(1)
         min_d = d_cur.min(1).values
     else:
         d_cur, carried, min_d = None, torch.zeros(p, dtype=torch.bool, device=dev), None
@@ -214,7 +224,7 @@ def speciate(
     picks = _to_device(np.concatenate([alive_at, founders]).astype(np.int64), dev)
     new_rows = picks[k:]
     # every other row joins the closest of the carried prototypes and the founders before it
-    d_new = full[:, new_rows].masked_fill(new_rows >= idx[:, None], math.inf)
+    d_new = full[:, new_rows].masked_fill(new_rows >= row, math.inf)
     if d_cur is not None:
         assert prev_ids is not None and closest is not None
         at = picks[:k]

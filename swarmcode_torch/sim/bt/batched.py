@@ -13,6 +13,7 @@ from typing import NamedTuple
 import torch
 import torch.nn.functional as F
 
+from ..tensors import cast
 from .ops import (
     _CODE_SHIFT,
     _FIRED_SHIFT,
@@ -366,7 +367,7 @@ def build_tables(
     the CPU with neither given, the walk runs in C++ where the fused tick's extension is built
     (`_native_tables`; identical tables).
     """
-    ops = opcodes.long()
+    ops = cast(opcodes, torch.long)
     on_cpu = ops.device.type == "cpu"
     if on_cpu and compact is None and chunk is None and ops.shape[0]:
         native = _native_tables(ops)
