@@ -162,7 +162,7 @@ def assemble_swarms(
     # the focal design, then the partners in the team, each in its slot; column s: discard bin
     cand = torch.cat([focal[:, None], torch.where(in_team, partner_rows, -1)], 1)  # [B, 1 + K]
     placed = F.pad(in_team, (1, 0), value=True)
-    slot = torch.where(placed, placed.long().cumsum(1) - 1, s)
+    slot = torch.where(placed, placed.cumsum(1) - 1, s)
     team = torch.full((b, s + 1), -1, dtype=torch.long, device=dev).scatter_(1, slot, cand)[:, :s]
 
     cand_ok = cand >= 0
@@ -171,8 +171,7 @@ def assemble_swarms(
     draw = torch.multinomial(w, s, replacement=True, generator=generator)  # [B, S]
     empty = team < 0
     focal_team = torch.where(empty, cand.gather(1, draw), team)
-    focal_slot = empty & (draw == 0)
-    focal_slot[:, 0] = True
+    focal_slot = (empty & (draw == 0)) | (arange(s, dev) == 0)  # and slot 0, the focal's own
 
     refill = in_team
     if refill_distance is not None and k > 0:

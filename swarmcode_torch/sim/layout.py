@@ -64,19 +64,27 @@ def _spawn_constants(n: int, spacing: float, device: torch.device) -> tuple[torc
 
 
 @functools.lru_cache(maxsize=16)
-def _arena_constants(arena: float, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
-    """The arena's centre [2] and the order of the candidates [1, _CANDIDATES, 1] that
-    `_first_valid` ranks them by (built once per arena and device, never written to)."""
+def _arena_constants(
+    arena: float, device: torch.device
+) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
+    """The arena's centre [2] and the ranks of the candidates [1, _CANDIDATES, 1] that
+    `_first_valid` picks by: a valid one's (K + 1, K, ..., 2, the first highest) and an invalid
+    one's (0, ..., 0, 1: the last highest) (built once per arena and device, never written
+    to)."""
     centre = torch.tensor([arena / 2, arena / 2], device=device)
-    return centre, torch.arange(_CANDIDATES, 0, -1, device=device)[None, :, None]
+    valid = torch.arange(_CANDIDATES + 1, 1, -1, device=device)[None, :, None]
+    invalid = (torch.arange(_CANDIDATES, device=device) == _CANDIDATES - 1).long()[None, :, None]
+    return centre, (valid, invalid)
 
 
-def _first_valid(cand: torch.Tensor, ok: torch.Tensor, order: torch.Tensor) -> torch.Tensor:
-    """cand [E, K, M, 2], ok [E, K, M], order [1, K, 1] (K, K - 1, ..., 1) -> [E, M, 2]: the
-    first valid candidate (else the last)."""
+def _first_valid(
+    cand: torch.Tensor, ok: torch.Tensor, ranks: tuple[torch.Tensor, torch.Tensor]
+) -> torch.Tensor:
+    """cand [E, K, M, 2], ok [E, K, M], ranks (`_arena_constants`) -> [E, M, 2]: the first
+    valid candidate (else the last): the highest rank, every valid one's above every invalid
+    one's."""
     e, k, m, _ = cand.shape
-    pick = torch.where(ok, order, 0).argmax(1)  # first True; all False -> index 0 ...
-    pick = torch.where(ok.any(1), pick, k - 1)  # ... then fall back to the last candidate
+    pick = torch.where(ok, *ranks).argmax(1)
     return torch.take_along_dim(cand, pick.view(e, 1, m, 1), 1).view(e, m, 2)
 
 
@@ -145,7 +153,7 @@ def make_layouts(
     """Draw `num` random environments of `scenario` (on the generator's device, then moved)."""
     g, gdev = generator, generator.device
     E, N, W = num, scenario.num_robots, scenario.arena
-    base, order = _arena_constants(W, gdev)
+    base, ranks = _arena_constants(W, gdev)
     slots, extent = _spawn_constants(N, 2 * R_MAX + 0.1, gdev)
     spawn_r = extent + R_MAX
 
@@ -161,7 +169,7 @@ def make_layouts(
     dc = (cand - base).norm(dim=-1)
     r4 = o_r.view(E, 1, O, 1)
     margin_ok = ((cand > r4) & (cand < W - r4)).all(-1)
-    o_pos = _first_valid(cand, margin_ok & (dc > spawn_r + o_r[:, None] + 0.5), order)
+    o_pos = _first_valid(cand, margin_ok & (dc > spawn_r + o_r[:, None] + 0.5), ranks)
 
     # Packages, class by class.
     Q, G = scenario.num_packages, scenario.max_grips
@@ -178,7 +186,7 @@ def make_layouts(
     if O:
         do = (cand.unsqueeze(3) - o_pos.view(E, 1, 1, O, 2)).norm(dim=-1)  # [E, _CANDIDATES, Q, O]
         ok &= (do > o_r.view(E, 1, 1, O) + k.clear).all(-1)
-    p_pos = _first_valid(cand, ok, order)
+    p_pos = _first_valid(cand, ok, ranks)
     d0 = (p_pos - base).norm(dim=-1)
 
     frac = ((d0 - k.d_lo) / k.d_scale).clamp(0, 1)
