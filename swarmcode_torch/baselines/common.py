@@ -16,7 +16,7 @@ from ..coevo.evaluation import simulate_teams, team_scores
 from ..coevo.evolve import Context, make_context, random_population
 from ..coevo.fitness import team_cost
 from ..coevo.population import Population, genome_phenotype
-from ..coevo.reproduction import ReproductionParams, crossover, mutate
+from ..coevo.reproduction import ReproductionParams, mate, mutate
 from ..coevo.selection import elite_count, rank_within_groups, top_per_group
 from ..sim import bt
 from ..sim.layout import Layout, make_layouts
@@ -170,9 +170,7 @@ def reproduce_groups(
     p2 = order[base + local2.gather(1, w2)].squeeze(1)
 
     do_cross = torch.rand(n_off, generator=generator, device=dev) < p_crossover
-    g1 = genome.index(p1)
-    cross = crossover(g1, genome.index(p2), generator)
-    child = mutate(cross.where(do_cross, g1), params, generator)
+    child = mutate(mate(genome, p1, p2, do_cross, generator), params, generator)
 
     # each group's block: its elites then its offspring
     group = torch.cat([pos[elite], off_pos])

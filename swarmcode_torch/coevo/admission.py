@@ -31,7 +31,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
+
+from ..sim.tensors import arange, cast
 
 
 @dataclass(frozen=True)
@@ -75,12 +78,12 @@ class Admission:
         m = self.partner.numel()
         if n <= m:
             return self
-        dev, extra = self.partner.device, n - m
+        new = (0, n - m)  # padding at the end
         return Admission(
-            torch.cat([self.partner, torch.full((extra,), partner, dtype=torch.bool, device=dev)]),
-            torch.cat([self.gated, torch.full((extra,), torch.nan, device=dev)]),
-            torch.cat([self.calm, torch.zeros(extra, dtype=torch.long, device=dev)]),
-            torch.cat([self.clash, torch.zeros(extra, dtype=torch.long, device=dev)]),
+            F.pad(self.partner, new, value=partner),
+            F.pad(self.gated, new, value=torch.nan),
+            F.pad(self.calm, new),
+            F.pad(self.clash, new),
         )
 
     def allowed(self, proto_ids: Tensor) -> Tensor:
@@ -130,13 +133,17 @@ def nearest_partner(design_distance: Tensor, allowed: Tensor) -> Tensor:
     there is none."""
     k = allowed.numel()
     eye = torch.eye(k, dtype=torch.bool, device=allowed.device)
-    d = torch.where(
-        allowed[None, :] & ~eye,
-        design_distance.float(),
-        torch.full((k, k), torch.inf, device=allowed.device),
-    )
-    best = d.argmin(1)
-    return torch.where(torch.isfinite(d.min(1).values), best, -1)
+    d = torch.where(allowed & ~eye, cast(design_distance, torch.float), torch.inf)
+    nearest = d.min(1)  # the first of equals, as argmin
+    return torch.where(torch.isfinite(nearest.values), nearest.indices, -1)
+
+
+def near_partner(design_distance: Tensor, nearest: Tensor, delta: float) -> Tensor:
+    """design_distance [K, K], nearest [K] (`nearest_partner`) -> [K] bool: the nearest
+    partner's design is within delta of the species' own (where there is none: of the first
+    species', which no one reads)."""
+    k = nearest.numel()
+    return design_distance[arange(k, nearest.device), nearest.clamp_min(0)] <= delta
 
 
 def update(
@@ -161,13 +168,13 @@ def update(
     k = proto_ids.numel()
     if k == 0:
         return adm
-    member = species[:, None] == proto_ids[None, :]  # [P, K]
+    member = species[:, None] == proto_ids  # [P, K]
     size = member.sum(0)
-    share = (member & gated[:, None]).sum(0).float() / size.clamp_min(1).float()
+    share = (member & gated[:, None]).sum(0) / size.clamp_min(1)  # counts: a float32 quotient
     if elite is not None:
         kept = member & elite[:, None]
         n_kept = kept.sum(0)
-        kept_share = (kept & gated[:, None]).sum(0).float() / n_kept.clamp_min(1).float()
+        kept_share = (kept & gated[:, None]).sum(0) / n_kept.clamp_min(1)
         share = torch.where(n_kept > 0, kept_share, share)
     prev = adm.gated[proto_ids]
     avg = torch.where(torch.isnan(prev), share, params.decay * prev + (1 - params.decay) * share)
@@ -176,22 +183,24 @@ def update(
     clash = torch.where(partner & (avg > params.clash_above), adm.clash[proto_ids] + 1, 0)
     admit = ~partner & (calm >= params.admit_generations)
     clashing = clash >= params.clash_generations
-    demote = torch.zeros(k, dtype=torch.bool, device=species.device)
     rank = size * (proto_ids.max() + 1) - proto_ids  # higher: larger, then older
     pair = clashing & (nearest >= 0)
     if near is not None:
         pair = pair & near
     # the lowest-ranked loser of a clashing pair, if any (no value is read on the host: where
-    # there is no pair, False is written)
+    # there is no pair, no one is demoted)
+    idx = arange(k, rank.device)
     other = nearest.clamp_min(0)
-    loser = torch.where(rank[other] < rank, other, torch.arange(k, device=rank.device))
+    loser = torch.where(rank[other] < rank, other, idx)
     low = torch.where(pair, rank[loser], rank.max() + 1)
-    demote[loser[low.argmin()]] = pair.any()
+    demote = (idx == loser.take(low.argmin())) & pair.any()
     new_partner = (partner | admit) & ~demote
     reset = admit | demote
-    out = Admission(adm.partner.clone(), adm.gated.clone(), adm.calm.clone(), adm.clash.clone())
-    out.partner[proto_ids] = new_partner
-    out.gated[proto_ids] = avg
-    out.calm[proto_ids] = torch.where(reset, 0, calm)
-    out.clash[proto_ids] = torch.where(reset, 0, clash)
+    at = (proto_ids,)
+    out = Admission(
+        adm.partner.index_put(at, new_partner),
+        adm.gated.index_put(at, avg),
+        adm.calm.index_put(at, torch.where(reset, 0, calm)),
+        adm.clash.index_put(at, torch.where(reset, 0, clash)),
+    )
     return out

@@ -28,6 +28,7 @@ from ..sim.layout import Layout, make_layouts
 from ..sim.rollout import rollout
 from ..sim.scenario import Scenario
 from ..sim.state import Robots, WorldParams, capabilities
+from ..sim.tensors import arange, cast
 from .config import EvalConfig
 from .fitness import budget_penalty, gate, raw_fitness, team_cost
 from .partners import (
@@ -252,9 +253,9 @@ def plan_evaluation(
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
     near = None
     if proto_distance is not None:
-        pos = (species[:, None] == proto_ids[None, :]).long().argmax(1)  # [P] species index
-        near = proto_distance.to(dev)[pos]  # [P, K]
-    swarms = assemble_swarms(torch.arange(P, device=dev), partners, dominance, S, generator, near)
+        pos = (species[:, None] == proto_ids).to(torch.int32).argmax(1)  # [P] species index
+        near = cast(proto_distance, device=dev)[pos]  # [P, K]
+    swarms = assemble_swarms(arange(P, dev), partners, dominance, S, generator, near)
     layouts = make_layouts(replace(scenario, num_robots=S), P * T, generator, dev)
     return EvalPlan(swarms, layouts, T)
 
@@ -295,9 +296,9 @@ def sim_batch(plan: EvalPlan, genome: Population, lo: int = 0, hi: int | None = 
     renumbered into them. The whole plan is the population and its teams as they are."""
     P, T = plan.size, plan.trials
     hi = P if hi is None else hi
-    focal, base = plan.swarms.focal_team[lo:hi], plan.swarms.baseline_team[lo:hi]
     if lo == 0 and hi == P:
-        return SimBatch(genome, focal, base, plan.layouts, T)
+        return SimBatch(genome, plan.swarms.focal_team, plan.swarms.baseline_team, plan.layouts, T)
+    focal, base = plan.swarms.focal_team[lo:hi], plan.swarms.baseline_team[lo:hi]
     teams = torch.cat([focal, base])
     rows = torch.unique(teams[teams >= 0])  # sorted
     local = [
@@ -324,7 +325,7 @@ def simulate_batch(
     T, B = batch.trials, batch.focal_team.shape[0]
     dev = batch.genome.bt.device
     teams = torch.cat([batch.focal_team, batch.baseline_team]).repeat_interleave(T, 0)
-    layout_ids = torch.arange(B * T, device=dev).repeat(2)
+    layout_ids = arange(B * T, dev).repeat(2)
     if tables is None:
         tables = bt.build_tables(batch.genome.bt)
     t0 = _now(dev)
@@ -367,21 +368,21 @@ def score_plan(
     over trials, the marginal gate. `phenotype`: the genome's, if computed."""
     P, T = plan.size, plan.trials
     swarms = plan.swarms
-    teams = torch.cat([swarms.focal_team, swarms.baseline_team]).repeat_interleave(T, 0)
+    teams = torch.cat([swarms.focal_team, swarms.baseline_team])  # [2B, S]
     ph = phenotype if phenotype is not None else genome_phenotype(genome, scenario.hardware)
-    robot_cost = ph.cost[teams.clamp_min(0)]
-    counts = torch.cat(
-        [swarms.focal_species_count, swarms.baseline_species_count]
-    ).repeat_interleave(T)
-    cost = team_cost(robot_cost, teams >= 0, counts, scenario.species_overhead)
-    scores = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1)
-    focal, base = scores[0], scores[1]
-    team_m = {k: v.view(2, P, T)[0].mean(-1) for k, v in m.items()}
+    counts = torch.cat([swarms.focal_species_count, swarms.baseline_species_count])
+    # each team's cost, then each of its trials'
+    costs = team_cost(ph.cost[teams.clamp_min(0)], teams >= 0, counts, scenario.species_overhead)
+    cost = costs.repeat_interleave(T)
+    focal, base = _scores(score_fn, m, cost, cfg).view(2, P, T).mean(-1).unbind()
+    # every metric's mean over the focal team's trials, in one reduction
+    means = torch.stack(list(m.values())).view(len(m), 2, P, T)[:, 0].mean(-1).unbind()
+    team_m = dict(zip(m, means))
     return EvalResult(
         fitness=gate(focal, base, cfg.p_marginal),
         focal=focal,
         baseline=base,
-        team_cost=cost.view(2, P, T)[0, :, 0],
+        team_cost=costs[:P],
         swarms=swarms,
         team_metrics=team_m,
         sim_seconds=sim_seconds,

@@ -334,7 +334,7 @@ def _evaluation(
         adm = state.admission or Admission.empty(ctx.device).grow(state.next_species_id, True)
         adm = adm.grow(sp.next_species_id, partner=state.generation == 0)
         allowed = adm.allowed(sp.proto_ids)
-        designs_d = design_distance(state.genome.index(sp.proto_index), ctx.speciation.weights)
+        designs_d = design_distance(sp.prototypes, ctx.speciation.weights)
     res = evaluate(
         state.genome,
         sp.species,
@@ -359,7 +359,7 @@ def _evaluation(
     gated = ~beats_baseline(res.focal, res.baseline)
     nearest = admission.nearest_partner(designs_d, allowed)
     # a substitute pair: the nearest partner's design within δ of the species' own
-    near = designs_d.gather(1, nearest.clamp_min(0)[:, None]).squeeze(1) <= ctx.speciation.delta
+    near = admission.near_partner(designs_d, nearest, ctx.speciation.delta)
     adm = admission.update(
         adm,
         sp.species,
@@ -428,7 +428,7 @@ def _reproduction(
         generation=state.generation + 1,
         genome=children,
         species_hint=hint,
-        proto=state.genome.index(sp.proto_index),
+        proto=sp.prototypes,
         proto_ids=sp.proto_ids,
         next_species_id=sp.next_species_id,
         fitness=torch.where(is_elite, fit[parent], 0.0),

@@ -8,6 +8,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from ..sim.tensors import cast
 from .config import FitnessWeights
 
 #: Keys `raw_fitness` reads from its metrics dict (all tensors of one common shape).
@@ -23,6 +24,11 @@ METRIC_KEYS = (
 )
 
 
+def _weighted(w: float, x: Tensor) -> Tensor:
+    """x * w (x itself for a weight of 1: the product would be x exactly)."""
+    return x if w == 1.0 else x * w
+
+
 def raw_fitness_terms(
     m: dict[str, Tensor], w: FitnessWeights = FitnessWeights()
 ) -> dict[str, Tensor]:
@@ -32,18 +38,16 @@ def raw_fitness_terms(
     missing = [k for k in METRIC_KEYS if k not in m]
     if missing:
         raise KeyError(f"raw_fitness is missing metrics: {', '.join(missing)}")
-    f = {k: torch.as_tensor(m[k]).float() for k in METRIC_KEYS}
+    f = {k: cast(m[k], torch.float) for k in METRIC_KEYS}
     picked = f["picked_individual"] + f["picked_collab"]
     return {
         "delivery": f["delivered_individual"] * w.W_delivery,
         "collab": f["grips_delivered"] * w.W_delivery + f["delivered_collab"] * w.W_collab_bonus,
-        "pickup": picked * w.W_pickup,
+        "pickup": _weighted(w.W_pickup, picked),
         "energy": f["mean_final_energy"] * w.W_energy,
-        "proximity": f["proximity"] * w.W_proximity,
+        "proximity": _weighted(w.W_proximity, f["proximity"]),
         "closeness": f["closeness"] * w.W_closeness,
-        "activity": torch.where(
-            picked <= 0, torch.full_like(picked, w.inactive_factor), torch.ones_like(picked)
-        ),
+        "activity": torch.where(picked <= 0, w.inactive_factor, 1.0),
     }
 
 
@@ -61,13 +65,14 @@ def budget_penalty(
 ) -> Tensor:
     """[...] team cost -> [...] factor: max(floor, exp(-lam (cost - budget))) over budget,
     else 1."""
-    cost = torch.as_tensor(cost).float()
-    ones = torch.ones_like(cost)
+    cost = cast(cost, torch.float)
     if budget is None:
-        return ones
-    over = cost - torch.as_tensor(budget, dtype=cost.dtype, device=cost.device)
+        return torch.ones_like(cost)
+    if isinstance(budget, Tensor):
+        budget = budget.to(dtype=cost.dtype, device=cost.device)
+    over = cost - budget
     pen = torch.exp(-lam * over).clamp(min=floor)
-    return torch.where(over > 0, pen, ones)
+    return torch.where(over > 0, pen, 1.0)
 
 
 def gate(f_focal: Tensor, f_baseline: Tensor, p_marginal: float = 0.25) -> Tensor:
@@ -94,5 +99,5 @@ def team_cost(
 ) -> Tensor:
     """[..., N] robot cost, [..., N] bool present, [...] species count -> [...] sum of present
     costs + overhead*count."""
-    hw = torch.where(robot_present, robot_cost, torch.zeros_like(robot_cost)).sum(-1)
-    return hw + overhead * species_count.to(hw.dtype)
+    hw = torch.where(robot_present, robot_cost, 0.0).sum(-1)
+    return hw + overhead * cast(species_count, hw.dtype)

@@ -6,8 +6,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
+from ..sim.tensors import arange, cast
 from .selection import elite_count, group_sizes, rank_within_groups, top_table
 from .speciation import hamming
 
@@ -53,27 +55,24 @@ def choose_partners(
     dev = tag.device
     if k == 0 or p == 0 or elite_index.shape[1] == 0:
         return torch.full((p, k), -1, dtype=torch.long, device=dev)
-    dist = hamming(tag, proto_tag.to(dev)) / max(l, 1)  # [P, K]
+    dist = hamming(tag, cast(proto_tag, device=dev)) / max(l, 1)  # [P, K]
     valid = elite_index >= 0
     count = valid.sum(1)  # [K]
-    eligible = (dist < selectivity[:, None]) & (species[:, None] != proto_ids[None, :])
-    eligible &= (count > 0)[None, :]
+    eligible = (dist < selectivity[:, None]) & (species[:, None] != proto_ids) & (count > 0)
     if allowed is not None:
-        eligible &= allowed.to(dev)[None, :]
+        eligible &= cast(allowed, device=dev)
     # left-pack each species' elites so that entries 0..count-1 are valid
     packed = elite_index.gather(1, torch.sort((~valid).to(torch.uint8), dim=1, stable=True).indices)
     u = torch.rand(p, k, generator=generator, device=dev)
-    j = torch.minimum((u * count[None, :]).long(), (count - 1).clamp(min=0)[None, :])
-    rows = packed[torch.arange(k, device=dev)[None, :].expand(p, k), j]
-    return torch.where(eligible, rows, torch.full_like(rows, -1))
+    j = torch.minimum((u * count).long(), (count - 1).clamp(min=0))  # [P, K] the elite drawn
+    rows = packed.T.gather(0, j)  # rows[i, k] = packed[k, j[i, k]]
+    return torch.where(eligible, rows, -1)
 
 
 def ranking_fitness(fitness: Tensor, has_fitness: Tensor) -> Tensor:
     """[P] float fitness by which elites rank: -inf where there is none (or it is NaN)."""
     return torch.where(
-        has_fitness,
-        torch.nan_to_num(fitness.float(), nan=-torch.inf),
-        torch.full_like(fitness, -torch.inf, dtype=torch.float),
+        has_fitness, torch.nan_to_num(cast(fitness, torch.float), nan=-torch.inf), -torch.inf
     )
 
 
@@ -114,22 +113,18 @@ def elite_rows(
     N_k = n_elite_fn(sizes [K] long) (capped by the size); individuals without fitness rank below
     those with it; ties by lowest row; individuals whose species is not in proto_ids are ignored.
     """
-    p = fitness.numel()
     k = proto_ids.numel()
     dev = fitness.device
     if k == 0:
         return torch.full((0, 0), -1, dtype=torch.long, device=dev)
-    match = species[:, None] == proto_ids[None, :]
-    pos = torch.where(
-        match.any(1),
-        match.to(torch.int32).argmax(1).long(),
-        torch.full((p,), k, dtype=torch.long, device=dev),
-    )  # k: not in any species
+    match = species[:, None] == proto_ids
+    pos = torch.where(match.any(1), match.to(torch.int32).argmax(1), k)  # k: not in any species
     sizes = group_sizes(pos, k + 1)
-    n_wanted = torch.as_tensor(n_elite_fn(sizes[:k]), device=dev)
+    species_sizes = sizes[:k]  # (sizes[k]: no species)
+    n_wanted = cast(n_elite_fn(species_sizes), torch.long, dev)
     f = ranking_fitness(fitness, has_fitness)
     order, rank = rank_within_groups(pos, f, sizes, first=has_fitness)
-    return top_table(order, rank, pos, torch.minimum(n_wanted.long(), sizes[:k]), width)
+    return top_table(order, rank, pos, torch.minimum(n_wanted, species_sizes), width)
 
 
 def assemble_swarms(
@@ -153,57 +148,43 @@ def assemble_swarms(
     b, k = partner_rows.shape
     s = int(swarm_size)
     dev = partner_rows.device
-    focal = focal.long().to(dev)
-    dom = dominance.float().clamp(min=0.0)
+    focal = cast(focal, torch.long, dev)
+    dom = cast(dominance, torch.float).clamp(min=0.0)
     valid = partner_rows >= 0
 
-    # uniform random subset of at most S - 1 partners: rank partners by random keys
-    keys = torch.rand(b, k, generator=generator, device=dev).masked_fill(~valid, 2.0)
-    rank = torch.empty(b, k, dtype=torch.long, device=dev)
-    rank.scatter_(
-        1,
-        torch.sort(keys, dim=1, stable=True).indices,
-        torch.arange(k, device=dev).expand(b, k).contiguous(),
-    )
+    # uniform random subset of at most S - 1 partners: rank partners by random keys (the rank of
+    # each: the inverse of the sorting permutation)
+    keys = torch.where(valid, torch.rand(b, k, generator=generator, device=dev), 2.0)
+    rank = torch.sort(keys, dim=1, stable=True).indices.argsort(1)
     in_team = valid & (rank < s - 1)
     n_team = in_team.sum(1)
 
-    team = torch.full((b, s + 1), -1, dtype=torch.long, device=dev)  # column s: discard bin
-    team[:, 0] = focal
-    slot = torch.where(in_team, in_team.long().cumsum(1), torch.full_like(rank, s))
-    team.scatter_(1, slot, torch.where(in_team, partner_rows, torch.full_like(partner_rows, -1)))
-    team = team[:, :s]
+    # the focal design, then the partners in the team, each in its slot; column s: discard bin
+    cand = torch.cat([focal[:, None], torch.where(in_team, partner_rows, -1)], 1)  # [B, 1 + K]
+    placed = F.pad(in_team, (1, 0), value=True)
+    slot = torch.where(placed, placed.cumsum(1) - 1, s)
+    team = torch.full((b, s + 1), -1, dtype=torch.long, device=dev).scatter_(1, slot, cand)[:, :s]
 
-    team_partners = torch.where(in_team, partner_rows, torch.full_like(partner_rows, -1))
-    cand = torch.cat([focal[:, None], team_partners], 1)  # [B, 1 + K]
     cand_ok = cand >= 0
-    w = torch.where(cand_ok, dom[cand.clamp(min=0)], torch.zeros(cand.shape, device=dev))
+    w = torch.where(cand_ok, dom[cand.clamp(min=0)], 0.0)
     w = torch.where(w.sum(1, keepdim=True) > 0, w, cand_ok.float())
     draw = torch.multinomial(w, s, replacement=True, generator=generator)  # [B, S]
     empty = team < 0
     focal_team = torch.where(empty, cand.gather(1, draw), team)
-    focal_slot = empty & (draw == 0)
-    focal_slot[:, 0] = True
+    focal_slot = (empty & (draw == 0)) | (arange(s, dev) == 0)  # and slot 0, the focal's own
 
     refill = in_team
     if refill_distance is not None and k > 0:
-        d = torch.where(
-            refill, refill_distance.to(dev).float(), torch.full((b, k), torch.inf, device=dev)
-        )
-        nearest = torch.zeros_like(refill)
-        nearest[torch.arange(b, device=dev), d.argmin(1)] = True
+        d = torch.where(refill, cast(refill_distance, torch.float, dev), torch.inf)
+        nearest = arange(k, dev) == d.argmin(1, keepdim=True)
         refill = refill & nearest
-    has_p = refill.any(1)
+    has_p = refill.any(1, keepdim=True)
     if k > 0:
-        pw = torch.where(refill, dom[partner_rows.clamp(min=0)], torch.zeros(b, k, device=dev))
+        pw = torch.where(refill, dom[partner_rows.clamp(min=0)], 0.0)
         pw = torch.where(pw.sum(1, keepdim=True) > 0, pw, refill.float())
-        pw = torch.where(has_p[:, None], pw, torch.ones_like(pw))  # dummy rows, masked below
+        pw = torch.where(has_p, pw, 1.0)  # dummy rows, masked below
         bdraw = torch.multinomial(pw, s, replacement=True, generator=generator)
-        brows = torch.where(
-            has_p[:, None],
-            partner_rows.gather(1, bdraw),
-            torch.full((b, s), -1, dtype=torch.long, device=dev),
-        )
+        brows = torch.where(has_p, partner_rows.gather(1, bdraw), -1)
     else:
         brows = torch.full((b, s), -1, dtype=torch.long, device=dev)
     baseline_team = torch.where(focal_slot, brows, focal_team)

@@ -10,6 +10,7 @@ import torch
 
 from ..sim.bt import NOP, NUM_OPCODES
 from ..sim.hardware import NUM_TIERS, PINCHER, R_MAX, R_MIN, SUCTION, Catalog, Phenotype, phenotype
+from ..sim.tensors import cast
 
 #: Closed interval of every continuous gene: drawn uniformly in it, mutated within it.
 GENE_BOUNDS: dict[str, tuple[float, float]] = {
@@ -102,7 +103,9 @@ class Population:
         return Population(**{f.name: getattr(self, f.name)[idx] for f in fields(self)})
 
     def to(self, device: torch.device | str) -> Population:
-        return Population(**{f.name: getattr(self, f.name).to(device) for f in fields(self)})
+        return Population(
+            **{f.name: cast(getattr(self, f.name), device=device) for f in fields(self)}
+        )
 
     def clone(self) -> Population:
         return Population(**{f.name: getattr(self, f.name).clone() for f in fields(self)})
@@ -137,7 +140,7 @@ class Population:
         """[P, 2] the hardware space of d_hw, each axis in [0, 1]: the two continuous operating
         points (torque, battery), the paper's "continuous hardware space". Radius and tool are
         excluded (they have their own terms)."""
-        return torch.stack([self.torque_point, self.battery_point], dim=-1).float()
+        return cast(torch.stack([self.torque_point, self.battery_point], dim=-1), torch.float)
 
 
 def genome_phenotype(genome: Population, catalog: Catalog | None = None) -> Phenotype:

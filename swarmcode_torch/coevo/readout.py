@@ -4,7 +4,8 @@ Each read of a device value on the host waits for the device; a generation makes
 (besides speciation's, `speciation.speciate`): the best team, the species' sizes, the summary
 numbers and the genes the records keep, and the number of elites that reproduction keeps
 (which sizes its offspring). Everything is gathered on the device in fixed shapes, copied in
-one transfer, and taken apart on the host.
+one transfer, and taken apart on the host: the population's genes and phenotype whole (the
+best team's rows are picked there, with no gather on the device).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import torch
 from torch import Tensor
 
 from ..sim.hardware import Phenotype
+from ..sim.tensors import cast
 from .evaluation import EvalResult
 from .population import Population
 
@@ -81,37 +83,33 @@ def read_generation(
     the highest fitness score, gated: a focal whose marginal contribution is not positive is
     penalised, so a strong team carried by its partners is not credited to a focal that weakens
     it), the species' sizes, the summary numbers of `fitness` (the smoothed fitness) and
-    `res`, three genes of every individual, and `n_elites` (0-d)."""
-    b = res.fitness.argmax()
-    team = res.swarms.focal_team[b]
-    slots = team.clamp(min=0)  # the genes of each slot's robot; the team's rows on the host
-    sel = genome.index(slots)
+    `res`, three genes of every individual, and `n_elites` (0-d). The best team's genes and
+    phenotype are its rows of the population's, all of which are read."""
+    b = res.fitness.argmax().view(1)
+    team = res.swarms.focal_team.index_select(0, b)[0]
     names = [f.name for f in fields(Population)]
     n_g, n_ph = len(names), len(Phenotype._fields)
+    # every gene and phenotype value of the population (the team's rows are picked on the host),
+    # the team's scores and metrics at b
+    scores = [res.focal, res.team_cost, *(cast(v, torch.float) for v in res.team_metrics.values())]
     h = to_host(
-        [getattr(sel, n) for n in names]
-        + [t[slots] for t in phenotype]
+        [getattr(genome, n) for n in names]
+        + list(phenotype)
         + [
             b,
             team,
-            res.swarms.baseline_team[b],
+            res.swarms.baseline_team.index_select(0, b),
             species,
-            torch.stack([v[b].float() for v in res.team_metrics.values()]),
-            torch.stack([res.focal[b], res.focal.max()]),
-            res.team_cost[b],
-            torch.stack([fitness.max(), fitness.mean()]),
-            genome.radius,
-            genome.dominance,
-            genome.selectivity,
+            torch.stack(scores).index_select(1, b),
+            torch.stack([res.focal.max(), fitness.max(), fitness.mean()]),
             n_elites,
         ]
     )
     genes, ph = h[:n_g], h[n_g : n_g + n_ph]
-    (b_h, team_h, base_h, species_h, metrics, focal, cost, fit) = h[n_g + n_ph : n_g + n_ph + 8]
-    radius, dominance, selectivity, n_el = h[n_g + n_ph + 8 :]
+    (b_h, team_h, base_h, species_h, at_b, stats, n_el) = h[n_g + n_ph :]
+    focal, cost, metrics = at_b[0, 0], at_b[1, 0], at_b[2:, 0]
     valid = team_h >= 0
-    rows, first, counts = np.unique(team_h[valid], return_index=True, return_counts=True)
-    at = np.flatnonzero(valid)[first]  # a slot of each row
+    rows, counts = np.unique(team_h[valid], return_counts=True)
     ids, sizes = np.unique(species_h, return_counts=True)
 
     def t(a: np.ndarray) -> Tensor:
@@ -119,14 +117,14 @@ def read_generation(
 
     best_team = BestTeam(
         rows=t(rows),
-        genome=Population(**{n: t(x[at]) for n, x in zip(names, genes)}),
-        phenotype=Phenotype(*(t(x[at]) for x in ph)),
+        genome=Population(**{n: t(x[rows]) for n, x in zip(names, genes)}),
+        phenotype=Phenotype(*(t(x[rows]) for x in ph)),
         species=t(species_h[rows]),
         count=t(counts.astype(np.int64)),
-        baseline_count=t((base_h[None, :] == rows[:, None]).sum(1, dtype=np.int64)),
-        focal=t(rows == b_h),
+        baseline_count=t((base_h.reshape(1, -1) == rows[:, None]).sum(1, dtype=np.int64)),
+        focal=t(rows == b_h[0]),
         metrics=dict(zip(res.team_metrics, metrics.tolist())),
-        fitness=float(focal[0]),
+        fitness=float(focal),
         cost=float(cost),
     )
     return Readout(
@@ -139,12 +137,12 @@ def read_generation(
                 zip(species_h[rows].tolist(), counts.tolist()), key=lambda sc: -sc[1]
             )
         },
-        fit_max=float(fit[0]),
-        fit_mean=float(fit[1]),
-        focal_max=float(focal[1]),
-        radius=t(radius),
-        dominance=t(dominance),
-        selectivity=t(selectivity),
+        fit_max=float(stats[1]),
+        fit_mean=float(stats[2]),
+        focal_max=float(stats[0]),
+        radius=t(genes[names.index("radius")]),
+        dominance=t(genes[names.index("dominance")]),
+        selectivity=t(genes[names.index("selectivity")]),
         n_elites=int(n_el),
     )
 
@@ -157,11 +155,15 @@ def to_host(tensors: list[Tensor]) -> list[np.ndarray]:
     for i, x in enumerate(tensors):
         groups.setdefault(x.dtype, []).append(i)
     order = sorted(groups, key=lambda d: -d.itemsize)
-    flat = [
-        torch.cat([tensors[i] if tensors[i].dim() == 1 else tensors[i].reshape(-1) for i in ix])
+
+    def flat(i: int) -> Tensor:
+        return tensors[i] if tensors[i].dim() == 1 else tensors[i].reshape(-1)
+
+    parts = [
+        flat(ix[0]) if len(ix) == 1 else torch.cat([flat(i) for i in ix])
         for ix in (groups[d] for d in order)
     ]
-    data = torch.cat([f.view(torch.uint8) for f in flat]).cpu().numpy()
+    data = cast(torch.cat([f.view(torch.uint8) for f in parts]), device="cpu").numpy()
     out: list[np.ndarray] = [np.empty(0)] * len(tensors)
     pos = 0
     for d in order:

@@ -3,6 +3,7 @@ crossover and mutation of whole populations as batched tensor operations."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
@@ -10,6 +11,7 @@ import torch
 from torch import Tensor
 
 from ..sim.bt import END, LEAF_OPS, NOP, NUM_OPCODES, SEL, SEQ, compute_jumps
+from ..sim.tensors import arange, cast
 from .config import ReproductionParams
 from .population import CROSSOVER_GROUPS, GENE_BOUNDS, GENE_VALUES, SOCIAL_GENES, Population
 from .selection import elite_count, group_sizes, rank_within_groups, top_per_group
@@ -39,27 +41,37 @@ def offspring_quotas(
     if k == 0:
         return torch.zeros(0, dtype=torch.long, device=dev)
     # no value is read on the host here (each would be a device sync): the branches are
-    # torch.where over tensors, `protect` may be a 0-d tensor
-    f = torch.nan_to_num(adjusted_fitness_sum.double(), nan=0.0).clamp(min=0.0)
-    f = torch.where(f.sum() > 0, f, torch.ones_like(f))
+    # torch.where over tensors, `protect` may be a 0-d tensor (a position: a mask `is_p`)
+    if isinstance(protect, int) and not -k <= protect < k:
+        raise IndexError(f"protect {protect} is out of range for {k} species")
+    idx = arange(k, dev)
+    is_p = (
+        None if protect is None else idx == (protect % k if isinstance(protect, int) else protect)
+    )
+    f = torch.nan_to_num(cast(adjusted_fitness_sum, torch.double), nan=0.0).clamp(min=0.0)
+    f = torch.where(f.sum() > 0, f, 1.0)
     if min_share > 0:
         # a relative tolerance, so that an exact share of min_share is not lost to rounding
         keep = f / f.sum() * population_size >= min_share * (1 - 1e-9)
         any_kept = (f * keep).sum() > 0  # else no species qualifies: no threshold
-        if protect is not None:
-            keep[protect] = True
-        f = torch.where(any_kept & ~keep, torch.zeros_like(f), f)
+        if is_p is not None:
+            keep = keep | is_p
+        f = torch.where(any_kept & ~keep, 0.0, f)
     share = f / f.sum() * population_size
     base = share.floor()
     q = base.long()
     rem = (population_size - q.sum()).clamp(0, k)  # +1 to the rem largest remainders
     order = torch.sort(share - base, descending=True, stable=True).indices
-    q[order] += (torch.arange(k, device=dev) < rem).long()
-    if protect is not None:
+    q = q.index_add(0, order, (idx < rem).long())
+    if is_p is not None:
         # take 1 from the largest quota (no host read: population_size may be a tensor)
-        need = (q[protect] == 0) & (torch.as_tensor(population_size, device=dev) > 0)
-        q[q.argmax()] -= need.long()
-        q[protect] = torch.where(need, 1, q[protect])
+        need = torch.where(is_p, q, 0).sum() == 0
+        if isinstance(population_size, Tensor):
+            need = need & (population_size > 0)
+        elif population_size <= 0:
+            need = need & False
+        q = q - ((idx == q.argmax()) & need).long()
+        q = torch.where(is_p & need, 1, q)
     return q
 
 
@@ -98,7 +110,7 @@ def floor_quotas(
 def subtree_end(bt: Tensor, start: Tensor) -> Tensor:
     """[N, L] opcodes, [N] start slot -> [N] end (exclusive) of the subtree rooted at start:
     the jump index (past the matching END for SEQ/SEL, L if unclosed; start + 1 otherwise)."""
-    return compute_jumps(bt).gather(1, start[:, None].long()).squeeze(1)
+    return compute_jumps(bt).gather(1, cast(start, torch.long)[:, None]).squeeze(1)
 
 
 def replace_subtree(bt: Tensor, start: Tensor, subtree: Tensor, subtree_len: Tensor) -> Tensor:
@@ -110,15 +122,20 @@ def replace_subtree(bt: Tensor, start: Tensor, subtree: Tensor, subtree_len: Ten
     n, l = bt.shape
     if l == 0 or n == 0:
         return bt.clone()
-    s_max = subtree.shape[1]
-    end = subtree_end(bt, start)
-    t = torch.arange(l, device=bt.device)[None, :]
-    s, m, e = start[:, None], subtree_len[:, None], end[:, None]
-    from_sub = subtree.gather(1, (t - s).clamp(0, s_max - 1))
-    tail = t - s - m + e
-    from_tail = bt.gather(1, tail.clamp(0, l - 1))
-    from_tail = torch.where(tail < l, from_tail, torch.full_like(from_tail, NOP))
-    return torch.where(t < s, bt, torch.where(t < s + m, from_sub, from_tail))
+    s = cast(start, torch.long)[:, None]
+    end = compute_jumps(bt).gather(1, s)  # [N, 1] `subtree_end`
+    d = arange(l, bt.device) - s  # [N, L] each slot's place after the start
+    m = subtree_len[:, None]
+    from_sub = subtree.gather(1, d.clamp(0, subtree.shape[1] - 1))
+    tail = d + (end - m)  # the slot of the old program that shifts there
+    from_tail = torch.where(tail < l, bt.gather(1, tail.clamp(0, l - 1)), NOP)
+    return torch.where(d < 0, bt, torch.where(d < m, from_sub, from_tail))
+
+
+@functools.lru_cache(maxsize=8)
+def _leaf_ops(device: torch.device) -> Tensor:
+    """[len(LEAF_OPS)] long (built once per device, never written to)."""
+    return torch.tensor(LEAF_OPS, dtype=torch.long, device=device)
 
 
 def random_subtrees(
@@ -129,27 +146,21 @@ def random_subtrees(
 ) -> tuple[Tensor, Tensor]:
     """-> ([n, max_leaves + 2] long subtrees NOP-padded, [n] long lengths): a leaf, or SEQ/SEL +
     1..max leaves + END."""
+    device = torch.device(device)
     ml = params.subtree_max_leaves
     s_max = ml + 2
-    leaf_ops = torch.tensor(LEAF_OPS, dtype=torch.long, device=device)
     is_leaf = torch.rand(n, generator=generator, device=device) < params.subtree_leaf_prob
     ctrl = torch.randint(0, 2, (n,), generator=generator, device=device)  # SEQ=0 / SEL=1
     k = torch.randint(1, ml + 1, (n,), generator=generator, device=device)
-    leaves = leaf_ops[
+    leaves = _leaf_ops(device)[
         torch.randint(0, len(LEAF_OPS), (n, s_max), generator=generator, device=device)
     ]
-    t = torch.arange(s_max, device=device)[None, :]
-    kk = k[:, None]
-    nop = torch.full((n, s_max), NOP, dtype=torch.long, device=device)
-    ctrl_form = torch.where(
-        t == 0,
-        torch.where(ctrl[:, None] == 0, SEQ, SEL),
-        torch.where(t <= kk, leaves, torch.where(t == kk + 1, END, nop)),
-    )
-    leaf_form = torch.where(t == 0, leaves, nop)
-    sub = torch.where(is_leaf[:, None], leaf_form, ctrl_form)
-    length = torch.where(is_leaf, torch.ones_like(k), k + 2)
-    return sub, length
+    # a leaf: its leaf at slot 0; else SEQ / SEL at slot 0, leaves at 1..k and END at k + 1
+    head = torch.where(is_leaf, leaves[:, 0], torch.where(ctrl == 0, SEQ, SEL))
+    t, kk = arange(s_max, device), k[:, None]
+    body = torch.where(t <= kk, leaves, torch.where(t == kk + 1, END, NOP))
+    sub = torch.where(t == 0, head[:, None], torch.where(is_leaf[:, None], NOP, body))
+    return sub, torch.where(is_leaf, 1, k + 2)
 
 
 def _random_node(bt: Tensor, generator: torch.Generator) -> Tensor:
@@ -158,8 +169,17 @@ def _random_node(bt: Tensor, generator: torch.Generator) -> Tensor:
     count = live.sum(1, keepdim=True)
     u = torch.rand(bt.shape[0], 1, generator=generator, device=bt.device)
     k = torch.minimum((u * count).long(), (count - 1).clamp(min=0))  # the k-th node
-    hit = live & (live.long().cumsum(1) - 1 == k)
-    return hit.to(torch.int32).argmax(1, keepdim=True).long()
+    # the k-th node is the first slot where the running count of nodes reaches k + 1
+    hit = live.cumsum(1) == k + 1
+    return hit.to(torch.int32).argmax(1, keepdim=True)
+
+
+@functools.lru_cache(maxsize=8)
+def _opcode_weights(weights: tuple[float, ...], device: torch.device) -> Tensor:
+    """The point mutation's opcode weights as a tensor (built once per setting and device)."""
+    if len(weights) != NUM_OPCODES:
+        raise ValueError(f"point_opcode_weights needs {NUM_OPCODES} entries")
+    return torch.tensor(weights, dtype=torch.float, device=device)
 
 
 def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator) -> Tensor:
@@ -171,19 +191,16 @@ def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator
     dev = bt.device
     do = torch.rand(n, generator=generator, device=dev) < params.bt_mutation_rate
     sub = torch.rand(n, generator=generator, device=dev) < params.bt_subtree_prob
-    weights = torch.tensor(params.point_opcode_weights, dtype=torch.float, device=dev)
-    if weights.numel() != NUM_OPCODES:
-        raise ValueError(f"point_opcode_weights needs {NUM_OPCODES} entries")
-    point = bt.clone()
+    weights = _opcode_weights(tuple(params.point_opcode_weights), dev)
+    point = bt
     for _ in range(params.bt_point_count):
         slot = _random_node(point, generator)
         op = torch.multinomial(weights, n, replacement=True, generator=generator)
-        point.scatter_(1, slot, op[:, None].to(bt.dtype))
+        point = point.scatter(1, slot, cast(op, bt.dtype)[:, None])
     start = torch.randint(0, l, (n,), generator=generator, device=dev)
     subtree, sub_len = random_subtrees(n, params, generator, dev)
-    replaced = replace_subtree(bt, start, subtree.to(bt.dtype), sub_len)
-    out = torch.where((do & ~sub)[:, None], point, bt)
-    return torch.where((do & sub)[:, None], replaced, out)
+    replaced = replace_subtree(bt, start, cast(subtree, bt.dtype), sub_len)
+    return torch.where(do[:, None], torch.where(sub[:, None], replaced, point), bt)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -192,34 +209,82 @@ def mutate_bt(bt: Tensor, params: ReproductionParams, generator: torch.Generator
 
 def crossover(a: Population, b: Population, generator: torch.Generator) -> Population:
     """Parents [N], [N] -> child [N]: uniform per gene group, uniform per tag bit, one-point BT
-    crossover at the same cut in 1..L-1."""
+    crossover at the same cut in 1..L-1 (`mate` of every pair)."""
     n = a.size
-    dev = a.bt.device
-    out: dict[str, Tensor] = {}
+    rows = torch.arange(n, device=a.bt.device)
+    cross = torch.ones(n, dtype=torch.bool, device=rows.device)
+    return mate(Population.cat([a, b]), rows, rows + n, cross, generator)
+
+
+def mate(
+    genome: Population, p1: Tensor, p2: Tensor, do_cross: Tensor, generator: torch.Generator
+) -> Population:
+    """Rows p1 [N], p2 [N] of `genome`, do_cross [N] bool -> children [N]: where do_cross the
+    crossover of the two parents (uniform per gene group, uniform per tag bit, one-point BT
+    crossover at the same cut in 1..L-1), else a copy of p1 (the draws are made for every
+    child alike). Each gene is read once, from each child's row for it."""
+    n = p1.numel()
+    dev = genome.bt.device
+    keep = ~do_cross[:, None]  # [N, 1] a copy of p1
     pick = torch.rand(n, len(CROSSOVER_GROUPS), generator=generator, device=dev) < 0.5
-    for gi, group in enumerate(CROSSOVER_GROUPS):
+    group_rows = torch.where(pick | keep, p1[:, None], p2[:, None]).unbind(1)
+    out: dict[str, Tensor] = {}
+    for rows, group in zip(group_rows, CROSSOVER_GROUPS):
         for name in group:
-            out[name] = torch.where(pick[:, gi], getattr(a, name), getattr(b, name))
-    bits = torch.rand(a.tag.shape, generator=generator, device=dev) < 0.5
-    out["tag"] = torch.where(bits, a.tag, b.tag)
-    l = a.bt.shape[1]
+            out[name] = getattr(genome, name)[rows]
+    bits = torch.rand(n, genome.tag.shape[1], generator=generator, device=dev) < 0.5
+    out["tag"] = torch.where(bits | keep, genome.tag[p1], genome.tag[p2])
+    l = genome.bt.shape[1]
     if l >= 2:
         cut = torch.randint(1, l, (n, 1), generator=generator, device=dev)
-        t = torch.arange(l, device=dev)[None, :]
-        out["bt"] = torch.where(t < cut, a.bt, b.bt)
+        first = (arange(l, dev) < cut) | keep
+        out["bt"] = torch.where(first, genome.bt[p1], genome.bt[p2])
     else:
-        out["bt"] = a.bt.clone()
+        out["bt"] = genome.bt[p1]
     return Population(**{f.name: out[f.name] for f in fields(Population)})
 
 
-def _gauss_clip(
-    x: Tensor, lo: float, hi: float, sigma: float, generator: torch.Generator, p: float = 1.0
-) -> Tensor:
-    """[N] -> [N] x + N(0, (sigma (hi - lo))^2), clipped to [lo, hi], each entry w.p. p."""
+def _gauss_draws(x: Tensor, generator: torch.Generator, p: float) -> tuple[Tensor, Tensor | None]:
+    """The draws of a Gaussian step of x [N]: standard normal noise [N] (x's dtype), and where
+    p < 1, uniforms [N] (the entries below p are stepped)."""
     noise = torch.randn(x.shape, generator=generator, device=x.device, dtype=x.dtype)
-    if p < 1.0:
-        noise = noise * (torch.rand(x.shape, generator=generator, device=x.device) < p)
-    return (x + noise * (sigma * (hi - lo))).clamp(lo, hi)
+    u = torch.rand(x.shape, generator=generator, device=x.device) if p < 1.0 else None
+    return noise, u
+
+
+@functools.lru_cache(maxsize=8)
+def _gauss_constants(
+    names: tuple[str, ...], sigmas: tuple[float, ...], dtype: torch.dtype, device: torch.device
+) -> tuple[Tensor, Tensor, Tensor]:
+    """[G, 1] lower and upper bounds (GENE_BOUNDS) and noise scales sigma (hi - lo) of the genes
+    `names` (built once per setting and device, never written to)."""
+    lo, hi = zip(*(GENE_BOUNDS[n] for n in names))
+    scale = [s * (h - l) for s, l, h in zip(sigmas, lo, hi)]
+
+    def column(v) -> Tensor:
+        return torch.tensor(v, dtype=dtype, device=device)[:, None]
+
+    return column(lo), column(hi), column(scale)
+
+
+def _gauss_steps(
+    genes: dict[str, Tensor],
+    draws: dict[str, tuple[Tensor, Tensor | None]],
+    params: ReproductionParams,
+) -> dict[str, Tensor]:
+    """The continuous genes `genes` ([N] each, one dtype) stepped by their `_gauss_draws`: x +
+    N(0, (sigma (hi - lo))^2), clipped to GENE_BOUNDS [lo, hi], each entry w.p.
+    p_gene_mutation (social_sigma for SOCIAL_GENES, else hw_sigma); all in one pass over
+    their stack."""
+    names = tuple(draws)
+    x = torch.stack([genes[n] for n in names])
+    noise = torch.stack([draws[n][0] for n in names])
+    if params.p_gene_mutation < 1.0:
+        u = torch.stack([u for _, u in draws.values() if u is not None])
+        noise = noise * (u < params.p_gene_mutation)
+    sigmas = tuple(params.social_sigma if n in SOCIAL_GENES else params.hw_sigma for n in names)
+    lo, hi, scale = _gauss_constants(names, sigmas, x.dtype, x.device)
+    return dict(zip(names, (x + noise * scale).clamp(lo, hi).unbind()))
 
 
 def _resample(x: Tensor, n_values: int, p: float, generator: torch.Generator) -> Tensor:
@@ -234,13 +299,14 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
     bits, selectivity, dominance).
 
     Genes are drawn in field order: tag bits flip w.p. p_tag_flip (None: 1 / L_tag), the BT by
-    `mutate_bt`, continuous genes by `_gauss_clip` in their GENE_BOUNDS (social_sigma for
-    SOCIAL_GENES, else hw_sigma; each w.p. p_gene_mutation), categorical ones by `_resample`
-    (w.p. p_categorical; the effector w.p. p_effector where that is set).
+    `mutate_bt`, continuous genes by `_gauss_draws` (stepped together by `_gauss_steps`, in
+    their GENE_BOUNDS), categorical ones by `_resample` (w.p. p_categorical; the effector w.p.
+    p_effector where that is set).
     """
     l_tag = g.tag.shape[1]
     p_flip = params.p_tag_flip if params.p_tag_flip is not None else (1.0 / l_tag if l_tag else 0.0)
     out = {}
+    draws = {}  # the continuous genes' draws
     for name in (f.name for f in fields(Population)):
         x = getattr(g, name)
         if name == "tag":
@@ -248,8 +314,7 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
         elif name == "bt":
             out[name] = mutate_bt(x, params, generator)
         elif name in GENE_BOUNDS:
-            sigma = params.social_sigma if name in SOCIAL_GENES else params.hw_sigma
-            out[name] = _gauss_clip(x, *GENE_BOUNDS[name], sigma, generator, params.p_gene_mutation)
+            draws[name] = _gauss_draws(x, generator, params.p_gene_mutation)
         else:
             p_cat = (
                 params.p_effector
@@ -257,7 +322,8 @@ def mutate(g: Population, params: ReproductionParams, generator: torch.Generator
                 else params.p_categorical
             )
             out[name] = _resample(x, GENE_VALUES[name], p_cat, generator)
-    return Population(**out)
+    out.update(_gauss_steps({n: getattr(g, n) for n in draws}, draws, params))
+    return Population(**{f.name: out[f.name] for f in fields(Population)})
 
 
 @dataclass(frozen=True, eq=False)
@@ -289,32 +355,36 @@ def quotas(
     p = fitness.numel()
     dev = fitness.device
     k = proto_ids.numel()
-    ids = proto_ids.to(dev).long()
-    match = species[:, None] == ids[None, :]
+    ids = cast(proto_ids, torch.long, dev)
+    match = species[:, None] == ids
     if p and not present and not bool(match.any(1).all()):
         raise ValueError("every individual's species must be listed in proto_ids")
-    pos = match.to(torch.int32).argmax(1).long()
+    pos = match.to(torch.int32).argmax(1)
     sizes = group_sizes(pos, k)
-    fit = fitness.float()
+    fit = cast(fitness, torch.float)
     fsum = torch.zeros(k, dtype=torch.float64, device=dev).index_add_(0, pos, fit.double())
     if params.quota_size_exponent is not None:  # mean x size ** exponent
         n = sizes.clamp(min=1).double()
         adjusted = fsum / n * n.pow(params.quota_size_exponent)
     else:  # the paper's total
         adjusted = fsum
+    # empty species get 0 (`present`: there are none, every species is a position of its own)
+    nonempty = None if present else (sizes > 0).nonzero().squeeze(1)
+
+    def of_nonempty(t: Tensor) -> Tensor:
+        return t if nonempty is None else t[nonempty]
+
     quota = torch.zeros(k, dtype=torch.long, device=dev)
-    # empty species get 0
-    nonempty = torch.arange(k, device=dev) if present else (sizes > 0).nonzero().squeeze(1)
     if p:
-        best_pos = pos[fit.argmax()]
-        protect = (nonempty == best_pos).to(torch.int32).argmax()
-        q = offspring_quotas(adjusted[nonempty], p, protect=protect, min_share=params.min_share)
+        best_pos = pos.take(fit.argmax())  # the species of the global best (0-d, no host read)
+        protect = best_pos if nonempty is None else (nonempty == best_pos).int().argmax()
+        q = offspring_quotas(of_nonempty(adjusted), p, protect=protect, min_share=params.min_share)
         if essential is not None and params.essential_floor > 0:
             pri = priority if priority is not None else torch.zeros(k, device=dev)
             q = floor_quotas(
-                q, essential[nonempty], pri[nonempty], params.essential_floor, protect=protect
+                q, of_nonempty(essential), of_nonempty(pri), params.essential_floor, protect=protect
             )
-        quota[nonempty] = q
+        quota = q if nonempty is None else quota.index_put((nonempty,), q)
     n_elite = torch.minimum(torch.minimum(elite_count(sizes, params.max_elite), quota), sizes)
     return Quotas(pos, sizes, fit, quota, n_elite)
 
@@ -363,52 +433,41 @@ def reproduce(
     starts = sizes.cumsum(0) - sizes
 
     n_off = None if n_elites is None else p - n_elites  # quotas sum to p
-    off_pos = torch.repeat_interleave(
-        torch.arange(k, device=dev), quota - n_elite, output_size=n_off
-    )
+    off_pos = torch.repeat_interleave(arange(k, dev), quota - n_elite, output_size=n_off)
     n_off = off_pos.numel()
     ts = params.tournament_size
 
-    def tournament(spos: Tensor, tries: int) -> Tensor:
-        """[N] species positions -> [N, tries] tournament winners (rows) within those species."""
-        u = torch.rand(spos.numel(), tries, ts, generator=generator, device=dev)
-        size = sizes[spos].view(-1, 1, 1)
-        local = (u * size).long().clamp(max=size - 1)
-        rows = order[starts[spos].view(-1, 1, 1) + local]
+    # each offspring's species: its size, its last rank and its first place in `order`
+    size = sizes[off_pos].view(-1, 1, 1)
+    last, first = size - 1, starts[off_pos].view(-1, 1, 1)
+
+    def tournament(tries: int) -> Tensor:
+        """-> [N, tries] tournament winners (rows) within each offspring's species."""
+        u = torch.rand(n_off, tries, ts, generator=generator, device=dev)
+        rows = order[first + (u * size).long().clamp(max=last)]
         win = fit[rows].argmax(-1, keepdim=True)
         return rows.gather(-1, win).squeeze(-1)
 
-    p1 = tournament(off_pos, 1)[:, 0]
-    cand = tournament(off_pos, params.mate_tries)  # [N, tries]
+    p1 = tournament(1)[:, 0]
+    cand = tournament(params.mate_tries)  # [N, tries]
     dmat = distance_fn(genome, genome)
-    ok = (dmat[p1[:, None], cand] <= params.delta) & (cand != p1[:, None])
-    local_p2 = cand.gather(1, ok.to(torch.int32).argmax(1, keepdim=True).long()).squeeze(1)
+    p1_col = p1[:, None]
+    ok = (dmat[p1_col, cand] <= params.delta) & (cand != p1_col)
+    local_p2 = cand.gather(1, ok.to(torch.int32).argmax(1, keepdim=True)).squeeze(1)
     if p > 1:
         g = torch.randint(0, p - 1, (n_off, ts), generator=generator, device=dev)
-        g = g + (g >= p1[:, None]).long()  # uniform over rows != p1
+        g = g + (g >= p1_col)  # uniform over rows != p1
     else:
         g = torch.zeros(n_off, ts, dtype=torch.long, device=dev)
     global_p2 = g.gather(1, fit[g].argmax(1, keepdim=True)).squeeze(1)
     p2 = torch.where(ok.any(1), local_p2, global_p2)
 
     same = species[p2] == species[p1]
-    p_cross = torch.where(
-        same,
-        torch.full((n_off,), params.crossover_same, device=dev),
-        torch.full((n_off,), params.crossover_cross, device=dev),
-    )
+    p_cross = torch.where(same, params.crossover_same, params.crossover_cross)
     do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
-    g1, g2 = genome.index(p1), genome.index(p2)
-    child = crossover(g1, g2, generator).where(do_cross, g1)
-    child = mutate(child, params, generator)
+    child = mutate(mate(genome, p1, p2, do_cross, generator), params, generator)
 
     children = Population.cat([genome.index(elite), child])
-    hint = torch.cat([species[elite], species[p1]])
-    is_elite = torch.cat(
-        [
-            torch.ones(elite.numel(), dtype=torch.bool, device=dev),
-            torch.zeros(n_off, dtype=torch.bool, device=dev),
-        ]
-    )
     parent = torch.cat([elite, p1])
-    return children, hint, is_elite, parent
+    is_elite = arange(parent.numel(), dev) < elite.numel()
+    return children, species[parent], is_elite, parent

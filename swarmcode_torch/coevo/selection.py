@@ -7,8 +7,10 @@ from __future__ import annotations
 from typing import overload
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor
 
+from ..sim.tensors import arange
 from .config import SwarmCoDeConfig
 
 
@@ -22,7 +24,9 @@ def elite_count(
     """[K] long (or int) species sizes -> [K] long (or int) N = max(1, min(max_elite,
     size // 5 + 1)); max_elite is the paper's E."""
     if isinstance(species_size, Tensor):
-        return torch.clamp(torch.clamp(species_size // 5 + 1, max=max_elite), min=1)
+        if max_elite < 1:  # max(1, min(max_elite, .)) is 1
+            return torch.ones_like(species_size)
+        return (species_size // 5 + 1).clamp(1, max_elite)
     return max(1, min(max_elite, int(species_size) // 5 + 1))
 
 
@@ -48,11 +52,12 @@ def rank_within_groups(
     order = torch.sort(fitness, descending=True, stable=True).indices
     if first is not None:
         order = order[torch.sort((~first[order]).to(torch.uint8), stable=True).indices]
-    order = order[torch.sort(group[order], stable=True).indices]
+    by_group = torch.sort(group[order], stable=True)  # its values: the groups in that order
+    order = order[by_group.indices]
     if sizes is None:
         sizes = torch.bincount(group)
     starts = sizes.cumsum(0) - sizes
-    rank = torch.arange(group.numel(), device=group.device) - starts[group[order]]
+    rank = arange(group.numel(), group.device) - starts[by_group.values]
     return order, rank
 
 
@@ -79,8 +84,8 @@ def top_table(
     m = int(n.max()) if width is None else width
     dev = order.device
     g = group[order]
-    keep = rank < torch.cat([n, torch.zeros(1, dtype=n.dtype, device=dev)])[g]
+    keep = rank < F.pad(n, (0, 1))[g]  # group G keeps none
     flat = torch.full((k * m + 1,), -1, dtype=torch.long, device=dev)
-    target = torch.where(keep, g * m + rank, torch.full_like(rank, k * m))
-    flat.scatter_(0, target, torch.where(keep, order, torch.full_like(order, -1)))
+    target = torch.where(keep, g * m + rank, k * m)
+    flat.scatter_(0, target, torch.where(keep, order, -1))
     return flat[: k * m].view(k, m)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -10,6 +11,7 @@ import torch
 from torch import Tensor
 
 from ..sim.bt import NUM_OPCODES
+from ..sim.tensors import arange, cast
 from .config import DistanceWeights, SwarmCoDeConfig
 from .population import R_MAX, R_MIN, Population
 
@@ -20,27 +22,110 @@ _FULL_MATRIX_MAX = 1 << 24
 @dataclass(frozen=True, eq=False)
 class SpeciationResult:
     """species [P] long ids; proto_ids [K] long (carried-over first, then new in founding order);
-    proto_index [K] long prototype rows; next_species_id: the next unused id; distance [P, P]
-    float32: D between the population's genomes where it was computed (else None)."""
+    proto_index [K] long prototype rows; next_species_id: the next unused id; prototypes [K]:
+    the prototypes' genomes (rows proto_index); distance [P, P] float32: D between the
+    population's genomes where it was computed (else None)."""
 
     species: Tensor
     proto_ids: Tensor
     proto_index: Tensor
     next_species_id: int
+    prototypes: Population
     distance: Tensor | None = None
 
 
 def hamming(a: Tensor, b: Tensor) -> Tensor:
-    """[Pa, L] bool, [Pb, L] bool -> [Pa, Pb] float32 Hamming distances (exact integer counts)."""
+    """[Pa, L] bool, [Pb, L] bool -> [Pa, Pb] float32 Hamming distances (exact integer counts):
+    the bits set in a and not in b plus those set in b and not in a, in one product."""
     af, bf = a.float(), b.float()
-    return af @ (1.0 - bf).T + (1.0 - af) @ bf.T
+    return torch.cat([af, 1.0 - af], 1) @ torch.cat([1.0 - bf, bf], 1).T
 
 
-def _one_hot_bt(bt: Tensor) -> Tensor:
-    """[P, L] long opcodes -> [P, L * NUM_OPCODES] float32 one-hot."""
-    oh = torch.zeros(*bt.shape, NUM_OPCODES, dtype=torch.float32, device=bt.device)
-    oh.scatter_(-1, bt.long().unsqueeze(-1), 1.0)
-    return oh.flatten(1)
+@functools.lru_cache(maxsize=8)
+def _opcode_rows(device: torch.device) -> Tensor:
+    """[NUM_OPCODES, NUM_OPCODES] float32 identity: row o is opcode o one-hot (built once per
+    device, never written to)."""
+    return torch.eye(NUM_OPCODES, device=device)
+
+
+class _Genes:
+    """What D reads of a population, each part computed on its first use and kept: the
+    distances of one population to itself and to others read it once."""
+
+    def __init__(self, pop: Population):
+        self.pop = pop
+
+    @functools.cached_property
+    def bits(self) -> Tensor:
+        """[P, 2 L_tag] float32: the tag bits, then their complements (`hamming`'s left side)."""
+        t = self.pop.tag.float()
+        return torch.cat([t, 1.0 - t], 1)
+
+    @functools.cached_property
+    def flipped(self) -> Tensor:
+        """[P, 2 L_tag] float32: the complements, then the bits (`hamming`'s right side)."""
+        return self.bits.roll(self.pop.tag.shape[1], 1)
+
+    @functools.cached_property
+    def one_hot_bt(self) -> Tensor:
+        """[P, L * NUM_OPCODES] float32: the opcodes one-hot."""
+        return _opcode_rows(self.pop.bt.device)[cast(self.pop.bt, torch.long)].flatten(1)
+
+    @functools.cached_property
+    def hw(self) -> Tensor:
+        return self.pop.hardware_vector()
+
+    @functools.cached_property
+    def radius(self) -> Tensor:
+        return cast(self.pop.radius, torch.float)
+
+    @functools.cached_property
+    def effector_col(self) -> Tensor:
+        """[P, 1] the effectors, as the rows' side of a pairwise comparison."""
+        return self.pop.effector[:, None]
+
+    @functools.cached_property
+    def radius_col(self) -> Tensor:
+        """[P, 1] the radii, as the rows' side of a pairwise difference."""
+        return self.radius[:, None]
+
+
+def _weighted(w: float, d: Tensor) -> Tensor:
+    """w * d (d itself for a weight of 1: the product would be d exactly)."""
+    return d if w == 1.0 else w * d
+
+
+def _design_terms(a: _Genes, b: _Genes, w: DistanceWeights) -> tuple[Tensor, ...]:
+    """The hardware terms of D (`distance_terms`'): hw, tool, size, each [Pa, Pb] float32."""
+    d_hw = torch.cdist(a.hw, b.hw, compute_mode="donot_use_mm_for_euclid_dist")
+    d_hw = d_hw / math.sqrt(a.hw.shape[1])
+    d_tool = (a.effector_col != b.pop.effector).float()
+    d_size = (a.radius_col - b.radius).abs() / (R_MAX - R_MIN)
+    return _weighted(w.w_hw, d_hw), _weighted(w.w_tool, d_tool), _weighted(w.w_size, d_size)
+
+
+def _terms(a: _Genes, b: _Genes, w: DistanceWeights) -> dict[str, Tensor]:
+    """`distance_terms` of what D reads of two populations (b may be a)."""
+    pa, pb = a.pop.size, b.pop.size
+    dev = a.pop.bt.device
+    l_tag = a.pop.tag.shape[1]
+    if l_tag > 0:
+        d_tag = (a.bits @ b.flipped.T / l_tag) ** w.gamma  # the Hamming distance / L_tag
+    else:
+        d_tag = torch.zeros(pa, pb, device=dev)
+    l_bt = a.pop.bt.shape[1]
+    if l_bt > 0:
+        d_bt = 1.0 - (a.one_hot_bt @ b.one_hot_bt.T) / l_bt
+    else:
+        d_bt = torch.zeros(pa, pb, device=dev)
+    hw, tool, size = _design_terms(a, b, w)
+    return {
+        "tag": _weighted(w.w_tag, d_tag),
+        "hw": hw,
+        "bt": _weighted(w.w_bt, d_bt),
+        "tool": tool,
+        "size": size,
+    }
 
 
 def distance_terms(
@@ -48,44 +133,26 @@ def distance_terms(
 ) -> dict[str, Tensor]:
     """Genomes [Pa], [Pb] -> the weighted terms of D, each [Pa, Pb] float32, in the order of the
     sum: tag = w_tag (H/L)^gamma, hw = w_hw d_hw, bt = w_bt d_bt, tool = w_tool d_tool,
-    size = w_size d_size.
+    size = w_size d_size. (b may be a itself: what the two share is computed once.)
 
     H: tag Hamming distance, L: tag length; d_hw: Euclidean distance of `hardware_vector()`
     / sqrt(its dimension), the two continuous operating points;
     d_bt: fraction of BT slots whose opcode differs; d_tool: effectors differ;
     d_size: |dr| / (R_MAX - R_MIN).
     """
-    pa, pb = a.size, b.size
-    dev = a.bt.device
-    l_tag = a.tag.shape[1]
-    if l_tag > 0:
-        d_tag = (hamming(a.tag, b.tag) / l_tag) ** w.gamma
-    else:
-        d_tag = torch.zeros(pa, pb, device=dev)
-    ha, hb = a.hardware_vector(), b.hardware_vector()
-    d_hw = torch.cdist(ha, hb, compute_mode="donot_use_mm_for_euclid_dist") / math.sqrt(ha.shape[1])
-    l_bt = a.bt.shape[1]
-    if l_bt > 0:
-        matches = _one_hot_bt(a.bt) @ _one_hot_bt(b.bt).T
-        d_bt = 1.0 - matches / l_bt
-    else:
-        d_bt = torch.zeros(pa, pb, device=dev)
-    d_tool = (a.effector[:, None] != b.effector[None, :]).float()
-    d_size = (a.radius.float()[:, None] - b.radius.float()[None, :]).abs() / (R_MAX - R_MIN)
-    return {
-        "tag": w.w_tag * d_tag,
-        "hw": w.w_hw * d_hw,
-        "bt": w.w_bt * d_bt,
-        "tool": w.w_tool * d_tool,
-        "size": w.w_size * d_size,
-    }
+    ga = _Genes(a)
+    return _terms(ga, ga if b is a else _Genes(b), w)
+
+
+def _sum(t: dict[str, Tensor]) -> Tensor:
+    """D, the sum of its terms in their order."""
+    return t["tag"] + t["hw"] + t["bt"] + t["tool"] + t["size"]
 
 
 def distance(a: Population, b: Population, w: DistanceWeights = DistanceWeights()) -> Tensor:
     """Genomes [Pa], [Pb] -> [Pa, Pb] float32 D = w_tag (H/L)^gamma + w_hw d_hw + w_bt d_bt
     + w_tool d_tool + w_size d_size (the sum of `distance_terms`)."""
-    t = distance_terms(a, b, w)
-    return t["tag"] + t["hw"] + t["bt"] + t["tool"] + t["size"]
+    return _sum(distance_terms(a, b, w))
 
 
 def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -> Tensor:
@@ -93,8 +160,9 @@ def design_distance(proto: Population, w: DistanceWeights = DistanceWeights()) -
     d_tool + w_size d_size), how far apart their robots are as designs. The tag (a signal for
     partner choice, not a property of the robot) and the tree are left out: which partner's
     robots are most like a species' robots (`partner_admission = "substitute"`)."""
-    t = distance_terms(proto, proto, w)
-    return t["hw"] + t["tool"] + t["size"]
+    g = _Genes(proto)
+    hw, tool, size = _design_terms(g, g, w)
+    return hw + tool + size
 
 
 def speciate(
@@ -125,25 +193,27 @@ def speciate(
     dev = genome.bt.device
     long_empty = torch.zeros(0, dtype=torch.long, device=dev)
     if p == 0:
-        return SpeciationResult(long_empty, long_empty, long_empty, next_species_id)
+        empty = genome.index(long_empty)
+        return SpeciationResult(long_empty, long_empty, long_empty, next_species_id, empty)
+    genes = _Genes(genome)  # what D reads of the population, for both of its distances here
     # (1) carry-over of surviving species: alive [Kp], closest [Kp] (the new prototype's row)
     prev_ids: Tensor | None = None
     alive: Tensor | None = None
     closest: Tensor | None = None
     if prev_proto is not None and prev_proto_ids.numel() > 0:
-        prev_ids = prev_proto_ids.to(dev).long()
-        d_prev = distance(genome, prev_proto.to(dev), w)  # [P, Kp]
-        member = species_hint.to(dev)[:, None] == prev_ids[None, :]  # [P, Kp]
+        prev_ids = cast(prev_proto_ids, torch.long, dev)
+        d_prev = _sum(_terms(genes, _Genes(prev_proto.to(dev)), w))  # [P, Kp]
+        member = cast(species_hint, device=dev)[:, None] == prev_ids  # [P, Kp]
         alive = member.any(0)
         closest = d_prev.masked_fill(~member, math.inf).argmin(0)  # first min = lowest row
     if p * p > _FULL_MATRIX_MAX:
         return _speciate_in_rounds(genome, prev_ids, alive, closest, next_species_id, delta, w)
-    full = distance(genome, genome, w)
-    idx = torch.arange(p, device=dev)
+    full = _sum(_terms(genes, genes, w))
+    row = arange(p, dev)[:, None]  # [P, 1] each row's number
     if closest is not None:
         assert alive is not None and prev_ids is not None
-        d_cur = full[:, closest].masked_fill(~alive[None, :], math.inf)  # [P, Kp]
-        carried = ((closest[None, :] == idx[:, None]) & alive[None, :]).any(1)
+        d_cur = full[:, closest].masked_fill(~alive, math.inf)  # [P, Kp]
+        carried = ((closest == row) & alive).any(1)
         min_d = d_cur.min(1).values
     else:
         d_cur, carried, min_d = None, torch.zeros(p, dtype=torch.bool, device=dev), None
@@ -154,7 +224,7 @@ def speciate(
     picks = _to_device(np.concatenate([alive_at, founders]).astype(np.int64), dev)
     new_rows = picks[k:]
     # every other row joins the closest of the carried prototypes and the founders before it
-    d_new = full[:, new_rows].masked_fill(new_rows[None, :] >= idx[:, None], math.inf)
+    d_new = full[:, new_rows].masked_fill(new_rows >= row, math.inf)
     if d_cur is not None:
         assert prev_ids is not None and closest is not None
         at = picks[:k]
@@ -164,7 +234,7 @@ def speciate(
         carried_ids = carried_rows = long_empty
     proto_index = torch.cat([carried_rows, new_rows])
     own = torch.full((p,), -1, dtype=torch.long, device=dev)
-    own[proto_index] = torch.arange(k + n_new, device=dev)
+    own[proto_index] = arange(k + n_new, dev)
     assign_pos = torch.where(own >= 0, own, d_new.argmin(1))
     proto_ids = torch.cat(
         [
@@ -177,6 +247,7 @@ def speciate(
         proto_ids=proto_ids,
         proto_index=proto_index,
         next_species_id=next_species_id + n_new,
+        prototypes=genome.index(proto_index),
         distance=full,
     )
 
@@ -188,7 +259,7 @@ def _founders(cand: Tensor, alive: Tensor | None, near: Tensor) -> tuple[np.ndar
     in row order, sequential by definition)."""
     p = cand.numel()
     flags = [cand] + ([alive] if alive is not None else []) + [near.T.reshape(-1)]
-    host = torch.cat(flags).to(torch.uint8).cpu().numpy().astype(bool)
+    host = cast(torch.cat(flags), device="cpu").numpy()
     kp = 0 if alive is None else alive.numel()
     near_h = host[p + kp :].reshape(p, p)  # near_h[f]: the rows near row f
     founders: list[int] = []
@@ -204,7 +275,7 @@ def _to_device(a: np.ndarray, device: torch.device) -> Tensor:
     """A host array on `device`, without waiting for the device: from pinned memory on CUDA."""
     t = torch.from_numpy(a)
     if device.type != "cuda":
-        return t.to(device)
+        return cast(t, device=device)
     return t.pin_memory().to(device, non_blocking=True)
 
 
@@ -273,4 +344,5 @@ def _speciate_in_rounds(
         proto_ids=proto_ids,
         proto_index=proto_index,
         next_species_id=next_species_id + n_new,
+        prototypes=genome.index(proto_index),
     )

@@ -17,6 +17,8 @@ from typing import NamedTuple
 
 import torch
 
+from .tensors import cast
+
 # Radius bounds of a robot chassis, in metres (the paper's R_min, R_max).
 R_MIN = 0.15
 R_MAX = 0.5
@@ -225,9 +227,23 @@ class Phenotype(NamedTuple):
     cost: torch.Tensor  # $
 
 
-def _tier(values: tuple[float, ...], idx: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
-    table = torch.tensor(values, dtype=like.dtype, device=like.device)
-    return table[idx.long()]
+@lru_cache(maxsize=16)
+def _tier_tables(
+    cat: Catalog, dtype: torch.dtype, device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The catalog's per-tier figures as [figures, NUM_TIERS] tables of one part each (built
+    once per catalog, dtype and device, never written to): chassis (areal density, strength,
+    cost per area), motor (force, efficiency, mass, cost), battery (capacity, energy density,
+    cost per kJ)."""
+
+    def table(*rows: tuple[float, ...]) -> torch.Tensor:
+        return torch.tensor(rows, dtype=dtype, device=device)
+
+    return (
+        table(cat.chassis_density, cat.chassis_strength, cat.chassis_cost_per_area),
+        table(cat.motor_force, cat.motor_efficiency, cat.motor_mass, cat.motor_cost),
+        table(cat.battery_capacity, cat.battery_density, cat.battery_cost_per_kj),
+    )
 
 
 def phenotype(
@@ -242,29 +258,31 @@ def phenotype(
 ) -> Phenotype:
     """Phenotype of robots given their hardware genes (tiers as indices 0..2)."""
     cat = catalog or default_catalog()
-    r = radius.float()
+    r = cast(radius, torch.float)
     area = math.pi * r * r
-    u_m = torque_point.float().clamp(0, 1)
-    u_b = battery_point.float().clamp(0, 1)
+    u_m = cast(torque_point, torch.float).clamp(0, 1)
+    u_b = cast(battery_point, torch.float).clamp(0, 1)
+    try:
+        chassis_t, motor_t, battery_t = _tier_tables(cat, r.dtype, r.device)
+    except TypeError:  # a catalog that cannot be hashed: not cached
+        chassis_t, motor_t, battery_t = _tier_tables.__wrapped__(cat, r.dtype, r.device)
+    # each part's figures at each robot's tier, one gather a part
+    motor_force, efficiency, motor_kg, motor_usd = motor_t[:, cast(motor, torch.long)].unbind()
+    capacity_t, energy_density, kj_cost = battery_t[:, cast(battery, torch.long)].unbind()
+    # the chassis' areal figures (density, strength, cost per area) times the area
+    chassis_mass, payload, chassis_cost = (chassis_t[:, cast(chassis, torch.long)] * area).unbind()
 
-    chassis_mass = _tier(cat.chassis_density, chassis, r) * area
-    payload = _tier(cat.chassis_strength, chassis, r) * area
-    chassis_cost = _tier(cat.chassis_cost_per_area, chassis, r) * area
-
-    force = _tier(cat.motor_force, motor, r) * (
-        cat.motor_force_floor + (1 - cat.motor_force_floor) * u_m
-    )
-    efficiency = _tier(cat.motor_efficiency, motor, r)
+    force = motor_force * (cat.motor_force_floor + (1 - cat.motor_force_floor) * u_m)
     motor_scale = 0.5 + 0.5 * u_m
-    motor_mass = _tier(cat.motor_mass, motor, r) * motor_scale
-    motor_cost = _tier(cat.motor_cost, motor, r) * motor_scale
+    motor_mass = motor_kg * motor_scale
+    motor_cost = motor_usd * motor_scale
 
-    capacity = _tier(cat.battery_capacity, battery, r) * (
-        cat.battery_capacity_floor + (1 - cat.battery_capacity_floor) * u_b
-    )
-    battery_mass = capacity / _tier(cat.battery_density, battery, r)
-    battery_cost = capacity / 1000.0 * _tier(cat.battery_cost_per_kj, battery, r)
+    capacity = capacity_t * (cat.battery_capacity_floor + (1 - cat.battery_capacity_floor) * u_b)
+    battery_mass = capacity / energy_density
+    battery_cost = capacity / 1000.0 * kj_cost
 
     mass = cat.base_mass + cat.effector_mass + chassis_mass + motor_mass + battery_mass
     cost = cat.base_cost + cat.effector_cost + chassis_cost + motor_cost + battery_cost
-    return Phenotype(r, mass, force, payload, capacity, efficiency, effector.long(), cost)
+    return Phenotype(
+        r, mass, force, payload, capacity, efficiency, cast(effector, torch.long), cost
+    )

@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import NamedTuple
 
 import torch
+import torch.nn.functional as F
 
+from ..tensors import cast
 from .ops import (
     _CODE_SHIFT,
     _FIRED_SHIFT,
@@ -36,6 +39,50 @@ from .ops import (
 )
 
 
+class _Slots(NamedTuple):
+    """Slot numbers and node numbers of a program length L for `_nesting` and `_continuations`
+    (built once per L and device, never written to)."""
+
+    slot: torch.Tensor  # [L] 0..L-1
+    next_slot: torch.Tensor  # [L] 1..L
+    next_col: torch.Tensor  # [L, 1] 1..L
+    arrival_key: torch.Tensor  # [L + 1] 2 * slot: an arrival's place among equal depths
+    opener_key: torch.Tensor  # [L] 2 * slot + 1: an opener's, just after the arrival at it
+    s: torch.Tensor  # [2] the two statuses a child returns (SUCCESS, FAILURE)
+    leaf_node: torch.Tensor  # [L] the code "visit leaf slot i"
+    end_node: torch.Tensor  # [L] T(i, SUCCESS) of an END at slot i
+    codes: torch.Tensor  # [L + 2] the code nodes
+    root_codes: torch.Tensor  # [2] the codes "the tick ends with root status s"
+
+
+def _slots(L: int, device: torch.device) -> _Slots:
+    """`_Slots` of length L: cached, but built afresh while torch.compile traces (it would
+    bypass the cache and warn)."""
+    if torch.compiler.is_compiling():
+        return _build_slots(L, device)
+    return _cached_slots(L, device)
+
+
+def _build_slots(L: int, device: torch.device) -> _Slots:
+    slot = torch.arange(L + 2, device=device)
+    n_t, n_c = L + 1, 3 * L + 1  # `_continuations`' first T node and first code node
+    return _Slots(
+        slot=slot[:L],
+        next_slot=slot[1 : L + 1],
+        next_col=slot[1 : L + 1, None],
+        arrival_key=2 * slot[: L + 1],
+        opener_key=2 * slot[:L] + 1,
+        s=slot[:2],
+        leaf_node=n_c + slot[:L],
+        end_node=n_t + 2 * slot[:L],
+        codes=n_c + slot,
+        root_codes=n_c + L + slot[:2],
+    )
+
+
+_cached_slots = functools.lru_cache(maxsize=32)(_build_slots)
+
+
 def _nesting(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """ops [B, L] long -> (close [B, L] bool: an END that closes a block; encl [B, L + 1] long:
     the opener slot of the innermost block open on arriving at slot i (i = L: the array's end),
@@ -47,30 +94,32 @@ def _nesting(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tenso
     after it is the depth on arriving at i (found by one sort and a running maximum), and a
     block's END is the closing END whose innermost open block it is."""
     B, L = ops.shape
-    dev = ops.device
+    k = _slots(L, ops.device)
     push = ops <= SEL
-    s = (push.long() - (ops == END).long()).cumsum(1)
+    is_end = ops == END
+    s = push.long().masked_fill(is_end, -1).cumsum(1)  # +1 at an opener, -1 at an END
     after = s - torch.cummin(s, 1).values.clamp(max=0)  # depth after each slot
-    before = torch.cat([torch.zeros(B, 1, dtype=torch.long, device=dev), after], 1)  # [B, L + 1]
-    close = (ops == END) & (before[:, :L] > 0)
+    before = F.pad(after, (1, 0))  # [B, L + 1] depth on arriving at each slot
+    close = is_end & (before[:, :L] > 0)
     # openers and the arrivals at every slot in one order, by (depth, slot): an opener at o sorts
     # after the arrival at o and before the arrival at o + 1; the running maximum of the openers'
     # (depth, slot + 1) read at an arrival is the last opener before it at the largest depth up
     # to its own: its innermost open block where that depth is its own
-    slot = torch.arange(L + 1, device=dev)
     span = 2 * L + 2
-    q_key = before * span + 2 * slot
-    o_key = torch.where(push, after * span + 2 * slot[:L] + 1, (L + 1) * span)
-    o_val = torch.where(push, after * (L + 1) + slot[:L] + 1, 0)
+    q_key = before * span + k.arrival_key
+    o_key = torch.where(push, after * span + k.opener_key, (L + 1) * span)
+    o_val = torch.where(push, after * (L + 1) + k.next_slot, 0)
     keys = torch.cat([q_key, o_key], 1)
-    vals = torch.cat([torch.zeros_like(q_key), o_val], 1)
+    vals = F.pad(o_val, (L + 1, 0))  # the arrivals' values: 0
     order = keys.argsort(1)
     run = torch.cummax(vals.gather(1, order), 1).values
-    seen = torch.empty_like(run).scatter_(1, order, run)[:, : L + 1]
-    encl = torch.where(seen // (L + 1) == before, seen % (L + 1) - 1, -1)
+    seen = run.scatter(1, order, run)[:, : L + 1]  # `order` is a permutation: all written
+    # the slot of that opener where its depth is the arrival's (seen = before (L + 1) + slot + 1),
+    # else -1 (a shallower one: seen is then at most before (L + 1) - 1)
+    encl = (seen - (before * (L + 1) + 1)).clamp(min=-1)
     target = torch.where(close, encl[:, :L], L)
-    end = torch.full((B, L + 1), L, dtype=torch.long, device=dev)
-    end.scatter_(1, target, slot[:L].expand(B, L).clone())
+    end = torch.full((B, L + 1), L, dtype=torch.long, device=ops.device)
+    end.scatter_(1, target, k.slot.expand(B, L))
     return close, encl, end[:, :L]
 
 
@@ -82,12 +131,13 @@ def compute_jumps(opcodes: torch.Tensor) -> torch.Tensor:
     shape = opcodes.shape
     L = shape[-1]
     B = math.prod(shape[:-1])
-    ops = opcodes.reshape(B, L).long()
+    ops = opcodes if opcodes.dim() == 2 else opcodes.reshape(B, L)
+    ops = ops if ops.dtype == torch.long else ops.long()
     if L == 0 or B == 0:
         return ops.clone().reshape(shape)
     _, _, end = _nesting(ops)
-    jumps = torch.arange(1, L + 1, device=ops.device).expand(B, L)
-    return torch.where(ops <= SEL, end + (end < L).long(), jumps).reshape(shape)
+    jumps = torch.where(ops <= SEL, (end + 1).clamp(max=L), _slots(L, ops.device).next_slot)
+    return jumps if opcodes.dim() == 2 else jumps.reshape(shape)
 
 
 def interpret(
@@ -207,42 +257,42 @@ def _continuations(ops: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     with no closed parent ends the tick with root status s); the codes, which are final.
     """
     P, L = ops.shape
-    dev = ops.device
     if L == 0:  # the empty program: the root SEQ ends at once
         return ops.new_full((P,), SUCCESS), ops.new_zeros(P, 0, 2)
+    k = _slots(L, ops.device)
     close, encl, end = _nesting(ops)
     n_t = L + 1  # first node of T(e, s)
     n_c = 3 * L + 1  # first code node
-    s = torch.arange(2, device=dev)
+    # Blocks by column: the block opened at slot j < L, the root at column L (a block b >= 0 is
+    # column b, the root b = -1 column L: b mod (L + 1)).
+    dflt = F.pad(_default(ops), (0, 1), value=SUCCESS)  # [P, L + 1] (the root is a SEQ)
+    # where a child's non-default status s goes: its block's T(END, s), the root's code L + s
+    up = F.pad(torch.where(end < L, n_t + 2 * end, n_c + L), (0, 1), value=n_c + L)
+    # [P, L + 1, 2]: a child of the block returns s: -1 to continue after the child (s is the
+    # block's default), else the node it goes to
+    outcome = torch.where(k.s == dflt[..., None], -1, up[..., None] + k.s)
 
-    def block_type(b: torch.Tensor) -> torch.Tensor:  # a block's opcode; the root's: SEQ
-        return torch.where(b >= 0, ops.gather(1, b.clamp(min=0)), SEQ)
+    def returns(col: torch.Tensor) -> torch.Tensor:
+        """[P, L] blocks' columns -> [P, L, 2]: a child of that block ending just before slot
+        i + 1 returns s: continue there if s is the block's default, else the block returns s."""
+        to = outcome.gather(1, col[..., None].expand(P, L, 2))
+        return torch.where(to < 0, k.next_col, to)
 
-    def block_end(b: torch.Tensor) -> torch.Tensor:  # a block's END; L: none (or the root)
-        return torch.where(b >= 0, end.gather(1, b.clamp(min=0)), L)
-
-    def returns(b: torch.Tensor, after: torch.Tensor) -> torch.Tensor:
-        """[P, N] blocks, [P, N] slots -> [P, N, 2]: a child of block b, ending just before
-        `after`, returns s: continue there if s is b's default, else b returns s."""
-        e = block_end(b).unsqueeze(-1)
-        up = torch.where(e < L, n_t + 2 * e.clamp(max=L - 1) + s, n_c + L + s)
-        return torch.where(s == _default(block_type(b)).unsqueeze(-1), after.unsqueeze(-1), up)
-
-    slot = torch.arange(L, device=dev).expand(P, L)
-    enc = encl[:, :L]
-    parent = torch.where(enc >= 0, encl.gather(1, enc.clamp(min=0)), -1)
+    col = encl % (L + 1)  # [P, L + 1] the innermost open block's column
+    enc = col[:, :L]
+    parent = F.pad(enc, (0, 1), value=L).gather(1, enc)  # the enclosing block's own block
+    enc_dflt = dflt.gather(1, col)  # [P, L + 1] the innermost open block's default
     arrive = torch.where(
-        _is_leaf(ops),
-        n_c + slot,
-        torch.where(close, n_t + 2 * slot + _default(block_type(enc)), slot + 1),
+        _is_leaf(ops), k.leaf_node, torch.where(close, k.end_node + enc_dflt[:, :L], k.next_slot)
     )
-    at_end = n_c + L + _default(block_type(encl[:, L:]))
-    ret = torch.where(close.unsqueeze(-1), returns(parent, slot + 1), n_c + L + s)
-    codes = torch.arange(n_c, n_c + L + 2, device=dev).expand(P, L + 2)
-    nxt = torch.cat([arrive, at_end, ret.reshape(P, 2 * L), codes], 1)  # [P, 4L + 3]
+    at_end = n_c + L + enc_dflt[:, L:]
+    ret = torch.where(close[..., None], returns(parent), k.root_codes)
+    nxt = torch.cat(
+        [arrive, at_end, ret.reshape(P, 2 * L), k.codes.expand(P, L + 2)], 1
+    )  # [P, 4L + 3]
     for _ in range(nxt.shape[1].bit_length()):
         nxt = nxt.gather(1, nxt)
-    cont = nxt.gather(1, returns(enc, slot + 1).reshape(P, 2 * L)).reshape(P, L, 2) - n_c
+    cont = nxt.gather(1, returns(enc).reshape(P, 2 * L)).reshape(P, L, 2) - n_c
     return nxt[:, 0] - n_c, cont
 
 
@@ -317,7 +367,7 @@ def build_tables(
     the CPU with neither given, the walk runs in C++ where the fused tick's extension is built
     (`_native_tables`; identical tables).
     """
-    ops = opcodes.long()
+    ops = cast(opcodes, torch.long)
     on_cpu = ops.device.type == "cpu"
     if on_cpu and compact is None and chunk is None and ops.shape[0]:
         native = _native_tables(ops)
