@@ -117,6 +117,22 @@ def site(tmp_path_factory) -> Path:
     return out
 
 
+def test_every_link_of_the_site_opens_from_disk(site):
+    """A site opened as files (file://) has no server to turn a folder into its index.html:
+    every relative link of every page leads to a file that exists, never a folder."""
+    checked = 0
+    for page in site.rglob("*.html"):
+        for href in re.findall(r'href="([^"#?]*)[^"]*"', page.read_text(encoding="utf-8")):
+            if not href or re.match(r"[a-z]+:|//", href):
+                continue
+            target = (page.parent / href).resolve()
+            if site.resolve() not in target.parents:  # a repository file beside the site
+                continue
+            assert target.is_file(), f"{page.relative_to(site)} links to {href}"
+            checked += 1
+    assert checked > 100
+
+
 def _text(path: Path) -> str:
     import html
 
@@ -129,7 +145,7 @@ def test_site_reference_has_every_public_name(site):
     ids = set(re.findall(r'id="swarmcode_torch\.(\w+)"', html))
     assert set(swarmcode_torch.__all__) <= ids, sorted(set(swarmcode_torch.__all__) - ids)
     # a dataclass's fields are there with their docstrings
-    config = _text(site / "reference/config/index.html")
+    config = _text(site / "reference/config.html")
     for name in ("generations", "population", "delta", "quota_size_exponent"):
         assert f'id="swarmcode_torch.SwarmCoDeConfig.{name}"' in html
     assert "Total number of generations of the run." in config
@@ -143,7 +159,7 @@ def test_site_cli_page_is_the_help_of_every_command(site):
 
     commands = list(typer.main.get_command(app).commands)
     assert {"evolve", "sweep", "inspect", "replay", "dynamics", "scenarios"} <= set(commands)
-    text = _text(site / "cli/index.html")
+    text = _text(site / "cli.html")
     for name in commands:
         assert f"Usage: swarmcode-torch {name} [OPTIONS]" in text, name
     # the options of the code as it is, e.g. evolve's
@@ -159,7 +175,7 @@ def test_site_cli_page_is_the_help_of_every_command(site):
 def test_site_hardware_page_has_every_catalog_field_and_bound(site):
     from swarmcode_torch.sim import hardware as hw
 
-    text = _text(site / "formats/hardware/index.html")
+    text = _text(site / "formats/hardware.html")
     rows = {
         (m.group(1), m.group(2)): m.group(0)
         for m in re.finditer(r"\[(\w+)\]\s+(\w+)\s+(.*?)\n(.*?)\n(.*?)\n", text)
@@ -173,10 +189,10 @@ def test_site_hardware_page_has_every_catalog_field_and_bound(site):
 @pytest.mark.subprocess
 def test_site_has_the_notebooks_and_the_changelog(site):
     for nb in ("01_quickstart", "02_analyze_run", "03_budget_sweep"):
-        page = site / "notebooks" / nb / "index.html"
+        page = site / "notebooks" / f"{nb}.html"
         assert page.is_file(), nb
-    assert "import swarmcode_torch as sc" in _text(site / "notebooks/01_quickstart/index.html")
-    assert "Keep a Changelog" in _text(site / "CHANGELOG/index.html")
+    assert "import swarmcode_torch as sc" in _text(site / "notebooks/01_quickstart.html")
+    assert "Keep a Changelog" in _text(site / "CHANGELOG.html")
     assert not (site / "results").exists()  # the data folders stay out of the site
     assert not (site / "hooks.py").exists()
 
