@@ -181,9 +181,16 @@ def cli_reference() -> str:
                 "",
             ]
         )
-        for name, sub in getattr(command, "commands", {}).items():
-            if not getattr(sub, "hidden", False):
-                walk(sub, [*path, name])
+        subs = {n: c for n, c in getattr(command, "commands", {}).items() if not c.hidden}
+        if subs:  # --help cuts each command's summary to the terminal's width: here in full
+            parts.extend(["| command | what it does |", "|---|---|"])
+            for name, sub in subs.items():
+                summary = " ".join((sub.help or "").split("\n\n", 1)[0].split())
+                cell = summary.replace("|", "\\|")
+                parts.append(f"| `{' '.join([*path, name])}` | {cell} |")
+            parts.append("")
+        for name, sub in subs.items():
+            walk(sub, [*path, name])
 
     walk(typer.main.get_command(app), [])
     return "\n".join(parts)

@@ -162,6 +162,14 @@ def test_site_cli_page_is_the_help_of_every_command(site):
     text = _text(site / "cli.html")
     for name in commands:
         assert f"Usage: swarmcode-torch {name} [OPTIONS]" in text, name
+    # each command's summary in full, where --help cuts it to the terminal's width
+    flat = " ".join(text.split())
+    longest = 0
+    for name, command in typer.main.get_command(app).commands.items():
+        summary = " ".join((command.help or "").split("\n\n", 1)[0].split())
+        assert summary in flat, name
+        longest = max(longest, len(summary))
+    assert longest > 80  # longer than --help's summary column
     # the options of the code as it is, e.g. evolve's
     for option in ("--scenario", "--generations", "--resume", "--set"):
         assert re.search(
