@@ -112,7 +112,8 @@ class Archive:
             or ts["lineage"].numel() != ts["born"].numel()
         ):
             raise ValueError("checkpoint's re-founding archive is malformed")
-        return cls(**pops, **{n: t.to(device) for n, t in ts.items()})
+        tensors = {n: t.to(device) for n, t in ts.items()}
+        return cls(genome=pops["genome"], champ=pops["champ"], **tensors)
 
 
 def _grow(t: Tensor, n: int, fill: int) -> Tensor:
