@@ -194,12 +194,55 @@ def test_site_hardware_page_has_every_catalog_field_and_bound(site):
         assert f"{'[' if lo_ok else '('}{lo:g}, {hi:g}]" in rows[section, key]
 
 
+def _public_functions() -> dict[str, list[str]]:
+    """The public functions of swarmcode_torch with parameters -> their parameter names
+    (`*args` as `*args`; a `**settings` catch-all is documented by the keys it takes)."""
+    import inspect
+
+    out = {}
+    for name in swarmcode_torch.__all__:
+        obj = getattr(swarmcode_torch, name)
+        if not inspect.isfunction(obj):
+            continue
+        params = [
+            ("*" if p.kind is p.VAR_POSITIONAL else "") + p.name
+            for p in inspect.signature(obj).parameters.values()
+            if p.kind is not p.VAR_KEYWORD
+        ]
+        if params:
+            out[name] = params
+    return out
+
+
+@pytest.mark.subprocess
+def test_site_reference_shows_each_functions_parameters_as_a_table(site):
+    """Google-style docstrings (Args/Returns/Raises) render as tables: every parameter of every
+    public function is a row of its Parameters table, with a description."""
+    html = "".join(p.read_text(encoding="utf-8") for p in (site / "reference").rglob("*.html"))
+    functions = _public_functions()
+    assert {"evolve", "evaluate", "generate_world", "load_runs"} <= set(functions)
+    for name, params in functions.items():
+        start = html.index(f'id="swarmcode_torch.{name}"')
+        end = html.find('<div class="doc doc-object', start)
+        section = html[start : end if end > 0 else len(html)]
+        assert "Parameters:</span>" in section and "<table>" in section, name
+        rows = re.findall(r"<td>\s*<code>([^<]+)</code>\s*</td>", section)
+        missing = [p for p in params if p not in rows]
+        assert not missing, f"{name}: parameters without a row: {missing}"
+
+
 @pytest.mark.subprocess
 def test_site_has_the_notebooks_and_the_changelog(site):
     for nb in ("01_quickstart", "02_analyze_run", "03_budget_sweep"):
         page = site / "notebooks" / f"{nb}.html"
         assert page.is_file(), nb
     assert "import swarmcode_torch as sc" in _text(site / "notebooks/01_quickstart.html")
+    # the tutorials are shown with their outputs: the progress of the run, tables, figures
+    quick = (site / "notebooks/01_quickstart.html").read_text(encoding="utf-8")
+    assert "done 10/10" in quick and "<table" in quick
+    assert quick.count("data:image/png;base64,") >= 2 and "data:image/gif;base64," in quick
+    for nb in ("02_analyze_run", "03_budget_sweep"):
+        assert "data:image/png;base64," in (site / f"notebooks/{nb}.html").read_text("utf-8")
     assert "Keep a Changelog" in _text(site / "CHANGELOG.html")
     assert not (site / "results").exists()  # the data folders stay out of the site
     assert not (site / "hooks.py").exists()

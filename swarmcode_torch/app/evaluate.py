@@ -397,17 +397,35 @@ def evaluate(
     threads: int | None = None,
     progress: ProgressFn | None = None,
 ) -> EvaluationResult:
-    """Evaluate a run's team on `episodes` fresh seeds, `seed_start` + i, all in one batch (see
-    this module's docstring for the team, the seeds, the score, the interval and the
-    knock-outs). `team`: "best" (summary.json) or "last" (teams.jsonl's last generation);
-    `generation`: that generation's best team; `top`: the K best distinct teams of teams.jsonl;
-    `scenario`: another scenario (a built-in name or a TOML file) instead of the run's own;
-    `ticks`: the episode length (default: the run's on its own scenario, else the scenario's);
-    `fitness`: the run's user fitness function, for a run scored by one (any other ScoreFn
-    scores the episodes with it); `threads`: torch's CPU threads (`evolve`'s rule when unset);
-    `progress(stage, done, total)`: called as the environments are drawn and the ticks run.
-    Reads the run directory and writes nothing. RunError (a ValueError) for a run, a team or a
-    scenario that cannot be evaluated, ValueError for an argument out of range."""
+    """Evaluate a run's team on `episodes` fresh seeds, `seed_start` + i, all in one batch.
+
+    The team, the seeds, the score, the interval and the knock-outs: this module's docstring.
+    Reads the run directory and writes nothing.
+
+    Args:
+        run_dir: the run directory.
+        team: "best" (summary.json's best team) or "last" (teams.jsonl's last generation).
+        generation: evaluate that generation's best team instead.
+        top: evaluate the K best distinct teams of teams.jsonl instead.
+        episodes: how many fresh seeds.
+        seed_start: the first seed (disjoint from the seeds a run uses).
+        scenario: another scenario (a built-in name or a TOML file) instead of the run's own.
+        device: "cpu" or "cuda".
+        ticks: the episode length (default: the run's on its own scenario, else the scenario's).
+        fitness: the run's user fitness function, for a run scored by one (any other ScoreFn
+            scores the episodes with it).
+        threads: torch's CPU threads (`evolve`'s rule when unset).
+        progress: `progress(stage, done, total)`, called as the environments are drawn and the
+            ticks run.
+
+    Returns:
+        An `EvaluationResult`: one `TeamEvaluation` per team, best first (`to_dict()` is the JSON
+        `swarmcode-torch evaluate --json` writes).
+
+    Raises:
+        RunError: (a ValueError) a run, a team or a scenario that cannot be evaluated.
+        ValueError: an argument out of range.
+    """
     _check_arguments(team, generation, top, episodes, seed_start, ticks)
     if fitness is not None and not callable(fitness):
         raise TypeError(f"fitness must be a function, got {type(fitness).__name__}")

@@ -80,10 +80,19 @@ def _run_dirs(path: Path) -> list[Path]:
 
 
 def load_runs(*patterns: str | os.PathLike) -> Runs:
-    """The runs that the glob `patterns` match ("runs/*", "runs/sweep-*/*"; a sweep directory
-    stands for its runs; a path matched twice is one row), one row each (`Runs`), in the order
-    of their paths. RunError naming a run whose config or summary.json cannot be read;
-    ValueError without a pattern."""
+    """The runs that glob patterns match, one row each, in the order of their paths.
+
+    Args:
+        *patterns: globs such as "runs/*" or "runs/sweep-*/*"; a sweep directory stands for its
+            runs; a path matched twice is one row.
+
+    Returns:
+        The `Runs` (`to_pandas()`: one DataFrame with the settings as columns).
+
+    Raises:
+        RunError: naming a run whose config or summary.json cannot be read.
+        ValueError: no pattern given.
+    """
     if not patterns:
         raise ValueError('load_runs needs a pattern, e.g. load_runs("runs/*")')
     seen: dict[str, Path] = {}

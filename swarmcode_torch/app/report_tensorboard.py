@@ -9,9 +9,13 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..coevo.evolve import Evolution, GenerationResult
 from .records import HISTOGRAMS, SCALAR_TAGS, scalars
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def _check_history(history) -> None:
@@ -42,15 +46,22 @@ def _check_history(history) -> None:
             )
 
 
-def composition_figure(history: list[dict], legend: int = 8):
-    """A matplotlib `Figure`: species composition of the population and of the best team per
-    generation (stacked areas, one colour per species id; paper Fig. 5). Each panel's legend
-    names its `legend` largest species (most individuals, or robots, over the generations
-    shown) by the ids `swarmcode-torch inspect` prints, largest first (0: no legend).
+def composition_figure(history: list[dict], legend: int = 8) -> Figure:
+    """Species composition of the population and of the best team per generation (paper Fig. 5).
 
-    Drawn object-oriented (`matplotlib.figure.Figure`): no pyplot, no backend change, so a
-    notebook keeps its inline plots; the figure displays as the value of a cell
-    (`IPython.display.display(fig)`) and `fig.savefig(path)` writes it."""
+    Stacked areas, one colour per species id. Drawn object-oriented (`matplotlib.figure.Figure`):
+    no pyplot, no backend change, so a notebook keeps its inline plots; the figure displays as the
+    value of a cell (`IPython.display.display(fig)`) and `fig.savefig(path)` writes it.
+
+    Args:
+        history: the run's species history (`RunResult.species`).
+        legend: each panel's legend names its `legend` largest species (most individuals, or
+            robots, over the generations shown) by the ids `swarmcode-torch inspect` prints,
+            largest first (0: no legend).
+
+    Returns:
+        A matplotlib `Figure`.
+    """
     _check_history(history)
     from matplotlib import colormaps
     from matplotlib.figure import Figure

@@ -66,8 +66,15 @@ class Asked:
         return 2 * self.size * self.trials
 
     def designs(self, team: Tensor) -> list[dict | None]:
-        """The designs (hardware, behavior tree, tag; `population.design_record`) of a team's
-        robots, one per slot, None for an empty slot: e.g. `asked.designs(asked.focal_team[i])`."""
+        """The designs of a team's robots, one per slot.
+
+        Args:
+            team: a team's population rows, e.g. `asked.focal_team[i]`.
+
+        Returns:
+            Each slot's design (hardware, behavior tree, tag; `population.design_record`), None for
+            an empty slot.
+        """
         rows = [int(r) for r in team.tolist()]
         return [None if r < 0 else design_record(self.genome, r, -1, 0.0) for r in rows]
 
@@ -188,10 +195,16 @@ class Evolution(_Evolution):
         return self._asked
 
     def tell(self, metrics: dict[str, Tensor], sim_seconds: float = 0.0) -> GenerationResult:
-        """Finish the generation `ask` started with the per-environment `metrics` of its teams
-        (`Asked`; what `Asked.evaluate` returns): fitness, species, admission, reproduction, as
-        `step`. `sim_seconds`: the evaluation's wall time, for the records. The new state is
-        `self.state`; the generation's `GenerationResult` is returned."""
+        """Finish the generation `ask` started: fitness, species, admission, reproduction, as `step`.
+
+        Args:
+            metrics: the per-environment metrics of the asked teams (what `Asked.evaluate` returns,
+                or the caller's own evaluation in the same layout).
+            sim_seconds: the evaluation's wall time, for the records.
+
+        Returns:
+            The generation's `GenerationResult`; the new state is `self.state`.
+        """
         asked = self._asked
         if asked is None or asked.generation != self.state.generation:
             raise RuntimeError("tell needs the teams of this generation: call ask() first")

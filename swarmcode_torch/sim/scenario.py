@@ -400,5 +400,17 @@ def read_scenario(name_or_path: str, hardware: Catalog | None = None) -> tuple[S
 
 
 def load_scenario(name_or_path: str, hardware: Catalog | None = None) -> Scenario:
-    """A built-in scenario by name, or a scenario TOML file by path (`read_scenario`)."""
+    """A built-in scenario by name, or a scenario TOML file by path (`read_scenario`).
+
+    Args:
+        name_or_path: a name of `builtin_names()`, or the path of a scenario TOML file.
+        hardware: a hardware catalog to use instead of the file's (its `hardware` file name is
+            looked up beside it) or the built-in one.
+
+    Returns:
+        The `Scenario`.
+
+    Raises:
+        ScenarioError: (a ValueError) an unknown name or a file that is not a valid scenario.
+    """
     return read_scenario(name_or_path, hardware)[0]

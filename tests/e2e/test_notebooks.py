@@ -35,6 +35,25 @@ def test_every_notebook_declares_its_figures():
         assert {t: len(c) for t, c in cells.items()} == EXPECTED_IMAGES[path.stem], path.name
 
 
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_saved_notebooks_carry_their_outputs(path):
+    """The docs site shows the tutorials with the outputs saved in them (`notebooks/execute.py`
+    writes them): every code cell ran, in order, without an error, and each tagged figure is
+    there."""
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.read(path, as_version=4)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert [c.get("execution_count") for c in code] == list(range(1, len(code) + 1)), (
+        f"{path.name} is not saved executed top to bottom: run python notebooks/execute.py"
+    )
+    assert not [o for c in code for o in c.get("outputs", []) if o["output_type"] == "error"]
+    for tag, cells in image_cells(nb).items():
+        for c in cells:
+            assert any(IMAGE_TAGS[tag] in o.get("data", {}) for o in c.get("outputs", [])), (
+                f"{path.name}: no saved {IMAGE_TAGS[tag]} output in\n{c.source}"
+            )
+
+
 @pytest.mark.subprocess
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])

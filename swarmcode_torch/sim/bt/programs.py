@@ -156,11 +156,16 @@ def template_tensor(name: str, length: int) -> torch.Tensor:
 
 
 def format_tree(opcodes: torch.Tensor | Sequence[int], root: bool = True) -> str:
-    """opcodes [L] -> an indented tree, one node per line, two spaces per level (NOP, END omitted).
+    """A behavior tree as an indented tree, one node per line, two spaces per level.
 
-    root (default): print the implicit root SEQ of the top-level nodes as the first line
-    ("SEQ (root)") and indent them under it, so that the program reads as the one tree it runs
-    as; False: the top-level nodes alone, each at the left margin (a forest).
+    Args:
+        opcodes: the program [L] (NOP and END are omitted).
+        root: print the implicit root SEQ of the top-level nodes as the first line ("SEQ (root)")
+            and indent them under it, so that the program reads as the one tree it runs as;
+            False: the top-level nodes alone, each at the left margin (a forest).
+
+    Returns:
+        The tree as text.
     """
     program = opcodes.tolist() if isinstance(opcodes, torch.Tensor) else list(opcodes)
     lines = [text for text, _ in _slot_lines(program, 1 if root else 0)]

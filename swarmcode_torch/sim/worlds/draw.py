@@ -366,24 +366,43 @@ def generate_world(
     base_radius: float = 1.5,
     name: str | None = None,
 ) -> World:
-    """A foraging world drawn from `seed` that needs `niches` (1-6) distinct robot designs (the
-    module's docstring; docs/WORLDS.md).
+    """A foraging world drawn from `seed` that needs `niches` distinct robot designs.
 
-    `effectors`: the effectors its niches use (at most 3 niches each); `bands`: "disjoint" or
-    "overlapping" radius bands for the niches of one effector (overlapping bands are told apart
-    by mass, so they need a mass range up to ~120 kg); `mass`, `distance`: the ranges (kg, m
-    from the base centre) the classes' masses and distances are drawn from; heavy packages lie
-    near the base, or far from it with `inversion`; `obstacles`: their count; `packages`: how
-    many packages in all, shared among the classes; `family`: "classes", "generalist",
-    "collab" or "single" (`FAMILIES`); `budget`: the $ a run's team may cost (a run setting,
-    written in the header of `world_toml`): refused when no team of num_robots robots with one
-    robot per niche fits it. The other knobs are the scenario's fields.
+    What the knobs mean and how a world is drawn: the module's docstring and docs/WORLDS.md. The
+    same seed and knobs give the same world. A draw that is not solvable with exactly `niches`
+    designs (a class no robot lifts, packages that cannot be placed, a budget too small) is drawn
+    again, up to `MAX_DRAWS` times.
 
-    The same seed and knobs give the same world. A draw that is not solvable with exactly
-    `niches` designs (a class no robot lifts, packages that cannot be placed, a budget too
-    small) is drawn again, up to `MAX_DRAWS` times; then ScenarioError (a ValueError) says why
-    the last draw failed. Knobs that no draw can satisfy (a mass beyond any robot's lift, an
-    effector that does not exist) are refused at once."""
+    Args:
+        seed: the generator seed.
+        niches: how many distinct designs the world needs (1-6).
+        effectors: the effectors its niches use (at most 3 niches each).
+        bands: "disjoint" or "overlapping" radius bands for the niches of one effector
+            (overlapping bands are told apart by mass, so they need a mass range up to ~120 kg).
+        mass: the range (kg) the classes' masses are drawn from.
+        distance: the range (m from the base centre) the classes' distances are drawn from.
+        inversion: heavy packages lie far from the base (default: near it).
+        obstacles: how many obstacles.
+        num_robots: the swarm size.
+        budget: the $ a run's team may cost (a run setting, written in the header of
+            `world_toml`); refused when no team of `num_robots` robots with one robot per niche
+            fits it. None: no budget.
+        family: "classes", "generalist", "collab" or "single" (`FAMILIES`).
+        packages: how many packages in all, shared among the classes.
+        species_overhead: the scenario's field of that name.
+        episode_ticks: the scenario's episode length.
+        arena: the arena's side (m).
+        base_radius: the base's radius (m).
+        name: the scenario's name (default: one made from the seed and knobs).
+
+    Returns:
+        The `World`: its scenario, niches and knobs.
+
+    Raises:
+        ScenarioError: (a ValueError) knobs that no draw can satisfy (a mass beyond any robot's
+            lift, an effector that does not exist), at once; or, after `MAX_DRAWS` draws, why the
+            last one failed.
+    """
     catalog = default_catalog()
     knobs = _check_knobs(
         seed,

@@ -70,9 +70,15 @@ def _lift_curve(catalog: Catalog) -> tuple[tuple[float, ...], tuple[float, ...]]
 
 
 def max_lift(band: tuple[float, float] = (R_MIN, R_MAX), catalog: Catalog | None = None) -> float:
-    """The heaviest load (kg) a robot with a radius in `band` can lift, by the simulator's lift
-    rule with the best hardware of `catalog` (the built-in one by default); 0 for a band that
-    holds no robot radius."""
+    """The heaviest load a robot with a radius in a band can lift, with the best hardware.
+
+    Args:
+        band: the radius band (m).
+        catalog: the hardware catalog (default: the built-in one).
+
+    Returns:
+        The load (kg), by the simulator's lift rule; 0 for a band that holds no robot radius.
+    """
     cat = catalog or default_catalog()
     a, b = max(band[0], R_MIN), min(band[1], R_MAX)
     if a > b:
@@ -130,12 +136,21 @@ def _coverage(s: Scenario) -> tuple[list[tuple[int, int]], list[int]]:
 
 
 def fewest_designs(s: Scenario, heaviest: bool = False) -> int | None:
-    """The fewest distinct robot designs that together can lift every package class of `s` (a
-    collaborative class: one design per grip effector), by the simulator's lift rule
-    (`sim.state.capabilities`, which reads each class's lightest package; `heaviest`: its
-    heaviest instead), searched over the designs `s.hardware` builds (every effector, radii every
-    mm, at every band edge and at every payload threshold, every tier, the torque operating
-    point at both ends). None when some class cannot be lifted at all."""
+    """The fewest distinct robot designs that together can lift every package class of a scenario.
+
+    By the simulator's lift rule (`sim.state.capabilities`), searched over the designs the
+    scenario's hardware builds (every effector, radii every mm, at every band edge and at every
+    payload threshold, every tier, the torque operating point at both ends). A collaborative class
+    takes one design per grip effector.
+
+    Args:
+        s: the scenario.
+        heaviest: judge each class by its heaviest package (default: its lightest, as the lift
+            rule reads it).
+
+    Returns:
+        The count, or None when some class cannot be lifted at all.
+    """
     s = _heaviest(s) if heaviest else s
     tokens, maximal = _coverage(s)
     full = (1 << len(tokens)) - 1
@@ -176,11 +191,22 @@ def cheapest_robot(
     effector: str = "pincher",
     catalog: Catalog | None = None,
 ) -> float | None:
-    """$ of the cheapest robot with `effector` and a radius in `band` that lifts `load` kg (by
-    the lift rule, checked with `sim.state.capabilities` on its phenotype); None if none does.
-    Solved per tier combination: the smallest radius whose payload carries the load (cost grows
-    with the radius), then the lowest torque operating point whose force moves robot and load,
-    the battery at its lowest capacity."""
+    """The cost of the cheapest robot with an effector and a radius in a band that lifts a load.
+
+    By the lift rule, checked with `sim.state.capabilities` on its phenotype. Solved per tier
+    combination: the smallest radius whose payload carries the load (cost grows with the radius),
+    then the lowest torque operating point whose force moves robot and load, the battery at its
+    lowest capacity.
+
+    Args:
+        load: the load (kg).
+        band: the radius band (m).
+        effector: "pincher" or "suction".
+        catalog: the hardware catalog (default: the built-in one).
+
+    Returns:
+        Its cost ($), or None if no such robot lifts the load.
+    """
     cat = catalog or default_catalog()
     lf = WorldParams().lift_force
     lo, hi = max(band[0], R_MIN), min(band[1], R_MAX)

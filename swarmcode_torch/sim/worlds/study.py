@@ -32,7 +32,14 @@ SPLITS = ("train", "test")
 
 
 def split_seeds(split: str) -> range:
-    """The generator seeds of a study split: "train" 1000-1999, "test" 5000-5999 (disjoint)."""
+    """The generator seeds of a study split (the two are disjoint).
+
+    Args:
+        split: "train" (seeds 1000-1999) or "test" (5000-5999).
+
+    Returns:
+        The split's seeds.
+    """
     if split == "train":
         return TRAIN_SEEDS
     if split == "test":
@@ -41,8 +48,15 @@ def split_seeds(split: str) -> range:
 
 
 def study_world(split: str, index: int) -> World:
-    """Standard study world `index` (0 .. len(STUDY_SPECS) - 1) of `split`: `generate_world` of
-    the split's index-th seed with the knobs `STUDY_SPECS[index]`, named study-SPLIT-INDEX."""
+    """Standard study world `index` of a split, named study-SPLIT-INDEX.
+
+    Args:
+        split: "train" or "test".
+        index: 0 .. len(STUDY_SPECS) - 1.
+
+    Returns:
+        `generate_world` of the split's index-th seed with the knobs `STUDY_SPECS[index]`.
+    """
     seeds = split_seeds(split)
     if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(STUDY_SPECS):
         raise ScenarioError(
@@ -54,6 +68,12 @@ def study_world(split: str, index: int) -> World:
 
 
 def study_worlds(split: str) -> list[World]:
-    """The standard study worlds of `split` ("train" or "test"), `study_world` of each index:
-    15 worlds, three of each niche count 1-5."""
+    """The standard study worlds of a split: 15 worlds, three of each niche count 1-5.
+
+    Args:
+        split: "train" or "test".
+
+    Returns:
+        `study_world` of each index.
+    """
     return [study_world(split, i) for i in range(len(STUDY_SPECS))]

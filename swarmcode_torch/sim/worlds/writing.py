@@ -59,10 +59,16 @@ def world_command(world: World) -> str:
 
 
 def world_toml(world: World) -> str:
-    """`world` as a scenario TOML file: a header of comments (the generator, its seed and knobs,
-    the niche count and what it means, the budget), then the scenario's fields, each package
-    class under a comment saying what it is for. `parse_scenario` reads it back into
-    `world.scenario`."""
+    """A world as a scenario TOML file, which `parse_scenario` reads back into `world.scenario`.
+
+    Args:
+        world: a world of `generate_world`.
+
+    Returns:
+        The file's text: a header of comments (the generator, its seed and knobs, the niche count
+        and what it means, the budget), then the scenario's fields, each package class under a
+        comment saying what it is for.
+    """
     knobs = {"seed": world.seed, **world.knobs}
     if world.study is not None:
         knobs["study"] = list(world.study)
