@@ -128,6 +128,9 @@ def _last_records(path: Path) -> dict:
 
 def _summary(run: Path) -> dict:
     s = json.loads((run / "summary.json").read_text())
+    # the results, not the software that made them (a commit made while the test runs
+    # changes the checkout's commit between the two runs)
+    s.pop("software")
     s["last_generation"] = {
         k: v for k, v in s["last_generation"].items() if not k.startswith("perf/")
     }
