@@ -177,12 +177,56 @@ def replay_run(
     check_replay_options(seed=seed, ticks=ticks, every=every, fps=fps, dpi=dpi)
     _integer("seeds", seeds, 1, min(MAX_REPLAY_SEEDS, MAX_SEED - seed + 1))
     run_dir = Path(run_dir)
-    default = run_dir / (HTML_FILE if html else REPLAY_FILE)
-    out = Path(out) if out is not None else default
-    if out.is_dir() and not out.is_symlink():
-        raise RunError(f"--out {out} is a directory; give a file name such as {out / default.name}")
-    check_output_path(out)
+    out = _replay_path(run_dir, out, html)
     cfg = read_config(run_dir)
+    record, scenario = _replay_team(run_dir, cfg, generation, seeds)
+    if ticks is None:
+        ticks = cfg.ticks or scenario.episode_ticks
+    if html:
+        what = f"generation {generation}" if generation is not None else "best team"
+        data = page_data(
+            record["designs"],
+            scenario,
+            cfg,
+            seed=seed,
+            ticks=ticks,
+            title=f"SwarmCoDe replay: {run_dir.name}, {what}",
+            record=_page_record(run_dir, record, generation),
+            progress=progress,
+            seeds=seeds,
+        )
+        write_page(data, out)
+        if report is not None:
+            for line in explain_lines(data):
+                report(line)
+        return out, dict(data["panels"]["focal"]["metrics"])
+    ep, gif = _replay_gif(record["designs"], scenario, cfg, seed, ticks, every, fps, dpi, progress)
+    if report is not None:
+        _report_gif(report, ep, record["designs"], scenario, cfg, seed, seeds, ticks)
+    # replaced whole (a temporary file renamed over it): a link at `out` is replaced, never
+    # written through, and a reader never sees half a GIF
+    atomic_write_bytes(out, gif)
+    return out, dict(ep.metrics)
+
+
+def _replay_path(run_dir: Path, out: str | Path | None, html: bool) -> Path:
+    """Where a replay is written: `out`, or the run's team.gif (team.html for `html`); RunError
+    for a folder or an output path that cannot be written."""
+    default = run_dir / (HTML_FILE if html else REPLAY_FILE)
+    path = Path(out) if out is not None else default
+    if path.is_dir() and not path.is_symlink():
+        raise RunError(
+            f"--out {path} is a directory; give a file name such as {path / default.name}"
+        )
+    check_output_path(path)
+    return path
+
+
+def _replay_team(run_dir: Path, cfg, generation: int | None, seeds: int) -> tuple[dict, Scenario]:
+    """The record of the team to replay (summary.json's, or teams.jsonl's of `generation`) and
+    the run's scenario (its own copies, when it has them); RunError for a design with
+    capabilities of classes the scenario lacks, or a team whose `seeds` episodes would not fit
+    in memory."""
     if generation is not None:
         record = generation_team(run_dir, generation)
     else:
@@ -203,62 +247,57 @@ def replay_run(
             f"the team to replay has {robots} robots, which would need about "
             f"{_size(need)} of memory, more than the {_size(limit)} of {what}"
         )
-    if ticks is None:
-        ticks = cfg.ticks or scenario.episode_ticks
-    if html:
-        fitness = record.get("fitness") if generation is not None else record.get("best_fitness")
-        shown = generation if generation is not None else record.get("best_generation")
-        # the re-evaluated mean and its interval where the run has them (`best_team`)
-        reeval = record.get("reeval") if generation is not None else None
-        if isinstance(reeval, dict):
-            fitness, k, ci = reeval.get("mean"), reeval.get("trials"), reeval.get("ci95")
-        elif generation is None:
-            k, ci = record.get("best_reeval_trials"), record.get("best_fitness_ci95")
-        else:
-            k = ci = None
-        if not (isinstance(ci, list) and len(ci) == 2):
-            ci = [None, None]
-        # only numbers reach the page from the run's records (the page escapes text as well)
-        rec = {
-            "run": run_dir.name,
-            "fitness": float(fitness) if _finite(fitness) else None,
-            "generation": shown if isinstance(shown, int) and not isinstance(shown, bool) else None,
-            "trials": k if isinstance(k, int) and not isinstance(k, bool) and k > 0 else None,
-            "fitness_low": float(ci[0]) if _finite(ci[0]) else None,
-            "fitness_high": float(ci[1]) if _finite(ci[1]) else None,
-        }
-        what = f"generation {generation}" if generation is not None else "best team"
-        data = page_data(
-            designs,
-            scenario,
-            cfg,
-            seed=seed,
-            ticks=ticks,
-            title=f"SwarmCoDe replay: {run_dir.name}, {what}",
-            record={k: v for k, v in rec.items() if v is not None},
-            progress=progress,
-            seeds=seeds,
-        )
-        write_page(data, out)
-        if report is not None:
-            for line in explain_lines(data):
-                report(line)
-        return out, dict(data["panels"]["focal"]["metrics"])
+    return record, scenario
+
+
+def _page_record(run_dir: Path, record: dict, generation: int | None) -> dict:
+    """What the replay page shows of the team's record: the run, its fitness (the re-evaluated
+    mean and its interval where the run has them, `best_team`), its generation; numbers only
+    (the page escapes text as well), those the record lacks left out."""
+    fitness = record.get("fitness") if generation is not None else record.get("best_fitness")
+    shown = generation if generation is not None else record.get("best_generation")
+    # the re-evaluated mean and its interval where the run has them (`best_team`)
+    reeval = record.get("reeval") if generation is not None else None
+    if isinstance(reeval, dict):
+        fitness, k, ci = reeval.get("mean"), reeval.get("trials"), reeval.get("ci95")
+    elif generation is None:
+        k, ci = record.get("best_reeval_trials"), record.get("best_fitness_ci95")
+    else:
+        k = ci = None
+    if not (isinstance(ci, list) and len(ci) == 2):
+        ci = [None, None]
+    # only numbers reach the page from the run's records (the page escapes text as well)
+    rec = {
+        "run": run_dir.name,
+        "fitness": float(fitness) if _finite(fitness) else None,
+        "generation": shown if isinstance(shown, int) and not isinstance(shown, bool) else None,
+        "trials": k if isinstance(k, int) and not isinstance(k, bool) and k > 0 else None,
+        "fitness_low": float(ci[0]) if _finite(ci[0]) else None,
+        "fitness_high": float(ci[1]) if _finite(ci[1]) else None,
+    }
+    return {k: v for k, v in rec.items() if v is not None}
+
+
+def _replay_gif(
+    designs, scenario, cfg, seed, ticks, every, fps, dpi, progress
+) -> tuple[Episode, bytes]:
+    """The team's episode recorded, and its GIF's bytes."""
     genome, team = team_genome(designs, cfg.tag_length)
     ep = record_episode(genome, team, scenario, seed, ticks=ticks, every=every, progress=progress)
     ep.labels = [f"sp{d.get('species', '?')} {lab}" for d, lab in zip(designs, ep.labels)]
     buf = io.BytesIO()
     save_gif(ep, buf, fps=fps, dpi=dpi, progress=progress)
-    if report is not None:
-        report(_by_design(ep, designs))
-        if seeds > 1:
-            sm = seed_marginals(designs, scenario, cfg, seed, seeds, ticks)
-            sd = f", sd {sm['sd']:.1f}" if sm["sd"] is not None else ""
-            report(
-                f"Marginal contribution over {seeds} environments (seeds {seed}-"
-                f"{seed + seeds - 1}): mean {sm['mean']:.1f}{sd}"
-            )
-    # replaced whole (a temporary file renamed over it): a link at `out` is replaced, never
-    # written through, and a reader never sees half a GIF
-    atomic_write_bytes(out, buf.getvalue())
-    return out, dict(ep.metrics)
+    return ep, buf.getvalue()
+
+
+def _report_gif(report, ep: Episode, designs, scenario, cfg, seed, seeds, ticks) -> None:
+    """The lines that explain a GIF replay: deliveries and pick-ups by design, and with `seeds`
+    > 1 the marginal contribution over that many environments."""
+    report(_by_design(ep, designs))
+    if seeds > 1:
+        sm = seed_marginals(designs, scenario, cfg, seed, seeds, ticks)
+        sd = f", sd {sm['sd']:.1f}" if sm["sd"] is not None else ""
+        report(
+            f"Marginal contribution over {seeds} environments (seeds {seed}-"
+            f"{seed + seeds - 1}): mean {sm['mean']:.1f}{sd}"
+        )

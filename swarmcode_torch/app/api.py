@@ -17,24 +17,21 @@ replayed).
 
 from __future__ import annotations
 
-import functools
 import math
 import os
 import re
-import sys
-import time
 from collections.abc import Callable, Iterable
-from contextlib import ExitStack, contextmanager
+from contextlib import ExitStack
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from ..coevo.config import SwarmCoDeConfig
-from ..coevo.evaluation import ScoreFn, score_fn_name
+from ..coevo.evaluation import ScoreFn
 from ..coevo.evolve import Evolution, GenerationResult
 from ..sim.runtime import set_threads
 from ..sim.scenario import Scenario
-from . import records, session
+from . import api_checks, api_progress, session
 from .checkpoints import load_run
 from .files import RunError, new_run_dir
 from .optspec import Intervals, Values, api_values, check_values, declare_keywords
@@ -108,214 +105,6 @@ class RunResult:
         )
 
 
-class _History:
-    """Reporter: collects every generation's scalars (`records.scalars`); calls a user callback
-    with each generation's `GenerationResult`."""
-
-    def __init__(self, callback: Callable[[GenerationResult], Any] | None = None):
-        self.rows: list[dict] = []
-        self.callback = callback
-
-    def on_start(self, ev: Evolution) -> None:
-        pass
-
-    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
-        self.rows.append(records.scalars(result))
-        if self.callback is not None:
-            self.callback(result)
-
-    def on_end(self, ev: Evolution) -> None:
-        pass
-
-
-def _interactive(stream) -> bool:
-    """Whether `stream` is shown as it is written: a terminal, or a notebook's output (a Jupyter
-    kernel's stream, which is no terminal but redraws a line on a carriage return)."""
-    if type(stream).__module__.split(".")[0] == "ipykernel":
-        return True
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, ValueError):  # no isatty, or a closed stream
-        return False
-
-
-def _clock(seconds: float) -> str:
-    s = int(round(seconds))
-    return (
-        f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
-    )
-
-
-class _Progress:
-    """Reporter: the progress of a run on stdout, one compact line per generation (done count,
-    time left, best fitness, species, the generation's best team, seconds per generation). On a
-    terminal or in a notebook the line is redrawn in place and ended when the run ends;
-    elsewhere (a log) each generation prints its own line."""
-
-    def __init__(self):
-        self.stream = None
-        self.inplace = False
-        self.width = 0
-
-    def on_start(self, ev: Evolution) -> None:
-        self.stream = sys.stdout
-        self.inplace = _interactive(self.stream)
-        self.start, self.first, self.width = time.monotonic(), ev.state.generation, 0
-
-    def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
-        done, total = ev.state.generation, ev.cfg.generations
-        ran = done - self.first
-        left = (time.monotonic() - self.start) / ran * (total - done) if ran > 0 else None
-        team = result.team
-        line = (
-            f"done {done}/{total}  left {'?' if left is None else _clock(left)}  best "
-            f"{result.best['fitness']:.1f}  species {result.num_species}  team "
-            f"{team['species']} sp, {team['niches']} niches, ${team['cost']:.0f}  "
-            f"{result.seconds:.2f}s/gen"
-        )
-        if self.inplace:
-            self.stream.write("\r" + line.ljust(self.width))
-            self.width = max(self.width, len(line))
-        else:
-            self.stream.write(line + "\n")
-        self.stream.flush()
-
-    def on_end(self, ev: Evolution) -> None:
-        self.close()
-
-    def on_stop(self, ev: Evolution, record: dict) -> None:
-        """A bound or the callback stopped the run: a line saying why (`stopping.stop_text`)."""
-        from .stopping import stop_text
-
-        self.close()
-        self.stream.write(stop_text(record) + "\n")
-        self.stream.flush()
-
-    def close(self) -> None:
-        """End the line redrawn in place (at the end of a run, or when it stops)."""
-        if self.inplace and self.width:
-            self.stream.write("\n")
-            self.stream.flush()
-            self.width = 0
-
-
-def _progress(progress: bool | None) -> _Progress | None:
-    """The progress reporter of `progress`: None (the default) shows it on a terminal or in a
-    notebook, True always, False never."""
-    if progress is not None and not isinstance(progress, bool):
-        raise TypeError(f"progress must be True, False or None, got {progress!r:.40}")
-    if progress is False or (progress is None and not _interactive(sys.stdout)):
-        return None
-    return _Progress()
-
-
-@contextmanager
-def _closing(shown: _Progress | None):
-    """The progress line ended however the run ends (a Ctrl-C, an error)."""
-    try:
-        yield
-    finally:
-        if shown is not None:
-            shown.close()
-
-
-def _logdir(logdir) -> Path:
-    """`logdir` as a folder; RunError for an empty one ('' would write into the working
-    directory) or one that is not a path."""
-    if not isinstance(logdir, (str, os.PathLike)) or not str(os.fspath(logdir)).strip():
-        raise RunError(f"logdir must be a folder path, got {logdir!r:.60}")
-    return Path(logdir)
-
-
-def _declared(**given: Any) -> Values:
-    """The API's keywords that `run_options` declares (checkpoint_every=, patience=, ...) as
-    `Values`, each checked against its declared bound (`optspec.check_values`): TypeError for
-    one that is not an integer, ValueError below its bound."""
-    opts = [o for o in EVOLVE_OPTIONS if o.name in given]
-    values = Values(opts, given)
-    check_values(opts, values)
-    return values
-
-
-def _intervals(**given: Any) -> Intervals:
-    """The `Intervals` of the API's keywords (checkpoint_every=, render_every=, ...; the others
-    at their defaults), each checked (`_declared`)."""
-    return _declared(**given).intervals(EVOLVE_OPTIONS)
-
-
-def _check_hooks(callback, reporters) -> list:
-    """`callback` callable (or None) and every reporter with callable on_start, on_generation
-    and on_end: TypeError before any file is written, not a crash mid-run. The reporters as a
-    list."""
-    if callback is not None and not callable(callback):
-        raise TypeError(
-            f"callback must be a function of a GenerationResult, got {type(callback).__name__}"
-        )
-    if isinstance(reporters, (str, bytes)) or not hasattr(reporters, "__iter__"):
-        raise TypeError(f"reporters must be a list of reporters, got {type(reporters).__name__}")
-    reporters = list(reporters)
-    for i, r in enumerate(reporters):
-        missing = [
-            m for m in ("on_start", "on_generation", "on_end") if not callable(getattr(r, m, None))
-        ]
-        if missing:
-            raise TypeError(
-                f"reporters[{i}] ({type(r).__name__}) has no {', '.join(missing)} "
-                "method (a reporter has on_start(ev), on_generation(ev, result) and "
-                "on_end(ev))"
-            )
-    return reporters
-
-
-#: The largest score a user fitness function may return: the mean of a population's scores
-#: stays finite in float32 (3.4e38).
-MAX_SCORE = 1e30
-
-
-def _checked_fitness(fitness: ScoreFn | None) -> ScoreFn | None:
-    """A user fitness function as a run calls it: with copies of the metrics and the cost (a
-    function that edits them in place cannot change what the run records), and its scores
-    refused (ValueError) when beyond +-MAX_SCORE, where a mean would overflow. It keeps the
-    function's name (`score_fn_name`), which the run records."""
-    if fitness is None:
-        return None
-    if not callable(fitness):
-        raise TypeError(
-            f"fitness must be a function (metrics, cost, cfg) -> Tensor, "
-            f"got {type(fitness).__name__}"
-        )
-    if getattr(fitness, "__wrapped_fitness__", False):
-        return fitness
-
-    @functools.wraps(fitness)
-    def checked(metrics, cost, cfg):
-        import torch
-
-        out = fitness({k: v.clone() for k, v in metrics.items()}, cost.clone(), cfg)
-        if isinstance(out, torch.Tensor) and out.numel() and out.is_floating_point():
-            big = out.abs().max()
-            if bool(torch.isfinite(big)) and float(big) > MAX_SCORE:
-                raise ValueError(
-                    f"the fitness function {score_fn_name(fitness)} returned a "
-                    f"score of {float(big):.3g}, beyond the +-{MAX_SCORE:g} a run "
-                    "can average (scale it down)"
-                )
-        return out
-
-    checked.__module__ = getattr(fitness, "__module__", None) or type(fitness).__module__
-    checked.__qualname__ = getattr(fitness, "__qualname__", None) or type(fitness).__qualname__
-    checked.__wrapped_fitness__ = True
-    return checked
-
-
-def _wandb_reporters(project: str | None, run_dir: Path | None, render_every: int) -> list:
-    """[a `WandbReporter` of `project` for `run_dir`], or [] for None; ImportError naming the
-    extra, before anything runs."""
-    from .reporting import WandbReporter
-
-    return [] if project is None else [WandbReporter(project, run_dir, render_every=render_every)]
-
-
 def file_reporters(
     run_dir: Path, checkpoint_every: int = 10, render_every: int = 50, figure_every: int = 50
 ) -> list:
@@ -323,7 +112,7 @@ def file_reporters(
     summary.json and teams.jsonl, metrics.csv, TensorBoard events (a replay image every
     `render_every` generations, 0: never; the composition figure every `figure_every`) and
     checkpoint.pt every `checkpoint_every` generations and at the end."""
-    every = _intervals(
+    every = api_checks.declared_intervals(
         checkpoint_every=checkpoint_every, render_every=render_every, figure_every=figure_every
     )
     return _file_reporters(run_dir, every)
@@ -356,21 +145,6 @@ def _result(
         evolution=ev,
         stopped=bounds.reason if bounds is not None else None,
     )
-
-
-def _bounds(max_time, patience, stop=(), callback=None) -> session.Bounds | None:
-    """The run's `session.Bounds` (None without max_time, patience, the early-stopping settings
-    `stop` (`stopping.metric_stop`'s) and a callback); ValueError otherwise. The declared
-    bounds (patience >= 1, stop_warmup >= 0) are checked with the other keywords'
-    (`optspec.check_values`)."""
-    from .stopping import CallbackStop, metric_stop
-
-    metric = metric_stop(patience, *(tuple(stop) or (None,) * 4))
-    stops = [metric] if metric is not None else []
-    stops += [CallbackStop(callback)] if callback is not None else []
-    if max_time is None and patience is None and not stops:
-        return None
-    return session.Bounds(max_time=max_time, patience=patience, stops=stops)
 
 
 # ------------------------------------------------------------------ evolve, resume, load
@@ -447,35 +221,65 @@ def evolve(
     """
     o, settings = api_values(EVOLVE_OPTIONS, settings)
     check_values(o.options.values(), o)
+    launch = _launch(o, callback, reporters, fitness, progress, wandb, o.logdir is None)
+    set_threads(o.threads)
+    scenario = settings.pop("scenario", None)
+    if o.from_run is not None:
+        return _branch(config, scenario, o, settings, launch)
+    return _new(config, scenario, o, settings, launch)
+
+
+#: evolve's signature shows every keyword it takes: those declared in
+#: `run_options.RUN_OPTIONS` (`api=True`) before its own
+declare_keywords(evolve, EVOLVE_OPTIONS)
+
+
+@dataclass
+class _Launch:
+    """What `evolve` and `resume` check and build from their keywords before a run starts.
+
+    reporters: the caller's reporters as the run adds them: the progress line first, the W&B
+    ones last; wandb: the W&B ones (a new run names them after its directory); shown: the
+    progress line; bounds: the run's `session.Bounds`; fitness: the user fitness function as
+    the run calls it; every: the run's `Intervals`; keep: the checkpoints kept
+    (keep_checkpoints)."""
+
+    reporters: list
+    wandb: list
+    shown: api_progress.Progress | None
+    bounds: session.Bounds | None
+    fitness: ScoreFn | None
+    every: Intervals
+    keep: int
+
+
+def _launch(
+    o: Values, callback, reporters, fitness, progress, wandb, in_memory=False, wandb_dir=None
+) -> _Launch:
+    """The `_Launch` of a run's keywords (`o`: the declared ones, checked), each refused
+    (TypeError, ValueError) before any file is written; `in_memory`: the run writes no
+    directory, which W&B needs; `wandb_dir`: the directory the W&B reporter is named after, when
+    it is known."""
     every = o.intervals(EVOLVE_OPTIONS)
-    reporters = _check_hooks(callback, reporters)
-    if wandb is not None and o.logdir is None:
+    reporters = api_checks.check_hooks(callback, reporters)
+    if wandb is not None and in_memory:
         raise ValueError("wandb needs a run directory for its files: give a logdir")
-    wandb_reporters = _wandb_reporters(wandb, None, every.render)
-    fitness = _checked_fitness(fitness)
-    bounds = _bounds(
+    wandb_reporters = api_checks.wandb_reporters(wandb, wandb_dir, every.render)
+    fitness = api_checks.checked_fitness(fitness)
+    bounds = api_checks.run_bounds(
         o.max_time,
         o.patience,
         (o.stop_metric, o.stop_min_delta, o.stop_warmup, o.stop_mode),
         callback,
     )
-    shown = _progress(progress)
-    set_threads(o.threads)
+    shown = api_progress.progress_reporter(progress)
     reporters = [*([shown] if shown else []), *reporters, *wandb_reporters]
-    scenario = settings.pop("scenario", None)
-    if o.from_run is not None:
-        return _branch(
-            config,
-            scenario,
-            o,
-            settings,
-            fitness,
-            reporters,
-            callback,
-            bounds,
-            wandb_reporters,
-            shown,
-        )
+    return _Launch(reporters, wandb_reporters, shown, bounds, fitness, every, o.keep_checkpoints)
+
+
+def _new(config, scenario, o: Values, settings, launch: _Launch) -> RunResult:
+    """`evolve` without from_run: a new run of `config` (a config, a settings file's path or
+    None) changed by `settings`, on `scenario` (a name, a path, a Scenario or None)."""
     names: dict[str, str] = {}  # a bad value from a settings file is named FILE: key
     if isinstance(config, (str, os.PathLike)):
         from .runconfig import read_config_file_keys
@@ -489,53 +293,36 @@ def evolve(
     if scenario_obj is not None:
         cfg = replace(cfg, scenario=scenario_obj.name)
     name = cfg if scenario_obj is None else replace(cfg, scenario=_scenario_stem(scenario_obj))
-    folder = None if o.logdir is None else _logdir(o.logdir)
+    folder = None if o.logdir is None else api_checks.checked_logdir(o.logdir)
     make_dir = None if folder is None else (lambda ev: new_run_dir(folder, name))
-    history = _History()  # the callback is `bounds`': it may stop the run
     with ExitStack() as stack:
         start = session.start_new(
-            stack, cfg, make_dir, scenario=scenario_obj, fitness=fitness, names=names or None
+            stack, cfg, make_dir, scenario=scenario_obj, fitness=launch.fitness, names=names or None
         )
-        return _run_started(
-            start, history, reporters, wandb_reporters, shown, bounds, every, o.keep_checkpoints
-        )
+        return _run_started(start, launch)
 
 
-#: evolve's signature shows every keyword it takes: those declared in
-#: `run_options.RUN_OPTIONS` (`api=True`) before its own
-declare_keywords(evolve, EVOLVE_OPTIONS)
-
-
-def _run_started(
-    start, history, reporters, wandb_reporters, shown, bounds, every, keep=0
-) -> RunResult:
+def _run_started(start, launch: _Launch) -> RunResult:
     """Run a new or branched run that `session` started (its directory locked by the caller's
-    stack): the W&B reporters named after its directory, its file reporters (at `every`, the
-    run's `Intervals`, keeping `keep` checkpoints; none for a run in memory), the progress line
-    closed however the run ends. Its `RunResult`."""
-    for r in wandb_reporters:  # named after the run directory, if there is one
+    stack), the W&B reporters named after its directory. Its `RunResult`."""
+    for r in launch.wandb:  # named after the run directory, if there is one
         r.run_dir = start.run_dir
-    reps = [] if start.run_dir is None else _file_reporters(start.run_dir, every, keep)
-    with _closing(shown):
-        session.run(start.ev, start.run_dir, [*reps, history, *reporters], bounds=bounds)
-    return _result(start.ev, start.run_dir, history.rows, bounds)
+    history = api_progress.History()  # the callback is `bounds`': it may stop the run
+    _run(start.ev, start.run_dir, history, launch)
+    return _result(start.ev, start.run_dir, history.rows, launch.bounds)
 
 
-def _branch(
-    config,
-    scenario,
-    o: Values,
-    settings,
-    fitness,
-    reporters,
-    callback,
-    bounds,
-    wandb_reporters,
-    shown,
-) -> RunResult:
+def _run(ev: Evolution, run_dir: Path | None, history, launch: _Launch) -> None:
+    """Run `ev` to its end or a bound with `launch`'s reporters after its file reporters (none
+    for a run in memory) and `history`, the progress line closed however the run ends."""
+    reps = [] if run_dir is None else _file_reporters(run_dir, launch.every, launch.keep)
+    with api_progress.closing(launch.shown):
+        session.run(ev, run_dir, [*reps, history, *launch.reporters], bounds=launch.bounds)
+
+
+def _branch(config, scenario, o: Values, settings, launch: _Launch) -> RunResult:
     """`evolve(from_run=...)`: a new run from a run's snapshot (`session.start_branch`); `o`:
-    evolve's own keywords (`optspec.api_values`); `wandb_reporters`, `shown` as `_run_started`
-    takes them."""
+    evolve's own keywords (`optspec.api_values`)."""
     from .checkpoints import load_branch, parse_run_ref
 
     if config is not None:
@@ -553,15 +340,11 @@ def _branch(
     logdir = o.logdir
     if logdir == "runs":  # the default: beside the parent
         logdir = branch.run_dir.parent
-    folder = None if logdir is None else _logdir(logdir)
+    folder = None if logdir is None else api_checks.checked_logdir(logdir)
     make_dir = None if folder is None else (lambda ev: new_run_dir(folder, cfg, branch))
-    history = _History()  # the callback is `bounds`'
     with ExitStack() as stack:
-        start = session.start_branch(stack, branch, cfg, make_dir, fitness=fitness)
-        every = o.intervals(EVOLVE_OPTIONS)
-        return _run_started(
-            start, history, reporters, wandb_reporters, shown, bounds, every, o.keep_checkpoints
-        )
+        start = session.start_branch(stack, branch, cfg, make_dir, fitness=launch.fitness)
+        return _run_started(start, launch)
 
 
 def start_evolution(
@@ -572,7 +355,7 @@ def start_evolution(
     scenario file (a run directory keeps them as scenario.toml). `scenario`: a Scenario object
     to run instead of `cfg.scenario`'s file; `fitness`: a user score function (`evolve`).
     ValueError (ScenarioError is one) otherwise."""
-    fitness = _checked_fitness(fitness)
+    fitness = api_checks.checked_fitness(fitness)
     checked, data = session.check_start(cfg, scenario)
     return session.build(cfg, checked, scenario, fitness), data
 
@@ -620,7 +403,7 @@ def resume(
     `patience`, the `stop_*` settings, `keep_checkpoints`, `wandb` and `progress`: as in
     `evolve` (`max_time` counts from this call); the keywords `run_options` declares are
     checked against their declared bounds, as in `evolve`."""
-    d = _declared(
+    d = api_checks.declared(
         checkpoint_every=checkpoint_every,
         render_every=render_every,
         figure_every=figure_every,
@@ -634,15 +417,7 @@ def resume(
         stop_mode=stop_mode,
         keep_checkpoints=keep_checkpoints,
     )
-    every = d.intervals(EVOLVE_OPTIONS)
-    reporters = _check_hooks(callback, reporters) + _wandb_reporters(
-        wandb, Path(run_dir), every.render
-    )
-    fitness = _checked_fitness(fitness)
-    bounds = _bounds(
-        max_time, patience, (stop_metric, stop_min_delta, stop_warmup, stop_mode), callback
-    )
-    shown = _progress(progress)
+    launch = _launch(d, callback, reporters, fitness, progress, wandb, wandb_dir=Path(run_dir))
     if generations is not None and (
         not isinstance(generations, int) or isinstance(generations, bool) or generations < 1
     ):
@@ -656,22 +431,15 @@ def resume(
         raise RunError(f"{run_dir} is not a run directory (no such directory)")
     with ExitStack() as stack:
         start = session.start_resume(
-            stack, run_dir, generations=generations, device=device, fitness=fitness
+            stack, run_dir, generations=generations, device=device, fitness=launch.fitness
         )
         ev = start.ev
         earlier = _earlier_rows(run_dir, ev.state.generation)
         if ev.done:  # nothing to run: no file changes (as the CLI)
             return _result(ev, run_dir, earlier)
-        history = _History()  # the callback is `bounds`'
-        reps = _file_reporters(run_dir, every, keep_checkpoints)
-        with _closing(shown):
-            session.run(
-                ev,
-                run_dir,
-                [*reps, history, *([shown] if shown else []), *reporters],
-                bounds=bounds,
-            )
-    return _result(ev, run_dir, earlier + history.rows, bounds)
+        history = api_progress.History()  # the callback is `bounds`'
+        _run(ev, run_dir, history, launch)
+    return _result(ev, run_dir, earlier + history.rows, launch.bounds)
 
 
 def load(run_dir: str | os.PathLike) -> RunResult:

@@ -6,10 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import io
-import os
-import pickle
 import re
-import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +17,7 @@ from ..coevo.config import SwarmCoDeConfig, with_overrides
 from ..coevo.evaluation import score_fn_name
 from ..coevo.evolve import GenerationResult
 from ..sim.scenario import Scenario
+from .checkpoint_read import read_checkpoint
 from .files import (
     CHECKPOINT_FILE,
     CONFIG_FILE,
@@ -29,7 +27,8 @@ from .files import (
     SNAPSHOT_DIR,
     RunError,
     atomic_write_bytes,
-    open_nofollow,
+    numbered_files,
+    own_folder,
     read_file_bytes,
     refuse_links,
 )
@@ -88,170 +87,12 @@ def snapshot_path(run_dir: Path, generation: int) -> Path:
 def snapshot_folder(run_dir: Path, make: bool = False) -> Path:
     """The run's snapshots folder (made when `make`); RunError when it is a link or not a
     folder (a run reads and writes only its own files)."""
-    folder = Path(run_dir) / SNAPSHOT_DIR
-    if folder.is_symlink():
-        raise RunError(f"{folder} is a symbolic link; a run's snapshots must be its own")
-    if folder.exists() and not folder.is_dir():
-        raise RunError(f"{folder} is not a folder")
-    if make:
-        folder.mkdir(exist_ok=True)
-    return folder
+    return own_folder(Path(run_dir) / SNAPSHOT_DIR, "snapshots", make)
 
 
 def list_snapshots(run_dir: Path) -> dict[int, Path]:
     """generation -> the run's snapshot file of it, oldest first ({} without snapshots)."""
-    folder = snapshot_folder(run_dir)
-    if not folder.is_dir():
-        return {}
-    found = {}
-    for entry in os.scandir(folder):
-        m = _SNAPSHOT_NAME.match(entry.name)
-        if m:
-            found[int(m.group(1))] = Path(entry.path)
-    return dict(sorted(found.items()))
-
-
-#: What a checkpoint may hold at the top level, and the type of each entry.
-_CHECKPOINT_KEYS = {
-    "version": int,
-    "config": dict,
-    "generation": int,
-    "genome": dict,
-    "species_hint": torch.Tensor,
-    "proto": (dict, type(None)),
-    "proto_ids": torch.Tensor,
-    "next_species_id": int,
-    "fitness": torch.Tensor,
-    "has_fitness": torch.Tensor,
-    "rng_state": torch.Tensor,
-    "best": (dict, type(None)),
-    "history": list,
-}
-
-
-def read_checkpoint(path: Path) -> dict:
-    """The contents of a checkpoint file, unpickled with `torch.load(weights_only=True)`: only
-    tensors, plain containers, numbers and strings are rebuilt, so no code in the file can run.
-    RunError for a file that would call anything on loading, a damaged file, or one that is not a
-    swarmcode-torch checkpoint."""
-    path = Path(path)
-    try:
-        # never through a link; O_NONBLOCK: a FIFO planted there is refused, not waited on
-        fd = open_nofollow(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-        with os.fdopen(fd, "rb") as f:
-            if not stat.S_ISREG(os.fstat(fd).st_mode):
-                raise RunError(
-                    f"{path} is not a regular file (a FIFO, a device, a folder); a "
-                    "checkpoint is a file torch.save wrote"
-                )
-            os.set_blocking(fd, True)
-            d = torch.load(f, map_location="cpu", weights_only=True)
-    except RunError:
-        raise
-    except pickle.UnpicklingError as e:
-        if "weights only load failed" in str(e).lower() or "unsupported global" in str(e).lower():
-            raise RunError(
-                f"{path} was refused: loading it would run code (only tensors, "
-                "numbers, strings and plain containers are allowed)"
-            ) from None
-        raise RunError(f"{path} is corrupt or not a checkpoint (UnpicklingError)") from None
-    except OSError as e:
-        raise RunError(f"{path} cannot be read ({e.strerror or type(e).__name__})") from None
-    except Exception as e:  # noqa: BLE001 - any other failure means a damaged file
-        raise RunError(f"{path} is corrupt or not a checkpoint ({type(e).__name__})") from None
-    if not isinstance(d, dict) or "version" not in d:
-        raise RunError(f"{path} is not a swarmcode-torch checkpoint")
-    for key, kind in _CHECKPOINT_KEYS.items():
-        if key not in d:
-            raise RunError(f"{path} is not a complete checkpoint (no {key!r})")
-        if not isinstance(d[key], kind) or isinstance(d[key], bool) and kind is int:
-            raise RunError(
-                f"{path} is damaged: {key!r} has the wrong type ({type(d[key]).__name__})"
-            )
-    check_records(d, path)
-    return d
-
-
-def _integer(v, low: int = 0) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool) and v >= low
-
-
-def _species_id(k) -> bool:
-    """A species id as a history record keys it: an integer >= 0, or its decimal text."""
-    return (_integer(k) and k < 2**63) or (
-        isinstance(k, str) and 0 < len(k) < 19 and k.isascii() and k.isdigit()
-    )
-
-
-def _number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def check_records(d: dict, path: Path) -> None:
-    """RunError, one line naming `path` and the entry, unless the plain records of a checkpoint
-    (its types checked) fit together: `generation` no more than the generations of the config
-    it holds, one `history` record per finished generation, in order, each with its species
-    composition (`population`, `team`: species id -> count), and a `best` team (None before a
-    generation finished) of a finished generation, with a number for its fitness and
-    well-formed designs. What every reader of a checkpoint relies on (resume, `--from`,
-    `dynamics`, the API's load); the tensors are checked against the config where a run is
-    built from them (`evolve.load_state_dict`)."""
-    from .summary import check_designs, finite, short
-
-    gen = d["generation"]
-    if gen < 0:
-        raise RunError(f"{path}: generation must be an integer >= 0, got {short(gen)}")
-    total = d["config"].get("generations")
-    if _integer(total) and gen > total:
-        raise RunError(
-            f"{path}: generation: {short(gen)} is beyond the {short(total)} generations of "
-            "the run's config (the file is damaged)"
-        )
-    history = d["history"]
-    if len(history) != gen:
-        raise RunError(
-            f"{path}: history must hold one record per generation 0..{gen - 1} (it has "
-            f"{len(history)} for {short(gen)} finished generations)"
-        )
-    for i, h in enumerate(history):
-        w = f"{path}: history[{i}]"
-        if not isinstance(h, dict):
-            raise RunError(f"{w}: expected a record (a table), got {short(h)}")
-        g = h.get("generation")
-        if not _integer(g) or g != i:
-            raise RunError(
-                f"{w}.generation: expected {i} (one record per generation, in order), "
-                f"got {short(g)}"
-            )
-        for key in ("population", "team"):
-            if key not in h and key == "team":
-                continue
-            v = h.get(key)
-            if not isinstance(v, dict) or not all(
-                _species_id(k) and _integer(n) and n < 2**63 for k, n in v.items()
-            ):
-                raise RunError(
-                    f"{w}.{key}: expected species id -> count (integers >= 0), got {short(v)}"
-                )
-    best = d["best"]
-    if best is None:
-        return
-    w = f"{path}: best"
-    g = best.get("generation")
-    if not _integer(g) or g >= gen:
-        raise RunError(
-            f"{w}.generation: expected a finished generation (0..{gen - 1}), got {short(g)}"
-        )
-    if not finite(best.get("fitness")):
-        raise RunError(f"{w}.fitness: expected a number, got {short(best.get('fitness'))}")
-    check_designs(best.get("designs"), w)
-    for key, fields in (("reeval", ("mean",)), ("run_single_trial", ("fitness", "generation"))):
-        v = best.get(key)
-        if v is not None and not (isinstance(v, dict) and all(finite(v.get(f)) for f in fields)):
-            raise RunError(f"{w}.{key}: expected a table of numbers, got {short(v)}")
-    v = best.get("single_trial_fitness")
-    if v is not None and not finite(v):
-        raise RunError(f"{w}.single_trial_fitness: expected a number, got {short(v)}")
+    return numbered_files(snapshot_folder(run_dir), _SNAPSHOT_NAME)
 
 
 def load_checkpoint(run_dir: Path) -> dict:
@@ -262,6 +103,25 @@ def load_checkpoint(run_dir: Path) -> dict:
     return read_checkpoint(path)
 
 
+def _run_matches(
+    run_dir: Path, cfg: SwarmCoDeConfig, d: dict, path: Path, named, advice: str = ""
+) -> Scenario:
+    """The run's scenario (built with its own catalog; a damaged copy: the file and field
+    named), once its copies are those the checkpoint `d` (read from `path`) recorded and its
+    config.toml `cfg` agrees with the config saved in `d` in every key but generations and
+    device; RunError otherwise, naming the checkpoint as `named`, then `advice`."""
+    scenario = run_scenario(run_dir, cfg)
+    check_copies(run_dir, d)
+    saved = config_from_dict(d["config"], f"{path} (its config)")
+    diff = config_differences(cfg, saved, scenario)
+    if diff:
+        raise RunError(
+            f"{run_dir / CONFIG_FILE} does not match the config saved in {named} "
+            f"(differing keys: {', '.join(diff)}){advice}"
+        )
+    return scenario
+
+
 def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     """The config, checkpoint and scenario of a run directory, checked against each other:
     config.toml must agree with the config saved in the checkpoint in every key but generations
@@ -270,16 +130,14 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     refuse_links(run_dir)
     cfg = read_config(run_dir)
     d = load_checkpoint(run_dir)
-    scenario = run_scenario(run_dir, cfg)  # a damaged copy: the file and field named
-    check_copies(run_dir, d)
-    saved = config_from_dict(d["config"], f"{run_dir / CHECKPOINT_FILE} (its config)")
-    diff = config_differences(cfg, saved, scenario)
-    if diff:
-        raise RunError(
-            f"{run_dir / CONFIG_FILE} does not match the config saved in "
-            f"{CHECKPOINT_FILE} (differing keys: {', '.join(diff)}); restore "
-            f"{CONFIG_FILE} or start a new run"
-        )
+    scenario = _run_matches(
+        run_dir,
+        cfg,
+        d,
+        run_dir / CHECKPOINT_FILE,
+        CHECKPOINT_FILE,
+        f"; restore {CONFIG_FILE} or start a new run",
+    )
     metrics = run_dir / METRICS_FILE
     if metrics.exists() or metrics.is_symlink():
         from .reporting import read_metrics_csv
@@ -436,15 +294,7 @@ def load_branch(run_dir: Path, generation: int | None = None) -> Branch:
             d = read_checkpoint(path)
         if d["generation"] != generation:
             raise RunError(f"{path} holds generation {d['generation']}, not {generation}")
-    scenario = run_scenario(run_dir, cfg)
-    check_copies(run_dir, d)
-    saved = config_from_dict(d["config"], f"{path} (its config)")
-    diff = config_differences(cfg, saved, scenario)
-    if diff:
-        raise RunError(
-            f"{run_dir / CONFIG_FILE} does not match the config saved in {path} "
-            f"(differing keys: {', '.join(diff)})"
-        )
+    scenario = _run_matches(run_dir, cfg, d, path, path)
 
     def copy(name: str) -> bytes | None:
         p = run_dir / name

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from rich import box
 from rich.markup import escape
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ..coevo.config import MAX_SEED, UPPER_BOUNDS
@@ -16,7 +15,8 @@ from ..sim.scenario import ScenarioError
 from .evaluate import MAX_EPISODES, MAX_TOP, EvaluationResult, Stat, TeamEvaluation, evaluate
 from .files import RunError, atomic_write_bytes, check_output_path
 from .records import json_clean
-from .terminal import check_path, console, err, fail, os_fail
+from .replay_view import stage_progress
+from .terminal import check_path, console, fail, os_fail
 
 
 def _interval(s: Stat, fmt: str = "{:.3f}") -> str:
@@ -95,22 +95,17 @@ def print_result(r: EvaluationResult) -> None:
         console.print(kt)
 
 
-def evaluate_command(
-    run_dir: str,
-    team,
+def _check_options(
+    team_name: str | None,
     generation: int | None,
     top: int | None,
     episodes: int,
     seed_start: int,
-    scenario: str | None,
     ticks: int | None,
-    json_out: str | None,
-    device: str,
     threads: int | None,
 ) -> None:
-    path = check_path(run_dir, "RUN_DIR")
-    out = check_path(json_out, "--json")
-    team_name = None if team is None else getattr(team, "value", team)
+    """evaluate's options checked: one of --team, --generation and --top, each in its range;
+    a one-line error and exit otherwise (`fail`)."""
     given = [
         name
         for name, v in (("--team", team_name), ("--generation", generation), ("--top", top))
@@ -133,28 +128,32 @@ def evaluate_command(
         fail(f"--ticks must be in [1, {UPPER_BOUNDS['ticks']}], got {ticks}")
     if threads is not None and threads < 1:
         fail(f"--threads must be >= 1, got {threads}")
+
+
+def evaluate_command(
+    run_dir: str,
+    team,
+    generation: int | None,
+    top: int | None,
+    episodes: int,
+    seed_start: int,
+    scenario: str | None,
+    ticks: int | None,
+    json_out: str | None,
+    device: str,
+    threads: int | None,
+) -> None:
+    path = check_path(run_dir, "RUN_DIR")
+    out = check_path(json_out, "--json")
+    team_name = None if team is None else getattr(team, "value", team)
+    _check_options(team_name, generation, top, episodes, seed_start, ticks, threads)
     assert path is not None
     if not path.is_dir():
         fail(f"{path} is not a directory")
     try:
         if out is not None:
             check_output_path(out, "--json")
-        with Progress(
-            TextColumn("{task.description}"),
-            BarColumn(bar_width=30),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            console=err,
-            transient=True,
-            disable=not err.is_terminal,
-        ) as bar:
-            tasks: dict[str, int] = {}
-
-            def progress(stage: str, done: int, total: int) -> None:
-                if stage not in tasks:
-                    tasks[stage] = bar.add_task(stage, total=total)
-                bar.update(tasks[stage], completed=done, total=total)
-
+        with stage_progress() as progress:
             result = evaluate(
                 path,
                 team=team_name or "best",

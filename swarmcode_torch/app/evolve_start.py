@@ -265,31 +265,15 @@ def start_evolve(stack: ExitStack, o: Values, *, where: Where, attach=None):
                 os_fail(e, f"--logdir {logdir}: cannot make a run directory")
 
         on_dir = lambda run_dir: setattr(where, "run_dir", run_dir)  # noqa: E731
+        steps = dict(names=names, before_build=check_logdir, attach=attach, on_dir=on_dir)
         if branch is not None:
-            start = session.start_branch(
-                stack,
-                branch,
-                cfg,
-                make_dir,
-                names=names,
-                before_build=check_logdir,
-                attach=attach,
-                on_dir=on_dir,
-            )
+            start = session.start_branch(stack, branch, cfg, make_dir, **steps)
             console.print(
                 f"Branching from {escape(str(branch.path))} (generation {branch.generation})",
                 highlight=False,
             )
         else:
-            start = session.start_new(
-                stack,
-                cfg,
-                make_dir,
-                names=names,
-                before_build=check_logdir,
-                attach=attach,
-                on_dir=on_dir,
-            )
+            start = session.start_new(stack, cfg, make_dir, **steps)
         ev, run_dir = start.ev, start.run_dir
         assert ev is not None  # a new run's start has its Evolution
         console.print(

@@ -384,3 +384,28 @@ def refuse_links(run_dir: Path) -> None:
                 f"{path} is a symbolic link; a run's files must be its own (remove "
                 "the link, or put the file itself there)"
             )
+
+
+def own_folder(folder: Path, what: str, make: bool = False) -> Path:
+    """`folder`, a run's folder of `what` ("snapshots", "checkpoints"), made when `make`;
+    RunError when it is a link or not a folder (a run reads and writes only its own files)."""
+    if folder.is_symlink():
+        raise RunError(f"{folder} is a symbolic link; a run's {what} must be its own")
+    if folder.exists() and not folder.is_dir():
+        raise RunError(f"{folder} is not a folder")
+    if make:
+        folder.mkdir(exist_ok=True)
+    return folder
+
+
+def numbered_files(folder: Path, name: re.Pattern, files_only: bool = False) -> dict[int, Path]:
+    """number -> the entry of `folder` whose name `name` matches (its first group the number),
+    in order ({} without the folder); `files_only`: regular files only, no links."""
+    if not folder.is_dir():
+        return {}
+    found = {}
+    for entry in os.scandir(folder):
+        m = name.match(entry.name)
+        if m and (not files_only or entry.is_file(follow_symlinks=False)):
+            found[int(m.group(1))] = Path(entry.path)
+    return dict(sorted(found.items()))

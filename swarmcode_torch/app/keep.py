@@ -10,13 +10,12 @@ generation files beyond K are removed."""
 
 from __future__ import annotations
 
-import os
 import re
 from pathlib import Path
 
 from ..coevo.evolve import Evolution, GenerationResult
 from .checkpoints import CheckpointReporter, save_checkpoint
-from .files import RunError, clean_temporary_files
+from .files import clean_temporary_files, numbered_files, own_folder
 
 KEEP_DIR = "checkpoints"
 BEST_FILE = "best.pt"
@@ -26,27 +25,12 @@ _TARGETS = re.compile(r"^(generation-\d{6,}|best)\.pt$")
 
 def keep_folder(run_dir: Path, make: bool = False) -> Path:
     """RUN_DIR/checkpoints (made when `make`); RunError when it is a link or not a folder."""
-    folder = Path(run_dir) / KEEP_DIR
-    if folder.is_symlink():
-        raise RunError(f"{folder} is a symbolic link; a run's checkpoints must be its own")
-    if folder.exists() and not folder.is_dir():
-        raise RunError(f"{folder} is not a folder")
-    if make:
-        folder.mkdir(exist_ok=True)
-    return folder
+    return own_folder(Path(run_dir) / KEEP_DIR, "checkpoints", make)
 
 
 def kept(run_dir: Path) -> dict[int, Path]:
     """generation -> the kept checkpoint of it, oldest first ({} without any)."""
-    folder = keep_folder(run_dir)
-    if not folder.is_dir():
-        return {}
-    found = {}
-    for entry in os.scandir(folder):
-        m = _KEPT.match(entry.name)
-        if m and entry.is_file(follow_symlinks=False):
-            found[int(m.group(1))] = Path(entry.path)
-    return dict(sorted(found.items()))
+    return numbered_files(keep_folder(run_dir), _KEPT, files_only=True)
 
 
 def check_keep(keep, name: str = "keep_checkpoints") -> int:

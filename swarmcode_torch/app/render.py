@@ -119,13 +119,34 @@ def draw_static(ax, episode: Episode, colors: Sequence, legend: bool = True) -> 
 def _draw_moving(ax, episode: Episode, snapshot: State, colors: Sequence) -> None:
     """Packages, robots and the title of one snapshot (over `draw_static`)."""
     from matplotlib.collections import PatchCollection
-    from matplotlib.colors import to_rgba
+
+    s = snapshot
+    ground, ground_c, carried, carried_c, grips = _package_patches(episode, s)
+    if ground:
+        ax.add_collection(
+            PatchCollection(ground, facecolor=ground_c, edgecolor="black", lw=0.6, zorder=3)
+        )
+    _draw_robots(ax, episode, s, colors)
+    if carried:
+        ax.add_collection(
+            PatchCollection(carried, facecolor=carried_c, edgecolor="black", lw=0.6, zorder=5)
+        )
+    for patches, fills in grips:
+        if patches:
+            ax.add_collection(
+                PatchCollection(patches, facecolor=fills, edgecolor="black", lw=0.7, zorder=6)
+            )
+
+    ax.set_title(frame_title(episode, s), fontsize=9)
+
+
+def _package_patches(episode: Episode, s: State) -> tuple[list, list, list, list, list]:
+    """The packages not delivered as patches: (those on the ground, their colours, those
+    carried, drawn small on their carriers, their colours, [(the pincher grips of collaborative
+    packages, their fills), (the suction grips, their fills)])."""
     from matplotlib.patches import Circle, Rectangle, RegularPolygon
 
     lay, rob = episode.layout, episode.robots
-    s = snapshot
-
-    # packages (not delivered)
     present = lay.p_present[0] & (s.p_status != DELIVERED)
     holder = s.holder  # [P, G]
     g_eff = lay.g_effector[0]  # [P, G]
@@ -166,12 +187,17 @@ def _draw_moving(ax, episode: Episode, snapshot: State, colors: Sequence) -> Non
                 patch = Circle((x, y), r)
             (carried if held else ground).append(patch)
             (carried_c if held else ground_c).append(face[p])
-    if ground:
-        ax.add_collection(
-            PatchCollection(ground, facecolor=ground_c, edgecolor="black", lw=0.6, zorder=3)
-        )
+    return ground, ground_c, carried, carried_c, [(grips_p, grip_fill_p), (grips_s, grip_fill_s)]
 
-    # robots
+
+def _draw_robots(ax, episode: Episode, s: State, colors: Sequence) -> None:
+    """Every robot present as a disc of its design's colour (faded when out of energy, a dark
+    edge when carrying) with its effector's mark."""
+    from matplotlib.collections import PatchCollection
+    from matplotlib.colors import to_rgba
+    from matplotlib.patches import Circle, Rectangle
+
+    rob = episode.robots
     keep = rob.present[0].tolist()
     prog = rob.program[0].tolist()
     radius = rob.radius[0].tolist()
@@ -203,17 +229,6 @@ def _draw_moving(ax, episode: Episode, snapshot: State, colors: Sequence) -> Non
                 marks, facecolor="none", edgecolor="#1a1a1a", linewidths=0.9, zorder=4.5
             )
         )
-    if carried:
-        ax.add_collection(
-            PatchCollection(carried, facecolor=carried_c, edgecolor="black", lw=0.6, zorder=5)
-        )
-    for patches, fills in ((grips_p, grip_fill_p), (grips_s, grip_fill_s)):
-        if patches:
-            ax.add_collection(
-                PatchCollection(patches, facecolor=fills, edgecolor="black", lw=0.7, zorder=6)
-            )
-
-    ax.set_title(frame_title(episode, s), fontsize=9)
 
 
 def frame_title(episode: Episode, s: State) -> str:
@@ -228,6 +243,22 @@ def frame_title(episode: Episode, s: State) -> str:
     return f"{name}tick {int(s.t)}   delivered {n_ind + n_col}/{total}{extra}"
 
 
+def _mark(marker: str, size: float, face, edge="black", **kw):
+    """A legend's mark: a marker alone (no line)."""
+    from matplotlib.lines import Line2D
+
+    return Line2D(
+        [],
+        [],
+        marker=marker,
+        ls="",
+        markersize=size,
+        markeredgecolor=edge,
+        markerfacecolor=face,
+        **kw,
+    )
+
+
 def _legend(ax, episode: Episode, colors: Sequence) -> None:
     """The legend: each design present with its mark, then the package kinds present."""
     lay, rob = episode.layout, episode.robots
@@ -236,30 +267,14 @@ def _legend(ax, episode: Episode, colors: Sequence) -> None:
     effector = rob.effector[0].tolist()
     g_eff = lay.g_effector[0]
     collab = lay.p_collab[0]
-    from matplotlib.lines import Line2D
 
     used = sorted(set(p for p, k in zip(prog, keep) if k))
     eff_of = {p: e for p, e, k in zip(prog, effector, keep) if k}
     handles = [
         (
-            Line2D(
-                [],
-                [],
-                marker="o",
-                ls="",
-                markersize=9,
-                markeredgecolor="#333333",
-                markerfacecolor=colors[r % len(colors)],
-            ),
-            Line2D(
-                [],
-                [],
-                marker="s" if eff_of[r] == PINCHER else "o",
-                ls="",
-                markersize=4,
-                markeredgecolor="#1a1a1a",
-                markerfacecolor="none",
-                markeredgewidth=0.9,
+            _mark("o", 9, colors[r % len(colors)], edge="#333333"),
+            _mark(
+                "s" if eff_of[r] == PINCHER else "o", 4, "none", edge="#1a1a1a", markeredgewidth=0.9
             ),
         )
         for r in used
@@ -270,57 +285,17 @@ def _legend(ax, episode: Episode, colors: Sequence) -> None:
     pkg = "#d9a35b"
     for e, m in ((PINCHER, "s"), (SUCTION, "o")):
         if e in indiv_eff:
-            handles.append(
-                Line2D(
-                    [],
-                    [],
-                    marker=m,
-                    ls="",
-                    markersize=6,
-                    markeredgecolor="black",
-                    markerfacecolor=pkg,
-                )
-            )
+            handles.append(_mark(m, 6, pkg))
             labels.append(f"{_EFFECTOR_NAMES[e]} package")
     if bool((kinds & collab).any()):
-        handles.append(
-            Line2D(
-                [],
-                [],
-                marker="h",
-                ls="",
-                markersize=8,
-                markeredgecolor="black",
-                markerfacecolor=pkg,
-            )
-        )
+        handles.append(_mark("h", 8, pkg))
         labels.append("collab package")
         grip_eff = set(g_eff[kinds & collab].flatten().tolist())
         for e, m in ((PINCHER, "s"), (SUCTION, "o")):
             if e in grip_eff:
-                handles.append(
-                    Line2D(
-                        [],
-                        [],
-                        marker=m,
-                        ls="",
-                        markersize=4,
-                        markeredgecolor="black",
-                        markerfacecolor="white",
-                    )
-                )
+                handles.append(_mark(m, 4, "white"))
                 labels.append(f"{_EFFECTOR_NAMES[e]} grip")
-        handles.append(
-            Line2D(
-                [],
-                [],
-                marker="o",
-                ls="",
-                markersize=4,
-                markeredgecolor="black",
-                markerfacecolor="black",
-            )
-        )
+        handles.append(_mark("o", 4, "black"))
         labels.append("held grip")
     ax.legend(
         handles,

@@ -247,31 +247,91 @@ def page_data(
     focal, team, base, recorded = focal_and_baseline(designs, seed)
     ticks = scenario.episode_ticks if ticks is None else int(ticks)
     ph = genome_phenotype(genome, scenario.hardware)
-    row_cost = ph.cost
-    colors = design_colors(len(designs))
     traces: list[dict] = [{} for _ in designs]
     panels, eps = {}, {}
     for name, t in (("focal", team), ("baseline", base)):
         tell = None if progress is None else partial(_stage, progress, f"{name} ticks")
-        ep = record_episode(
-            genome, t, scenario, seed, ticks=ticks, every=1, leaves=True, progress=tell
+        panels[name], eps[name] = _record_panel(
+            designs, genome, ph.cost, t, traces, scenario, cfg, seed, ticks, tell
         )
-        present = t >= 0
-        counts = torch.tensor([_species_count(designs, t)])
-        cost = float(
-            team_cost(row_cost[t.clamp_min(0)], present, counts, scenario.species_overhead)[0]
-        )
-        panels[name] = _panel(ep, t, genome.bt, traces, cost, int(counts[0]), cfg, scenario)
-        eps[name] = ep
     f, b = panels["focal"]["score"], panels["baseline"]["score"]
     part = divergence(eps["focal"], eps["baseline"], (team == base) & (team >= 0))
     gated = float(gate(torch.tensor([f]), torch.tensor([b]), cfg.p_marginal)[0])
     lay = eps["focal"].layout
-    present = lay.p_present[0]
-    cls = [i for i, c in enumerate(scenario.packages) for _ in range(c.count)]
+    o = lay.o_present[0]
+    Q, G = lay.g_effector.shape[1:]
+    return {
+        "title": title,
+        "scenario": scenario.name,
+        "seed": int(seed),
+        "ticks": ticks,
+        "dt": eps["focal"].params.dt,
+        "arena": scenario.arena,
+        "base_radius": scenario.base_radius,
+        "robots": int(team.numel()),
+        "Q": int(Q),
+        "G": int(G),
+        "record": record or {},
+        "objective": cfg.objective,
+        "budget": cfg.budget,
+        "custom_fitness": getattr(cfg, "fitness_function", None),
+        "weights": {k: getattr(cfg.fitness_weights, k) for k in _WEIGHTS},
+        "classes": [c.label for c in scenario.packages],
+        "packages": _package_data(lay, scenario),
+        "obstacles": [
+            [_round(x, 3), _round(y, 3), _round(r, 3)]
+            for (x, y), r in zip(lay.o_pos[0][o].tolist(), lay.o_radius[0][o].tolist())
+        ],
+        "designs": _design_data(designs, genome, ph, base, focal, traces, scenario, eps["focal"]),
+        "focal": focal,
+        "baseline_recorded": recorded,
+        "panels": panels,
+        "gated": _round(gated),
+        "marginal": _round(f - b),
+        # the first tick the arenas part at, and the slot of the robot that stands apart first
+        "divergence": None if part is None else {"tick": part[0], "robot": part[1]},
+        "divergence_eps": DIVERGENCE_EPS,
+        "seed_marginals": _rounded(seed_marginals(designs, scenario, cfg, seed, seeds, ticks))
+        if seeds > 1
+        else None,
+        "shared_slots": int(((team == base) & (team >= 0)).sum()),
+        "p_marginal": cfg.p_marginal,
+    }
+
+
+#: The fitness weights the page shows (and scores a panel with)
+_WEIGHTS = (
+    "W_delivery",
+    "W_collab_bonus",
+    "W_pickup",
+    "W_energy",
+    "W_proximity",
+    "W_closeness",
+    "inactive_factor",
+    "floor",
+)
+
+
+def _record_panel(designs, genome, row_cost, t, traces, scenario, cfg, seed, ticks, tell):
+    """One team's (`t`: the genome row of each slot, -1 empty) panel: its episode recorded every
+    tick with the leaves its trees read (the slots each tree visits added to `traces`), its
+    cost and score. (panel, episode)."""
+    ep = record_episode(genome, t, scenario, seed, ticks=ticks, every=1, leaves=True, progress=tell)
+    present = t >= 0
+    counts = torch.tensor([_species_count(designs, t)])
+    cost = float(team_cost(row_cost[t.clamp_min(0)], present, counts, scenario.species_overhead)[0])
+    return _panel(ep, t, genome.bt, traces, cost, int(counts[0]), cfg, scenario), ep
+
+
+def _package_data(lay, scenario: Scenario) -> dict:
+    """The packages of the layout as the page draws them: present, class, collaborative, size,
+    mass and its colour (darker = heavier), grips."""
     from matplotlib import colormaps
     from matplotlib.colors import to_hex
 
+    Q = lay.g_effector.shape[1]
+    present = lay.p_present[0]
+    cls = [i for i, c in enumerate(scenario.packages) for _ in range(c.count)]
     mass = lay.p_mass[0]
     pm = mass[present]
     lo, hi = (float(pm.min()), float(pm.max())) if pm.numel() else (0.0, 1.0)
@@ -280,11 +340,28 @@ def page_data(
         to_hex(ylor(0.35 + 0.6 * min(max((float(x) - lo) / max(hi - lo, 1e-6), 0), 1)))
         for x in mass.tolist()
     ]
-    o = lay.o_present[0]
+    return {
+        "present": present.long().tolist(),
+        "cls": cls + [-1] * (int(Q) - len(cls)),
+        "collab": lay.p_collab[0].long().tolist(),
+        "size": [_round(x, 4) for x in lay.p_size[0].tolist()],
+        "mass": [_round(x, 3) for x in mass.tolist()],
+        "color": pcol,
+        "g_eff": lay.g_effector[0].reshape(-1).tolist(),
+        "g_off": [_round(x, 4) for x in lay.g_offset[0].reshape(-1).tolist()],
+    }
+
+
+def _design_data(designs, genome, ph, base, focal, traces, scenario, ep) -> list[dict]:
+    """Each design as the page shows it: its hardware, cost, capability, counts in both teams,
+    colour, tree and the slots its tree visited (`traces`)."""
+    from matplotlib.colors import to_hex
+
+    colors = design_colors(len(designs))
     if all("capability" in d for d in designs):
         can = [list(d["capability"]) for d in designs]
     else:  # an older record: from the genes, as analysis.design_capabilities does
-        rows = capabilities(ph, scenario, eps["focal"].params).tolist()
+        rows = capabilities(ph, scenario, ep.params).tolist()
         can = [[j for j, ok in enumerate(r) if ok] for r in rows]
     dd = []
     for i, d in enumerate(designs):
@@ -302,7 +379,7 @@ def page_data(
                 "battery_point": d["battery_point"],
                 "dominance": d.get("dominance"),
                 "selectivity": d.get("selectivity"),
-                "cost": _round(float(row_cost[i]), 2),
+                "cost": _round(float(ph.cost[i]), 2),
                 "capability": can[i],
                 "count": int(d.get("count", 1)),
                 "baseline_count": int((base == i).sum()),
@@ -313,65 +390,7 @@ def page_data(
                 "traces": {str(k): v for k, v in sorted(traces[i].items())},
             }
         )
-    Q, G = lay.g_effector.shape[1:]
-    return {
-        "title": title,
-        "scenario": scenario.name,
-        "seed": int(seed),
-        "ticks": ticks,
-        "dt": eps["focal"].params.dt,
-        "arena": scenario.arena,
-        "base_radius": scenario.base_radius,
-        "robots": int(team.numel()),
-        "Q": int(Q),
-        "G": int(G),
-        "record": record or {},
-        "objective": cfg.objective,
-        "budget": cfg.budget,
-        "custom_fitness": getattr(cfg, "fitness_function", None),
-        "weights": {
-            k: getattr(cfg.fitness_weights, k)
-            for k in (
-                "W_delivery",
-                "W_collab_bonus",
-                "W_pickup",
-                "W_energy",
-                "W_proximity",
-                "W_closeness",
-                "inactive_factor",
-                "floor",
-            )
-        },
-        "classes": [c.label for c in scenario.packages],
-        "packages": {
-            "present": present.long().tolist(),
-            "cls": cls + [-1] * (int(Q) - len(cls)),
-            "collab": lay.p_collab[0].long().tolist(),
-            "size": [_round(x, 4) for x in lay.p_size[0].tolist()],
-            "mass": [_round(x, 3) for x in mass.tolist()],
-            "color": pcol,
-            "g_eff": lay.g_effector[0].reshape(-1).tolist(),
-            "g_off": [_round(x, 4) for x in lay.g_offset[0].reshape(-1).tolist()],
-        },
-        "obstacles": [
-            [_round(x, 3), _round(y, 3), _round(r, 3)]
-            for (x, y), r in zip(lay.o_pos[0][o].tolist(), lay.o_radius[0][o].tolist())
-        ],
-        "designs": dd,
-        "focal": focal,
-        "baseline_recorded": recorded,
-        "panels": panels,
-        "gated": _round(gated),
-        "marginal": _round(f - b),
-        # the first tick the arenas part at, and the slot of the robot that stands apart first
-        "divergence": None if part is None else {"tick": part[0], "robot": part[1]},
-        "divergence_eps": DIVERGENCE_EPS,
-        "seed_marginals": _rounded(seed_marginals(designs, scenario, cfg, seed, seeds, ticks))
-        if seeds > 1
-        else None,
-        "shared_slots": int(((team == base) & (team >= 0)).sum()),
-        "p_marginal": cfg.p_marginal,
-    }
+    return dd
 
 
 def final_counts(data: dict, panel: str) -> dict:

@@ -1,6 +1,7 @@
 """What the `replay` command shows while it works: a Rich progress bar (on the error console,
 gone when done, nothing off a terminal) with one line per stage: the ticks of each team
-recorded, the frames of a GIF drawn."""
+recorded, the frames of a GIF drawn. `evaluate` shows its stages on the same bar
+(`stage_progress`)."""
 
 from __future__ import annotations
 
@@ -28,8 +29,10 @@ _STAGES = {
 
 
 @contextmanager
-def replay_progress() -> Iterator[ProgressFn]:
-    """A `progress(stage, done, total)` for `analysis.replay_run`, drawn as a Rich bar."""
+def stage_progress(labels: dict[str, str] | None = None) -> Iterator[ProgressFn]:
+    """A `progress(stage, done, total)` drawn as a Rich bar, a line per stage, labelled as
+    `labels` names it (the stage's own name otherwise)."""
+    labels = labels or {}
     with Progress(
         TextColumn("{task.description}"),
         BarColumn(bar_width=30),
@@ -43,7 +46,12 @@ def replay_progress() -> Iterator[ProgressFn]:
 
         def progress(stage: str, done: int, total: int) -> None:
             if stage not in tasks:
-                tasks[stage] = bar.add_task(_STAGES.get(stage, stage), total=total)
+                tasks[stage] = bar.add_task(labels.get(stage, stage), total=total)
             bar.update(tasks[stage], completed=done, total=total)
 
         yield progress
+
+
+def replay_progress():
+    """A `progress(stage, done, total)` for `analysis.replay_run`, drawn as a Rich bar."""
+    return stage_progress(_STAGES)

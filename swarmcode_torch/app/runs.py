@@ -7,7 +7,8 @@ job has its own module:
   the retired settings a resume refuses (`check_runnable`);
 - `runconfig`: config.toml, the run's own scenario.toml and hardware.toml, and the checks a
   config passes before a run starts (settings, memory);
-- `checkpoints`: checkpoint.pt written, read back, loaded with the run and resumed;
+- `checkpoints`: checkpoint.pt written, loaded with the run and resumed, branched from;
+- `checkpoint_read`: a checkpoint file read back without running code, its records checked;
 - `summary`: summary.json and teams.jsonl, written every generation and read back checked;
 - `signals`: the steps Ctrl-C and SIGTERM must not split;
 - `session`: how a run starts, runs (the generation loop, `run`) and ends.
@@ -17,13 +18,13 @@ docs/RELIABILITY.md lists what the files promise and the tests that show it.
 
 from __future__ import annotations
 
+from .checkpoint_read import read_checkpoint
 from .checkpoints import (
     CheckpointReporter,
     check_copies,
     copy_digests,
     load_checkpoint,
     load_run,
-    read_checkpoint,
     resume,
     save_checkpoint,
 )

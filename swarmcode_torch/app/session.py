@@ -16,9 +16,7 @@ The front ends add only what is theirs: the command line its options, messages a
 
 from __future__ import annotations
 
-import math
 import os
-import re
 import time
 from collections.abc import Callable, Iterable
 from contextlib import ExitStack, nullcontext
@@ -33,6 +31,7 @@ from ..coevo.evolve import GenerationResult
 from ..sim.scenario import Scenario, read_scenario
 from . import checkpoints, files, records
 from .checkpoints import Branch, CheckpointReporter, load_run, resume
+from .eta import parse_duration
 from .files import HARDWARE_COPY, SCENARIO_COPY, RunError, atomic_write_bytes
 from .locks import RunLock
 from .runconfig import (
@@ -167,14 +166,9 @@ def start_new(
     if before_build is not None:
         before_build()
     ev = build(cfg, checked, scenario, fitness)
-    if attach is not None:
-        attach(ev)
-    if make_dir is None:
+    run_dir = _open_dir(stack, ev, make_dir, attach, on_dir)
+    if run_dir is None:
         return Start(ev, None)
-    run_dir = make_dir(ev)
-    stack.enter_context(RunLock(run_dir))
-    if on_dir is not None:
-        on_dir(run_dir)
     write_run_files(run_dir, ev.cfg, data, ev.ctx.scenario.hardware)
     return Start(ev, run_dir)
 
@@ -241,6 +235,27 @@ def check_branch(branch: Branch, cfg: SwarmCoDeConfig, names: dict[str, str] | N
         )
 
 
+def _open_dir(
+    stack: ExitStack,
+    ev: Evolution,
+    make_dir: Callable[[Evolution], Path] | None,
+    attach: Callable[[Evolution], None] | None,
+    on_dir: Callable[[Path], None] | None,
+) -> Path | None:
+    """A new run's steps once its `Evolution` is built: `attach(ev)` (evaluation shards) before
+    any file is written, then its directory made (`make_dir(ev)`; None: a run in memory, no
+    directory, None returned), locked until `stack` closes, and `on_dir(run_dir)`."""
+    if attach is not None:
+        attach(ev)
+    if make_dir is None:
+        return None
+    run_dir = make_dir(ev)
+    stack.enter_context(RunLock(run_dir))
+    if on_dir is not None:
+        on_dir(run_dir)
+    return run_dir
+
+
 def start_branch(
     stack: ExitStack,
     branch: Branch,
@@ -271,14 +286,9 @@ def start_branch(
         from ..coevo.evolve import new_generator
 
         ev.state.rng_state = new_generator(ev.ctx).get_state()
-    if attach is not None:
-        attach(ev)
-    if make_dir is None:
+    run_dir = _open_dir(stack, ev, make_dir, attach, on_dir)
+    if run_dir is None:
         return Start(ev, None)
-    run_dir = make_dir(ev)
-    stack.enter_context(RunLock(run_dir))
-    if on_dir is not None:
-        on_dir(run_dir)
     write_config(run_dir, ev.cfg, branch.parent)
     atomic_write_bytes(
         run_dir / SCENARIO_COPY,
@@ -327,38 +337,6 @@ def file_reporters(
 def clock() -> float:
     """The clock --max-time reads (seconds, monotonic); tests replace it."""
     return time.monotonic()
-
-
-_DURATION = re.compile(r"(\d+(?:\.\d*)?|\.\d+)\s*([dhms]?)")
-_UNIT = {"d": 86400, "h": 3600, "m": 60, "s": 1, "": 1}
-
-
-def parse_duration(value: str | float | int, name: str = "max_time") -> float:
-    """Seconds of a duration: a number (seconds), or text such as 3600, 90m, 2h, 1h30m, 45s,
-    1.5h, 2d; ValueError, one line naming `name`, for anything else or a duration that is not
-    > 0."""
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        seconds = float(value)
-    elif isinstance(value, str):
-        text = value.strip().lower()
-        parts = _DURATION.findall(text)
-        if (
-            not text
-            or "".join(n + u for n, u in parts) != text.replace(" ", "")
-            or (len(parts) > 1 and any(u == "" for _, u in parts))
-        ):
-            raise ValueError(
-                f"{name} must be a duration such as 3600 (seconds), 90m, 2h or "
-                f"1h30m, got {value!r:.40}"
-            )
-        seconds = sum(float(n) * _UNIT[u] for n, u in parts)
-    else:
-        raise ValueError(
-            f"{name} must be a duration such as 3600 (seconds), 90m or 2h, got {value!r:.40}"
-        )
-    if not (seconds > 0 and math.isfinite(seconds)):
-        raise ValueError(f"{name} must be a duration > 0, got {value!r:.40}")
-    return seconds
 
 
 @dataclass

@@ -309,24 +309,13 @@ def plot(rows: list[dict], path: Path) -> None:
     x = [r["budget"] for r in rows]
     fig = Figure(figsize=(6, 5))
     fit_ax, species_ax = fig.subplots(2, 1, sharex=True)
-    fit_ax.errorbar(
-        x,
-        [r["best_fitness"] for r in rows],
-        [r["best_fitness_std"] for r in rows],
-        marker="o",
-        color="tab:blue",
-        capsize=3,
-    )
-    fit_ax.set_ylabel("best fitness")
-    species_ax.errorbar(
-        x,
-        [r["num_species"] for r in rows],
-        [r["num_species_std"] for r in rows],
-        marker="s",
-        color="tab:orange",
-        capsize=3,
-    )
-    species_ax.set_ylabel("species in the best team")
+    for ax, key, marker, color, label in (
+        (fit_ax, "best_fitness", "o", "tab:blue", "best fitness"),
+        (species_ax, "num_species", "s", "tab:orange", "species in the best team"),
+    ):
+        ys, errs = [r[key] for r in rows], [r[key + "_std"] for r in rows]
+        ax.errorbar(x, ys, errs, marker=marker, color=color, capsize=3)
+        ax.set_ylabel(label)
     species_ax.yaxis.set_major_locator(_whole_ticks())
     if all(float(b).is_integer() for b in x):
         species_ax.xaxis.set_major_locator(_whole_ticks())

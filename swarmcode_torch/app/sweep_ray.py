@@ -59,10 +59,24 @@ def sweep_on_ray(
     """Run the unfinished runs of a sweep as Ray tasks (`sweep_task`, up to `workers` at once),
     a line as each ends; ([(budget, seed, run directory)] of the finished runs, in the sweep's
     order, [(run name, error)] of the failed ones)."""
-    from .distributed import RayUnavailable, check_resources, ray_session, run_tasks
-    from .unshared import mark_storage, read_tree, write_tree
-
     todo = [p for p in plans if p[4] != "done"]
+    out, jobs = _ray_jobs(todo, data, checkpoint_every, log_every, again, wb)
+    what = f"--workers {workers}" if workers > 1 else "--ray-address"
+    shown = _RayProgress(plans, todo, out)
+    errors: list = []
+    if jobs:
+        errors = _run_on_ray(jobs, workers, cpus, gpus, address, what, again, shown)
+    failed_at = {id(p): e for p, e in zip(todo, errors) if e is not None}
+    finished = [p[:3] for p in plans if id(p) not in failed_at]
+    failed = [(p[2].name, failed_at[id(p)]) for p in plans if id(p) in failed_at]
+    return finished, failed
+
+
+def _ray_jobs(todo, data, checkpoint_every, log_every, again, wb) -> tuple[Path, list]:
+    """(the sweep directory, the arguments of `sweep_task` of each run of `todo`, the unfinished
+    runs); a one-line error when the sweep directory cannot be marked or a run read."""
+    from .unshared import mark_storage, read_tree
+
     out = todo[0][2].parent if todo else Path()
     try:
         token = mark_storage(out) if todo else ""
@@ -87,26 +101,36 @@ def sweep_on_ray(
         for p in todo
         for _, _, run_dir, cfg, state, _ in [p]
     ]
-    what = f"--workers {workers}" if workers > 1 else "--ray-address"
-    sent_back: set[int] = set()
-    shown = sweep_progress(plans)  # the sweep's times as each run ends
-    at = [k for k, p in enumerate(plans) if p[4] != "done"]  # todo[i] is plans[at[i]]
+    return out, jobs
 
-    def on_result(i: int, value) -> str | None:
+
+class _RayProgress:
+    """What the sweep prints as each of its Ray tasks ends, and the files of a run that ran on
+    a node without --out written here."""
+
+    def __init__(self, plans, todo, out: Path):
+        self.todo, self.out = todo, out
+        self.sent_back: set[int] = set()
+        self.shown = sweep_progress(plans)  # the sweep's times as each run ends
+        self.at = [k for k, p in enumerate(plans) if p[4] != "done"]  # todo[i] is plans[at[i]]
+
+    def on_result(self, i: int, value) -> str | None:
+        from .unshared import write_tree
+
         if isinstance(value, tuple):  # ran on a node without --out: its files, written here
             error, files = value
-            write_tree(todo[i][2], files)
-            sent_back.add(i)
+            write_tree(self.todo[i][2], files)
+            self.sent_back.add(i)
             return error
         return value
 
-    def on_finish(i: int, error: str | None, n: dict) -> None:
-        name = todo[i][2].name
+    def on_finish(self, i: int, error: str | None, n: dict) -> None:
+        name = self.todo[i][2].name
         counts = f"{n['done']} done, {n['running']} running, {n['failed']} failed of {n['total']}"
-        if i in sent_back:
-            counts += f"; it ran where {out.resolve()} is not, its files were written here"
-        shown.finished(at[i])
-        counts += f")  {shown.times()}"
+        if i in self.sent_back:
+            counts += f"; it ran where {self.out.resolve()} is not, its files were written here"
+        self.shown.finished(self.at[i])
+        counts += f")  {self.shown.times()}"
         if error is None:
             console.print(
                 f"{name}: finished ({counts}", markup=False, highlight=False, soft_wrap=True
@@ -116,48 +140,50 @@ def sweep_on_ray(
                 f"{name}: failed: {error} ({counts}", markup=False, highlight=False, soft_wrap=True
             )
 
-    errors: list = []
+
+def _run_on_ray(jobs, workers, cpus, gpus, address, what, again, shown: _RayProgress) -> list:
+    """`jobs` run as Ray tasks, up to `workers` at once; the error of each (None: finished). A
+    one-line error without Ray; Ctrl-C or SIGTERM: the running runs stop after writing their
+    checkpoints, and the command exits (130, 143)."""
+    from .distributed import RayUnavailable, check_resources, ray_session, run_tasks
+
     terminated: list = []
-    if jobs:
-        try:
-            with ray_session(address, what) as ray, terminate_as_interrupt() as terminated:
-                check_resources(
-                    ray,
-                    {"CPU": cpus, "GPU": gpus},
-                    f"a run with --cpus-per-run {cpus:g} and --gpus-per-run {gpus:g}",
-                )
-                console.print(
-                    f"Ray: {len(jobs)} runs, up to {workers} at once ({cpus:g} CPU, "
-                    f"{gpus:g} GPU each)",
-                    markup=False,
-                    highlight=False,
-                )
-                errors = run_tasks(
-                    sweep_task,
-                    jobs,
-                    workers=workers,
-                    num_cpus=cpus,
-                    num_gpus=gpus,
-                    on_finish=on_finish,
-                    what=what,
-                    on_result=on_result,
-                )
-        except RayUnavailable as e:
-            fail(str(e))
-        except KeyboardInterrupt:
-            how = "Terminated" if terminated else "Interrupted"
-            err.print(
-                f"{how}: the running runs were stopped after writing their checkpoints; "
-                f"continue with: {again}",
+    errors: list = []
+    try:
+        with ray_session(address, what) as ray, terminate_as_interrupt() as terminated:
+            check_resources(
+                ray,
+                {"CPU": cpus, "GPU": gpus},
+                f"a run with --cpus-per-run {cpus:g} and --gpus-per-run {gpus:g}",
+            )
+            console.print(
+                f"Ray: {len(jobs)} runs, up to {workers} at once ({cpus:g} CPU, {gpus:g} GPU each)",
                 markup=False,
                 highlight=False,
-                soft_wrap=True,
             )
-            raise typer.Exit(code=143 if terminated else 130) from None
-    failed_at = {id(p): e for p, e in zip(todo, errors) if e is not None}
-    finished = [p[:3] for p in plans if id(p) not in failed_at]
-    failed = [(p[2].name, failed_at[id(p)]) for p in plans if id(p) in failed_at]
-    return finished, failed
+            errors = run_tasks(
+                sweep_task,
+                jobs,
+                workers=workers,
+                num_cpus=cpus,
+                num_gpus=gpus,
+                on_finish=shown.on_finish,
+                what=what,
+                on_result=shown.on_result,
+            )
+    except RayUnavailable as e:
+        fail(str(e))
+    except KeyboardInterrupt:
+        how = "Terminated" if terminated else "Interrupted"
+        err.print(
+            f"{how}: the running runs were stopped after writing their checkpoints; "
+            f"continue with: {again}",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
+        raise typer.Exit(code=143 if terminated else 130) from None
+    return errors
 
 
 def sweep_task(

@@ -65,19 +65,10 @@ def run_sweep(
     --config FILE, the runs' settings to start from; `wandb`, `wandb_project`: each run logged
     to W&B, grouped by the sweep, `wandb_runs`."""
     from .evolve_start import wandb_option
-    from .sweep_ray import sweep_on_ray, sweep_ray_options
+    from .sweep_ray import sweep_ray_options
 
     set_threads_option(threads)
-    import time
-
-    from ..sim.scenario import read_scenario
-    from .files import SWEEP_LOCK_FILE, TABLE_MD, RunError
-    from .locks import RunLock
-    from .runconfig import check_config
-    from .settings import option_names
-    from .summary import read_summary
-    from .sweep import table_rows, write_outputs
-    from .sweep_grid import grid_points, parse_grid, point_name, with_point
+    from .sweep_grid import point_name, with_point
 
     logdir, out = check_path(logdir, "--logdir"), check_path(out, "--out")
     config_file = check_path(config, "--config")
@@ -86,15 +77,7 @@ def run_sweep(
     seed_list = parse_list(seeds, int, "--seeds")
     on_ray = sweep_ray_options(workers, cpus_per_run, gpus_per_run, ray_address, device)
     project = wandb_option(wandb, wandb_project)  # before anything is made
-    if logdir is not None and out is not None:
-        fail(
-            f"--logdir and --out cannot both be given: --out is the sweep directory itself "
-            f"({out}), --logdir the directory a new one is made in ({logdir})"
-        )
-    if logdir is not None and logdir.exists() and not logdir.is_dir():
-        fail(f"--logdir {logdir} is not a directory")
-    out = out or (logdir or Path("runs")) / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
-    names = option_names({"seed": "--seeds", "budget": "--budgets"})
+    out = _sweep_dir(logdir, out)
     given = dict(
         objective=objective,
         scenario=scenario,
@@ -106,6 +89,110 @@ def run_sweep(
         device=device,
         compile=compile,
     )
+    base, scen, data, points, budget_list, keys = _sweep_configs(
+        given, grid, preset, settings, config_file, budgets, budget_list, seed_list
+    )
+    _make_sweep_dir(out)
+    with ExitStack() as stack:
+        _lock_sweep(stack, out)
+        plans = [
+            plan_sweep_run(out, with_point(base, pt, b, sd), scen, data, point_name(pt))
+            for pt in points
+            for b in budget_list
+            for sd in seed_list
+        ]  # every refusal before any run
+        again = f"swarmcode-torch sweep with the same options and --out {out}"
+        console.print(
+            f"Sweep directory: {out} (resume with --out {out})",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
+        wb = {id(p): sweep_wandb(project, p) for p in plans}
+        runs, failed = _run_plans(plans, data, checkpoint_every, log_every, again, wb, on_ray)
+        runs, paths = _write_table(runs, plans, keys, out)
+    _print_end(out, paths, failed, len(plans), len(runs), again)
+
+
+def _lock_sweep(stack: ExitStack, out: Path) -> None:
+    """The sweep directory's sweep.lock held until `stack` closes; a one-line error when another
+    process holds it or it cannot be made."""
+    from .files import SWEEP_LOCK_FILE, RunError
+    from .locks import RunLock
+
+    try:
+        stack.enter_context(RunLock(out, SWEEP_LOCK_FILE))
+    except RunError as e:
+        fail(str(e))
+    except OSError as e:
+        os_fail(e, f"--out {out}: cannot lock the sweep directory")
+
+
+def _run_plans(plans, data, checkpoint_every, log_every, again, wb, on_ray):
+    """The sweep's unfinished runs run here (`on_ray` None) or as Ray tasks (`sweep_ray`);
+    ([(budget, seed, run directory)] of the finished runs, [(run name, error)] of the failed
+    ones: only on Ray, where a failed run leaves the others going). A one-line error when every
+    run failed."""
+    from .sweep_ray import sweep_on_ray
+
+    if on_ray is None:
+        return _run_here(plans, data, checkpoint_every, log_every, again, wb), []
+    ray_workers, cpus, gpus, address = on_ray
+    runs, failed = sweep_on_ray(
+        plans, data, checkpoint_every, log_every, again, ray_workers, cpus, gpus, address, wb
+    )
+    if not runs:
+        fail(
+            f"every run of the sweep failed ({failed[0][0]}: {failed[0][1]}); fix the "
+            f"cause, then run it again: {again}"
+        )
+    return runs, failed
+
+
+def _print_end(out: Path, paths, failed, planned: int, finished: int, again: str) -> None:
+    """The sweep's table and the files written printed; then a one-line error naming the runs
+    that failed, if any did."""
+    from .files import TABLE_MD
+
+    console.print((out / TABLE_MD).read_text(), highlight=False, markup=False)
+    console.print(
+        "Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False, soft_wrap=True
+    )
+    if failed:
+        names = ", ".join(name for name, _ in failed)
+        fail(
+            f"{len(failed)} of {planned} runs failed ({names}); the table has the "
+            f"{finished} that finished; fix the cause, then resume them: {again}"
+        )
+
+
+def _sweep_dir(logdir: Path | None, out: Path | None) -> Path:
+    """The sweep directory: --out, or a new sweep-TIME in --logdir (default runs/); a one-line
+    error for both, or a --logdir that is not a directory."""
+    import time
+
+    if logdir is not None and out is not None:
+        fail(
+            f"--logdir and --out cannot both be given: --out is the sweep directory itself "
+            f"({out}), --logdir the directory a new one is made in ({logdir})"
+        )
+    if logdir is not None and logdir.exists() and not logdir.is_dir():
+        fail(f"--logdir {logdir} is not a directory")
+    return out or (logdir or Path("runs")) / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
+
+
+def _sweep_configs(given, grid, preset, settings, config_file, budgets, budget_list, seed_list):
+    """(the runs' base config, the scenario and its file's bytes, the grid's points, the
+    budgets, the grid's keys) of a sweep, every run's config checked (`check_config`) before
+    anything is made; a one-line error otherwise. `given`: the command's setting options,
+    `config_file`: --config."""
+    from ..sim.scenario import read_scenario
+    from .files import RunError
+    from .runconfig import check_config
+    from .settings import option_names
+    from .sweep_grid import grid_points, parse_grid, with_point
+
+    names = option_names({"seed": "--seeds", "budget": "--budgets"})
     try:
         grid_spec = parse_grid(grid, given)
         if config_file is None:
@@ -133,96 +220,62 @@ def run_sweep(
         fail(str(e))
     except OSError as e:
         os_fail(e, "cannot read the config")
-    keys = tuple(grid_spec)
+    return base, scen, data, points, budget_list, tuple(grid_spec)
+
+
+def _make_sweep_dir(out: Path) -> None:
+    """The sweep directory made (with its parents); a one-line error when it cannot be."""
     if out.exists() and not out.is_dir():
         fail(f"--out {out} is not a directory")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         os_fail(e, f"--out {out}: cannot make the sweep directory")
+
+
+def _run_here(plans, data, checkpoint_every, log_every, again, wb) -> list:
+    """The sweep's runs (`plan_sweep_run`'s) one after the other in this process, a line as
+    each starts and ends; [(budget, seed, run directory)] of every run, in order."""
     runs = []
-    with ExitStack() as stack:
-        try:
-            stack.enter_context(RunLock(out, SWEEP_LOCK_FILE))
-        except RunError as e:
-            fail(str(e))
-        except OSError as e:
-            os_fail(e, f"--out {out}: cannot lock the sweep directory")
-        plans = [
-            plan_sweep_run(out, with_point(base, pt, b, sd), scen, data, point_name(pt))
-            for pt in points
-            for b in budget_list
-            for sd in seed_list
-        ]  # every refusal before any run
-        again = f"swarmcode-torch sweep with the same options and --out {out}"
-        console.print(
-            f"Sweep directory: {out} (resume with --out {out})",
-            markup=False,
-            highlight=False,
-            soft_wrap=True,
-        )
-        failed: list[tuple[str, str]] = []
-        wb = {id(p): sweep_wandb(project, p) for p in plans}
-        if on_ray is None:
-            shown = sweep_progress(plans)
-            for k, p in enumerate(plans):
-                b, sd, run_dir, cfg, state, _ = p
-                if state != "done":
-                    console.print(
-                        shown.line(k, run_dir.name), markup=False, highlight=False, soft_wrap=True
-                    )
-                    run_sweep_run(
-                        run_dir, cfg, data, state, checkpoint_every, log_every, again, wb[id(p)]
-                    )
-                    shown.finished(k)
-                    console.print(
-                        f"{run_dir.name}: finished ({k + 1} of {shown.total} runs)  "
-                        f"{shown.times()}",
-                        markup=False,
-                        highlight=False,
-                        soft_wrap=True,
-                    )
-                runs.append((b, sd, run_dir))
-        else:
-            ray_workers, cpus, gpus, address = on_ray
-            runs, failed = sweep_on_ray(
-                plans,
-                data,
-                checkpoint_every,
-                log_every,
-                again,
-                ray_workers,
-                cpus,
-                gpus,
-                address,
-                wb,
+    shown = sweep_progress(plans)
+    for k, p in enumerate(plans):
+        b, sd, run_dir, cfg, state, _ = p
+        if state != "done":
+            console.print(
+                shown.line(k, run_dir.name), markup=False, highlight=False, soft_wrap=True
             )
-            if not runs:
-                fail(
-                    f"every run of the sweep failed ({failed[0][0]}: {failed[0][1]}); fix the "
-                    f"cause, then run it again: {again}"
-                )
-        try:
-            for _, _, run_dir in runs:
-                read_summary(run_dir)  # every figure of the table is checked
-            cfgs = {p[2]: p[3] for p in plans}
-            runs = [(b, sd, d, {k: getattr(cfgs[d], k) for k in keys}) for b, sd, d in runs]
-            rows = table_rows(runs, keys)
-            paths = write_outputs(rows, out, keys)
-        except (RunError, ValueError) as e:
-            fail(str(e))
-        except OSError as e:
-            os_fail(e, f"--out {out}: cannot write the table")
-    console.print((out / TABLE_MD).read_text(), highlight=False, markup=False)
-    console.print(
-        "Wrote " + ", ".join(str(p) for p in paths), highlight=False, markup=False, soft_wrap=True
-    )
-    if failed:
-        names = ", ".join(name for name, _ in failed)
-        fail(
-            f"{len(failed)} of {len(plans)} runs failed ({names}); the table has the "
-            f"{len(runs)} that finished; fix the cause, then resume them: {again}"
-        )
+            run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again, wb[id(p)])
+            shown.finished(k)
+            console.print(
+                f"{run_dir.name}: finished ({k + 1} of {shown.total} runs)  {shown.times()}",
+                markup=False,
+                highlight=False,
+                soft_wrap=True,
+            )
+        runs.append((b, sd, run_dir))
+    return runs
+
+
+def _write_table(runs, plans, keys: tuple, out: Path) -> tuple[list, list]:
+    """The sweep's table (Markdown, CSV) and plot written from its finished `runs`, every figure
+    of their summaries checked; (the runs with their grid values, the paths written). A
+    one-line error otherwise."""
+    from .files import RunError
+    from .summary import read_summary
+    from .sweep import table_rows, write_outputs
+
+    try:
+        for _, _, run_dir in runs:
+            read_summary(run_dir)  # every figure of the table is checked
+        cfgs = {p[2]: p[3] for p in plans}
+        runs = [(b, sd, d, {k: getattr(cfgs[d], k) for k in keys}) for b, sd, d in runs]
+        rows = table_rows(runs, keys)
+        paths = write_outputs(rows, out, keys)
+    except (RunError, ValueError) as e:
+        fail(str(e))
+    except OSError as e:
+        os_fail(e, f"--out {out}: cannot write the table")
+    return runs, paths
 
 
 def sweep_progress(plans):
