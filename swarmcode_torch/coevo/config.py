@@ -9,24 +9,50 @@ through three parts built from it by field name, never by a hand-written copy:
 
 A part's setting that is also a run setting takes the run's default (`SwarmCoDeConfig.delta`
 and so on), so `ReproductionParams()` in a notebook is the algorithm a default run uses.
-Migrations of configs written by older versions are the application's (`app.runs`).
+Which values a setting takes is checked in `config_checks.py` (`SettingError`, the bounds),
+the presets are in `presets.py`; their names are importable from here. Migrations of configs
+written by older versions are the application's (`app.runs`).
 """
 
 from __future__ import annotations
 
-import math
 import typing
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+from .config_checks import (
+    CHOICES,
+    MAX_SEED,
+    OPTIONAL_CHOICES,
+    UPPER_BOUNDS,
+    SettingError,
+    check_names,
+    check_ranges,
+    check_types,
+    check_upper_bounds,
+)
+from .presets import PRESETS
 
-class SettingError(ValueError):
-    """An invalid setting: `key` names it, `problem` says what is wrong ("must be >= 1, got 0");
-    the message is the two together. The application respells the key as its options do."""
-
-    def __init__(self, key: str, problem: str):
-        super().__init__(f"{key} {problem}")
-        self.key, self.problem = key, problem
+__all__ = [
+    "CHOICES",
+    "DISTANCE_KEYS",
+    "FITNESS_KEYS",
+    "MAX_SEED",
+    "OPTIONAL_CHOICES",
+    "PRESETS",
+    "SETTING_TYPES",
+    "UPPER_BOUNDS",
+    "DistanceWeights",
+    "EvalConfig",
+    "EvolveConfig",
+    "FitnessWeights",
+    "ReproductionParams",
+    "SettingError",
+    "SpeciationParams",
+    "SwarmCoDeConfig",
+    "preset_config",
+    "with_overrides",
+]
 
 
 @dataclass(frozen=True)
@@ -193,111 +219,15 @@ class SwarmCoDeConfig:
         respells it as its options do). `bounds=False` leaves out the upper bounds
         (`check_bounds`), so that the application can first tell a run far too large for memory
         what it would need."""
-        for f in fields(self):
-            v = getattr(self, f.name)
-            kind, optional = SETTING_TYPES[f.name]
-            if v is None:
-                if not optional:
-                    raise SettingError(f.name, "must be set")
-                continue
-            if not isinstance(v, _ACCEPTS[kind]) or (isinstance(v, bool) and kind is not bool):
-                raise SettingError(f.name, f"must be {_KIND_TEXT[kind]}, got {v!r}")
-        if self.budget is not None:
-            if not math.isfinite(self.budget):
-                raise SettingError("budget", f"must be a finite number, got {self.budget}")
-            if self.budget <= 0:
-                raise SettingError("budget", f"must be > 0, got {self.budget:g}")
-        if not self.scenario:
-            raise SettingError("scenario", "must name a scenario")
-        if self.fitness_function is not None and not self.fitness_function.strip():
-            raise SettingError("fitness_function", "must name a function or be unset")
-        for key, opts in CHOICES.items():
-            v = getattr(self, key)
-            if v not in opts:
-                one_of = ", ".join(map(repr, opts[:-1])) + f" or {opts[-1]!r}"
-                raise SettingError(key, f"must be {one_of}, got {v!r}")
-        for key, opts in OPTIONAL_CHOICES.items():
-            v = getattr(self, key)
-            if v is not None and v not in opts:
-                raise SettingError(
-                    key, f"must be {' or '.join(map(repr, opts))} or unset, got {v!r}"
-                )
-        dev = self.device
-        if dev not in ("auto", "cpu", "cuda") and not (
-            dev.startswith("cuda:") and dev[5:].isdigit() and dev[5:].isascii()
-        ):
-            raise SettingError("device", f"must be auto, cpu, cuda or cuda:N, got {dev!r}")
-        # lower bounds; the sizes' upper bound is the memory their evaluation needs
-        for key, lo in (
-            ("generations", 1),
-            ("population", 2),
-            ("trials", 1),
-            ("tag_length", 1),
-            ("bt_length", 4),
-            ("max_elite", 1),
-            ("swarm_size", 1),
-            ("ticks", 1),
-            ("seed", 0),
-            ("essential_floor", 0),
-            ("refound_after", 0),
-            ("reeval_trials", 0),
-        ):
-            v = getattr(self, key)
-            if v is not None and v < lo:
-                raise SettingError(key, f"must be >= {lo}, got {v}")
-        if self.seed > MAX_SEED:
-            raise SettingError("seed", f"must be in [0, {MAX_SEED}] (2**63 - 1), got {self.seed}")
-        for key in (
-            "delta",
-            "lam",
-            "hw_sigma",
-            "social_sigma",
-            "min_share",
-            "w_delivery",
-            "w_collab_bonus",
-            "w_pickup",
-            "w_energy",
-            "w_proximity",
-            "w_closeness",
-            "fitness_floor",
-            *DISTANCE_KEYS,
-        ):
-            v = getattr(self, key)
-            if not (v >= 0 and math.isfinite(v)):  # also refuses nan
-                raise SettingError(key, f"must be a finite number >= 0, got {v}")
-        for key in ("delta", "gamma"):
-            v = getattr(self, key)
-            if not v > 0:
-                raise SettingError(key, f"must be a finite number > 0, got {v}")
-        for key in (
-            "p_marginal",
-            "quota_size_exponent",
-            "essential_below",
-            "alpha",
-            "p_categorical",
-            "p_effector",
-            "p_tag_flip",
-            "bt_mutation_rate",
-            "p_gene_mutation",
-            "inactive_factor",
-        ):
-            v = getattr(self, key)
-            if v is None:  # an optional one left unset (`p_effector`)
-                continue
-            if not (v >= 0 and math.isfinite(v)):
-                raise SettingError(key, f"must be a finite number in [0, 1], got {v}")
-            if v > 1:
-                raise SettingError(key, f"must be <= 1 (a number in [0, 1]), got {v}")
+        check_types(self, SETTING_TYPES)
+        check_names(self)
+        check_ranges(self, DISTANCE_KEYS)
         if bounds:
             self.check_bounds()
 
     def check_bounds(self) -> None:
         """`SettingError` for a setting above its upper bound (`UPPER_BOUNDS`)."""
-        for key, hi in UPPER_BOUNDS.items():
-            v = getattr(self, key)
-            if v is not None and v > hi:
-                fmt = "g" if isinstance(hi, float) else "d"
-                raise SettingError(key, f"must be <= {hi:{fmt}}, got {v:{fmt}}")
+        check_upper_bounds(self)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -349,82 +279,12 @@ class SwarmCoDeConfig:
         return _part(ReproductionParams, self)
 
 
-#: The settings that name one of a few choices (validated in `SwarmCoDeConfig.validate`).
-CHOICES = {
-    "objective": ("fitness", "roi"),
-    "partners_per_niche": ("all", "one"),
-    "partner_admission": ("open", "substitute"),
-    "admission_basis": ("elites", "members"),
-}
-#: Choices of settings that may also be unset.
-OPTIONAL_CHOICES = {"preset": ("default", "paper")}
-
-#: Algorithm settings of each preset, over the defaults of `SwarmCoDeConfig` ("default" is
-#: those defaults). "paper": our reading of the paper's text with nothing beyond it: every
-#: species the tags accept is a partner from its founding, a focal's slots are re-filled from
-#: any partner, offspring quotas proportional to each species' total fitness, the effector
-#: resampled as the tiers are (docs/MODEL.md, "Presets").
-PRESETS: dict[str, dict[str, Any]] = {
-    "default": {},
-    "paper": {
-        "partners_per_niche": "all",
-        "partner_admission": "open",
-        "quota_size_exponent": None,
-        "p_effector": None,
-        "essential_floor": 0,
-    },
-}
-
-
 def preset_config(name: str = "default", **settings: Any) -> SwarmCoDeConfig:
     """The config of preset `name` (`PRESETS`) with `settings` (config keys) on top; ValueError
     naming the presets for an unknown name."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r} (presets: {', '.join(PRESETS)})")
     return replace(SwarmCoDeConfig(), **{**PRESETS[name], **settings, "preset": name})
-
-
-#: The largest seed a run's generator takes (torch.Generator.manual_seed accepts 64 bits; a seed
-#: is kept non-negative and below 2**63 so that it reads back the same everywhere).
-MAX_SEED = 2**63 - 1
-
-#: Upper bounds of settings that memory does not bound (the application checks memory first
-#: (`app.runs.check_memory`), so that sizes far too large for memory are told what they would need).
-UPPER_BOUNDS = {
-    "generations": 10_000_000,
-    "ticks": 1_000_000,
-    "tag_length": 4096,
-    "bt_length": 4096,
-    "max_elite": 1_000_000,
-    "population": 100_000_000,
-    "trials": 1_000_000,
-    "reeval_trials": 10_000,
-    "swarm_size": 10_000_000,
-    # numbers the float32 tensors must hold with room to spare (delta=1e300 is inf
-    # there; social_sigma=1e300 makes NaN genes)
-    "budget": 1e15,
-    "delta": 1e6,
-    "lam": 1e6,
-    "hw_sigma": 1e6,
-    "social_sigma": 1e6,
-    "min_share": 1e9,
-    "essential_floor": 1_000_000,
-    "refound_after": 10_000_000,
-    "w_tag": 1e6,
-    "w_hw": 1e6,
-    "w_bt": 1e6,
-    "w_tool": 1e6,
-    "w_size": 1e6,
-    "gamma": 1e3,
-    # a team-episode's raw fitness is a float32 sum of these times counts
-    "w_delivery": 1e12,
-    "w_collab_bonus": 1e12,
-    "w_pickup": 1e12,
-    "w_energy": 1e12,
-    "w_proximity": 1e12,
-    "w_closeness": 1e12,
-    "fitness_floor": 1e12,
-}
 
 
 EvolveConfig = SwarmCoDeConfig
@@ -436,8 +296,6 @@ SETTING_TYPES: dict[str, tuple[type, bool]] = {}
 for _name, _hint in typing.get_type_hints(SwarmCoDeConfig).items():
     _args = [a for a in typing.get_args(_hint) if a is not type(None)] or [_hint]
     SETTING_TYPES[_name] = (_args[0], type(None) in typing.get_args(_hint))
-_ACCEPTS = {bool: (bool,), int: (int,), float: (int, float), str: (str,)}
-_KIND_TEXT = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
 
 _RUN = SwarmCoDeConfig  # the run defaults, as class attributes
 

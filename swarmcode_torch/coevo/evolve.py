@@ -24,20 +24,23 @@ from ..sim.state import WorldParams
 from . import admission, refound
 from .admission import Admission
 from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
-from .dynamics import median, replay
+from .dynamics import Turnover, median
 from .evaluation import EvalResult, ScoreFn, evaluate, score_fn_name, team_scores
 from .fitness import beats_baseline, ema
 from .hooks import AfterEvaluation, AfterReproduction, AfterSpeciation, Hooks
 from .hooks import call as call_hooks
 from .population import Population, genome_phenotype
-from .readout import BestTeam, read_generation  # noqa: F401 (BestTeam: re-exported)
+from .readout import BestTeam, Readout, read_generation  # noqa: F401 (BestTeam: re-exported)
 from .refound import Archive
 from .reproduction import Quotas, mutate, mutate_bt, quotas, reproduce
-from .run_state import EvolutionState, GenerationResult
+from .run_state import (  # noqa: F401 (re-exported: the checkpoint's state dict)
+    CHECKPOINT_VERSION,
+    EvolutionState,
+    GenerationResult,
+    load_state_dict,
+    state_dict,
+)
 from .speciation import SpeciationResult, design_distance, distance, speciate
-from .state_check import check_state_dict
-
-CHECKPOINT_VERSION = 1
 
 
 def random_population(
@@ -178,23 +181,11 @@ def generation(
     res, adm = _evaluation(state, ctx, sp, ph, g)
     eval_seconds = time.perf_counter() - t_eval
     fit = ema(state.fitness, res.fitness, state.has_fitness, ctx.cfg.alpha)
-    if adm is not None and ctx.cfg.refound_after > 0:
-        # a species that dies as a partner beating its baselines is worth re-founding
-        useful = adm.partner & (adm.gated < admission.SUBSTITUTE.admit_below)
-        arc = refound.champions(
-            arc,
-            state.genome,
-            fit,
-            sp.species,
-            sp.proto_ids,
-            useful,
-            sp.next_species_id,
-            state.generation,
-        )
+    arc = _archive_champions(arc, state, ctx, sp, adm, fit)
     call_hooks(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
 
     # 3. reproduction: the quotas (`_quotas`), the generation's report read with the number of
-    # elites they keep, the offspring (`_reproduction`)
+    # elites they keep, the offspring (`_reproduction`), re-founding copies among them
     plan = _quotas(ctx, sp, adm, fit, refound.on_trial(arc, sp.proto_ids, state.generation))
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
     composition: dict[str, Any] = {
@@ -205,18 +196,7 @@ def generation(
     turnover = state.turnover.copy()
     founded, extinct = turnover.advance(state.generation, composition["population"])
     new_state, is_elite, parent = _reproduction(state, ctx, sp, fit, plan, out.n_elites, g)
-    if arc is not None:
-        arc, children, hint = refound.inject(
-            arc,
-            new_state.genome,
-            new_state.species_hint,
-            fit[parent],
-            is_elite,
-            state.generation,
-            ctx.cfg.refound_after,
-            partial(mutate, params=ctx.repro, generator=g),
-        )
-        new_state = replace(new_state, genome=children, species_hint=hint, rng_state=g.get_state())
+    new_state, arc = _refound(new_state, ctx, arc, fit, parent, is_elite, state.generation, g)
     new_state = replace(
         new_state,
         history=state.history + [composition],
@@ -228,7 +208,29 @@ def generation(
         hooks.after_reproduction,
         AfterReproduction(state.generation, state, sp, res, fit, new_state, is_elite, parent),
     )
-    return new_state, GenerationResult(
+
+    # 4. what the generation measured
+    counts = (founded, extinct)
+    times = (t0, eval_seconds, res.sim_seconds)
+    return new_state, _measured(state, ctx, out, turnover, counts, composition, times)
+
+
+def _measured(
+    state: EvolutionState,
+    ctx: Context,
+    out: Readout,
+    turnover: Turnover,
+    counts: tuple[int, int],
+    composition: dict[str, Any],
+    times: tuple[float, float, float],
+) -> GenerationResult:
+    """Step 4: the generation's `GenerationResult` from its report (`out`, read by
+    `readout.read_generation`), the species founded and extinct (`counts`), the species' ages
+    (`turnover`) and `times`: when the generation started (`time.perf_counter`), the seconds of
+    its evaluation and of the rollout."""
+    founded, extinct = counts
+    t0, eval_seconds, sim_seconds = times
+    return GenerationResult(
         generation=state.generation,
         best_fitness=out.fit_max,
         mean_fitness=out.fit_mean,
@@ -244,7 +246,7 @@ def generation(
         budget=ctx.cfg.budget,
         seconds=time.perf_counter() - t0,
         eval_seconds=eval_seconds,
-        sim_seconds=res.sim_seconds,
+        sim_seconds=sim_seconds,
         radius=out.radius,
         dominance=out.dominance,
         selectivity=out.selectivity,
@@ -385,71 +387,58 @@ def _reproduction(
     return new_state, is_elite, parent
 
 
-# ------------------------------------------------------------------ checkpoints
-def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
-    """A CPU, torch.save-able snapshot of the run."""
-    return {
-        "version": CHECKPOINT_VERSION,
-        "config": cfg.to_dict(),
-        "generation": state.generation,
-        "genome": state.genome.state_dict(),
-        "species_hint": state.species_hint.cpu(),
-        "proto": state.proto.state_dict() if state.proto is not None else None,
-        "proto_ids": state.proto_ids.cpu(),
-        "next_species_id": state.next_species_id,
-        "fitness": state.fitness.cpu(),
-        "has_fitness": state.has_fitness.cpu(),
-        "rng_state": state.rng_state.cpu(),
-        "best": state.best,
-        "history": state.history,
-        "admission": state.admission.state_dict() if state.admission is not None else None,
-        "archive": state.archive.state_dict() if state.archive is not None else None,
-    }
-
-
-def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
-    """Rebuild a state from `state_dict` output; ValueError if it does not fit this run."""
-    if not isinstance(d, dict) or d.get("version") != CHECKPOINT_VERSION:
-        raise ValueError("checkpoint has an unknown format or version")
-    dev = ctx.device
-    check_state_dict(d, ctx.cfg)
-    genome = Population.from_state_dict(d["genome"]).to(dev)
-    rng = d["rng_state"]
-    if rng.numel() != torch.Generator(device=dev).get_state().numel():
-        raise ValueError(
-            f"checkpoint was written on another kind of device than {dev.type}; "
-            "resume it with the --device it was run on"
-        )
-    try:
-        torch.Generator(device=dev).set_state(rng)
-    except (RuntimeError, TypeError, ValueError):
-        raise ValueError("rng_state is not a valid state of the run's generator") from None
-    adm = None
-    if d.get("admission") is not None:
-        adm = Admission.from_state_dict(d["admission"], dev)
-        if adm.partner.numel() != int(d["next_species_id"]):
-            raise ValueError("checkpoint's partner admission state does not cover its species")
-    arc = None
-    if d.get("archive") is not None:
-        arc = Archive.from_state_dict(d["archive"], dev)
-        if arc.lineage.numel() > int(d["next_species_id"]):
-            raise ValueError("checkpoint's re-founding archive covers species it does not have")
-    return EvolutionState(
-        generation=int(d["generation"]),
-        genome=genome,
-        species_hint=d["species_hint"].to(dev),
-        proto=Population.from_state_dict(d["proto"]).to(dev) if d["proto"] is not None else None,
-        proto_ids=d["proto_ids"].to(dev),
-        next_species_id=int(d["next_species_id"]),
-        fitness=d["fitness"].to(dev),
-        has_fitness=d["has_fitness"].to(dev),
-        rng_state=rng,
-        best=d["best"],
-        history=list(d["history"]),
-        turnover=replay(d["history"])[0],
-        admission=adm,
-        archive=arc,
+def _archive_champions(
+    arc: Archive | None,
+    state: EvolutionState,
+    ctx: Context,
+    sp: SpeciationResult,
+    adm: Admission | None,
+    fit: Tensor,
+) -> Archive | None:
+    """Step 2, after the evaluation: with re-founding on (`refound_after`), the champions of
+    the partners that beat their baselines archived (a species that dies as one is worth
+    re-founding); else `arc` as it is."""
+    if adm is None or ctx.cfg.refound_after <= 0:
+        return arc
+    useful = adm.partner & (adm.gated < admission.SUBSTITUTE.admit_below)
+    return refound.champions(
+        arc,
+        state.genome,
+        fit,
+        sp.species,
+        sp.proto_ids,
+        useful,
+        sp.next_species_id,
+        state.generation,
     )
+
+
+def _refound(
+    new_state: EvolutionState,
+    ctx: Context,
+    arc: Archive | None,
+    fit: Tensor,
+    parent: Tensor,
+    is_elite: Tensor,
+    generation: int,
+    g: torch.Generator,
+) -> tuple[EvolutionState, Archive | None]:
+    """Step 3, its last part: where an archive is kept, the offspring that become copies of an
+    archived champion (`refound.inject`; `fit[parent]`: each offspring's parent's fitness), and
+    the archive after it."""
+    if arc is None:
+        return new_state, arc
+    arc, children, hint = refound.inject(
+        arc,
+        new_state.genome,
+        new_state.species_hint,
+        fit[parent],
+        is_elite,
+        generation,
+        ctx.cfg.refound_after,
+        partial(mutate, params=ctx.repro, generator=g),
+    )
+    return replace(new_state, genome=children, species_hint=hint, rng_state=g.get_state()), arc
 
 
 class Evolution:

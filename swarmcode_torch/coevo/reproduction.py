@@ -430,10 +430,40 @@ def reproduce(
 
     order, rank = rank_within_groups(pos, fit, sizes)  # by (species, fitness desc, row)
     elite = top_per_group(order, rank, pos, n_elite, n_elites)
-    starts = sizes.cumsum(0) - sizes
 
     n_off = None if n_elites is None else p - n_elites  # quotas sum to p
     off_pos = torch.repeat_interleave(arange(k, dev), quota - n_elite, output_size=n_off)
+    n_off = off_pos.numel()
+    p1, p2 = _parents(genome, fit, order, sizes, off_pos, params, generator, distance_fn)
+
+    same = species[p2] == species[p1]
+    p_cross = torch.where(same, params.crossover_same, params.crossover_cross)
+    do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
+    child = mutate(mate(genome, p1, p2, do_cross, generator), params, generator)
+
+    children = Population.cat([genome.index(elite), child])
+    parent = torch.cat([elite, p1])
+    is_elite = arange(parent.numel(), dev) < elite.numel()
+    return children, species[parent], is_elite, parent
+
+
+def _parents(
+    genome: Population,
+    fit: Tensor,
+    order: Tensor,
+    sizes: Tensor,
+    off_pos: Tensor,
+    params: ReproductionParams,
+    generator: torch.Generator,
+    distance_fn: DistanceFn,
+) -> tuple[Tensor, Tensor]:
+    """`reproduce`'s parents of each offspring (its species' position `off_pos` [N]; `order`:
+    the rows by species and fitness, `sizes` [K]): p1 by in-species tournament, p2 by in-species
+    tournament within `delta` of p1 (and != p1), up to mate_tries tries, else a global
+    tournament (!= p1) -> (p1 [N], p2 [N])."""
+    p = genome.size
+    dev = genome.bt.device
+    starts = sizes.cumsum(0) - sizes
     n_off = off_pos.numel()
     ts = params.tournament_size
 
@@ -460,14 +490,4 @@ def reproduce(
     else:
         g = torch.zeros(n_off, ts, dtype=torch.long, device=dev)
     global_p2 = g.gather(1, fit[g].argmax(1, keepdim=True)).squeeze(1)
-    p2 = torch.where(ok.any(1), local_p2, global_p2)
-
-    same = species[p2] == species[p1]
-    p_cross = torch.where(same, params.crossover_same, params.crossover_cross)
-    do_cross = torch.rand(n_off, generator=generator, device=dev) < p_cross
-    child = mutate(mate(genome, p1, p2, do_cross, generator), params, generator)
-
-    children = Population.cat([genome.index(elite), child])
-    parent = torch.cat([elite, p1])
-    is_elite = arange(parent.numel(), dev) < elite.numel()
-    return children, species[parent], is_elite, parent
+    return p1, torch.where(ok.any(1), local_p2, global_p2)

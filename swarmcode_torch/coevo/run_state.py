@@ -1,17 +1,27 @@
-"""The state of a run: `EvolutionState` (what a checkpoint holds) and `GenerationResult` (what
-one generation measured); `coevo.evolve` re-exports both."""
+"""The state of a run: `EvolutionState` (what a checkpoint holds), its checkpoint state dict
+written and read back (`state_dict`, `load_state_dict`), and `GenerationResult` (what one
+generation measured); `coevo.evolve` re-exports them."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
+import torch
 from torch import Tensor
 
 from .admission import Admission
-from .dynamics import Turnover
+from .config import SwarmCoDeConfig
+from .dynamics import Turnover, replay
 from .population import Population
 from .readout import BestTeam
 from .refound import Archive
+from .state_check import check_state_dict
+
+if TYPE_CHECKING:
+    from .evolve import Context
+
+CHECKPOINT_VERSION = 1
 
 
 @dataclass
@@ -70,3 +80,70 @@ class GenerationResult:
     reeval_seconds: float = 0.0
     """Wall time of the application's re-evaluation of the generation's best team
     (`app.records.step`, `app.best_team`); 0 here."""
+
+
+# ------------------------------------------------------------------ checkpoints
+def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
+    """A CPU, torch.save-able snapshot of the run."""
+    return {
+        "version": CHECKPOINT_VERSION,
+        "config": cfg.to_dict(),
+        "generation": state.generation,
+        "genome": state.genome.state_dict(),
+        "species_hint": state.species_hint.cpu(),
+        "proto": state.proto.state_dict() if state.proto is not None else None,
+        "proto_ids": state.proto_ids.cpu(),
+        "next_species_id": state.next_species_id,
+        "fitness": state.fitness.cpu(),
+        "has_fitness": state.has_fitness.cpu(),
+        "rng_state": state.rng_state.cpu(),
+        "best": state.best,
+        "history": state.history,
+        "admission": state.admission.state_dict() if state.admission is not None else None,
+        "archive": state.archive.state_dict() if state.archive is not None else None,
+    }
+
+
+def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
+    """Rebuild a state from `state_dict` output; ValueError if it does not fit this run."""
+    if not isinstance(d, dict) or d.get("version") != CHECKPOINT_VERSION:
+        raise ValueError("checkpoint has an unknown format or version")
+    dev = ctx.device
+    check_state_dict(d, ctx.cfg)
+    genome = Population.from_state_dict(d["genome"]).to(dev)
+    rng = d["rng_state"]
+    if rng.numel() != torch.Generator(device=dev).get_state().numel():
+        raise ValueError(
+            f"checkpoint was written on another kind of device than {dev.type}; "
+            "resume it with the --device it was run on"
+        )
+    try:
+        torch.Generator(device=dev).set_state(rng)
+    except (RuntimeError, TypeError, ValueError):
+        raise ValueError("rng_state is not a valid state of the run's generator") from None
+    adm = None
+    if d.get("admission") is not None:
+        adm = Admission.from_state_dict(d["admission"], dev)
+        if adm.partner.numel() != int(d["next_species_id"]):
+            raise ValueError("checkpoint's partner admission state does not cover its species")
+    arc = None
+    if d.get("archive") is not None:
+        arc = Archive.from_state_dict(d["archive"], dev)
+        if arc.lineage.numel() > int(d["next_species_id"]):
+            raise ValueError("checkpoint's re-founding archive covers species it does not have")
+    return EvolutionState(
+        generation=int(d["generation"]),
+        genome=genome,
+        species_hint=d["species_hint"].to(dev),
+        proto=Population.from_state_dict(d["proto"]).to(dev) if d["proto"] is not None else None,
+        proto_ids=d["proto_ids"].to(dev),
+        next_species_id=int(d["next_species_id"]),
+        fitness=d["fitness"].to(dev),
+        has_fitness=d["has_fitness"].to(dev),
+        rng_state=rng,
+        best=d["best"],
+        history=list(d["history"]),
+        turnover=replay(d["history"])[0],
+        admission=adm,
+        archive=arc,
+    )

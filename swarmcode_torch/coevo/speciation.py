@@ -197,15 +197,7 @@ def speciate(
         return SpeciationResult(long_empty, long_empty, long_empty, next_species_id, empty)
     genes = _Genes(genome)  # what D reads of the population, for both of its distances here
     # (1) carry-over of surviving species: alive [Kp], closest [Kp] (the new prototype's row)
-    prev_ids: Tensor | None = None
-    alive: Tensor | None = None
-    closest: Tensor | None = None
-    if prev_proto is not None and prev_proto_ids.numel() > 0:
-        prev_ids = cast(prev_proto_ids, torch.long, dev)
-        d_prev = _sum(_terms(genes, _Genes(prev_proto.to(dev)), w))  # [P, Kp]
-        member = cast(species_hint, device=dev)[:, None] == prev_ids  # [P, Kp]
-        alive = member.any(0)
-        closest = d_prev.masked_fill(~member, math.inf).argmin(0)  # first min = lowest row
+    prev_ids, alive, closest = _carry_over(genes, species_hint, prev_proto, prev_proto_ids, dev, w)
     if p * p > _FULL_MATRIX_MAX:
         return _speciate_in_rounds(genome, prev_ids, alive, closest, next_species_id, delta, w)
     full = _sum(_terms(genes, genes, w))
@@ -236,12 +228,46 @@ def speciate(
     own = torch.full((p,), -1, dtype=torch.long, device=dev)
     own[proto_index] = arange(k + n_new, dev)
     assign_pos = torch.where(own >= 0, own, d_new.argmin(1))
-    proto_ids = torch.cat(
-        [
-            carried_ids,
-            torch.arange(next_species_id, next_species_id + n_new, dtype=torch.long, device=dev),
-        ]
+    return _result(genome, carried_ids, proto_index, assign_pos, next_species_id, n_new, full)
+
+
+def _carry_over(
+    genes: _Genes,
+    species_hint: Tensor,
+    prev_proto: Population | None,
+    prev_proto_ids: Tensor,
+    dev: torch.device,
+    w: DistanceWeights,
+) -> tuple[Tensor | None, Tensor | None, Tensor | None]:
+    """`speciate`'s step (1): the previous species' ids [Kp], which have a member by the hint
+    (alive [Kp] bool) and each one's member closest to its old prototype (closest [Kp], the
+    lowest row of a tie); three Nones where there were no previous species."""
+    if prev_proto is None or prev_proto_ids.numel() == 0:
+        return None, None, None
+    prev_ids = cast(prev_proto_ids, torch.long, dev)
+    d_prev = _sum(_terms(genes, _Genes(prev_proto.to(dev)), w))  # [P, Kp]
+    member = cast(species_hint, device=dev)[:, None] == prev_ids  # [P, Kp]
+    alive = member.any(0)
+    closest = d_prev.masked_fill(~member, math.inf).argmin(0)  # first min = lowest row
+    return prev_ids, alive, closest
+
+
+def _result(
+    genome: Population,
+    carried_ids: Tensor,
+    proto_index: Tensor,
+    assign_pos: Tensor,
+    next_species_id: int,
+    n_new: int,
+    full: Tensor | None = None,
+) -> SpeciationResult:
+    """The species of both ways of `speciate`: the carried species' ids, then `n_new` new ones
+    from `next_species_id`; each row's species at its prototype position `assign_pos` [P];
+    `full`: the [P, P] distance matrix, where it was computed."""
+    new_ids = torch.arange(
+        next_species_id, next_species_id + n_new, dtype=torch.long, device=carried_ids.device
     )
+    proto_ids = torch.cat([carried_ids, new_ids])
     return SpeciationResult(
         species=proto_ids[assign_pos],
         proto_ids=proto_ids,
@@ -331,18 +357,5 @@ def _speciate_in_rounds(
         k += 1
     assign_pos = torch.where(assigned, assign_pos, arg)
 
-    n_new = len(new_rows)
-    proto_ids = torch.cat(
-        [
-            carried_ids,
-            torch.arange(next_species_id, next_species_id + n_new, dtype=torch.long, device=dev),
-        ]
-    )
     proto_index = torch.cat([carried_rows, torch.tensor(new_rows, dtype=torch.long, device=dev)])
-    return SpeciationResult(
-        species=proto_ids[assign_pos],
-        proto_ids=proto_ids,
-        proto_index=proto_index,
-        next_species_id=next_species_id + n_new,
-        prototypes=genome.index(proto_index),
-    )
+    return _result(genome, carried_ids, proto_index, assign_pos, next_species_id, len(new_rows))

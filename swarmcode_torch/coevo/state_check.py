@@ -1,5 +1,5 @@
 """Is a checkpoint's state dict one of the run's? `check_state_dict` names the first entry whose
-shape, dtype or values do not fit the run's config (`evolve.load_state_dict` calls it before it
+shape, dtype or values do not fit the run's config (`run_state.load_state_dict` calls it before it
 builds a state from the entries)."""
 
 from __future__ import annotations

@@ -42,6 +42,12 @@ _min = _lib(tl.min)
 
 @triton.jit
 def _pair_sums(
+    s,
+    bx,
+    by,
+    ks,
+    kx,
+    ky,
     xi,
     yi,
     vxi,
@@ -58,8 +64,9 @@ def _pair_sums(
     VEL: tl.constexpr,
     DIFF: tl.constexpr,
 ):
-    """Row sums over a tile of pairs (i rows [BI], j broadcastable to [BI, BJ]) of the contact
-    solver's coefficients c (positions) and, with VEL, k (the pass-0 impulses). Not DIFF: sums
+    """The row sums (s, bx, by, ks, kx, ky [BI]) plus those over a tile of pairs (i rows [BI], j
+    broadcastable to [BI, BJ]) of the contact solver's coefficients c (positions) and, with VEL,
+    k (the pass-0 impulses); without VEL, k's sums gain zeros. Not DIFF: sums
     of c, c x_j, c y_j, k, k x_j, k y_j, as `contacts._robot_contacts_dense` (sums over partners
     of c_ij (x_i - x_j) are x_i sum_j c_ij - sum_j c_ij x_j); DIFF: 0, sum_j c_ij (x_i - x_j),
     sum_j c_ij (y_i - y_j), 0 and the same with k, as `contacts._robot_contacts_cells`."""
@@ -71,31 +78,78 @@ def _pair_sums(
     w = tl.div_rn(inv_mi[:, None] + tl.full(inv_sum.shape, 0.0, tl.float32), inv_sum)
     overlap = tl.where(pair, tl.maximum(ri[:, None] + rj - d, 0.0), 0.0)
     c = overlap * w * inv_d
+    zero = tl.full([xi.shape[0]], 0.0, tl.float32)
     if DIFF:
-        s = tl.full([xi.shape[0]], 0.0, tl.float32)
-        bx = _sum(c * dx, 1)
-        by = _sum(c * dy, 1)
+        s += zero
+        bx += _sum(c * dx, 1)
+        by += _sum(c * dy, 1)
     else:
-        s = _sum(c, 1)
-        bx = _sum(c * xj, 1)
-        by = _sum(c * yj, 1)
+        s += _sum(c, 1)
+        bx += _sum(c * xj, 1)
+        by += _sum(c * yj, 1)
     if VEL:
         vn = ((vxi[:, None] - vxj) * dx + (vyi[:, None] - vyj) * dy) * inv_d
         jimp = tl.where((overlap > 0) & (vn < 0), tl.div_rn(-2.0 * vn, inv_sum), 0.0)
         k = jimp * inv_d
         if DIFF:
-            ks = tl.full(s.shape, 0.0, tl.float32)
-            kx = _sum(k * dx, 1)
-            ky = _sum(k * dy, 1)
+            ks += zero
+            kx += _sum(k * dx, 1)
+            ky += _sum(k * dy, 1)
         else:
-            ks = _sum(k, 1)
-            kx = _sum(k * xj, 1)
-            ky = _sum(k * yj, 1)
+            ks += _sum(k, 1)
+            kx += _sum(k * xj, 1)
+            ky += _sum(k * yj, 1)
     else:
-        ks = tl.full(s.shape, 0.0, tl.float32)
-        kx = tl.full(s.shape, 0.0, tl.float32)
-        ky = tl.full(s.shape, 0.0, tl.float32)
+        ks += zero
+        kx += zero
+        ky += zero
     return s, bx, by, ks, kx, ky
+
+
+@triton.jit
+def _zero_sums(B: tl.constexpr):
+    """The six row sums of `_pair_sums` [B], before any pair."""
+    z = tl.full([B], 0.0, tl.float32)
+    return z, z, z, z, z, z
+
+
+@triton.jit
+def _load_robots(pos_ptr, vel_ptr, radius_ptr, row, m):
+    """Position, velocity and radius of the robots at flat rows `row` (masked by m: zeros)."""
+    x = tl.load(pos_ptr + row * 2, mask=m, other=0.0)
+    y = tl.load(pos_ptr + row * 2 + 1, mask=m, other=0.0)
+    vx = tl.load(vel_ptr + row * 2, mask=m, other=0.0)
+    vy = tl.load(vel_ptr + row * 2 + 1, mask=m, other=0.0)
+    r = tl.load(radius_ptr + row, mask=m, other=0.0)
+    return x, y, vx, vy, r
+
+
+@triton.jit
+def _load_partners(vel_ptr, radius_ptr, mass_ptr, present_ptr, rj_, m):
+    """Velocity, radius, inverse mass and presence of the partners at flat rows `rj_` (their
+    positions are read by each kernel from where it keeps them)."""
+    vxj = tl.load(vel_ptr + rj_ * 2, mask=m, other=0.0)
+    vyj = tl.load(vel_ptr + rj_ * 2 + 1, mask=m, other=0.0)
+    rj = tl.load(radius_ptr + rj_, mask=m, other=0.0)
+    inv_mj = _inv_mass(mass_ptr, rj_, m)
+    okj = tl.load(present_ptr + rj_, mask=m, other=0) != 0
+    return vxj, vyj, rj, inv_mj, okj
+
+
+@triton.jit
+def _inv_mass(mass_ptr, row, m):
+    """1 / mass of the robots at flat rows `row` (masked: 1)."""
+    mass = tl.load(mass_ptr + row, mask=m, other=1.0)
+    return tl.div_rn(tl.full(mass.shape, 1.0, tl.float32), mass)
+
+
+@triton.jit
+def _store_robots(out_pos_ptr, out_vel_ptr, row, x, y, vx, vy, m):
+    """Positions and velocities written at flat rows `row` (where m)."""
+    tl.store(out_pos_ptr + row * 2, x, mask=m)
+    tl.store(out_pos_ptr + row * 2 + 1, y, mask=m)
+    tl.store(out_vel_ptr + row * 2, vx, mask=m)
+    tl.store(out_vel_ptr + row * 2 + 1, vy, mask=m)
 
 
 @triton.jit
@@ -167,62 +221,31 @@ def collide_dense_kernel(
     i = tl.arange(0, BN)
     mi = i < N
     row = e * N + i
-    x = tl.load(pos_ptr + row * 2, mask=mi, other=0.0)
-    y = tl.load(pos_ptr + row * 2 + 1, mask=mi, other=0.0)
-    vx = tl.load(vel_ptr + row * 2, mask=mi, other=0.0)
-    vy = tl.load(vel_ptr + row * 2 + 1, mask=mi, other=0.0)
-    r = tl.load(radius_ptr + row, mask=mi, other=0.0)
-    inv_m = tl.div_rn(
-        tl.full(r.shape, 1.0, tl.float32), tl.load(mass_ptr + row, mask=mi, other=1.0)
-    )
+    x, y, vx, vy, r = _load_robots(pos_ptr, vel_ptr, radius_ptr, row, mi)
+    inv_m = _inv_mass(mass_ptr, row, mi)
     ok = (tl.load(present_ptr + row, mask=mi, other=0) != 0) & mi
     for it in tl.static_range(ITERS):
         tl.store(out_pos_ptr + row * 2, x, mask=mi)
         tl.store(out_pos_ptr + row * 2 + 1, y, mask=mi)
         tl.debug_barrier()  # the pass's positions are written before any is read
-        s = tl.full([BN], 0.0, tl.float32)
-        bx = tl.full([BN], 0.0, tl.float32)
-        by = tl.full([BN], 0.0, tl.float32)
-        ks = tl.full([BN], 0.0, tl.float32)
-        kx = tl.full([BN], 0.0, tl.float32)
-        ky = tl.full([BN], 0.0, tl.float32)
+        s, bx, by, ks, kx, ky = _zero_sums(BN)
         for j0 in range(0, N, BJ):
             j = j0 + tl.arange(0, BJ)
             mj = j < N
             rj_ = e * N + j
             xj = tl.load(out_pos_ptr + rj_ * 2, mask=mj, other=0.0, cache_modifier=".cg")
             yj = tl.load(out_pos_ptr + rj_ * 2 + 1, mask=mj, other=0.0, cache_modifier=".cg")
-            vxj = tl.load(vel_ptr + rj_ * 2, mask=mj, other=0.0)
-            vyj = tl.load(vel_ptr + rj_ * 2 + 1, mask=mj, other=0.0)
-            rj = tl.load(radius_ptr + rj_, mask=mj, other=0.0)
-            inv_mj = tl.div_rn(
-                tl.full(rj.shape, 1.0, tl.float32), tl.load(mass_ptr + rj_, mask=mj, other=1.0)
+            vxj, vyj, rj, inv_mj, okj = _load_partners(
+                vel_ptr, radius_ptr, mass_ptr, present_ptr, rj_, mj
             )
-            okj = (tl.load(present_ptr + rj_, mask=mj, other=0) != 0) & mj
-            pair = ok[:, None] & okj[None, :] & (i[:, None] != j[None, :])
-            s_, bx_, by_, ks_, kx_, ky_ = _pair_sums(
-                x,
-                y,
-                vx,
-                vy,
-                r,
-                inv_m,
-                xj[None, :],
-                yj[None, :],
-                vxj[None, :],
-                vyj[None, :],
-                rj[None, :],
-                inv_mj[None, :],
-                pair,
-                it == 0,
-                False,
-            )
-            s += s_
-            bx += bx_
-            by += by_
-            ks += ks_
-            kx += kx_
-            ky += ky_
+            pair = ok[:, None] & (okj & mj)[None, :] & (i[:, None] != j[None, :])
+            s, bx, by, ks, kx, ky = _pair_sums(
+                s, bx, by, ks, kx, ky,  # the row sums so far
+                x, y, vx, vy, r, inv_m,  # the robots
+                xj[None, :], yj[None, :], vxj[None, :],  # their partners
+                vyj[None, :], rj[None, :], inv_mj[None, :],
+                pair, it == 0, False,
+            )  # fmt: skip
         tl.debug_barrier()  # every partner read before the next pass overwrites out_pos
         nx = x + x * s - bx
         ny = y + y * s - by
@@ -232,12 +255,11 @@ def collide_dense_kernel(
         x = nx
         y = ny
     x, y, vx, vy = _static(x, y, vx, vy, r, o_pos_ptr, o_rad_ptr, o_pres_ptr, e, O, arena, BO)
-    tl.store(out_pos_ptr + row * 2, x, mask=mi)
-    tl.store(out_pos_ptr + row * 2 + 1, y, mask=mi)
-    tl.store(out_vel_ptr + row * 2, vx, mask=mi)
-    tl.store(out_vel_ptr + row * 2 + 1, vy, mask=mi)
+    _store_robots(out_pos_ptr, out_vel_ptr, row, x, y, vx, vy, mi)
 
 
+# Over 80 lines: a fused kernel is one function by design (one launch a pass; what two kernels
+# share is in the @triton.jit helpers above).
 @triton.jit
 def collide_cells_kernel(
     pos_ptr,
@@ -276,26 +298,15 @@ def collide_cells_kernel(
     ms = slot < N
     i = tl.load(order_ptr + e * N + slot, mask=ms, other=0)
     row = e * N + i
-    x = tl.load(pos_ptr + row * 2, mask=ms, other=0.0)
-    y = tl.load(pos_ptr + row * 2 + 1, mask=ms, other=0.0)
-    vx = tl.load(vel_ptr + row * 2, mask=ms, other=0.0)
-    vy = tl.load(vel_ptr + row * 2 + 1, mask=ms, other=0.0)
-    r = tl.load(radius_ptr + row, mask=ms, other=0.0)
+    x, y, vx, vy, r = _load_robots(pos_ptr, vel_ptr, radius_ptr, row, ms)
     if PAIRS:
-        inv_m = tl.div_rn(
-            tl.full(r.shape, 1.0, tl.float32), tl.load(mass_ptr + row, mask=ms, other=1.0)
-        )
+        inv_m = _inv_mass(mass_ptr, row, ms)
         ok = (tl.load(present_ptr + row, mask=ms, other=0) != 0) & ms
         cell = tl.load(cell_ptr + row, mask=ms, other=0)
         cx = cell // G
         cy = cell % G
         sbase = e * (G * G + 2)
-        s = tl.full([BI], 0.0, tl.float32)
-        bx = tl.full([BI], 0.0, tl.float32)
-        by = tl.full([BI], 0.0, tl.float32)
-        ks = tl.full([BI], 0.0, tl.float32)
-        kx = tl.full([BI], 0.0, tl.float32)
-        ky = tl.full([BI], 0.0, tl.float32)
+        s, bx, by, ks, kx, ky = _zero_sums(BI)
         for a in range(9):  # the 3 x 3 neighbouring cells (a loop: unrolled, 9x the code)
             ncx = cx + (a // 3 - 1)
             ncy = cy + (a % 3 - 1)
@@ -311,23 +322,16 @@ def collide_cells_kernel(
                 rj_ = e * N + j
                 xj = tl.load(pos_ptr + rj_ * 2, mask=mk, other=0.0)
                 yj = tl.load(pos_ptr + rj_ * 2 + 1, mask=mk, other=0.0)
-                vxj = tl.load(vel_ptr + rj_ * 2, mask=mk, other=0.0)
-                vyj = tl.load(vel_ptr + rj_ * 2 + 1, mask=mk, other=0.0)
-                rj = tl.load(radius_ptr + rj_, mask=mk, other=0.0)
-                inv_mj = tl.div_rn(
-                    tl.full(rj.shape, 1.0, tl.float32), tl.load(mass_ptr + rj_, mask=mk, other=1.0)
+                vxj, vyj, rj, inv_mj, okj = _load_partners(
+                    vel_ptr, radius_ptr, mass_ptr, present_ptr, rj_, mk
                 )
-                okj = tl.load(present_ptr + rj_, mask=mk, other=0) != 0
                 pair = mk & okj & (j != i[:, None])
-                s_, bx_, by_, ks_, kx_, ky_ = _pair_sums(
-                    x, y, vx, vy, r, inv_m, xj, yj, vxj, vyj, rj, inv_mj, pair, VEL, True
-                )
-                s += s_
-                bx += bx_
-                by += by_
-                ks += ks_
-                kx += kx_
-                ky += ky_
+                s, bx, by, ks, kx, ky = _pair_sums(
+                    s, bx, by, ks, kx, ky,  # the row sums so far
+                    x, y, vx, vy, r, inv_m,  # the robots
+                    xj, yj, vxj, vyj, rj, inv_mj,  # their partners
+                    pair, VEL, True,
+                )  # fmt: skip
         nx = x + bx  # as contacts._robot_contacts_cells: sums of c_ij (x_i - x_j)
         ny = y + by
         if VEL:
@@ -337,10 +341,7 @@ def collide_cells_kernel(
         y = ny
     if STATIC:
         x, y, vx, vy = _static(x, y, vx, vy, r, o_pos_ptr, o_rad_ptr, o_pres_ptr, e, O, arena, BO)
-    tl.store(out_pos_ptr + row * 2, x, mask=ms)
-    tl.store(out_pos_ptr + row * 2 + 1, y, mask=ms)
-    tl.store(out_vel_ptr + row * 2, vx, mask=ms)
-    tl.store(out_vel_ptr + row * 2 + 1, vy, mask=ms)
+    _store_robots(out_pos_ptr, out_vel_ptr, row, x, y, vx, vy, ms)
 
 
 @triton.jit

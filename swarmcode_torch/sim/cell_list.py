@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import torch
 
+from .contacts import candidate_contacts
 from .state import WorldParams
 
 
@@ -130,30 +131,8 @@ def robot_contacts_cell_list(
 ):
     """`contacts._robot_contacts_dense`'s solver over this cell list's candidates (rebuilt every
     pass, as the reference's broad phase). `capacity` as in `cell_candidates` (None: exact)."""
-    E, N = present.shape
-    inv_m = 1.0 / mass
 
-    def at(v, rows):  # v [E, N, *] at rows [E, N, K]
-        K = rows.shape[2]
-        idx = rows.reshape(E, N * K)
-        if v.dim() == 3:
-            return v.gather(1, idx[..., None].expand(E, N * K, v.shape[2])).reshape(E, N, K, -1)
-        return v.gather(1, idx).reshape(E, N, K)
+    def candidates(p: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return cell_candidates(cell_list_for(p, present, params), present, capacity)
 
-    for it in range(params.collision_iters):
-        cl = cell_list_for(pos, present, params)
-        rows, valid = cell_candidates(cl, present, capacity)
-        inv_sum = inv_m[..., None] + at(inv_m, rows)
-        w = inv_m[..., None] / inv_sum
-        rsum = radius[..., None] + at(radius, rows)
-        diff = pos[:, :, None, :] - at(pos, rows)
-        d = diff.norm(dim=-1)
-        inv_d = 1.0 / d.clamp_min(1e-6)
-        overlap = torch.where(valid, (rsum - d).clamp_min(0), 0.0)
-        new_pos = pos + ((overlap * w * inv_d)[..., None] * diff).sum(2)
-        if it == 0:
-            vn = ((vel[:, :, None, :] - at(vel, rows)) * diff).sum(-1) * inv_d
-            j = torch.where((overlap > 0) & (vn < 0), -2.0 * vn / inv_sum, 0.0)
-            vel = vel + inv_m[..., None] * ((j * inv_d)[..., None] * diff).sum(2)
-        pos = new_pos
-    return pos, vel
+    return candidate_contacts(pos, vel, radius, mass, params, candidates)

@@ -4,6 +4,7 @@ robot-obstacle and robot-wall, resolved elastically."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import torch
 
@@ -118,10 +119,26 @@ def _gather_rows(values: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
 
 def _robot_contacts_cells(pos, vel, radius, mass, present, params: WorldParams):
     """The same contact solver as `_robot_contacts_dense`, over [E, N, K] broad-phase candidates."""
+    return candidate_contacts(
+        pos, vel, radius, mass, params, lambda p: neighbour_candidates(p, present, params)
+    )
+
+
+def candidate_contacts(
+    pos,
+    vel,
+    radius,
+    mass,
+    params: WorldParams,
+    candidates: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]],
+):
+    """`_robot_contacts_dense`'s solver over broad-phase candidates: `candidates(pos)` -> each
+    robot's candidate partner rows [E, N, K] and which are valid [E, N, K] bool, asked again
+    every pass (a push may carry a robot into another cell). The broad phase of `collide`
+    (`neighbour_candidates`) and the cell list's (`cell_list.robot_contacts_cell_list`)."""
     inv_m = 1.0 / mass
     for it in range(params.collision_iters):
-        # candidates are re-binned every pass: a push may carry a robot into another cell
-        rows, valid = neighbour_candidates(pos, present, params)  # [E, N, K]
+        rows, valid = candidates(pos)  # [E, N, K]
         inv_sum = inv_m[..., None] + _gather_rows(inv_m, rows)
         w = inv_m[..., None] / inv_sum
         rsum = radius[..., None] + _gather_rows(radius, rows)

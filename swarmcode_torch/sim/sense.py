@@ -32,21 +32,10 @@ def sense(
     params: WorldParams,
 ) -> Senses:
     """Leaf statuses of every robot from the current state (`keys`: see :func:`random_keys`)."""
-    E, N = robots.radius.shape
-    Q, G = layout.g_effector.shape[1:]
-    H = Q * G
-    base = state.pos.new_tensor([params.arena / 2, params.arena / 2])
-    gpos = (state.p_pos[:, :, None, :] + layout.g_offset).reshape(E, H, 2)
+    E = robots.radius.shape[0]
+    base, gpos, avail, free = grip_points(state, layout, robots, params)
     dist = (gpos[:, None, :, :] - state.pos[:, :, None, :]).norm(dim=-1)  # [E, N, H]
-    avail = (
-        (layout.g_effector >= 0)
-        & (state.holder < 0)
-        & (state.p_status != DELIVERED)[..., None]
-        & layout.p_present[..., None]
-    ).reshape(E, 1, H)
-    alive = robots.present & (state.energy > 0)
-    free = alive & (state.holding < 0)
-    valid = compat & avail & free[..., None]
+    valid = compat & avail.reshape(E, 1, gpos.shape[1]) & free[..., None]
     dm = torch.where(valid, dist, _INF)
     best_d, best = dm.min(-1)
     score = torch.where(valid, keys, -1.0)
@@ -58,6 +47,28 @@ def sense(
     )
 
     return leaf_senses(state, params, base, gpos, best, best_d, rand, rand_d)
+
+
+def grip_points(
+    state: State, layout: Layout, robots: Robots, params: WorldParams
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """What both ways of sensing (`sense`, the Triton tick's) start from: the base's centre [2],
+    the grip points' positions gpos [E, H, 2], which grip points are free to take avail [E, Q, G]
+    (a grip of a package that is present, not delivered, not held), which robots may take one
+    free [E, N] (present, with energy, holding nothing)."""
+    E = robots.radius.shape[0]
+    Q, G = layout.g_effector.shape[1:]
+    base = state.pos.new_tensor([params.arena / 2, params.arena / 2])
+    gpos = (state.p_pos[:, :, None, :] + layout.g_offset).reshape(E, Q * G, 2)
+    avail = (
+        (layout.g_effector >= 0)
+        & (state.holder < 0)
+        & (state.p_status != DELIVERED)[..., None]
+        & layout.p_present[..., None]
+    )
+    alive = robots.present & (state.energy > 0)
+    free = alive & (state.holding < 0)
+    return base, gpos, avail, free
 
 
 def leaf_senses(

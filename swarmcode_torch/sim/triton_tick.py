@@ -39,8 +39,8 @@ import torch
 
 from .cell_list import cell_list_for
 from .layout import Layout
-from .sense import _INF, Senses, leaf_senses
-from .state import DELIVERED, Robots, State, WorldParams
+from .sense import _INF, Senses, grip_points, leaf_senses
+from .state import Robots, State, WorldParams
 from .step import step
 
 # the dense kernel holds an environment's robots in one block (a power of two) of registers
@@ -302,19 +302,9 @@ def sense_triton(
     params: WorldParams,
 ) -> Senses:
     """`sense.sense` with the robot x grip-point phase in `sense_kernel`."""
-    E, N = robots.radius.shape
-    Q, G = layout.g_effector.shape[1:]
-    H = Q * G
-    base = state.pos.new_tensor([params.arena / 2, params.arena / 2])
-    gpos = (state.p_pos[:, :, None, :] + layout.g_offset).reshape(E, H, 2)
-    avail = (
-        (layout.g_effector >= 0)
-        & (state.holder < 0)
-        & (state.p_status != DELIVERED)[..., None]
-        & layout.p_present[..., None]
-    ).reshape(E, H)
-    alive = robots.present & (state.energy > 0)
-    free = alive & (state.holding < 0)
+    E = robots.radius.shape[0]
+    base, gpos, avail, free = grip_points(state, layout, robots, params)
+    avail = avail.reshape(E, gpos.shape[1])
     best, best_d, rand, rand_d = nearest_grips(state.pos, gpos, avail, free, compat, keys)
 
     return leaf_senses(state, params, base, gpos, best, best_d, rand, rand_d)
