@@ -19,7 +19,7 @@ from .app.evaluate import EvaluationResult, evaluate
 from .app.load_runs import Runs, load_runs
 from .app.reporting import composition_figure
 from .coevo.ask_tell import Asked, Evolution
-from .coevo.config import EvolveConfig, SwarmCoDeConfig
+from .coevo.config import SwarmCoDeConfig
 from .coevo.evolve import GenerationResult
 from .coevo.population import Population
 from .sim.bt import format_tree
@@ -35,7 +35,6 @@ __all__ = [
     "Runs",
     "RunResult",
     "SwarmCoDeConfig",
-    "EvolveConfig",
     "Evolution",
     "Asked",
     "GenerationResult",

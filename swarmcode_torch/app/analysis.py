@@ -106,9 +106,19 @@ def default_windows(last_generation: int, step: int = 100, tail: int = 50) -> li
 
 
 def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None) -> list[dict]:
-    """`dynamics.window_stats` of each window of a run directory (default `default_windows`);
-    RunError for a window that is not two integers START < END (a START before 0 counts
-    from generation 0)."""
+    """The species dynamics of a run in windows of generations (`dynamics.window_stats`).
+
+    Args:
+        run_dir: the run directory.
+        windows: (START, END) generation pairs, START < END (a START before 0 counts from
+            generation 0); default: `default_windows`.
+
+    Returns:
+        One dict of statistics per window.
+
+    Raises:
+        RunError: a window that is not two integers START < END.
+    """
     for w in windows or ():
         if (
             not isinstance(w, (tuple, list))
@@ -138,6 +148,7 @@ def run_dynamics(run_dir: Path, windows: Sequence[tuple[int, int]] | None = None
     return out
 
 
+# long: its docstring is the public API's parameter table (the docs' reference); the code is under 80 lines
 def replay_run(
     run_dir: str | Path,
     out: str | Path | None = None,
@@ -152,27 +163,40 @@ def replay_run(
     report: Callable[[str], None] | None = None,
     seeds: int = 1,
 ) -> tuple[Path, dict]:
-    """Render the best team of a run (summary.json "designs"), or the best team of one
-    `generation` (teams.jsonl), as a GIF, or (`html`) as an interactive page.
+    """Render the best team of a run as a GIF, or as an interactive page.
 
-    The run's config gives the episode length (``ticks`` overrides it) and its scenario.toml
-    copy the scenario (the config's scenario in a run made before runs kept one); the
-    environment is drawn from `seed`. RunError for an `out` whose folder does not exist, a run
-    file that cannot be read or is malformed (its robots are built from the run's hardware.toml
-    copy). Returns the GIF path (default ``run_dir/team.gif``) and
-    the episode metrics as floats.
+    The run's config gives the episode length and its scenario.toml copy the scenario (the
+    config's scenario in a run made before runs kept one); its robots are built from the run's
+    hardware.toml copy. The episodes run on the CPU's tick (`sim.runtime.tick_function`, as
+    evolution's).
 
-    `html`: one self-contained HTML file (default ``run_dir/team.html``; `replay_page`): the
-    team and its baseline team (the focal design's slots refilled by its partners) side by side
-    in the same environment, every tick, with each robot's design, energy, load and behavior
-    tree; `every`, `fps` and `dpi` do not apply. The metrics returned are the focal team's.
+    Args:
+        run_dir: the run directory.
+        out: the file to write (default ``run_dir/team.gif``, with `html` ``run_dir/team.html``).
+        seed: the seed the environment is drawn from.
+        ticks: the episode length (default: the run's).
+        every: draw every k-th tick (GIF).
+        generation: replay this generation's best team (teams.jsonl) instead of the run's
+            (summary.json "designs").
+        fps: frames per second of the GIF.
+        dpi: the GIF's resolution.
+        html: write one self-contained HTML page instead (`replay_page`): the team and its
+            baseline team (the focal design's slots refilled by its partners) side by side in the
+            same environment, every tick, with each robot's design, energy, load and behavior
+            tree; `every`, `fps` and `dpi` do not apply.
+        progress: `progress(stage, done, total)`, told of the ticks recorded and the frames drawn.
+        report: `report(line)` gets lines that explain the replay: deliveries and pick-ups by
+            design and, for the page, the tick at which the two arenas part.
+        seeds: more than 1: the focal's marginal contribution over that many environments
+            (seeds `seed`, `seed` + 1, ...), its mean on the page and in a reported line
+            (`replay_seeds`).
 
-    The episodes run on the CPU's tick (`sim.runtime.tick_function`, as evolution's).
-    `progress(stage, done, total)` is told of the ticks recorded and the frames drawn;
-    `report(line)` gets lines that explain the replay: deliveries and pick-ups by design and,
-    for the page, the tick at which the two arenas part. `seeds` > 1: the focal's marginal
-    contribution over that many environments (seeds `seed`, `seed` + 1, ...), its mean on the
-    page and in a reported line (`replay_seeds`).
+    Returns:
+        The path written and the episode metrics as floats (the focal team's, for a page).
+
+    Raises:
+        RunError: an `out` whose folder does not exist, a run file that cannot be read or is
+            malformed.
     """
     check_replay_options(seed=seed, ticks=ticks, every=every, fps=fps, dpi=dpi)
     _integer("seeds", seeds, 1, min(MAX_REPLAY_SEEDS, MAX_SEED - seed + 1))

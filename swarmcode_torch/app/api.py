@@ -36,7 +36,6 @@ from .checkpoints import load_run
 from .files import RunError, new_run_dir
 from .optspec import Intervals, Values, api_values, check_values, declare_keywords
 from .run_options import EVOLVE_OPTIONS
-from .runconfig import scenario_to_toml  # noqa: F401 - the API's, as before
 from .session import make_config  # noqa: F401 - the API's, as before
 
 
@@ -148,6 +147,7 @@ def _result(
 
 
 # ------------------------------------------------------------------ evolve, resume, load
+# long: its docstring is the public API's parameter table (the docs' reference); the code is under 80 lines
 def evolve(
     config: SwarmCoDeConfig | str | os.PathLike | None = None,
     *,
@@ -160,64 +160,83 @@ def evolve(
 ) -> RunResult:
     """Run an evolution and return its `RunResult`.
 
-    config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's budget
-        experiment with the default preset; `preset="paper"` for the paper's algorithm with
-        nothing beyond it), or the path of a settings file in the format of a run's config.toml
-        (`swarmcode-torch evolve --config FILE`); `settings` replace its keys: `generations=20,
-        population=30, seed=0, budget=4000.0, delta=0.5, ...` (any key of SwarmCoDeConfig / a
-        run's config.toml).
-    scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
-    budget, objective, generations, population, swarm_size, trials, ticks, seed, device,
-        compile, preset: the settings `swarmcode-torch evolve` has options for (UNSET: the
-        config's), as any other key of `settings`.
-    logdir: where the run directory is created (named as by the CLI,
-        `SCENARIO[__bBUDGET][__OBJECTIVE]__SEED__TIME`); None: run in memory, write no file.
-    checkpoint_every, render_every, figure_every: as `swarmcode-torch evolve`'s options
-        (generations between checkpoints, TensorBoard replay images (0: never), composition
-        figures).
-    reporters: more reporters (objects with on_start(ev), on_generation(ev, result),
-        on_end(ev)); callback: called with each generation's `GenerationResult`
-        (`result.best_fitness`, `result.team`, ...; `records.scalars(result)` under the tags);
-        returning True (or a non-empty string, the reason) stops the run after that generation,
-        as `patience` does (`RunResult.stopped` "callback"; summary.json's "stop" has the
-        reason); any other value (None, False) lets it go on.
-    fitness: a function `fitness(metrics, cost, cfg) -> Tensor [E]` that scores each
-        team-episode instead of the built-in fitness (`evaluation.team_scores`: F_raw times the
-        budget penalty, / cost for roi): `metrics` maps names (`fitness.METRIC_KEYS`,
-        "energy_used", ...) to [E] tensors, `cost` is the [E] team cost in $, `cfg` the run's
-        `EvalConfig` (weights, budget, lam, objective). The marginal gate, the mean over trials
-        and the EMA apply to its scores. The run records its name (config.toml's
-        `fitness_function`, summary.json's "fitness"), and `resume` needs it again.
-    threads: torch's CPU threads for this process (`sim.runtime.set_threads`; default:
-        OMP_NUM_THREADS if set, else the cores less the load average, at least 1).
-    wandb: a Weights & Biases project to log the run to as well (`reporting.WandbReporter`;
-        needs the wandb extra, `pip install -e ".[wandb]"`; ImportError saying so before anything
-        runs).
-    from_run: "RUN" or "RUN@GENERATION": start a new run from that run's snapshot of GENERATION
-        (or its latest checkpoint), as `swarmcode-torch evolve --from`: `settings` change the
-        parent's config (its scenario, population, tag_length and bt_length stay), the new run
-        records its parent (config.toml's [parent], summary.json's "parent"); `logdir` defaults
-        to the parent's folder. A parent scored by a `fitness` function needs it again.
-    snapshot_every: keep a copy of the checkpoint every N generations in the run directory's
-        snapshots/ (0: none), to branch from with `from_run`.
-    max_time, patience: stop cleanly (checkpoint written, `resume` continues it) after the
-        generation that ends past `max_time` (seconds, or "90m", "2h", ...), or when the best
-        team has not improved for `patience` generations; `RunResult.stopped` says which.
-    stop_metric, stop_min_delta, stop_warmup, stop_mode: early stopping on a chosen metric
-        (`stopping.MetricStop`; they need `patience`): stop when `stop_metric` (the run's best
-        team's "best/fitness", the default, or a metrics.csv tag such as "team/fitness") has not
-        improved by more than `stop_min_delta` for `patience` generations, counted from
-        generation `stop_warmup` on; `stop_mode` "max" (the default) or "min".
-    keep_checkpoints: also keep the last K checkpoints (RUN_DIR/checkpoints/generation-NNNNNN.pt)
-        and the one of the run's best team (checkpoints/best.pt); 0 (the default): none.
-    progress: print the run's progress on stdout, a compact line per generation (done count,
-        time left, best fitness, species; redrawn in place on a terminal or in a notebook).
-        None (the default): on a terminal or in a notebook, not when stdout is a file or a
-        pipe; True: always; False: never.
+    Ctrl-C in a run with a directory writes the checkpoint of the last finished generation
+    (continue with `resume`) and re-raises KeyboardInterrupt.
 
-    Raises ValueError (`ScenarioError` is one) for an invalid setting or scenario before any
-    file is written. Ctrl-C in a run with a directory writes the checkpoint of the last finished
-    generation (continue with `resume`) and re-raises KeyboardInterrupt.
+    Args:
+        config: an `SwarmCoDeConfig` to start from (default: `SwarmCoDeConfig()`, the paper's
+            budget experiment with the default preset; `preset="paper"` for the paper's algorithm
+            with nothing beyond it), or the path of a settings file in the format of a run's
+            config.toml (`swarmcode-torch evolve --config FILE`).
+        scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
+        budget: the team budget in $ (`--budget`); UNSET: the config's, as for every setting.
+        objective: "fitness" or "roi" (`--objective`).
+        generations: how many generations (`--generations`).
+        population: the population size (`--population`).
+        swarm_size: robots per team (`--swarm-size`).
+        trials: environments per team and generation (`--trials`).
+        ticks: the episode length (`--ticks`).
+        seed: the run's seed (`--seed`).
+        device: "cpu" or "cuda" (`--device`).
+        compile: the compiled tick instead of the fused C++ one on the CPU (`--compile`).
+        logdir: where the run directory is created (named as by the CLI,
+            `SCENARIO[__bBUDGET][__OBJECTIVE]__SEED__TIME`); None: run in memory, write no file.
+        checkpoint_every: generations between checkpoints.
+        render_every: generations between TensorBoard replay images (0: never).
+        figure_every: generations between composition figures.
+        preset: "default" or "paper".
+        threads: torch's CPU threads for this process (`sim.runtime.set_threads`; default:
+            OMP_NUM_THREADS if set, else the cores less the load average, at least 1).
+        from_run: "RUN" or "RUN@GENERATION": start a new run from that run's snapshot of
+            GENERATION (or its latest checkpoint), as `swarmcode-torch evolve --from`: `settings`
+            change the parent's config (its scenario, population, tag_length and bt_length stay),
+            the new run records its parent (config.toml's [parent], summary.json's "parent");
+            `logdir` defaults to the parent's folder. A parent scored by a `fitness` function needs
+            it again.
+        snapshot_every: keep a copy of the checkpoint every N generations in the run directory's
+            snapshots/ (0: none), to branch from with `from_run`.
+        max_time: stop cleanly (checkpoint written, `resume` continues it) after the generation
+            that ends past it (seconds, or "90m", "2h", ...); `RunResult.stopped` says so.
+        patience: stop when the best team has not improved for this many generations.
+        stop_metric: early stopping on this metric (`stopping.MetricStop`; needs `patience`): the
+            run's best team's "best/fitness" (the default) or a metrics.csv tag such as
+            "team/fitness".
+        stop_min_delta: an improvement counts when it exceeds this.
+        stop_warmup: generations before the patience count starts.
+        stop_mode: "max" (the default) or "min".
+        keep_checkpoints: also keep the last K checkpoints
+            (RUN_DIR/checkpoints/generation-NNNNNN.pt) and the one of the run's best team
+            (checkpoints/best.pt); 0 (the default): none.
+        reporters: more reporters (objects with on_start(ev), on_generation(ev, result),
+            on_end(ev)).
+        callback: called with each generation's `GenerationResult` (`result.best_fitness`,
+            `result.team`, ...; `records.scalars(result)` under the tags); returning True (or a
+            non-empty string, the reason) stops the run after that generation, as `patience` does
+            (`RunResult.stopped` "callback"; summary.json's "stop" has the reason); any other value
+            (None, False) lets it go on.
+        fitness: a function `fitness(metrics, cost, cfg) -> Tensor [E]` that scores each
+            team-episode instead of the built-in fitness (`evaluation.team_scores`: F_raw times the
+            budget penalty, / cost for roi): `metrics` maps names (`fitness.METRIC_KEYS`,
+            "energy_used", ...) to [E] tensors, `cost` is the [E] team cost in $, `cfg` the run's
+            `EvalConfig` (weights, budget, lam, objective). The marginal gate, the mean over trials
+            and the EMA apply to its scores. The run records its name (config.toml's
+            `fitness_function`, summary.json's "fitness"), and `resume` needs it again.
+        wandb: a Weights & Biases project to log the run to as well (`reporting.WandbReporter`;
+            needs the wandb extra, `pip install -e ".[wandb]"`; ImportError saying so before
+            anything runs).
+        progress: print the run's progress on stdout, a compact line per generation (done count,
+            time left, best fitness, species; redrawn in place on a terminal or in a notebook).
+            None (the default): on a terminal or in a notebook, not when stdout is a file or a
+            pipe; True: always; False: never.
+        **settings: any other key of `SwarmCoDeConfig` / a run's config.toml (`delta=0.5`, ...);
+            they replace the config's.
+
+    Returns:
+        The `RunResult`: config, history, species composition, best team, run directory.
+
+    Raises:
+        ValueError: (`ScenarioError` is one) an invalid setting or scenario, before any file is
+            written.
     """
     o, settings = api_values(EVOLVE_OPTIONS, settings)
     check_values(o.options.values(), o)
@@ -347,19 +366,6 @@ def _branch(config, scenario, o: Values, settings, launch: _Launch) -> RunResult
         return _run_started(start, launch)
 
 
-def start_evolution(
-    cfg: SwarmCoDeConfig, scenario: Scenario | None = None, fitness: ScoreFn | None = None
-) -> tuple[Evolution, bytes]:
-    """The checks `swarmcode-torch evolve` makes before it creates anything (the config, the
-    scenario, the memory the run needs), then the run's `Evolution` and the bytes of its
-    scenario file (a run directory keeps them as scenario.toml). `scenario`: a Scenario object
-    to run instead of `cfg.scenario`'s file; `fitness`: a user score function (`evolve`).
-    ValueError (ScenarioError is one) otherwise."""
-    fitness = api_checks.checked_fitness(fitness)
-    checked, data = session.check_start(cfg, scenario)
-    return session.build(cfg, checked, scenario, fitness), data
-
-
 def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
     from .files import METRICS_FILE
     from .reporting import read_metrics_csv
@@ -370,6 +376,7 @@ def _earlier_rows(run_dir: Path, before: int) -> list[dict]:
     return [r for r in read_metrics_csv(path)[0] if r["generation"] < before]
 
 
+# long: its docstring is the public API's parameter table (the docs' reference); the code is under 80 lines
 def resume(
     run_dir: str | os.PathLike,
     generations: int | None = None,
@@ -393,16 +400,41 @@ def resume(
     stop_mode: str | None = None,
     keep_checkpoints: int = 0,
 ) -> RunResult:
-    """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`):
-    to `generations` in all (default: the run's), on `device` (default: the run's);
-    `fitness`: the run's own fitness function, for a run started with one (`evolve`). The
-    result's history has every generation: those before the checkpoint from metrics.csv (when
-    the run has one), then this part's. RunError (a ValueError) for a directory, config or
-    checkpoint that cannot be used. `reporters`, `callback` (called with each generation's
-    `GenerationResult`; it may stop the run), `threads`, `snapshot_every`, `max_time`,
-    `patience`, the `stop_*` settings, `keep_checkpoints`, `wandb` and `progress`: as in
-    `evolve` (`max_time` counts from this call); the keywords `run_options` declares are
-    checked against their declared bounds, as in `evolve`."""
+    """Continue the run in `run_dir` from its checkpoint (as `swarmcode-torch evolve --resume`).
+
+    The keywords `run_options` declares are checked against their declared bounds, as in
+    `evolve`.
+
+    Args:
+        run_dir: the run directory.
+        generations: how many generations in all (default: the run's).
+        device: "cpu" or "cuda" (default: the run's).
+        checkpoint_every: as in `evolve`.
+        render_every: as in `evolve`.
+        figure_every: as in `evolve`.
+        reporters: as in `evolve`.
+        callback: called with each generation's `GenerationResult`; it may stop the run, as in
+            `evolve`.
+        fitness: the run's own fitness function, for a run started with one (`evolve`).
+        threads: as in `evolve`.
+        snapshot_every: as in `evolve`.
+        max_time: as in `evolve`, counted from this call.
+        patience: as in `evolve`.
+        wandb: as in `evolve`.
+        progress: as in `evolve`.
+        stop_metric: as in `evolve`.
+        stop_min_delta: as in `evolve`.
+        stop_warmup: as in `evolve`.
+        stop_mode: as in `evolve`.
+        keep_checkpoints: as in `evolve`.
+
+    Returns:
+        The `RunResult`; its history has every generation: those before the checkpoint from
+        metrics.csv (when the run has one), then this part's.
+
+    Raises:
+        RunError: (a ValueError) a directory, config or checkpoint that cannot be used.
+    """
     d = api_checks.declared(
         checkpoint_every=checkpoint_every,
         render_every=render_every,
@@ -443,9 +475,16 @@ def resume(
 
 
 def load(run_dir: str | os.PathLike) -> RunResult:
-    """The results of a run directory as they stand, without running anything: config,
-    metrics.csv as the history (empty for a run written before metrics.csv existed), species
-    composition and best team from the checkpoint. `evolution` is None."""
+    """The results of a run directory as they stand, without running anything.
+
+    Args:
+        run_dir: the run directory.
+
+    Returns:
+        The `RunResult`: config, metrics.csv as the history (empty for a run written before
+        metrics.csv existed), species composition and best team from the checkpoint; its
+        `evolution` is None.
+    """
     run_dir = Path(run_dir)
     cfg, ck, scenario = load_run(run_dir)
     best = ck["best"]

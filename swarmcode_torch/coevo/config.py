@@ -44,7 +44,6 @@ __all__ = [
     "UPPER_BOUNDS",
     "DistanceWeights",
     "EvalConfig",
-    "EvolveConfig",
     "FitnessWeights",
     "ReproductionParams",
     "SettingError",
@@ -286,9 +285,6 @@ def preset_config(name: str = "default", **settings: Any) -> SwarmCoDeConfig:
         raise ValueError(f"unknown preset {name!r} (presets: {', '.join(PRESETS)})")
     return replace(SwarmCoDeConfig(), **{**PRESETS[name], **settings, "preset": name})
 
-
-EvolveConfig = SwarmCoDeConfig
-"""The name of `SwarmCoDeConfig` before 0.3."""
 
 #: SwarmCoDeConfig field -> (its type without None, whether None is allowed); from the resolved
 #: annotations, not their text.

@@ -258,7 +258,7 @@ def collide_dense_kernel(
     _store_robots(out_pos_ptr, out_vel_ptr, row, x, y, vx, vy, mi)
 
 
-# Over 80 lines: a fused kernel is one function by design (one launch a pass; what two kernels
+# long: a fused kernel is one function by design (one launch a pass; what two kernels
 # share is in the @triton.jit helpers above).
 @triton.jit
 def collide_cells_kernel(

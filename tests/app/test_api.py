@@ -14,7 +14,6 @@ import pytest
 from typer.testing import CliRunner
 
 import swarmcode_torch as sc
-from swarmcode_torch.app.api import scenario_to_toml
 from swarmcode_torch.app.cli import app
 from swarmcode_torch.app.reporting import (
     HPARAM_METRICS,
@@ -23,6 +22,7 @@ from swarmcode_torch.app.reporting import (
     CsvReporter,
     read_metrics_csv,
 )
+from swarmcode_torch.app.runconfig import scenario_to_toml
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.sim.scenario import builtin_names, load_scenario
 
@@ -375,7 +375,8 @@ def test_package_exports_and_cheap_import():
         assert name in sc.__all__ and hasattr(sc, name)
     from swarmcode_torch.coevo.config import SwarmCoDeConfig
 
-    assert SwarmCoDeConfig is sc.SwarmCoDeConfig is sc.EvolveConfig  # the name before 0.3
+    assert SwarmCoDeConfig is sc.SwarmCoDeConfig
+    assert not hasattr(sc, "EvolveConfig")  # the name before 0.3, removed (CHANGELOG, Unreleased)
 
 
 @pytest.mark.subprocess

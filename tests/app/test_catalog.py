@@ -14,8 +14,8 @@ from test_reliability import MINE, invoke, one_line_error
 
 import swarmcode_torch as sc
 from swarmcode_torch.app import distributed
-from swarmcode_torch.app.api import scenario_to_toml
 from swarmcode_torch.app.render import record_episode, team_genome
+from swarmcode_torch.app.runconfig import scenario_to_toml
 from swarmcode_torch.app.runs import hardware_bytes, read_config, run_scenario
 from swarmcode_torch.app.runs import resume as resume_run
 from swarmcode_torch.coevo import evaluation

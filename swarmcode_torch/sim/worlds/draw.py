@@ -346,6 +346,7 @@ def _draw(rng: random.Random, seed: int, knobs: dict, catalog: Catalog) -> World
     )
 
 
+# long: its docstring is the public API's parameter table (the docs' reference); the code is under 80 lines
 def generate_world(
     seed: int,
     *,
