@@ -142,7 +142,8 @@ def fmt_rate(x: float | None) -> str:
     return f"{x:14.4g}" if x is not None else f"{'-':>14}"
 
 
-def main() -> None:
+def make_parser() -> argparse.ArgumentParser:
+    """The command line (`--help`)."""
     parser = argparse.ArgumentParser(
         description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -209,6 +210,11 @@ def main() -> None:
     parser.add_argument(
         "--out", default=None, help="output JSON (default benchmarks/results/vmas_<device>.json)"
     )
+    return parser
+
+
+def main() -> None:
+    parser = make_parser()
     args = parser.parse_args()
     device = apply_run_options(parser, args)
     cuda = device.type == "cuda"
