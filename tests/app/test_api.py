@@ -472,39 +472,6 @@ def test_api_preset_sets_the_papers_rules_under_explicit_settings(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
-def test_progress_true_prints_a_line_per_generation_and_false_prints_nothing(tmp_path, capsys):
-    capsys.readouterr()
-    sc.evolve(generations=2, logdir=None, progress=True, **SETTINGS)
-    lines = capsys.readouterr().out.splitlines()
-    assert [ln.split("  ")[0] for ln in lines] == ["done 1/2", "done 2/2"], lines
-    assert all(" left " in ln and " best " in ln and " species " in ln for ln in lines), lines
-    run = sc.evolve(generations=1, logdir=tmp_path, render_every=0, progress=False, **SETTINGS)
-    sc.resume(run.run_dir, generations=2, render_every=0, progress=False)
-    assert capsys.readouterr() == ("", "")
-    sc.resume(run.run_dir, generations=3, render_every=0, progress=True)
-    assert [ln.split("  ")[0] for ln in capsys.readouterr().out.splitlines()] == ["done 3/3"]
-    sc.evolve(generations=1, logdir=None, **SETTINGS)  # the default: not on a pipe or file
-    assert capsys.readouterr() == ("", "")
-    with pytest.raises(TypeError, match="progress"):
-        sc.evolve(generations=1, logdir=None, progress="yes", **SETTINGS)
-
-
-def test_progress_on_a_terminal_or_in_a_notebook_is_one_line_redrawn(monkeypatch):
-    import io
-
-    class Terminal(io.StringIO):
-        def isatty(self):
-            return True
-
-    screen = Terminal()
-    monkeypatch.setattr(sys, "stdout", screen)
-    sc.evolve(generations=3, logdir=None, **SETTINGS)  # the default shows it here
-    text = screen.getvalue()
-    assert text.endswith("\n") and text.count("\n") == 1, repr(text)
-    frames = text.rstrip("\n").split("\r")[1:]
-    assert [f.split("  ")[0] for f in frames] == ["done 1/3", "done 2/3", "done 3/3"], frames
-
-
 def test_api_callbacks_are_annotated_with_what_they_receive():
     import typing
 

@@ -11,68 +11,18 @@ from __future__ import annotations
 import io
 import json
 import os
-import socket
-import sys
 import time
 from pathlib import Path
 
 import pytest
 import torch
-from test_reliability import _copy_run  # the same copy of a run directory
-from typer.testing import CliRunner
-
-from swarmcode_torch.app.cli import app
-
-runner = CliRunner()
-TINY = [
-    "--scenario",
-    "one-niche",
-    "--population",
-    "6",
-    "--swarm-size",
-    "4",
-    "--trials",
-    "1",
-    "--ticks",
-    "10",
-    "--seed",
-    "3",
-    "--render-every",
-    "0",
-    "--no-compile",
-    "--device",
-    "cpu",
-]
-RFAST = ["--render-every", "0", "--device", "cpu"]
-
-
-def invoke(*args, **kw):
-    return runner.invoke(app, [str(a) for a in args], **kw)
-
-
-def one_line_error(result, *needles):
-    assert result.exit_code == 2, result.output
-    assert "Traceback" not in result.output
-    assert result.exception is None or isinstance(result.exception, SystemExit), result.exception
-    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1, result.output
-    assert lines[0].startswith("Error: "), result.output
-    for n in needles:
-        assert n in lines[0], result.output
-    return lines[0]
+from hostilekit import RFAST, TINY, _snapshot, invoke, one_line_error, tiny_run
+from runkit import _copy_run  # the same copy of a run directory
 
 
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory):
-    logdir = tmp_path_factory.mktemp("runs")
-    r = invoke("evolve", *TINY, "--generations", 2, "--logdir", logdir)
-    assert r.exit_code == 0, r.output
-    (run,) = list(logdir.iterdir())
-    return run
-
-
-def _snapshot(run: Path) -> dict[str, bytes]:
-    return {f.name: f.read_bytes() for f in run.iterdir() if f.is_file() and not f.is_symlink()}
+    return tiny_run(tmp_path_factory)
 
 
 # ====================================================================== links and paths
@@ -372,121 +322,6 @@ def test_non_utf8_path_bytes_and_nul_in_paths_are_one_line(tmp_path):
     one_line_error(invoke("inspect", bad), "RUN_DIR", "not UTF-8")
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@pytest.mark.parametrize("command", ["evolve", "sweep"])
-def test_a_ray_address_that_is_closed_or_silent_is_one_line_in_time(tmp_path, monkeypatch, command):
-    pytest.importorskip("ray")
-    monkeypatch.setenv("SWARMCODE_RAY_CONNECT_TIMEOUT", "2")
-    args = (
-        ["evolve", *TINY, "--generations", 1, "--logdir", tmp_path / "r"]
-        if command == "evolve"
-        else [
-            "sweep",
-            "--budgets",
-            "1000",
-            "--generations",
-            1,
-            "--population",
-            6,
-            "--trials",
-            1,
-            "--ticks",
-            5,
-            "--device",
-            "cpu",
-            "--out",
-            tmp_path / "s",
-        ]
-    )
-    t = time.monotonic()
-    one_line_error(
-        invoke(*args, "--ray-address", f"127.0.0.1:{_free_port()}"),
-        "cannot join the Ray cluster at 127.0.0.1:",
-    )
-    silent = socket.socket()  # accepts (the backlog) and never answers
-    silent.bind(("127.0.0.1", 0))
-    silent.listen(4)
-    try:
-        port = silent.getsockname()[1]
-        one_line_error(
-            invoke(*args, "--ray-address", f"127.0.0.1:{port}"),
-            f"cannot join the Ray cluster at 127.0.0.1:{port}",
-        )
-    finally:
-        silent.close()
-    assert time.monotonic() - t < 30
-
-
-@pytest.fixture
-def ray_whose_workers_cannot_start(tmp_path):
-    """A local Ray cluster (127.0.0.1 only, 2 CPUs) whose worker processes cannot start: they run
-    under a virtual-memory limit (ulimit -v, as on shared clusters), so mapping the object store
-    fails ("mmap failed") and no task or actor ever runs. The command line joins this session."""
-    ray = pytest.importorskip("ray")
-    if ray.is_initialized():
-        pytest.skip("a Ray session is already open in this process")
-    python = tmp_path / "python-under-ulimit"
-    python.write_text(f'#!/bin/sh\nulimit -v 400000\nexec {sys.executable} "$@"\n')
-    python.chmod(0o755)
-    ray.init(
-        num_cpus=2,
-        include_dashboard=False,
-        log_to_driver=False,
-        _node_ip_address="127.0.0.1",  # loopback only
-        runtime_env={"py_executable": str(python)},
-    )
-    try:
-        yield ray
-    finally:
-        ray.shutdown()
-
-
-@pytest.mark.subprocess
-@pytest.mark.parametrize("command", ["sweep", "evolve"])
-def test_ray_workers_that_cannot_start_are_one_line_in_time(
-    ray_whose_workers_cannot_start, tmp_path, monkeypatch, command
-):
-    monkeypatch.setenv("SWARMCODE_RAY_START_TIMEOUT", "3")
-    if command == "sweep":
-        args = [
-            "sweep",
-            "--budgets",
-            "1000",
-            "--seeds",
-            "0,1",
-            "--generations",
-            1,
-            "--population",
-            6,
-            "--trials",
-            1,
-            "--ticks",
-            5,
-            "--device",
-            "cpu",
-            "--no-compile",
-            "--out",
-            tmp_path / "s",
-            "--workers",
-            2,
-        ]
-        needle = "Ray could not start 2 workers for the runs within 3 s"
-    else:
-        args = ["evolve", *TINY, "--generations", 1, "--logdir", tmp_path / "r"]
-        args += ["--eval-workers", 2]
-        needle = "Ray could not start 2 evaluation workers within 3 s"
-    t = time.monotonic()
-    line = one_line_error(invoke(*args), needle, "SWARMCODE_RAY_START_TIMEOUT")
-    assert time.monotonic() - t < 30, line
-    if command == "sweep":
-        assert not (tmp_path / "s" / "table.csv").exists()
-
-
 # ====================================================================== silent wrongs
 def test_empty_logdir_and_out_are_refused(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -589,81 +424,3 @@ def test_a_sweep_table_with_a_null_figure_is_written(tmp_path):
         out,
     )
     assert r.exit_code == 0, r.output
-
-
-# ====================================================================== the API
-API = dict(
-    scenario="one-niche",
-    population=6,
-    swarm_size=4,
-    trials=1,
-    ticks=10,
-    seed=3,
-    generations=2,
-    device="cpu",
-    compile=False,
-    render_every=0,
-)
-
-
-def _api(tmp_path, **kw):
-    import swarmcode_torch as sc
-
-    return sc.evolve(logdir=tmp_path / "runs", **{**API, **kw})
-
-
-@pytest.mark.parametrize(
-    "kw,error",
-    [
-        (dict(callback=42), "callback must be a function"),
-        (dict(reporters=[object()]), "has no on_start, on_generation, on_end"),
-        (dict(reporters=5), "reporters must be a list"),
-        (dict(checkpoint_every=2.5), "checkpoint_every must be an integer"),
-        (dict(figure_every="3"), "figure_every must be an integer"),
-        (dict(fitness="f"), "fitness must be a function"),
-    ],
-)
-def test_the_api_checks_its_arguments_before_any_file_is_written(tmp_path, kw, error):
-    with pytest.raises(TypeError, match=error):
-        _api(tmp_path, **kw)
-    assert not (tmp_path / "runs").exists()
-
-
-def test_api_resume_refuses_zero_generations_and_a_bad_callback(finished_run, tmp_path):
-    import swarmcode_torch as sc
-
-    run = _copy_run(finished_run, tmp_path / "run")
-    before = _snapshot(run)
-    with pytest.raises(ValueError, match="generations must be an integer >= 1"):
-        sc.resume(run, generations=0)
-    with pytest.raises(TypeError, match="callback must be a function"):
-        sc.resume(run, generations=3, callback="x")
-    assert _snapshot(run) == before
-
-
-def huge(metrics, cost, cfg):
-    return torch.full_like(cost, 3e38)
-
-
-def spend(metrics, cost, cfg):
-    cost.mul_(1000.0)  # an in-place edit of what it was given
-    metrics["delivered_individual"].add_(50.0)
-    return -cost
-
-
-def plain(metrics, cost, cfg):
-    return -cost * 1000.0
-
-
-def test_a_user_fitness_with_huge_scores_is_refused(tmp_path):
-    with pytest.raises(ValueError, match="beyond the"):
-        _api(tmp_path, fitness=huge)
-
-
-def test_a_user_fitness_that_edits_its_arguments_in_place_changes_no_record(tmp_path):
-    a = _api(tmp_path / "a", fitness=spend)
-    b = _api(tmp_path / "b", fitness=plain)  # the same scores without the edits
-    assert a.best_team["cost"] == b.best_team["cost"]
-    assert a.best_team["deliveries"] == b.best_team["deliveries"]
-    assert [h["team/cost"] for h in a.history] == [h["team/cost"] for h in b.history]
-    assert a.config.fitness_function.endswith(".spend")

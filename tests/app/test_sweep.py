@@ -3,6 +3,7 @@
 import json
 
 import torch
+from runkit import invoke, one_line_error
 
 from swarmcode_torch.app.sweep import csv_text, markdown, table_rows
 from swarmcode_torch.coevo.population import Population, design_record
@@ -87,3 +88,80 @@ def test_budget_plot_shows_fitness_and_species_apart_with_integer_species_ticks(
     lo, hi = axes[1].get_ylim()
     ticks = [t for t in axes[1].get_yticks() if lo <= t <= hi]
     assert ticks and all(float(t).is_integer() for t in ticks), ticks
+
+
+# ====================================================================== sweeps
+SWEEP = [
+    "sweep",
+    "--budgets",
+    "1500",
+    "--seeds",
+    "0",
+    "--scenario",
+    "one-niche",
+    "--generations",
+    1,
+    "--population",
+    6,
+    "--swarm-size",
+    4,
+    "--trials",
+    1,
+    "--ticks",
+    10,
+    "--device",
+    "cpu",
+    "--no-compile",
+]
+
+
+def test_a_sweep_into_an_out_of_other_settings_is_refused(tmp_path):
+    out = tmp_path / "sweep"
+    r = invoke(*SWEEP, "--out", out)
+    assert r.exit_code == 0, r.output
+    for change, keys in (
+        ((("--population", 6), ("--population", 8)), "population"),
+        ((("--trials", 1), ("--trials", 2)), "trials"),
+        ((("--ticks", 10), ("--ticks", 12)), "ticks"),
+        ((("--scenario", "one-niche"), ("--scenario", "two-niche")), "scenario"),
+    ):
+        args = list(SWEEP)
+        i = args.index(change[0][0])
+        args[i + 1] = change[1][1]
+        one_line_error(invoke(*args, "--out", out), "other settings", f"differing keys: {keys}")
+    one_line_error(invoke(*SWEEP, "--objective", "roi", "--out", out), "differing keys: objective")
+    one_line_error(
+        invoke(*SWEEP, "--set", "delta=0.5", "--set", "p_tag_flip=0.5", "--out", out),
+        "differing keys: delta, p_tag_flip",
+    )
+    r = invoke(*SWEEP, "--out", out)  # the same sweep: already done
+    assert r.exit_code == 0 and "already done" in r.output, r.output
+
+
+def test_a_sweep_refuses_duplicated_or_non_finite_budgets_and_seeds(tmp_path):
+    one_line_error(
+        invoke("sweep", "--budgets", "1500,3000,1500", "--out", tmp_path / "a"),
+        "--budgets lists 1500 twice",
+    )
+    one_line_error(
+        invoke("sweep", "--seeds", "0,1,0", "--out", tmp_path / "a"), "--seeds lists 0 twice"
+    )
+    one_line_error(
+        invoke("sweep", "--budgets", "1500,nan", "--out", tmp_path / "a"),
+        "--budgets: nan is not a finite number",
+    )
+    one_line_error(
+        invoke("sweep", "--seeds", str(2**64), "--out", tmp_path / "a"),
+        "--seeds must be in [0, 9223372036854775807]",
+    )
+    assert not (tmp_path / "a").exists()
+
+
+def test_a_sweep_table_from_a_damaged_summary_is_one_line(tmp_path):
+    out = tmp_path / "sweep"
+    assert invoke(*SWEEP, "--out", out).exit_code == 0
+    summary = out / "budget-1500_seed-0" / "summary.json"
+    summary.write_text(summary.read_text().replace('"team_cost": ', '"team_cost": "x", "y": '))
+    one_line_error(
+        invoke(*SWEEP, "--out", out), str(summary), "team_cost: expected a number", stdout_ok=True
+    )
