@@ -168,43 +168,43 @@ def evolve(
             budget experiment with the default preset; `preset="paper"` for the paper's algorithm
             with nothing beyond it), or the path of a settings file in the format of a run's
             config.toml (`swarmcode-torch evolve --config FILE`).
-        scenario: a built-in name, a path to a scenario TOML file, or a `Scenario` object.
-        budget: the team budget in $ (`--budget`); UNSET: the config's, as for every setting.
-        objective: "fitness" or "roi" (`--objective`).
-        generations: how many generations (`--generations`).
-        population: the population size (`--population`).
-        swarm_size: robots per team (`--swarm-size`).
-        trials: environments per team and generation (`--trials`).
-        ticks: the episode length (`--ticks`).
-        seed: the run's seed (`--seed`).
-        device: "cpu" or "cuda" (`--device`).
-        compile: the compiled tick instead of the fused C++ one on the CPU (`--compile`).
-        logdir: where the run directory is created (named as by the CLI,
+        scenario (str | PathLike | Scenario | None): a built-in name, a path to a scenario TOML file, or a `Scenario` object.
+        budget (float | None): the team budget in $ (`--budget`); UNSET: the config's, as for every setting.
+        objective (str): "fitness" or "roi" (`--objective`).
+        generations (int): how many generations (`--generations`).
+        population (int): the population size (`--population`).
+        swarm_size (int | None): robots per team (`--swarm-size`).
+        trials (int): environments per team and generation (`--trials`).
+        ticks (int | None): the episode length (`--ticks`).
+        seed (int): the run's seed (`--seed`).
+        device (str): "cpu" or "cuda" (`--device`).
+        compile (bool | None): the compiled tick instead of the fused C++ one on the CPU (`--compile`).
+        logdir (str | PathLike | None): where the run directory is created (named as by the CLI,
             `SCENARIO[__bBUDGET][__OBJECTIVE]__SEED__TIME`); None: run in memory, write no file.
-        checkpoint_every: generations between checkpoints.
-        render_every: generations between TensorBoard replay images (0: never).
-        figure_every: generations between composition figures.
-        preset: "default" or "paper".
-        threads: torch's CPU threads for this process (`sim.runtime.set_threads`; default:
+        checkpoint_every (int): generations between checkpoints.
+        render_every (int): generations between TensorBoard replay images (0: never).
+        figure_every (int): generations between composition figures.
+        preset (str): "default" or "paper".
+        threads (int | None): torch's CPU threads for this process (`sim.runtime.set_threads`; default:
             OMP_NUM_THREADS if set, else the cores less the load average, at least 1).
-        from_run: "RUN" or "RUN@GENERATION": start a new run from that run's snapshot of
+        from_run (str | PathLike | None): "RUN" or "RUN@GENERATION": start a new run from that run's snapshot of
             GENERATION (or its latest checkpoint), as `swarmcode-torch evolve --from`: `settings`
             change the parent's config (its scenario, population, tag_length and bt_length stay),
             the new run records its parent (config.toml's [parent], summary.json's "parent");
             `logdir` defaults to the parent's folder. A parent scored by a `fitness` function needs
             it again.
-        snapshot_every: keep a copy of the checkpoint every N generations in the run directory's
+        snapshot_every (int): keep a copy of the checkpoint every N generations in the run directory's
             snapshots/ (0: none), to branch from with `from_run`.
-        max_time: stop cleanly (checkpoint written, `resume` continues it) after the generation
+        max_time (float | str | None): stop cleanly (checkpoint written, `resume` continues it) after the generation
             that ends past it (seconds, or "90m", "2h", ...); `RunResult.stopped` says so.
-        patience: stop when the best team has not improved for this many generations.
-        stop_metric: early stopping on this metric (`stopping.MetricStop`; needs `patience`): the
+        patience (int | None): stop when the best team has not improved for this many generations.
+        stop_metric (str | None): early stopping on this metric (`stopping.MetricStop`; needs `patience`): the
             run's best team's "best/fitness" (the default) or a metrics.csv tag such as
             "team/fitness".
-        stop_min_delta: an improvement counts when it exceeds this.
-        stop_warmup: generations before the patience count starts.
-        stop_mode: "max" (the default) or "min".
-        keep_checkpoints: also keep the last K checkpoints
+        stop_min_delta (float | None): an improvement counts when it exceeds this.
+        stop_warmup (int | None): generations before the patience count starts.
+        stop_mode (str | None): "max" (the default) or "min".
+        keep_checkpoints (int): also keep the last K checkpoints
             (RUN_DIR/checkpoints/generation-NNNNNN.pt) and the one of the run's best team
             (checkpoints/best.pt); 0 (the default): none.
         reporters: more reporters (objects with on_start(ev), on_generation(ev, result),
@@ -228,7 +228,7 @@ def evolve(
             time left, best fitness, species; redrawn in place on a terminal or in a notebook).
             None (the default): on a terminal or in a notebook, not when stdout is a file or a
             pipe; True: always; False: never.
-        **settings: any other key of `SwarmCoDeConfig` / a run's config.toml (`delta=0.5`, ...);
+        **settings (Any): any other key of `SwarmCoDeConfig` / a run's config.toml (`delta=0.5`, ...);
             they replace the config's.
 
     Returns:
