@@ -23,8 +23,9 @@ from .files import (
     atomic_write_bytes,
     check_output_path,
 )
+from .frames import save_gif
 from .records import design_capabilities
-from .render import record_episode, save_gif, team_genome
+from .render import record_episode, team_genome
 from .replay_explain import MAX_REPLAY_SEEDS, explain_lines, seed_marginals
 from .replay_page import HTML_FILE, page_data, write_page
 from .runconfig import _size, estimate_bytes, memory_limit, read_config, run_scenario

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 from ..coevo.population import PINCHER
 from ..sim.state import DELIVERED, State
 from .episodes import Episode
+from .render import _mass_colors, design_colors, draw_static, frame_title
 
 _SS = 2  # supersampling: frames are drawn at twice the size, then reduced
 
@@ -38,8 +40,6 @@ class FrameRenderer:
         from matplotlib.figure import Figure
         from matplotlib.font_manager import FontProperties, findfont
         from PIL import Image, ImageFont
-
-        from .render import _mass_colors, design_colors, draw_static
 
         self.episode = episode
         colors = design_colors(max(episode.num_designs, 1))
@@ -74,8 +74,6 @@ class FrameRenderer:
     def image(self, s: State):
         """Snapshot `s` as a PIL RGB image."""
         from PIL import ImageDraw
-
-        from .render import frame_title
 
         ep, lay, rob = self.episode, self.episode.layout, self.episode.robots
         im = self.background.copy()
@@ -168,3 +166,39 @@ def gif_frames(
         if progress is not None and (i % 5 == 0 or i == n - 1):
             progress("frames", i + 1, n)
     return out
+
+
+def frame_image(episode: Episode, index: int = -1, dpi: int = 80):
+    """Snapshot `index` as a numpy uint8 array ``[H, W, 3]`` (TensorBoard: dataformats="HWC")."""
+    return FrameRenderer(episode, dpi).render(episode.snapshots[index])
+
+
+def save_png(episode: Episode, path: str | Path, index: int = -1, dpi: int = 100) -> Path:
+    """Write snapshot `index` (default the last) as a PNG."""
+    path = Path(path)
+    FrameRenderer(episode, dpi).image(episode.snapshots[index]).save(path, format="PNG")
+    return path
+
+
+def save_gif(
+    episode: Episode,
+    path: str | Path,
+    fps: float = 10,
+    dpi: int = 80,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> Path:
+    """Write every snapshot of the episode as an animated GIF (looping) to `path` (a file name,
+    or a binary file object); `progress("frames", done, total)` as the frames are drawn."""
+    path = Path(path) if isinstance(path, (str, Path)) else path
+    frames = gif_frames(episode, dpi, progress)
+    duration = max(int(round(1000.0 / fps)), 20)
+    frames[0].save(
+        path,
+        format="GIF",
+        save_all=True,
+        append_images=list(frames[1:]),
+        duration=duration,
+        loop=0,
+        optimize=False,
+    )
+    return path

@@ -2,17 +2,16 @@
 
 `record_episode` (`episodes`) runs a team through one random environment of a scenario on the
 CPU and keeps snapshots of the state; `draw_frame` draws a snapshot on a matplotlib Axes in true
-arena coordinates; `save_gif`, `save_png` and `frame_image` turn an episode into pictures
-(`frames.FrameRenderer`: the same drawing, the still part drawn once) (`analysis.replay_run` does it all for the best team of a run
-directory).
+arena coordinates; `draw_static` and `frame_title` are what `frames` builds its fast frames on
+(`frames.save_gif`, `frames.save_png` and `frames.frame_image` turn an episode into pictures;
+`analysis.replay_run` does it all for the best team of a run directory).
 
 Matplotlib (Agg canvas, no pyplot) and PIL are imported inside the functions that need them.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from pathlib import Path
+from collections.abc import Sequence
 
 import torch
 from torch import Tensor
@@ -21,16 +20,7 @@ from ..coevo.population import PINCHER, SUCTION
 from ..sim.state import DELIVERED, State
 from .episodes import _EFFECTOR_NAMES, Episode, record_episode, team_genome
 
-__all__ = [
-    "Episode",
-    "design_colors",
-    "draw_frame",
-    "frame_image",
-    "record_episode",
-    "save_gif",
-    "save_png",
-    "team_genome",
-]
+__all__ = ["Episode", "design_colors", "draw_frame", "record_episode", "team_genome"]
 # tab10, most distinct hues first; brown / olive / grey last (packages are drawn in browns).
 _TAB10_ORDER = (0, 2, 3, 4, 6, 9, 1, 7, 8, 5)
 
@@ -309,45 +299,3 @@ def _legend(ax, episode: Episode, colors: Sequence) -> None:
         title="darker = heavier",
         title_fontsize=8,
     )
-
-
-def frame_image(episode: Episode, index: int = -1, dpi: int = 80):
-    """Snapshot `index` as a numpy uint8 array ``[H, W, 3]`` (TensorBoard: dataformats="HWC")."""
-    from .frames import FrameRenderer
-
-    return FrameRenderer(episode, dpi).render(episode.snapshots[index])
-
-
-def save_png(episode: Episode, path: str | Path, index: int = -1, dpi: int = 100) -> Path:
-    """Write snapshot `index` (default the last) as a PNG."""
-    from .frames import FrameRenderer
-
-    path = Path(path)
-    FrameRenderer(episode, dpi).image(episode.snapshots[index]).save(path, format="PNG")
-    return path
-
-
-def save_gif(
-    episode: Episode,
-    path: str | Path,
-    fps: float = 10,
-    dpi: int = 80,
-    progress: Callable[[str, int, int], None] | None = None,
-) -> Path:
-    """Write every snapshot of the episode as an animated GIF (looping) to `path` (a file name,
-    or a binary file object); `progress("frames", done, total)` as the frames are drawn."""
-    from .frames import gif_frames
-
-    path = Path(path) if isinstance(path, (str, Path)) else path
-    frames = gif_frames(episode, dpi, progress)
-    duration = max(int(round(1000.0 / fps)), 20)
-    frames[0].save(
-        path,
-        format="GIF",
-        save_all=True,
-        append_images=list(frames[1:]),
-        duration=duration,
-        loop=0,
-        optimize=False,
-    )
-    return path

@@ -23,6 +23,7 @@ from ..sim.runtime import tick_function
 from ..sim.scenario import Scenario
 from ..sim.state import WorldParams
 from .episodes import CREDIT_KINDS, team_genome
+from .replay_teams import focal_and_baseline, species_count
 
 #: The most environments `replay --seeds` takes (each is two episodes).
 MAX_REPLAY_SEEDS = 1000
@@ -39,7 +40,6 @@ def seed_marginals(
     """{"seeds": [first, last], "focal": [...], "baseline": [...], "marginal": [...], "mean",
     "sd"}: the two teams' scores and their difference in each environment, the mean and sample
     standard deviation of the differences (sd None for one environment)."""
-    from .replay_page import _species_count, focal_and_baseline
 
     genome, _ = team_genome(designs, cfg.tag_length)
     _, team, base, _ = focal_and_baseline(designs, seed)
@@ -64,7 +64,7 @@ def seed_marginals(
     costs = []
     for t in (team, base):
         present = t >= 0
-        counts = torch.tensor([_species_count(designs, t)])
+        counts = torch.tensor([species_count(designs, t)])
         c = team_cost(row_cost[t.clamp_min(0)], present, counts, scenario.species_overhead)
         costs.append(float(c[0]))
     ecfg = cfg.evaluation(scenario.num_robots, scenario.episode_ticks)

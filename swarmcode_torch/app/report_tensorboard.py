@@ -248,7 +248,8 @@ def replay_strip(ev: Evolution, designs: list[dict], seed: int, frames: int = 3,
     a GIF frame is drawn (dpi 80: the legend's 8-point text is about 9 pixels high)."""
     import numpy as np
 
-    from .render import frame_image, record_episode, team_genome
+    from .frames import frame_image
+    from .render import record_episode, team_genome
 
     genome, team = team_genome(designs, ev.cfg.tag_length)
     ticks = ev.ctx.eval_cfg.ticks

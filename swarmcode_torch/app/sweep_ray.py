@@ -11,7 +11,7 @@ from pathlib import Path
 import typer
 
 from .signals import terminate_as_interrupt
-from .sweep_run import run_sweep_run, sweep_progress
+from .sweep_one import run_sweep_run, sweep_progress
 from .terminal import Failed, console, err, fail, need_ray, os_fail
 
 

@@ -12,7 +12,7 @@ from .evaluation import EvalResult
 from .speciation import SpeciationResult
 
 if TYPE_CHECKING:
-    from .evolve import EvolutionState
+    from .run_state import EvolutionState
 
 
 @dataclass(frozen=True, eq=False)

@@ -5,7 +5,7 @@ generation measured); `coevo.evolve` re-exports them."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import torch
 from torch import Tensor
@@ -18,8 +18,13 @@ from .readout import BestTeam
 from .refound import Archive
 from .state_check import check_state_dict
 
-if TYPE_CHECKING:
-    from .evolve import Context
+
+class RunContext(Protocol):
+    """What reading a checkpoint needs of a run's context (`evolve.Context` is one)."""
+
+    cfg: SwarmCoDeConfig
+    device: torch.device
+
 
 CHECKPOINT_VERSION = 1
 
@@ -104,7 +109,7 @@ def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
     }
 
 
-def load_state_dict(d: dict, ctx: Context) -> EvolutionState:
+def load_state_dict(d: dict, ctx: RunContext) -> EvolutionState:
     """Rebuild a state from `state_dict` output; ValueError if it does not fit this run."""
     if not isinstance(d, dict) or d.get("version") != CHECKPOINT_VERSION:
         raise ValueError("checkpoint has an unknown format or version")

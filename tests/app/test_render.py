@@ -8,14 +8,8 @@ import torch
 from PIL import Image
 
 from swarmcode_torch.app.analysis import replay_run
-from swarmcode_torch.app.render import (
-    Episode,
-    frame_image,
-    record_episode,
-    save_gif,
-    save_png,
-    team_genome,
-)
+from swarmcode_torch.app.frames import frame_image, save_gif, save_png
+from swarmcode_torch.app.render import Episode, record_episode, team_genome
 from swarmcode_torch.app.runs import write_config
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.population import PINCHER, SUCTION

@@ -17,13 +17,8 @@ from swarmcode_torch.app.cli import app
 from swarmcode_torch.app.episodes import divergence, record_episode
 from swarmcode_torch.app.render import team_genome
 from swarmcode_torch.app.replay_explain import design_credits, explain_lines, seed_marginals
-from swarmcode_torch.app.replay_page import (
-    decode_page,
-    final_counts,
-    focal_and_baseline,
-    page_data,
-    render_html,
-)
+from swarmcode_torch.app.replay_page import decode_page, final_counts, page_data, render_html
+from swarmcode_torch.app.replay_teams import focal_and_baseline
 from swarmcode_torch.app.runs import write_config
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.evaluation import simulate_teams, team_scores
