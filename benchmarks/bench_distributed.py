@@ -147,6 +147,75 @@ def _same_state(a, b) -> bool:
     )
 
 
+def _timed_generations(ev: Evolution, args, device: torch.device):
+    """Runs `args.generations` generations: their seconds, numeric metrics (as sorted JSON, less
+    the perf/ ones), states after each, and simulation seconds."""
+    gen_s, metrics, states, rollout_s = [], [], [], []
+    for _ in range(args.generations):
+        t = now(device)
+        m = ev.step()
+        gen_s.append(now(device) - t)
+        rollout_s.append(m.sim_seconds)
+        metrics.append(
+            json.dumps(
+                {
+                    k: v
+                    for k, v in m.items()
+                    if isinstance(v, (int, float)) and not k.startswith("perf/")
+                },
+                sort_keys=True,
+            )
+        )
+        states.append(ev.state)
+    return gen_s, metrics, states, rollout_s
+
+
+def _in_process_fields(timers: _Timers, gen_s, rollout_s, args) -> dict:
+    """The in-process mode's parts of a generation and the driver's share."""
+    parts = {k: v / args.generations for k, v in timers.seconds.items()}
+    parts["rest"] = median(gen_s) - sum(parts.values())
+    # the simulation is the behavior-tree tables and the rollout
+    parts["simulation_rollout"] = median(rollout_s)
+    driver = median(gen_s) - parts["simulation"]
+    return {
+        "parts_seconds_per_generation": parts,
+        "driver_seconds_per_generation": driver,
+        "driver_share": driver / median(gen_s),
+    }
+
+
+def _sharded_fields(evaluator, gen_s, same: bool) -> dict:
+    """A sharded mode's traffic and waits per generation, from the evaluator's stats."""
+    st = evaluator.stats
+    n = len(st)
+    return {
+        "bytes_sent_per_generation": sum(s["bytes_sent"] for s in st) / n,
+        "bytes_received_per_generation": sum(s["bytes_received"] for s in st) / n,
+        "evaluations_per_shard": st[0]["evaluations"],
+        "pack_and_send_seconds": median([s["send_seconds"] for s in st]),
+        "wait_seconds": median([s["wait_seconds"] for s in st]),
+        "unpack_seconds": median([s["gather_seconds"] for s in st]),
+        "slowest_shard_sim_seconds": median([max(s["shard_sim_seconds"]) for s in st]),
+        "driver_seconds_per_generation": median(gen_s) - median([s["wait_seconds"] for s in st]),
+        "where": evaluator.where,
+        "same_as_in_process": same,
+    }
+
+
+def _print_mode(name: str, pop: int, row: dict) -> None:
+    print(
+        f"{name} pop {pop}: {row['mode']}: {row['seconds_per_generation']:.3f} s/gen"
+        + (
+            f", {row['bytes_sent_per_generation'] / 1024:.1f} KiB sent, "
+            f"{row['bytes_received_per_generation'] / 1024:.1f} KiB back, same: "
+            f"{row['same_as_in_process']}"
+            if row["shards"]
+            else f", driver share {100 * row['driver_share']:.0f} %"
+        ),
+        flush=True,
+    )
+
+
 def bench_generations(name: str, swarm: int, pop: int, args, device: torch.device) -> dict:
     cfg = SwarmCoDeConfig(
         scenario=name,
@@ -175,25 +244,9 @@ def bench_generations(name: str, swarm: int, pop: int, args, device: torch.devic
             ev.step()  # the actors' first generation: not timed
             ev.state = start
             evaluator.stats.clear()
-        gen_s, metrics, states, rollout_s = [], [], [], []
         timers = _Timers(device)
         with timers if not shards else _NoTimers():
-            for _ in range(args.generations):
-                t = now(device)
-                m = ev.step()
-                gen_s.append(now(device) - t)
-                rollout_s.append(m.sim_seconds)
-                metrics.append(
-                    json.dumps(
-                        {
-                            k: v
-                            for k, v in m.items()
-                            if isinstance(v, (int, float)) and not k.startswith("perf/")
-                        },
-                        sort_keys=True,
-                    )
-                )
-                states.append(ev.state)
+            gen_s, metrics, states, rollout_s = _timed_generations(ev, args, device)
         row = {
             "mode": "in process" if not shards else f"{shards} shards on Ray",
             "shards": shards,
@@ -202,49 +255,17 @@ def bench_generations(name: str, swarm: int, pop: int, args, device: torch.devic
         }
         if not shards:
             reference_states, reference_metrics = states, metrics
-            parts = {k: v / args.generations for k, v in timers.seconds.items()}
-            parts["rest"] = median(gen_s) - sum(parts.values())
-            # the simulation is the behavior-tree tables and the rollout
-            parts["simulation_rollout"] = median(rollout_s)
-            row["parts_seconds_per_generation"] = parts
-            driver = median(gen_s) - parts["simulation"]
-            row["driver_seconds_per_generation"] = driver
-            row["driver_share"] = driver / median(gen_s)
+            row.update(_in_process_fields(timers, gen_s, rollout_s, args))
         else:
-            st = evaluator.stats
-            n = len(st)
-            row.update(
-                {
-                    "bytes_sent_per_generation": sum(s["bytes_sent"] for s in st) / n,
-                    "bytes_received_per_generation": sum(s["bytes_received"] for s in st) / n,
-                    "evaluations_per_shard": st[0]["evaluations"],
-                    "pack_and_send_seconds": median([s["send_seconds"] for s in st]),
-                    "wait_seconds": median([s["wait_seconds"] for s in st]),
-                    "unpack_seconds": median([s["gather_seconds"] for s in st]),
-                    "slowest_shard_sim_seconds": median([max(s["shard_sim_seconds"]) for s in st]),
-                    "driver_seconds_per_generation": median(gen_s)
-                    - median([s["wait_seconds"] for s in st]),
-                    "where": evaluator.where,
-                    "same_as_in_process": all(
-                        _same_state(a, b) for a, b in zip(states, reference_states)
-                    )
-                    and metrics == reference_metrics,
-                }
+            same = (
+                all(_same_state(a, b) for a, b in zip(states, reference_states))
+                and metrics == reference_metrics
             )
+            row.update(_sharded_fields(evaluator, gen_s, same))
             ev.ctx.evaluator = None
             evaluator.close()
         modes.append(row)
-        print(
-            f"{name} pop {pop}: {row['mode']}: {row['seconds_per_generation']:.3f} s/gen"
-            + (
-                f", {row['bytes_sent_per_generation'] / 1024:.1f} KiB sent, "
-                f"{row['bytes_received_per_generation'] / 1024:.1f} KiB back, same: "
-                f"{row['same_as_in_process']}"
-                if shards
-                else f", driver share {100 * row['driver_share']:.0f} %"
-            ),
-            flush=True,
-        )
+        _print_mode(name, pop, row)
     return {
         "scenario": name,
         "swarm_size": swarm,

@@ -155,11 +155,22 @@ def _caller() -> str:
     return "elsewhere"
 
 
-def count_generation(ev: Evolution, device: torch.device) -> dict:
-    """Ops, host syncs and kernel launches of one generation, split into rollout and rest."""
-    reads = HostReads(device)
+COUNTS = (
+    "aten_ops",
+    "aten_top_ops",
+    "local_scalar_dense",
+    "kernel_launches",
+    "graph_launches",
+    "dtoh_copies",
+    "syncs",
+)
+CUDA_ONLY = ("kernel_launches", "graph_launches", "dtoh_copies", "syncs")
+
+
+def _profile_step(ev: Evolution, device: torch.device, reads: HostReads, keep_mode: bool):
+    """One generation under torch.profiler and `reads`, the rollout marked as ROLLOUT (and, if
+    not `keep_mode`, run outside `reads`). Returns the profiler's events."""
     inner = evaluation.simulate_teams
-    keep_mode = not ev.ctx.compiled  # a compiled tick would recompile under the mode
 
     def marked(*a, **k):
         with contextlib.ExitStack() as stack:
@@ -184,20 +195,12 @@ def count_generation(ev: Evolution, device: torch.device) -> dict:
             ev.step()
     finally:
         evaluation.simulate_teams = inner
-    events = prof.events()
-    spans = [(e.time_range.start, e.time_range.end) for e in events if e.name == ROLLOUT]
-    zero = dict.fromkeys(
-        (
-            "aten_ops",
-            "aten_top_ops",
-            "local_scalar_dense",
-            "kernel_launches",
-            "graph_launches",
-            "dtoh_copies",
-            "syncs",
-        ),
-        0,
-    )
+    return prof.events()
+
+
+def _count_events(events, spans) -> dict:
+    """COUNTS of the profiler's CPU events, split into rollout (inside `spans`) and rest."""
+    zero = dict.fromkeys(COUNTS, 0)
     out = {"rollout": dict(zero), "rest": dict(zero)}
     for e in events:
         if e.device_type != torch.autograd.DeviceType.CPU or e.name == ROLLOUT:
@@ -218,6 +221,12 @@ def count_generation(ev: Evolution, device: torch.device) -> dict:
         c["kernel_launches"] += e.name in LAUNCHES
         c["graph_launches"] += e.name == "cudaGraphLaunch"
         c["syncs"] += e.name in SYNCS
+    return out
+
+
+def _add_host_reads(out: dict, reads: HostReads, device: torch.device) -> None:
+    """Adds the host reads and shape syncs per part to `out` (and drops the CUDA-only counts on
+    another device)."""
     for part in out:
         out[part]["host_reads"] = sum(
             n for (p, k), n in reads.counts.items() if p == part and k != "shape"
@@ -227,8 +236,18 @@ def count_generation(ev: Evolution, device: torch.device) -> dict:
             k: n for (p, k), n in sorted(reads.counts.items()) if p == part and k != "shape"
         }
         if device.type != "cuda":
-            for k in ("kernel_launches", "graph_launches", "dtoh_copies", "syncs"):
+            for k in CUDA_ONLY:
                 del out[part][k]
+
+
+def count_generation(ev: Evolution, device: torch.device) -> dict:
+    """Ops, host syncs and kernel launches of one generation, split into rollout and rest."""
+    reads = HostReads(device)
+    keep_mode = not ev.ctx.compiled  # a compiled tick would recompile under the mode
+    events = _profile_step(ev, device, reads, keep_mode)
+    spans = [(e.time_range.start, e.time_range.end) for e in events if e.name == ROLLOUT]
+    out = _count_events(events, spans)
+    _add_host_reads(out, reads, device)
     out["rollout_counted"] = {"host_reads": keep_mode}
     out["rollouts"] = len(spans)
     for part in ("rollout", "rest"):

@@ -253,7 +253,8 @@ def _timed(
     return rec
 
 
-def main() -> None:
+def make_parser() -> argparse.ArgumentParser:
+    """The command line (`--help`)."""
     parser = argparse.ArgumentParser(
         description=__doc__.splitlines()[0], formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -318,8 +319,11 @@ def main() -> None:
     parser.add_argument(
         "--out", default=None, help="output JSON (default benchmarks/results/sim_<device>.json)"
     )
-    args = parser.parse_args()
-    device = apply_run_options(parser, args)
+    return parser
+
+
+def prepare(parser, args, device: torch.device) -> tuple[list[int], list[int], list[str]]:
+    """Fills in the device's defaults in `args`: the E values, N values and modes to run."""
     cuda = device.type == "cuda"
     envs = args.envs or ([50, 200, 400] if cuda else [16, 64])
     robots = args.robots or ([20, 200, 1000] if cuda else [20, 200])
@@ -329,7 +333,11 @@ def main() -> None:
         if not cuda:
             parser.error("--cuda-graphs needs --device cuda")
         modes.append("graphs")
+    return envs, robots, modes
 
+
+def new_result(args, device: torch.device, envs, robots, modes) -> dict[str, Any]:
+    """The output JSON before any measurement."""
     result: dict[str, Any] = run_metadata(device)
     result.update(
         {
@@ -347,75 +355,86 @@ def main() -> None:
             "results": [],
         }
     )
+    return result
+
+
+def show(rec: dict[str, Any], E: int, N: int, mode: str) -> None:
+    """One line of the table printed as the run goes."""
+    if "error" in rec:
+        print(f"{E:>5} {N:>5} {mode:>8} out of memory")
+        return
+    cs = f"{rec['compile_seconds']:9.1f}" if "compile_seconds" in rec else f"{'':>9}"
+    pk = f"{rec['peak_memory_bytes'] / 2**20:9.0f}" if "peak_memory_bytes" in rec else ""
+    print(
+        f"{E:>5} {N:>5} {mode:>8} {rec['ms_per_tick']:9.2f} "
+        f"{rec['robot_ticks_per_s']:14.4g} {cs} {pk}",
+        flush=True,
+    )
+
+
+def bench_config(result: dict, scenario: Scenario, E: int, N: int, modes, args, device, out):
+    """Every mode on E environments of the scenario for N robots (skipped on the CPU where
+    estimated not to fit in memory); the JSON rewritten after each mode."""
+    C = scenario.num_packages * scenario.max_grips
+    need = estimate_bytes(E, N, C, scenario.obstacle_count)
+    avail = mem_available()
+    if device.type != "cuda" and avail is not None and need > args.mem_fraction * avail:
+        for mode in modes:
+            result["results"].append(
+                {
+                    "E": E,
+                    "N": N,
+                    "mode": mode,
+                    "skipped": f"estimated {need / 2**30:.1f} GiB > "
+                    f"{args.mem_fraction} x {avail / 2**30:.1f} GiB available",
+                }
+            )
+        print(f"{E:>5} {N:>5} skipped (estimated {need / 2**30:.1f} GiB)")
+        return
+    try:
+        w = Workload(scenario, E, args.seed, args.programs, device)
+    except torch.cuda.OutOfMemoryError:
+        for mode in modes:
+            result["results"].append({"E": E, "N": N, "mode": mode, "error": "out of memory"})
+        print(f"{E:>5} {N:>5} out of memory building inputs")
+        return
+    result["scenarios"][str(N)] = {
+        "name": scenario.name,
+        "arena": scenario.arena,
+        "packages": w.P,
+        "grips": w.G,
+        "obstacles": w.O,
+        "episode_ticks": scenario.episode_ticks,
+    }
+    for mode in modes:
+        try:
+            rec = run_mode(w, mode, args, device)
+        except torch.cuda.OutOfMemoryError:
+            rec = {"E": E, "N": N, "mode": mode, "error": "out of memory"}
+        rec["scenario"] = scenario.name
+        rec["load_average"] = load_average()
+        result["results"].append(rec)
+        show(rec, E, N, mode)
+        write_json(result, out)  # keep what is done if a later configuration dies
+    del w
+
+
+def main() -> None:
+    parser = make_parser()
+    args = parser.parse_args()
+    device = apply_run_options(parser, args)
+    envs, robots, modes = prepare(parser, args, device)
+    result = new_result(args, device, envs, robots, modes)
     out = Path(args.out) if args.out else RESULTS_DIR / f"sim_{device.type}.json"
     print(f"{result['device_name']} | torch {result['torch']} | threads {result['threads']}")
     print(
         f"{'E':>5} {'N':>5} {'mode':>8} {'ms/tick':>9} {'robot-ticks/s':>14} "
         f"{'compile s':>9} {'peak MiB':>9}"
     )
-
     for N in robots:
         scenario = scenario_for(N)
         for E in envs:
-            C = scenario.num_packages * scenario.max_grips
-            need = estimate_bytes(E, N, C, scenario.obstacle_count)
-            avail = mem_available()
-            if not cuda and avail is not None and need > args.mem_fraction * avail:
-                for mode in modes:
-                    result["results"].append(
-                        {
-                            "E": E,
-                            "N": N,
-                            "mode": mode,
-                            "skipped": f"estimated {need / 2**30:.1f} GiB > "
-                            f"{args.mem_fraction} x {avail / 2**30:.1f} GiB available",
-                        }
-                    )
-                print(f"{E:>5} {N:>5} skipped (estimated {need / 2**30:.1f} GiB)")
-                continue
-            try:
-                w = Workload(scenario, E, args.seed, args.programs, device)
-            except torch.cuda.OutOfMemoryError:
-                for mode in modes:
-                    result["results"].append(
-                        {"E": E, "N": N, "mode": mode, "error": "out of memory"}
-                    )
-                print(f"{E:>5} {N:>5} out of memory building inputs")
-                continue
-            result["scenarios"][str(N)] = {
-                "name": scenario.name,
-                "arena": scenario.arena,
-                "packages": w.P,
-                "grips": w.G,
-                "obstacles": w.O,
-                "episode_ticks": scenario.episode_ticks,
-            }
-            for mode in modes:
-                try:
-                    rec = run_mode(w, mode, args, device)
-                except torch.cuda.OutOfMemoryError:
-                    rec = {"E": E, "N": N, "mode": mode, "error": "out of memory"}
-                rec["scenario"] = scenario.name
-                rec["load_average"] = load_average()
-                result["results"].append(rec)
-                if "error" in rec:
-                    print(f"{E:>5} {N:>5} {mode:>8} out of memory")
-                else:
-                    cs = (
-                        f"{rec['compile_seconds']:9.1f}" if "compile_seconds" in rec else f"{'':>9}"
-                    )
-                    pk = (
-                        f"{rec['peak_memory_bytes'] / 2**20:9.0f}"
-                        if "peak_memory_bytes" in rec
-                        else ""
-                    )
-                    print(
-                        f"{E:>5} {N:>5} {mode:>8} {rec['ms_per_tick']:9.2f} "
-                        f"{rec['robot_ticks_per_s']:14.4g} {cs} {pk}",
-                        flush=True,
-                    )
-                write_json(result, out)  # keep what is done if a later configuration dies
-            del w
+            bench_config(result, scenario, E, N, modes, args, device, out)
     result["load_average_at_end"] = load_average()
     result["date_end"] = time.strftime("%Y-%m-%dT%H:%M:%S")
     write_json(result, out)

@@ -213,10 +213,8 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main() -> None:
-    parser = make_parser()
-    args = parser.parse_args()
-    device = apply_run_options(parser, args)
+def prepare(args, device: torch.device) -> tuple[list[int], list[int], list[str]]:
+    """Fills in the device's defaults in `args`: the E values, N values and our modes to run."""
     cuda = device.type == "cuda"
     envs = args.envs or ([50, 200, 400] if cuda else [16, 64])
     robots = args.robots
@@ -224,7 +222,11 @@ def main() -> None:
     args.vmas_ticks = args.vmas_ticks or (min(args.ticks, 50) if cuda else args.ticks)
     args.fullgraph, args.compile_mode = True, None  # what bench_sim.run_mode reads
     modes = ["eager", "compile"] if args.compile == "both" else [args.compile]
+    return envs, robots, modes
 
+
+def new_result(args, device: torch.device, envs, robots, modes) -> dict[str, Any]:
+    """The output JSON before any measurement: the run, the world and both sides described."""
     result: dict[str, Any] = run_metadata(device)
     result.update(
         {
@@ -259,91 +261,89 @@ def main() -> None:
         result["vmas"] = {"installed": False, "error": VMAS_IMPORT_ERROR}
     else:
         result["vmas"] = {"installed": True, **vmas_description(args)}
-    out = Path(args.out) if args.out else RESULTS_DIR / f"vmas_{device.type}.json"
-    vtxt = f"VMAS {result['vmas']['version']}" if vmas is not None else "VMAS missing"
+    return result
+
+
+def show(rec: dict[str, Any], label: str) -> None:
+    """One line of the table printed as the run goes."""
+    if "error" in rec or "skipped" in rec:
+        print(f"{rec['E']:>5} {rec['N']:>5} {label:>13} {rec.get('error') or rec['skipped']}")
+        return
+    cs = f"{rec['compile_seconds']:9.1f}" if "compile_seconds" in rec else ""
     print(
-        f"{result['device_name']} | torch {result['torch']} | threads {result['threads']} | {vtxt}"
+        f"{rec['E']:>5} {rec['N']:>5} {label:>13} {rec['ms_per_tick']:9.2f} "
+        f"{rec['robot_ticks_per_s']:14.4g} {cs}",
+        flush=True,
     )
-    print(f"{'E':>5} {'N':>5} {'side':>13} {'ms/tick':>9} {'robot-ticks/s':>14} {'compile s':>9}")
 
-    def show(rec: dict[str, Any], label: str) -> None:
-        if "error" in rec or "skipped" in rec:
-            print(f"{rec['E']:>5} {rec['N']:>5} {label:>13} {rec.get('error') or rec['skipped']}")
-            return
-        cs = f"{rec['compile_seconds']:9.1f}" if "compile_seconds" in rec else ""
-        print(
-            f"{rec['E']:>5} {rec['N']:>5} {label:>13} {rec['ms_per_tick']:9.2f} "
-            f"{rec['robot_ticks_per_s']:14.4g} {cs}",
-            flush=True,
-        )
 
-    for N in robots:
-        scenario = world_scenario(N)
-        for E in envs:
-            row: dict[str, Any] = {"E": E, "N": N}
-            w = OurWorld(scenario, E, args.radius, args.seed, device)
-            result["scenarios"][str(N)] = {
-                "name": scenario.name,
-                "arena": scenario.arena,
-                "packages": w.P,
-                "grips": w.G,
-                "obstacles": 0,
-            }
+def measure_vmas(w: OurWorld, scenario: Scenario, E: int, N: int, args, device) -> dict:
+    """VMAS, from the same start positions in the same arena."""
+    try:
+        rec, env = run_vmas(w.layout.start, scenario.arena, args, device)
+        del env
+    except torch.cuda.OutOfMemoryError:
+        rec = {"E": E, "N": N, "sim": "vmas", "mode": "vmas", "error": "out of memory"}
+    rec["load_average"] = load_average()
+    return rec
 
-            # VMAS, from the same start positions in the same arena
-            if vmas is not None:
-                try:
-                    rec, env = run_vmas(w.layout.start, scenario.arena, args, device)
-                    del env
-                except torch.cuda.OutOfMemoryError:
-                    rec = {"E": E, "N": N, "sim": "vmas", "mode": "vmas", "error": "out of memory"}
-                rec["load_average"] = load_average()
-                result["results"].append(rec)
-                show(rec, "vmas")
-                row["vmas"] = rec.get("robot_ticks_per_s")
-                write_json(result, out)
 
-            # ours
-            need = estimate_bytes(E, N, w.P * w.G, 0)
-            avail = mem_available()
-            for mode in modes:
-                if not cuda and avail is not None and need > args.mem_fraction * avail:
-                    rec = {
-                        "E": E,
-                        "N": N,
-                        "sim": "ours",
-                        "mode": mode,
-                        "skipped": f"estimated {need / 2**30:.1f} GiB",
-                    }
-                else:
-                    try:
-                        rec = run_mode(w, mode, args, device)
-                        rec["sim"] = "ours"
-                        rec["overlap"] = overlap_stats(w.last.pos, w.robots.radius)
-                    except torch.cuda.OutOfMemoryError:
-                        rec = {
-                            "E": E,
-                            "N": N,
-                            "sim": "ours",
-                            "mode": mode,
-                            "error": "out of memory",
-                        }
-                rec["scenario"] = scenario.name
-                rec["load_average"] = load_average()
-                result["results"].append(rec)
-                show(rec, f"ours {mode}")
-                row[f"ours_{mode}"] = rec.get("robot_ticks_per_s")
-                write_json(result, out)
-            for mode in modes:
-                if row.get("vmas") and row.get(f"ours_{mode}"):
-                    row[f"ratio_{mode}"] = row[f"ours_{mode}"] / row["vmas"]
-            result["comparison"].append(row)
-            del w
+def measure_ours(w: OurWorld, E: int, N: int, mode: str, need: int, avail, args, device) -> dict:
+    """Our step in `mode` (skipped on the CPU where it is estimated not to fit in memory)."""
+    if device.type != "cuda" and avail is not None and need > args.mem_fraction * avail:
+        return {
+            "E": E,
+            "N": N,
+            "sim": "ours",
+            "mode": mode,
+            "skipped": f"estimated {need / 2**30:.1f} GiB",
+        }
+    try:
+        rec = run_mode(w, mode, args, device)
+        rec["sim"] = "ours"
+        rec["overlap"] = overlap_stats(w.last.pos, w.robots.radius)
+    except torch.cuda.OutOfMemoryError:
+        rec = {"E": E, "N": N, "sim": "ours", "mode": mode, "error": "out of memory"}
+    return rec
 
-    result["load_average_at_end"] = load_average()
-    result["date_end"] = time.strftime("%Y-%m-%dT%H:%M:%S")
-    write_json(result, out)
 
+def compare_one(result: dict, scenario: Scenario, E: int, N: int, modes, args, device, out) -> None:
+    """Both sides on E environments of the scenario for N robots: records, the comparison row,
+    the JSON rewritten after each record."""
+    row: dict[str, Any] = {"E": E, "N": N}
+    w = OurWorld(scenario, E, args.radius, args.seed, device)
+    result["scenarios"][str(N)] = {
+        "name": scenario.name,
+        "arena": scenario.arena,
+        "packages": w.P,
+        "grips": w.G,
+        "obstacles": 0,
+    }
+    if vmas is not None:
+        rec = measure_vmas(w, scenario, E, N, args, device)
+        result["results"].append(rec)
+        show(rec, "vmas")
+        row["vmas"] = rec.get("robot_ticks_per_s")
+        write_json(result, out)
+    need = estimate_bytes(E, N, w.P * w.G, 0)
+    avail = mem_available()
+    for mode in modes:
+        rec = measure_ours(w, E, N, mode, need, avail, args, device)
+        rec["scenario"] = scenario.name
+        rec["load_average"] = load_average()
+        result["results"].append(rec)
+        show(rec, f"ours {mode}")
+        row[f"ours_{mode}"] = rec.get("robot_ticks_per_s")
+        write_json(result, out)
+    for mode in modes:
+        if row.get("vmas") and row.get(f"ours_{mode}"):
+            row[f"ratio_{mode}"] = row[f"ours_{mode}"] / row["vmas"]
+    result["comparison"].append(row)
+    del w
+
+
+def print_comparison(result: dict) -> None:
+    """The summary table: robot-ticks/s of both sides and their ratios."""
     print("\nrobot-ticks/s; ratio = ours / VMAS")
     print(
         f"{'E':>5} {'N':>5} {'VMAS':>14} {'ours eager':>14} {'ours compiled':>14} "
@@ -359,6 +359,29 @@ def main() -> None:
             f"{fmt_rate(row.get('ours_eager'))} {fmt_rate(row.get('ours_compile'))} "
             f"{ratios[0]} {ratios[1]}"
         )
+
+
+def main() -> None:
+    parser = make_parser()
+    args = parser.parse_args()
+    device = apply_run_options(parser, args)
+    envs, robots, modes = prepare(args, device)
+    result = new_result(args, device, envs, robots, modes)
+    out = Path(args.out) if args.out else RESULTS_DIR / f"vmas_{device.type}.json"
+    vtxt = f"VMAS {result['vmas']['version']}" if vmas is not None else "VMAS missing"
+    print(
+        f"{result['device_name']} | torch {result['torch']} | threads {result['threads']} | {vtxt}"
+    )
+    print(f"{'E':>5} {'N':>5} {'side':>13} {'ms/tick':>9} {'robot-ticks/s':>14} {'compile s':>9}")
+    for N in robots:
+        scenario = world_scenario(N)
+        for E in envs:
+            compare_one(result, scenario, E, N, modes, args, device, out)
+
+    result["load_average_at_end"] = load_average()
+    result["date_end"] = time.strftime("%Y-%m-%dT%H:%M:%S")
+    write_json(result, out)
+    print_comparison(result)
     print(f"wrote {out}")
 
 

@@ -57,6 +57,8 @@ def overlap_stats(pos: torch.Tensor, radius: torch.Tensor) -> dict[str, float]:
 
 
 # ------------------------------------------------------------------ VMAS
+# long: one VMAS scenario class, defined inside this function (its base class comes from VMAS)
+# so that this file imports without VMAS installed; its methods are short
 def vmas_scenario_class():
     """The VMAS scenario class (built on demand, so this file imports without VMAS)."""
     from vmas.simulator.core import Agent, Landmark, Line, Sphere, World
