@@ -148,8 +148,8 @@ def _same_state(a, b) -> bool:
 
 
 def _timed_generations(ev: Evolution, args, device: torch.device):
-    """Runs `args.generations` generations: their seconds, numeric metrics (as sorted JSON, less
-    the perf/ ones), states after each, and simulation seconds."""
+    """Runs `args.generations` generations: their seconds, numeric fields of each
+    `GenerationResult` (as sorted JSON, less the timings: the `*seconds` fields), states after each, and simulation seconds."""
     gen_s, metrics, states, rollout_s = [], [], [], []
     for _ in range(args.generations):
         t = now(device)
@@ -160,8 +160,8 @@ def _timed_generations(ev: Evolution, args, device: torch.device):
             json.dumps(
                 {
                     k: v
-                    for k, v in m.items()
-                    if isinstance(v, (int, float)) and not k.startswith("perf/")
+                    for k, v in vars(m).items()
+                    if isinstance(v, (int, float)) and not k.endswith("seconds")
                 },
                 sort_keys=True,
             )
