@@ -17,6 +17,7 @@ from .app.analysis import replay_run, run_dynamics
 from .app.api import RunResult, evolve, load, resume
 from .app.evaluate import EvaluationResult, evaluate
 from .app.load_runs import Runs, load_runs
+from .app.reporter import Reporter
 from .app.reporting import composition_figure
 from .coevo.ask_tell import Asked, Evolution
 from .coevo.config import SwarmCoDeConfig
@@ -34,6 +35,7 @@ __all__ = [
     "load_runs",
     "Runs",
     "RunResult",
+    "Reporter",
     "SwarmCoDeConfig",
     "Evolution",
     "Asked",

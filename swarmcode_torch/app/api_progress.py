@@ -11,9 +11,10 @@ from typing import Any
 
 from ..coevo.evolve import Evolution, GenerationResult
 from . import records
+from .reporter import Reporter
 
 
-class History:
+class History(Reporter):
     """Reporter: collects every generation's scalars (`records.scalars`); calls a user callback
     with each generation's `GenerationResult`."""
 
@@ -51,7 +52,7 @@ def _clock(seconds: float) -> str:
     )
 
 
-class Progress:
+class Progress(Reporter):
     """Reporter: the progress of a run on stdout, one compact line per generation (done count,
     time left, best fitness, species, the generation's best team, seconds per generation). On a
     terminal or in a notebook the line is redrawn in place and ended when the run ends;

@@ -33,6 +33,7 @@ from .files import (
     refuse_links,
 )
 from .migrations import check_runnable
+from .reporter import Reporter
 from .runconfig import check_config, config_differences, config_from_dict, read_config, run_scenario
 
 
@@ -310,7 +311,7 @@ def load_branch(run_dir: Path, generation: int | None = None) -> Branch:
     )
 
 
-class CheckpointReporter:
+class CheckpointReporter(Reporter):
     """Writes checkpoint.pt at the start of a new run (generation 0, so that a run stopped
     before its first periodic checkpoint can still be resumed), every `every` generations and
     after the last one (as part of that generation's step: `run` writes the records of a

@@ -10,9 +10,10 @@ from pathlib import Path
 from ..coevo.evolve import Evolution, GenerationResult
 from .files import METRICS_FILE
 from .records import SCALAR_TAGS, scalars
+from .reporter import Reporter
 
 
-class CsvReporter:
+class CsvReporter(Reporter):
     """Appends every generation's scalars (`records.scalars`) to metrics.csv in the run directory:
     one row per generation, the header (`generation` and the tags) once; each row is written
     (unbuffered) when its generation ends. On a resume, rows of generations the run repeats (those after its checkpoint)

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from ..coevo.evolve import Evolution, GenerationResult
 from .records import HISTOGRAMS, SCALAR_TAGS, scalars
+from .reporter import Reporter
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -315,7 +316,7 @@ def hparams_summaries(ev: Evolution) -> list:
     return out
 
 
-class TensorBoardReporter:
+class TensorBoardReporter(Reporter):
     """Writes every generation's scalars (`records.SCALAR_TAGS` and the run's best team so
     far, `HPARAM_METRICS`) and gene histograms; the composition figure every `figure_every`
     generations and at the end; a replay of the generation's best team every `render_every`

@@ -12,6 +12,7 @@ from pathlib import Path
 from ..coevo.evolve import Evolution, GenerationResult
 from .records import HISTOGRAMS, SCALAR_TAGS, scalars
 from .report_tensorboard import best_scalars, replay_strip
+from .reporter import Reporter
 
 #: What to install for `WandbReporter` (`evolve --wandb`).
 WANDB_INSTALL = 'pip install -e ".[wandb]" in the source tree'
@@ -61,7 +62,7 @@ def _wandb_run_id(run_dir: Path) -> str:
     return hashlib.sha256(str(Path(run_dir).resolve()).encode()).hexdigest()[:16]
 
 
-class WandbReporter:
+class WandbReporter(Reporter):
     """Logs a run to Weights & Biases: the config (every key of config.toml), every
     generation's scalars under the TensorBoard tags (`records.SCALAR_TAGS` and the best team's,
     `HPARAM_METRICS`) and gene histograms, a replay of the generation's best team every

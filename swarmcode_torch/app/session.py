@@ -22,18 +22,17 @@ from collections.abc import Callable, Iterable
 from contextlib import ExitStack, nullcontext
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Protocol
 
 from ..coevo.ask_tell import Evolution
 from ..coevo.config import PRESETS, SwarmCoDeConfig, preset_config, with_overrides
 from ..coevo.evaluation import ScoreFn
-from ..coevo.evolve import GenerationResult
 from ..sim.scenario import Scenario, read_scenario
 from . import checkpoints, files, records
 from .checkpoints import Branch, CheckpointReporter, load_run, resume
 from .eta import parse_duration
 from .files import HARDWARE_COPY, SCENARIO_COPY, RunError, atomic_write_bytes
 from .locks import RunLock
+from .reporter import Reporter
 from .runconfig import (
     check_config,
     config_differences,
@@ -48,12 +47,6 @@ from .signals import deferred_signals, interrupt_of
 from .summary import SummaryReporter
 
 _CONFIG_KEYS = tuple(f.name for f in fields(SwarmCoDeConfig))
-
-
-class Reporter(Protocol):
-    def on_start(self, ev: Evolution) -> None: ...
-    def on_generation(self, ev: Evolution, result: GenerationResult) -> None: ...
-    def on_end(self, ev: Evolution) -> None: ...
 
 
 # ------------------------------------------------------------------ the config

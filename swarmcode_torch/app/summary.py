@@ -25,9 +25,10 @@ from .files import (
     read_text,
     trim_teams,
 )
+from .reporter import Reporter
 
 
-class SummaryReporter:
+class SummaryReporter(Reporter):
     """Rewrites summary.json (atomically) after every generation and appends the generation's
     best team to teams.jsonl (one JSON object per line). On a start or resume it prepares the
     directory (`prepare_run_dir`) and drops the records of teams.jsonl past the checkpoint the

@@ -33,6 +33,7 @@ from .process_options import (
     print_shard_traffic,
     set_threads_option,
 )
+from .reporter import Reporter
 from .signals import TERMINATED, deferred_signals, terminate_as_interrupt
 from .stop_lines import (
     Where,
@@ -108,7 +109,7 @@ class _FittedProgress(Progress):
         return super().make_tasks_table(tasks)
 
 
-class ProgressReporter:
+class ProgressReporter(Reporter):
     """Rich progress line on a terminal (`out`, default the command line's console); a plain
     line every few generations otherwise, with the elapsed and remaining time (`eta.Eta`)."""
 

@@ -8,6 +8,8 @@ import torch
 from hostilekit import _snapshot, tiny_run
 from runkit import _copy_run  # the same copy of a run directory
 
+import swarmcode_torch as sc
+
 
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory):
@@ -90,3 +92,47 @@ def test_a_user_fitness_that_edits_its_arguments_in_place_changes_no_record(tmp_
     assert a.best_team["deliveries"] == b.best_team["deliveries"]
     assert [h["team/cost"] for h in a.history] == [h["team/cost"] for h in b.history]
     assert a.config.fitness_function.endswith(".spend")
+
+
+def test_a_reporter_subclass_overrides_only_what_it_needs(tmp_path):
+    """`sc.Reporter` is the base of every built-in reporter; a subclass with one hook is a
+    reporter (the others do nothing) and is told of every generation, then of the end."""
+    from swarmcode_torch.app import api_progress, checkpoints, keep, report_wandb, summary, terminal
+    from swarmcode_torch.app.reporting import CsvReporter, TensorBoardReporter
+
+    for cls in (
+        CsvReporter,
+        TensorBoardReporter,
+        report_wandb.WandbReporter,
+        summary.SummaryReporter,
+        checkpoints.CheckpointReporter,
+        keep.KeepingCheckpoints,
+        terminal.ProgressReporter,
+        api_progress.History,
+        api_progress.Progress,
+    ):
+        assert issubclass(cls, sc.Reporter), cls
+
+    class Generations(sc.Reporter):
+        def __init__(self):
+            self.seen, self.ended = [], 0
+
+        def on_generation(self, ev, result):
+            self.seen.append(result.generation)
+
+        def on_end(self, ev):
+            self.ended += 1
+
+    r = Generations()
+    sc.evolve(
+        scenario="one-niche",
+        generations=3,
+        population=6,
+        swarm_size=3,
+        trials=1,
+        ticks=10,
+        logdir=None,
+        reporters=[r],
+        progress=False,
+    )
+    assert r.seen == [0, 1, 2] and r.ended == 1
