@@ -41,6 +41,7 @@ from common import (
 
 from swarmcode_torch.coevo.population import R_MAX, R_MIN  # noqa: E402
 from swarmcode_torch.sim import bt  # noqa: E402
+from swarmcode_torch.sim.fused import FusedTicks  # noqa: E402
 from swarmcode_torch.sim.hardware import phenotype  # noqa: E402
 from swarmcode_torch.sim.layout import make_layouts  # noqa: E402
 from swarmcode_torch.sim.runtime import CudaGraphTicks  # noqa: E402
@@ -54,6 +55,8 @@ from swarmcode_torch.sim.state import (
     reset,
 )
 from swarmcode_torch.sim.step import step  # noqa: E402
+from swarmcode_torch.sim.triton_tick import TritonTicks  # noqa: E402
+from swarmcode_torch.sim.triton_tick import takes as triton_takes  # noqa: E402
 
 PROGRAM_LENGTH = 32
 
@@ -179,6 +182,15 @@ def run_mode(w: Workload, mode: str, args, device: torch.device) -> dict[str, An
     fn: Callable = step
     cudagraphs = False
     state = w.start()
+    if mode == "fused":
+        return _run_fused(w, rec, state, args, device)
+    if mode == "triton":
+        fn = TritonTicks()
+        if not triton_takes(state, w.robots):
+            rec["error"] = (
+                "the Triton tick does not run here (CUDA with triton, or TRITON_INTERPRET=1)"
+            )
+            return rec
     if mode == "graphs":
         # the compiled tick captured in CUDA graphs of --graph-ticks ticks (CudaGraphTicks)
         torch._dynamo.reset()
@@ -229,6 +241,24 @@ def run_mode(w: Workload, mode: str, args, device: torch.device) -> dict[str, An
     return _timed(rec, times, args, state, device)
 
 
+def _run_fused(w: Workload, rec: dict[str, Any], state, args, device) -> dict[str, Any]:
+    """The fused C++ tick (`sim.fused.FusedTicks`, the CPU default): all `args.ticks` ticks of a
+    run in one call; an error record where it cannot be built or does not take the inputs."""
+    fused = FusedTicks()
+    if device.type != "cpu" or not fused.ready(warn=False):
+        rec["error"] = "the fused C++ tick runs on the CPU only, where it builds"
+        return rec
+    inputs = TickInputs(w.layout, w.robots, w.compat, w.keys, w.tables)
+    for _ in range(max(args.warmup, 1)):
+        state = fused.run_ticks(state, inputs, w.params, args.ticks)
+    times = []
+    for _ in range(args.repeats):
+        t0 = now(device)
+        out = fused.run_ticks(state, inputs, w.params, args.ticks)
+        times.append(now(device) - t0)
+    return _timed(rec, times, args, out, device)
+
+
 def _timed(
     rec: dict[str, Any], times: list[float], args, state, device: torch.device
 ) -> dict[str, Any]:
@@ -272,6 +302,12 @@ def make_parser() -> argparse.ArgumentParser:
         help="comma-separated N values (default cpu: 20,200; cuda: 20,200,1000)",
     )
     parser.add_argument("--compile", choices=("eager", "compile", "both"), default="both")
+    parser.add_argument(
+        "--modes",
+        metavar="LIST",
+        help="the ticks to time instead of --compile's, comma-separated: eager, compile, "
+        "graphs (CUDA), fused (the C++ tick, CPU), triton (CUDA, or TRITON_INTERPRET=1)",
+    )
     parser.add_argument(
         "--cuda-graphs",
         action="store_true",
@@ -322,6 +358,20 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: the ticks a benchmark can time: the eager Python tick, torch.compile'd, compiled in CUDA
+#: graphs, the fused C++ tick (CPU), the Python tick with its pair phases in Triton kernels
+MODES = ("eager", "compile", "graphs", "fused", "triton")
+
+
+def parse_modes(parser, text: str) -> list[str]:
+    """--modes: a comma-separated list of MODES (a parser error otherwise)."""
+    modes = [m.strip() for m in text.split(",") if m.strip()]
+    bad = [m for m in modes if m not in MODES]
+    if bad or not modes:
+        parser.error(f"--modes: expected some of {', '.join(MODES)}, got {text!r}")
+    return modes
+
+
 def prepare(parser, args, device: torch.device) -> tuple[list[int], list[int], list[str]]:
     """Fills in the device's defaults in `args`: the E values, N values and modes to run."""
     cuda = device.type == "cuda"
@@ -329,6 +379,8 @@ def prepare(parser, args, device: torch.device) -> tuple[list[int], list[int], l
     robots = args.robots or ([20, 200, 1000] if cuda else [20, 200])
     args.ticks = args.ticks or (200 if cuda else 20)
     modes = ["eager", "compile"] if args.compile == "both" else [args.compile]
+    if args.modes:
+        modes = parse_modes(parser, args.modes)
     if args.cuda_graphs:
         if not cuda:
             parser.error("--cuda-graphs needs --device cuda")
@@ -361,7 +413,7 @@ def new_result(args, device: torch.device, envs, robots, modes) -> dict[str, Any
 def show(rec: dict[str, Any], E: int, N: int, mode: str) -> None:
     """One line of the table printed as the run goes."""
     if "error" in rec:
-        print(f"{E:>5} {N:>5} {mode:>8} out of memory")
+        print(f"{E:>5} {N:>5} {mode:>8} {rec['error']}")
         return
     cs = f"{rec['compile_seconds']:9.1f}" if "compile_seconds" in rec else f"{'':>9}"
     pk = f"{rec['peak_memory_bytes'] / 2**20:9.0f}" if "peak_memory_bytes" in rec else ""

@@ -44,7 +44,14 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_sim import PROGRAM_LENGTH, estimate_bytes, mem_available, run_mode, scenario_for  # noqa: E402
+from bench_sim import (  # noqa: E402
+    PROGRAM_LENGTH,
+    estimate_bytes,
+    mem_available,
+    parse_modes,
+    run_mode,
+    scenario_for,
+)
 from common import (
     RESULTS_DIR,
     add_run_options,
@@ -167,6 +174,12 @@ def make_parser() -> argparse.ArgumentParser:
         help="our side: eager step, torch.compile(step, dynamic=False, fullgraph=True), or both",
     )
     parser.add_argument(
+        "--modes",
+        metavar="LIST",
+        help="our ticks to time instead of --compile's, comma-separated: eager, compile, "
+        "graphs (CUDA), fused (the C++ tick, CPU), triton (CUDA, or TRITON_INTERPRET=1)",
+    )
+    parser.add_argument(
         "--ticks",
         type=int,
         default=None,
@@ -213,7 +226,7 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def prepare(args, device: torch.device) -> tuple[list[int], list[int], list[str]]:
+def prepare(parser, args, device: torch.device) -> tuple[list[int], list[int], list[str]]:
     """Fills in the device's defaults in `args`: the E values, N values and our modes to run."""
     cuda = device.type == "cuda"
     envs = args.envs or ([50, 200, 400] if cuda else [16, 64])
@@ -222,6 +235,8 @@ def prepare(args, device: torch.device) -> tuple[list[int], list[int], list[str]
     args.vmas_ticks = args.vmas_ticks or (min(args.ticks, 50) if cuda else args.ticks)
     args.fullgraph, args.compile_mode = True, None  # what bench_sim.run_mode reads
     modes = ["eager", "compile"] if args.compile == "both" else [args.compile]
+    if args.modes:
+        modes = parse_modes(parser, args.modes)
     return envs, robots, modes
 
 
@@ -343,29 +358,26 @@ def compare_one(result: dict, scenario: Scenario, E: int, N: int, modes, args, d
 
 
 def print_comparison(result: dict) -> None:
-    """The summary table: robot-ticks/s of both sides and their ratios."""
+    """The summary table: robot-ticks/s of VMAS and of each of our modes, and their ratios."""
+    modes = result.get("modes", [])
     print("\nrobot-ticks/s; ratio = ours / VMAS")
-    print(
-        f"{'E':>5} {'N':>5} {'VMAS':>14} {'ours eager':>14} {'ours compiled':>14} "
-        f"{'ratio eager':>11} {'ratio comp.':>11}"
+    head = "".join(f" {'ours ' + m:>14}" for m in modes) + "".join(
+        f" {'ratio ' + m:>13}" for m in modes
     )
+    print(f"{'E':>5} {'N':>5} {'VMAS':>14}{head}")
     for row in result["comparison"]:
-        ratios = [
-            f"{row[k]:11.2f}" if k in row else f"{'-':>11}"
-            for k in ("ratio_eager", "ratio_compile")
-        ]
-        print(
-            f"{row['E']:>5} {row['N']:>5} {fmt_rate(row.get('vmas'))} "
-            f"{fmt_rate(row.get('ours_eager'))} {fmt_rate(row.get('ours_compile'))} "
-            f"{ratios[0]} {ratios[1]}"
+        rates = "".join(f" {fmt_rate(row.get(f'ours_{m}'))}" for m in modes)
+        ratios = "".join(
+            f" {row[f'ratio_{m}']:13.2f}" if f"ratio_{m}" in row else f" {'-':>13}" for m in modes
         )
+        print(f"{row['E']:>5} {row['N']:>5} {fmt_rate(row.get('vmas'))}{rates}{ratios}")
 
 
 def main() -> None:
     parser = make_parser()
     args = parser.parse_args()
     device = apply_run_options(parser, args)
-    envs, robots, modes = prepare(args, device)
+    envs, robots, modes = prepare(parser, args, device)
     result = new_result(args, device, envs, robots, modes)
     out = Path(args.out) if args.out else RESULTS_DIR / f"vmas_{device.type}.json"
     vtxt = f"VMAS {result['vmas']['version']}" if vmas is not None else "VMAS missing"

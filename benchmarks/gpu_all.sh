@@ -112,9 +112,16 @@ left=$(( DEADLINE - SECONDS - 25 ))
 step e2e_swarm200 "$(( left / SCALE ))" "$PY" $B/bench_end_to_end.py --device "$DEV" "${E2E_200[@]}" \
     --time-limit "$(( left > 40 ? left - 15 : 25 ))" "${E2E_SET[@]}" \
     --out "$DEST/end_to_end_swarm200.json"
-# 10. our side of the VMAS comparison at N = 200 (VMAS itself only if installed there)
-step vmas_200 45 "$PY" $B/bench_vs_vmas.py --device "$DEV" "${VMAS[@]}" \
+# 10. our side of the VMAS comparison at N = 200 (VMAS itself only if installed there), every
+#     tick the project ships on this device side by side: eager, compiled, and the Triton tick
+#     on CUDA (in Triton's interpreter on a CPU check) or the fused C++ tick on the CPU
+VMAS_MODES=eager,compile,triton; [[ "$DEV" == cpu ]] && VMAS_MODES=eager,compile,fused
+step vmas_200 45 env "TRITON_INTERPRET=$([[ "$DEV" == cpu ]] && echo 1 || echo 0)" "$PY" \
+    $B/bench_vs_vmas.py --device "$DEV" "${VMAS[@]}" --modes "$VMAS_MODES" \
     --out "$DEST/vmas_cuda_200.json"
+# 11. four-niche end to end with the Triton tick in the run (SWARMCODE_TICK=triton), as step 2
+step e2e_four_niche_triton 90 env SWARMCODE_TICK=triton "$PY" $B/bench_end_to_end.py \
+    --device "$DEV" "${E2E_4[@]}" --time-limit 60 --out "$DEST/end_to_end_four_niche_triton.json"
 
 echo "== done in $SECONDS s; $DEST/steps.tsv:"
 column -t -s $'\t' "$DEST/steps.tsv" 2>/dev/null | cut -c1-150 || cat "$DEST/steps.tsv"

@@ -59,11 +59,14 @@ class NativeError(RuntimeError):
 
 
 def tick_choice() -> str:
-    """``SWARMCODE_TICK``: 'fused' (default: the C++ tick on the CPU where it builds) or
-    'reference' (the Python tick, eager or torch.compile'd, as before)."""
+    """``SWARMCODE_TICK``: 'fused' (default: the C++ tick on the CPU where it builds),
+    'reference' (the Python tick, eager or torch.compile'd, as before) or 'triton' (the Python
+    tick with its pair phases in Triton kernels, `triton_tick.TritonTicks`: on CUDA with triton
+    installed, or on the CPU under ``TRITON_INTERPRET=1``; elsewhere the Python tick, saying
+    so)."""
     v = os.environ.get("SWARMCODE_TICK", "fused").strip().lower() or "fused"
-    if v not in ("fused", "reference"):
-        raise ValueError(f"SWARMCODE_TICK must be 'fused' or 'reference', got {v!r}")
+    if v not in ("fused", "reference", "triton"):
+        raise ValueError(f"SWARMCODE_TICK must be 'fused', 'reference' or 'triton', got {v!r}")
     return v
 
 

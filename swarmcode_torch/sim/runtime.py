@@ -14,6 +14,7 @@ from .fused import FusedTicks, tick_choice
 from .layout import Layout
 from .state import Robots, State, TickInputs, WorldParams
 from .step import step
+from .triton_tick import TritonTicks
 
 # compiling the tick takes ~10-20 s on a CPU and then runs it ~2.4x faster (benchmarks/README.md)
 COMPILE_MIN_GENERATIONS = 50
@@ -180,16 +181,16 @@ def tick_function(
     """The tick function of a run on `device` and whether it is compiled. On the CPU, unless
     `compile` is true or ``SWARMCODE_TICK=reference``: the fused C++ tick (`FusedTicks`, which
     is built on first use; where it cannot be, a warning and the choice below), not compiled.
+    ``SWARMCODE_TICK=triton`` (and `compile` and `cuda_graphs` not true): the tick with its
+    pair phases in Triton kernels (`triton_tick.TritonTicks`), not compiled.
     Otherwise the Python
     tick: `compile` unset compiles it on CUDA, or for runs of at least COMPILE_MIN_GENERATIONS
     generations; `cuda_graphs` unset: on CUDA with the compiled tick, and a tick that fails to
     compile then runs eagerly."""
-    if (
-        device.type == "cpu"
-        and compile is not True
-        and not cuda_graphs
-        and tick_choice() == "fused"
-    ):
+    choice = tick_choice()
+    if choice == "triton" and compile is not True and not cuda_graphs:
+        return TritonTicks(), False
+    if device.type == "cpu" and compile is not True and not cuda_graphs and choice == "fused":
         fused = FusedTicks()
         if fused.ready(warn=True):
             return fused, False
@@ -210,10 +211,12 @@ def tick_function(
 
 
 def tick_mode(step_fn: Callable, compiled: bool) -> str:
-    """How the tick runs: 'fused', 'eager', 'compiled', 'compiled, CUDA graphs', 'eager (compiling
+    """How the tick runs: 'fused', 'triton', 'eager', 'compiled', 'compiled, CUDA graphs', 'eager (compiling
     failed)' once a compiled tick has fallen back."""
     if isinstance(step_fn, FusedTicks):
         return "fused"
+    if isinstance(step_fn, TritonTicks):  # it has warned once it fell back to the Python tick
+        return "eager (the Triton tick could not run)" if step_fn.warned else "triton"
     graphs = isinstance(step_fn, CudaGraphTicks)
     compiled_step = step_fn
     if isinstance(step_fn, CudaGraphTicks):

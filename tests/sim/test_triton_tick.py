@@ -227,6 +227,35 @@ def test_ticks_agree_with_the_reference_state_by_state(
         assert bool(s.p_picked.any()) and bool((s.p_status == 2).any())
 
 
+@needs_triton
+def test_swarmcode_tick_triton_selects_the_triton_tick_for_a_rollout(interpret):
+    """SWARMCODE_TICK=triton: `tick_function` gives the Triton tick (not compiled, named
+    "triton"), and a whole rollout with it ends where the reference's does."""
+    from swarmcode_torch.sim.rollout import rollout
+    from swarmcode_torch.sim.runtime import tick_function, tick_mode
+
+    interpret.setenv("SWARMCODE_TICK", "triton")
+    fn, compiled = tick_function(torch.device("cpu"))
+    assert isinstance(fn, tt.TritonTicks) and not compiled and tick_mode(fn, compiled) == "triton"
+    inp, p = _world("two-niche", 2, seed=6)
+    _, ref = rollout(inp.layout, inp.robots, inp.tables, p, 40, step_fn=step, return_state=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the kernels ran: no fallback to the Python tick
+        _, got = rollout(inp.layout, inp.robots, inp.tables, p, 40, step_fn=fn, return_state=True)
+    # 40 ticks of the two sums' orders drift apart by a few 1e-5 (each tick alone is within
+    # TOL: test_ticks_agree_with_the_reference_state_by_state); the discrete state is the same
+    for name, x, y in zip(ref._fields, ref, got):
+        if x.dtype.is_floating_point:
+            torch.testing.assert_close(
+                y, x, rtol=1e-3, atol=1e-3, msg=lambda m, n=name: f"{n}: {m}"
+            )
+        else:
+            assert torch.equal(x, y), name
+    interpret.setenv("SWARMCODE_TICK", "bogus")
+    with pytest.raises(ValueError, match="'fused', 'reference' or 'triton'"):
+        tick_function(torch.device("cpu"))
+
+
 # ------------------------------------------------------------------ the broad phase at N = 1000
 def test_cell_list_finds_exactly_the_dense_contact_pairs_at_1000():
     pos, _, radius, _, present = crowd(E=2, N=1000, arena=22.0, seed=7)
