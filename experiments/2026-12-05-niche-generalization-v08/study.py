@@ -73,6 +73,14 @@ ARMS = {
         "--set",
         "refound_after=5",
     ],
+    "v12": [
+        "--set",
+        "essential_floor=0",
+        "--set",
+        "admission_basis=members",
+        "--set",
+        "demote_far_after=100",
+    ],
     "paper": ["--preset", "paper"],
 }
 BUILTIN = {"one-niche": 1, "two-niche": 2, "four-niche": 4}

@@ -146,6 +146,12 @@ def near_partner(design_distance: Tensor, nearest: Tensor, delta: float) -> Tens
     return design_distance[arange(k, nearest.device), nearest.clamp_min(0)] <= delta
 
 
+def same_effector(effector: Tensor, nearest: Tensor) -> Tensor:
+    """effector [K] (the prototypes'), nearest [K] (`nearest_partner`) -> [K] bool: the nearest
+    partner's robots have the species' effector (False where there is none)."""
+    return (nearest >= 0) & (effector == effector[nearest.clamp_min(0)])
+
+
 def update(
     adm: Admission,
     species: Tensor,

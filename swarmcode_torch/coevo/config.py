@@ -142,6 +142,14 @@ class SwarmCoDeConfig:
     members beat their baselines) is archived, and this many generations after its death a
     few offspring become copies of it, founding a species with a trial quota floor; 0: never
     (the default). Needs `partner_admission = "substitute"`."""
+    demote_far_after: int = 0
+    """From this generation on, the admission's demotion of substitutes (`coevo.admission`)
+    also pairs a partner with its nearest partner design of the same effector when that design
+    is farther than δ (before it, and with 0, the default: only within δ, 0.7's rule). Two
+    partners of one effector whose robots stand in for each other at no loss are then told
+    apart however their radii and tiers differ; the delay keeps the first generations, when
+    most species are gated half the time, from demoting a niche holder. Needs
+    `partner_admission = "substitute"`."""
     hw_sigma: float = 0.05
     """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
     social_sigma: float = 0.05

@@ -49,6 +49,7 @@ LOWER_BOUNDS = {
     "seed": 0,
     "essential_floor": 0,
     "refound_after": 0,
+    "demote_far_after": 0,
     "reeval_trials": 0,
 }
 
@@ -108,6 +109,7 @@ UPPER_BOUNDS = {
     "min_share": 1e9,
     "essential_floor": 1_000_000,
     "refound_after": 10_000_000,
+    "demote_far_after": 10_000_000,
     "w_tag": 1e6,
     "w_hw": 1e6,
     "w_bt": 1e6,

@@ -304,6 +304,8 @@ def _evaluation(
     nearest = admission.nearest_partner(designs_d, allowed)
     # a substitute pair: the nearest partner's design within δ of the species' own
     near = admission.near_partner(designs_d, nearest, ctx.speciation.delta)
+    if 0 < ctx.cfg.demote_far_after <= state.generation:
+        near = near | admission.same_effector(sp.prototypes.effector, nearest)
     adm = admission.update(
         adm,
         sp.species,

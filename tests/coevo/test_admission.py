@@ -100,6 +100,56 @@ def test_a_gated_partner_whose_nearest_partner_is_another_design_is_not_a_substi
         assert adm.partner.tolist() == want, near
 
 
+def test_same_effector_pairs_a_far_nearest_partner_of_the_species_effector_only():
+    """`demote_far_after`: past it, a far nearest partner counts as near when its robots have
+    the species' effector, and the far pair of the test above is then a substitute pair."""
+    from swarmcode_torch.coevo.admission import SUBSTITUTE, nearest_partner, same_effector
+
+    effector = torch.tensor([0, 0, 1])
+    nearest = torch.tensor([1, 0, -1])  # 0 and 1 each other's nearest; 2 has none
+    assert same_effector(effector, nearest).tolist() == [True, True, False]
+    assert same_effector(torch.tensor([0, 1]), torch.tensor([1, 0])).tolist() == [False, False]
+    dd = torch.tensor([[0.0, 0.9], [0.9, 0.0]])
+    nearest = nearest_partner(dd, torch.tensor([True, True]))
+    near = same_effector(torch.tensor([1, 1]), nearest)
+    species, ids = torch.tensor([0, 0, 0, 1, 1]), torch.tensor([0, 1])
+    gated = torch.tensor([False, False, False, True, True])
+    adm = Admission.empty().grow(2, True)
+    for _ in range(SUBSTITUTE.clash_generations + 1):
+        adm = update(adm, species, ids, gated, nearest, SUBSTITUTE, near=near)
+    assert adm.partner.tolist() == [True, False]
+
+
+def test_demote_far_after_is_off_by_default_and_changes_nothing_before_its_generation():
+    """0 (the default) and a generation not reached yet give the default's run exactly."""
+    from dataclasses import replace
+
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+    from swarmcode_torch.coevo.evolve import Evolution
+
+    cfg = SwarmCoDeConfig(
+        scenario="two-niche",
+        population=16,
+        swarm_size=6,
+        trials=1,
+        ticks=30,
+        generations=4,
+        seed=2,
+        device="cpu",
+        compile=False,
+    )
+    assert cfg.demote_far_after == 0
+
+    def run(c):
+        ev = Evolution(c)
+        return [ev.step().best_fitness for _ in range(4)], ev.state.genome.effector
+
+    base = run(cfg)
+    late = run(replace(cfg, demote_far_after=50))
+    assert base[0] == late[0] and torch.equal(base[1], late[1])
+    run(replace(cfg, demote_far_after=1))  # on from generation 1: runs
+
+
 def test_a_checkpoint_with_a_damaged_admission_state_is_refused():
     from dataclasses import replace
 
