@@ -36,6 +36,7 @@ from .checkpoints import load_run
 from .files import RunError, new_run_dir
 from .optspec import Intervals, Values, api_values, check_values, declare_keywords
 from .run_options import EVOLVE_OPTIONS
+from .run_record import APP_KEY, app_record
 from .session import make_config  # noqa: F401 - the API's, as before
 
 
@@ -133,7 +134,7 @@ def _file_reporters(run_dir: Path, every: Intervals, keep: int = 0) -> list:
 def _result(
     ev: Evolution, run_dir: Path | None, history: list[dict], bounds: session.Bounds | None = None
 ) -> RunResult:
-    best = ev.state.best
+    best = app_record(ev).best
     return RunResult(
         config=ev.cfg,
         run_dir=run_dir,
@@ -487,7 +488,7 @@ def load(run_dir: str | os.PathLike) -> RunResult:
     """
     run_dir = Path(run_dir)
     cfg, ck, scenario = load_run(run_dir)
-    best = ck["best"]
+    best = ck[APP_KEY]["best"]
     return RunResult(
         config=cfg,
         run_dir=run_dir,

@@ -24,15 +24,15 @@ re-rolled until it is lucky. `swarmcode-torch evaluate RUN --generation G --epis
 --seed-start S` gives a record's numbers again; its default seeds (from 1,000,000) are held out
 from this selection.
 
-**The record.** The run's best team (`EvolutionState.best`, saved in the checkpoint) is the
-teams.jsonl record of the highest re-evaluated mean so far (the earlier of equals), with
-``fitness`` = that mean and ``single_trial_fitness`` = the team's own single evaluation, and
-``run_single_trial`` = {"fitness", "generation"}: the highest single evaluation of any
-generation's best team (what the run recorded as its best before re-evaluation). `--patience`
-counts generations since that record last changed. Evolution never reads any of it: a run
-evolves the same for every K. K = 0: the best team is the highest single evaluation, as before
-0.8 (configs written before the key resume with 0). A best team recorded with another K (a
-branch, `evolve --from`, that changes it) is re-evaluated with this run's K first.
+**The record.** The run's best team (`run_record.app_record(ev).best`, saved in the checkpoint
+beside the algorithm's state) is the teams.jsonl record of the highest re-evaluated mean so far (the
+earlier of equals), with ``fitness`` = that mean and ``single_trial_fitness`` = the team's own
+single evaluation, and ``run_single_trial`` = {"fitness", "generation"}: the highest single
+evaluation of any generation's best team (what the run recorded as its best before re-evaluation).
+`--patience` counts generations since that record last changed. Evolution never reads any of it: a
+run evolves the same for every K. K = 0: the best team is the highest single evaluation, as before
+0.8 (configs written before the key resume with 0). A best team recorded with another K (a branch,
+`evolve --from`, that changes it) is re-evaluated with this run's K first.
 """
 
 from __future__ import annotations
@@ -49,6 +49,7 @@ from ..coevo.evolve import Evolution
 from ..sim import bt
 from ..sim.layout import Layout
 from ..sim.runtime import tick_function
+from .run_record import app_record
 from .team_eval import TEAM_GENES, draw_layouts, score_team
 
 #: The first seed of the re-evaluation environments (`evaluate`'s default start is 1,000,000).
@@ -161,10 +162,11 @@ def _unreevaluated(best: dict) -> dict:
 
 def update(ev: Evolution, team: dict) -> tuple[dict, float]:
     """The run's best team record after generation `team` (its teams.jsonl record, which gets
-    its "reeval" here), from `ev.state.best` (the record so far; see the module docstring), and
+    its "reeval" here), from `app_record(ev).best` (the record so far; see the module
+    docstring), and
     the seconds the re-evaluation took."""
     k = ev.cfg.reeval_trials
-    best = ev.state.best
+    best = app_record(ev).best
     if k == 0:
         if best is not None and "reeval" in best:
             best = _unreevaluated(best)  # a branch that turned re-evaluation off

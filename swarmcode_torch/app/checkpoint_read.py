@@ -1,6 +1,12 @@
 """A checkpoint file read back: unpickled without running code, its entries' types and its plain
 records (generation, history, best team) checked against each other. `checkpoints` loads,
-resumes and branches from what it returns."""
+resumes and branches from what it returns.
+
+A checkpoint holds the algorithm's state dict (`coevo.run_state.state_dict`) and, beside it, the
+application's record of the run (`run_record.RunRecord`) as its "app" table: {"best": the run's
+best team}. A checkpoint written before the record moved out of the algorithm's state holds
+"best" among the algorithm's entries; `read_checkpoint` moves it into "app", so that every
+reader sees one layout."""
 
 from __future__ import annotations
 
@@ -12,6 +18,7 @@ from pathlib import Path
 import torch
 
 from .files import RunError, open_nofollow
+from .run_record import APP_KEY
 
 #: What a checkpoint may hold at the top level, and the type of each entry.
 _CHECKPOINT_KEYS = {
@@ -26,9 +33,38 @@ _CHECKPOINT_KEYS = {
     "fitness": torch.Tensor,
     "has_fitness": torch.Tensor,
     "rng_state": torch.Tensor,
-    "best": (dict, type(None)),
     "history": list,
 }
+
+#: What the application's "app" table holds, and the type of each entry.
+_APP_KEYS = {"best": (dict, type(None))}
+
+
+def _app_record(d: dict, path: Path) -> str:
+    """Checks the application's record of checkpoint `d` (read from `path`): its "app" table,
+    or an older checkpoint's "best" among the algorithm's entries, moved into "app" (RunError,
+    one line, for a missing or mistyped entry); where the record's best team lies in the file
+    ("app.best" or "best"), for the messages of `check_records`."""
+    if APP_KEY in d:
+        app, where = d[APP_KEY], f"{APP_KEY}."
+        if not isinstance(app, dict):
+            raise RunError(
+                f"{path} is damaged: {APP_KEY!r} has the wrong type ({type(app).__name__})"
+            )
+    elif "best" in d:  # written before the record moved out of the algorithm's state
+        app, where = {"best": d.pop("best")}, ""
+        d[APP_KEY] = app
+    else:
+        raise RunError(f"{path} is not a complete checkpoint (no {APP_KEY!r})")
+    for key, kind in _APP_KEYS.items():
+        name = where + key
+        if key not in app:
+            raise RunError(f"{path} is not a complete checkpoint (no {name!r})")
+        if not isinstance(app[key], kind):
+            raise RunError(
+                f"{path} is damaged: {name!r} has the wrong type ({type(app[key]).__name__})"
+            )
+    return f"{where}best"
 
 
 def read_checkpoint(path: Path) -> dict:
@@ -70,7 +106,7 @@ def read_checkpoint(path: Path) -> dict:
             raise RunError(
                 f"{path} is damaged: {key!r} has the wrong type ({type(d[key]).__name__})"
             )
-    check_records(d, path)
+    check_records(d, path, _app_record(d, path))
     return d
 
 
@@ -89,15 +125,16 @@ def _number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
-def check_records(d: dict, path: Path) -> None:
+def check_records(d: dict, path: Path, best_at: str = "app.best") -> None:
     """RunError, one line naming `path` and the entry, unless the plain records of a checkpoint
     (its types checked) fit together: `generation` no more than the generations of the config
     it holds, one `history` record per finished generation, in order, each with its species
-    composition (`population`, `team`: species id -> count), and a `best` team (None before a
-    generation finished) of a finished generation, with a number for its fitness and
-    well-formed designs. What every reader of a checkpoint relies on (resume, `--from`,
-    `dynamics`, the API's load); the tensors are checked against the config where a run is
-    built from them (`evolve.load_state_dict`)."""
+    composition (`population`, `team`: species id -> count), and the application's best team
+    (`d["app"]["best"]`, named `best_at` in messages; None before a generation finished) of a
+    finished generation, with a number for its fitness and well-formed designs. What every
+    reader of a checkpoint relies on (resume, `--from`, `dynamics`, the API's load); the
+    tensors are checked against the config where a run is built from them
+    (`evolve.load_state_dict`)."""
     from .summary import check_designs, finite, short
 
     gen = d["generation"]
@@ -135,10 +172,10 @@ def check_records(d: dict, path: Path) -> None:
                 raise RunError(
                     f"{w}.{key}: expected species id -> count (integers >= 0), got {short(v)}"
                 )
-    best = d["best"]
+    best = d[APP_KEY]["best"]
     if best is None:
         return
-    w = f"{path}: best"
+    w = f"{path}: {best_at}"
     g = best.get("generation")
     if not _integer(g) or g >= gen:
         raise RunError(

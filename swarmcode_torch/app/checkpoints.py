@@ -1,6 +1,7 @@
-"""Checkpoints: written atomically with the digests of the run's copies, read back without
-running code, loaded with the run's config and scenario checked against them, and resumed;
-`CheckpointReporter` writes them during a run."""
+"""Checkpoints: the algorithm's state and, beside it, the application's record of the run
+(`run_record`, the "app" table) written atomically with the digests of the run's copies, read
+back without running code, loaded with the run's config and scenario checked against them, and
+resumed; `CheckpointReporter` writes them during a run."""
 
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ from .files import (
 )
 from .migrations import check_runnable
 from .reporter import Reporter
+from .run_record import APP_KEY, app_record, restore
 from .runconfig import check_config, config_differences, config_from_dict, read_config, run_scenario
 
 
@@ -67,10 +69,16 @@ def check_copies(run_dir: Path, d: dict) -> None:
 
 
 def save_checkpoint(run_dir: Path, ev: Evolution, path: Path | None = None) -> Path:
-    """The checkpoint of `ev`'s state, with the digests of the run's copies, written atomically
-    to `path` (default: the run's checkpoint.pt; a snapshot's path, `snapshot_path`)."""
+    """The checkpoint of `ev`'s state, with the application's record of the run beside it
+    ("app") and the digests of the run's copies, written atomically to `path` (default: the
+    run's checkpoint.pt; a snapshot's path, `snapshot_path`)."""
     buf = io.BytesIO()
-    torch.save({**ev.state_dict(), "run_files": copy_digests(run_dir)}, buf)
+    d = {
+        **ev.state_dict(),
+        APP_KEY: app_record(ev).state_dict(),
+        "run_files": copy_digests(run_dir),
+    }
+    torch.save(d, buf)
     path = Path(run_dir) / CHECKPOINT_FILE if path is None else Path(path)
     atomic_write_bytes(path, buf.getvalue())
     return path
@@ -147,6 +155,15 @@ def load_run(run_dir: Path) -> tuple[SwarmCoDeConfig, dict, Scenario]:
     return cfg, d, scenario
 
 
+def evolution_from_checkpoint(
+    d: dict, cfg: SwarmCoDeConfig, fitness=None, scenario: Scenario | None = None, checked=False
+) -> Evolution:
+    """The `Evolution` of checkpoint `d` (as `read_checkpoint` returns it) with `cfg`, and the
+    application's record of the run it saved (`run_record.restore`); ValueError where the
+    algorithm's state does not fit `cfg`."""
+    return restore(Evolution.from_checkpoint(d, cfg, fitness, scenario, checked=checked), d)
+
+
 def same_function(recorded: str, given: str) -> bool:
     """Whether a user fitness function named `given` ("module.qualname", `score_fn_name`) is the
     one a run recorded: the same name, or the same qualified name where one of the two ran as a
@@ -205,7 +222,7 @@ def resume(
     cfg = with_overrides(cfg, generations=generations, device=device)
     check_config(cfg, scenario)
     try:  # the run keeps the scenario it names; it runs on its copy
-        return Evolution.from_checkpoint(d, cfg, fitness, scenario, checked=True)
+        return evolution_from_checkpoint(d, cfg, fitness, scenario, checked=True)
     except ValueError as e:
         raise RunError(f"{run_dir / CHECKPOINT_FILE} does not fit the run's config: {e}") from None
     except (KeyError, TypeError, RuntimeError, IndexError) as e:

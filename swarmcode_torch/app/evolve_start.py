@@ -16,6 +16,7 @@ from ..coevo.config import with_overrides
 from ..sim.scenario import ScenarioError
 from . import session
 from .optspec import Values, check_values
+from .run_record import app_record
 from .settings import option_names, parse_settings
 from .signals import TERMINATED, terminate_as_interrupt
 from .terminal import (
@@ -79,7 +80,7 @@ def bound_line(bounds, ev, run_dir: Path) -> str:
         why = bounds.stopper.why()
     elif bounds.reason == "patience":
         why = (
-            f"the best team (generation {ev.state.best['generation']}) has not improved for "
+            f"the best team (generation {app_record(ev).best['generation']}) has not improved for "
             f"{bounds.patience} generations (--patience {bounds.patience})"
         )
     else:

@@ -16,6 +16,7 @@ from pathlib import Path
 from ..coevo.evolve import Evolution, GenerationResult
 from .checkpoints import CheckpointReporter, save_checkpoint
 from .files import clean_temporary_files, numbered_files, own_folder
+from .run_record import app_record
 
 KEEP_DIR = "checkpoints"
 BEST_FILE = "best.pt"
@@ -61,7 +62,7 @@ class KeepingCheckpoints(CheckpointReporter):
     def on_start(self, ev: Evolution) -> None:
         folder = keep_folder(self.run_dir, make=True)
         clean_temporary_files(folder, _TARGETS)
-        best = ev.state.best
+        best = app_record(ev).best
         self.best_generation = None if best is None else int(best["generation"])
         super().on_start(ev)
 
@@ -74,7 +75,7 @@ class KeepingCheckpoints(CheckpointReporter):
             path.unlink(missing_ok=True)
 
     def on_generation(self, ev: Evolution, result: GenerationResult) -> None:
-        best = ev.state.best
+        best = app_record(ev).best
         if best is not None and int(best["generation"]) != self.best_generation:
             save_checkpoint(self.run_dir, ev, keep_folder(self.run_dir) / BEST_FILE)
             self.best_generation = int(best["generation"])

@@ -20,6 +20,7 @@ from ..coevo.population import design_record, from_designs, genome_phenotype
 from ..sim.hardware import Phenotype
 from ..sim.state import WorldParams, capabilities
 from . import best_team
+from .run_record import app_record
 
 #: The scalar tags of a generation, in the order of metrics.csv's columns.
 SCALAR_TAGS = (
@@ -129,13 +130,14 @@ def step(ev: Evolution) -> GenerationResult:
     """One generation of `ev` with its report records: the generation's best team
     (`team_record`, re-evaluated on the run's `reeval_trials` fresh environments) and the run's
     best team so far, the one of the best re-evaluated mean (`best_team.update`), which
-    `ev.state.best` keeps (a checkpoint saves it): what the application's reporters and
+    `app_record(ev).best` keeps (a checkpoint saves it): what the application's reporters and
     callbacks receive."""
     result = ev.step()
     team = team_record(result.best_team, result.generation, ev.ctx.scenario)
-    ev.state.best = describe_team(ev.state.best, ev.ctx.scenario)
+    run = app_record(ev)
+    run.best = describe_team(run.best, ev.ctx.scenario)
     best, seconds = best_team.update(ev, team)
-    ev.state.best = best
+    run.best = best
     return replace(result, team=team, best=best, reeval_seconds=seconds)
 
 

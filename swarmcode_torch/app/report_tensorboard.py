@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 from ..coevo.evolve import Evolution, GenerationResult
 from .records import HISTOGRAMS, SCALAR_TAGS, scalars
 from .reporter import Reporter
+from .run_record import app_record
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -378,7 +379,7 @@ class TensorBoardReporter(Reporter):
             step = ev.state.history[-1]["generation"]
             if self._figure_step != step:  # the last generation's figure, once
                 self._figure(ev, step)
-            best = ev.state.best
+            best = app_record(ev).best
             if self.render_every and best and best.get("designs"):
                 img = replay_strip(ev, best["designs"], seed=step)
                 self.writer.add_image("best/replay", img, step, dataformats="HWC")

@@ -13,6 +13,7 @@ from ..coevo.evolve import Evolution, GenerationResult
 from .records import HISTOGRAMS, SCALAR_TAGS, scalars
 from .report_tensorboard import best_scalars, replay_strip
 from .reporter import Reporter
+from .run_record import app_record
 
 #: What to install for `WandbReporter` (`evolve --wandb`).
 WANDB_INSTALL = 'pip install -e ".[wandb]" in the source tree'
@@ -148,7 +149,7 @@ class WandbReporter(Reporter):
     def on_end(self, ev: Evolution) -> None:
         if self.run is None:
             return
-        best = ev.state.best
+        best = app_record(ev).best
         if self.render_every and ev.state.history and best and best.get("designs"):
             step = ev.state.history[-1]["generation"]
             self.run.log(

@@ -28,11 +28,12 @@ from ..coevo.config import PRESETS, SwarmCoDeConfig, preset_config, with_overrid
 from ..coevo.evaluation import ScoreFn
 from ..sim.scenario import Scenario, read_scenario
 from . import checkpoints, files, records
-from .checkpoints import Branch, CheckpointReporter, load_run, resume
+from .checkpoints import Branch, CheckpointReporter, evolution_from_checkpoint, load_run, resume
 from .eta import parse_duration
 from .files import HARDWARE_COPY, SCENARIO_COPY, RunError, atomic_write_bytes
 from .locks import RunLock
 from .reporter import Reporter
+from .run_record import app_record, set_app_record
 from .runconfig import (
     check_config,
     config_differences,
@@ -272,7 +273,7 @@ def start_branch(
     if before_build is not None:
         before_build()
     try:
-        ev = Evolution.from_checkpoint(branch.checkpoint, cfg, fitness, branch.scenario)
+        ev = evolution_from_checkpoint(branch.checkpoint, cfg, fitness, branch.scenario)
     except ValueError as e:
         raise RunError(f"{branch.path} cannot start the branch: {e}") from None
     if cfg.seed != branch.config.seed:
@@ -369,9 +370,10 @@ class Bounds:
                 self.stopper = s
                 return reason
         on_metric = any(s.reason == "patience" for s in self.stops)  # --patience --stop-metric
-        if self.patience is not None and ev.state.best is not None and not on_metric:
+        best = app_record(ev).best
+        if self.patience is not None and best is not None and not on_metric:
             last = ev.state.generation - 1
-            if last - int(ev.state.best["generation"]) >= self.patience:
+            if last - int(best["generation"]) >= self.patience:
                 return "patience"
         if self.max_time is not None and elapsed >= self.max_time:
             return "max_time"
@@ -383,7 +385,9 @@ class Bounds:
         if self.stopper is not None:
             out.update(self.stopper.record())  # type: ignore[attr-defined]
         elif self.reason == "patience":
-            out.update(patience=self.patience, best_generation=int(ev.state.best["generation"]))
+            out.update(
+                patience=self.patience, best_generation=int(app_record(ev).best["generation"])
+            )
         else:
             out.update(max_time_seconds=self.max_time, elapsed_seconds=round(self.elapsed, 3))
         return out
@@ -420,7 +424,8 @@ def run(
     saver = reporters[marks[-1]] if marks else None
     cut = marks[-1] + 1 if marks else len(reporters)
     step_reporters, after = reporters[:cut], reporters[cut:]
-    recorded = ev.state  # the last state whose records are all written
+    # the last state whose records are all written, and the application's record of it
+    recorded = ev.state, replace(app_record(ev))
     t0 = clock()
     try:
         with hold():
@@ -435,7 +440,7 @@ def run(
             with hold():
                 for r in step_reporters:
                     r.on_generation(ev, result)
-                recorded = ev.state
+                recorded = ev.state, replace(app_record(ev))
                 reason = None
                 if bounds is not None:
                     bounds.elapsed = clock() - t0
@@ -458,7 +463,8 @@ def run(
         if interrupt is None or not on_disk:
             raise
         with deferred_signals(deliver=False):  # a second Ctrl-C cannot split this checkpoint
-            ev.state = recorded
+            ev.state = recorded[0]
+            set_app_record(ev, recorded[1])
             if saver is not None:
                 saver.save_state(ev)
                 path = Path(run_dir) / files.CHECKPOINT_FILE

@@ -15,6 +15,7 @@ from typing import Any
 
 from ..coevo.evolve import Evolution, GenerationResult
 from . import records
+from .run_record import app_record
 
 #: The metric the run's own best team gives (`GenerationResult.best`): what --patience alone
 #: watches, and the default of --stop-metric.
@@ -82,7 +83,7 @@ class MetricStop:
 
         before = ev.state.generation
         if self.metric == BEST:
-            best = ev.state.best
+            best = app_record(ev).best
             if best is not None and int(best["generation"]) >= self.warmup:
                 self.best, self.best_generation = float(best["fitness"]), int(best["generation"])
             return

@@ -380,7 +380,6 @@ def _reproduction(
         fitness=torch.where(is_elite, fit[parent], 0.0),
         has_fitness=is_elite,
         rng_state=g.get_state(),
-        best=state.best,
         history=state.history,
         turnover=state.turnover,
         admission=state.admission,

@@ -42,8 +42,6 @@ class EvolutionState:
     fitness: Tensor  # [P] smoothed fitness carried by elites
     has_fitness: Tensor  # [P] bool
     rng_state: Tensor  # the run generator's state
-    best: dict | None = None  # the application's record of the run's best team so far
-    #                                (`app.records.step` keeps it; saved in checkpoints)
     history: list = field(default_factory=list)  # per-generation composition records
     turnover: Turnover = field(default_factory=Turnover)  # species births and deaths (derived
     #                                                       from history; not saved)
@@ -56,7 +54,12 @@ class EvolutionState:
 @dataclass(frozen=True, eq=False)
 class GenerationResult:
     """What one generation measured (`generation` returns it; `app.records` turns it into
-    TensorBoard tags, metrics.csv rows, summary.json and teams.jsonl)."""
+    TensorBoard tags, metrics.csv rows, summary.json and teams.jsonl).
+
+    `team`, `best` and `reeval_seconds` are the application's: the algorithm leaves them empty
+    and `app.records.step` fills them in a copy (`dataclasses.replace`). They stay here so that
+    every reporter hook and callback receives one result per generation; the run's best team
+    itself is not part of the algorithm's state (the application keeps it, `app.run_record`)."""
 
     generation: int  # the generation evaluated (0-based)
     best_fitness: float  # highest smoothed fitness in the population
@@ -102,7 +105,6 @@ def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
         "fitness": state.fitness.cpu(),
         "has_fitness": state.has_fitness.cpu(),
         "rng_state": state.rng_state.cpu(),
-        "best": state.best,
         "history": state.history,
         "admission": state.admission.state_dict() if state.admission is not None else None,
         "archive": state.archive.state_dict() if state.archive is not None else None,
@@ -110,7 +112,9 @@ def state_dict(state: EvolutionState, cfg: SwarmCoDeConfig) -> dict:
 
 
 def load_state_dict(d: dict, ctx: RunContext) -> EvolutionState:
-    """Rebuild a state from `state_dict` output; ValueError if it does not fit this run."""
+    """Rebuild a state from `state_dict` output; ValueError if it does not fit this run.
+    Entries that are not the algorithm's (the application's, such as an older checkpoint's
+    "best") are ignored."""
     if not isinstance(d, dict) or d.get("version") != CHECKPOINT_VERSION:
         raise ValueError("checkpoint has an unknown format or version")
     dev = ctx.device
@@ -146,7 +150,6 @@ def load_state_dict(d: dict, ctx: RunContext) -> EvolutionState:
         fitness=d["fitness"].to(dev),
         has_fitness=d["has_fitness"].to(dev),
         rng_state=rng,
-        best=d["best"],
         history=list(d["history"]),
         turnover=replay(d["history"])[0],
         admission=adm,

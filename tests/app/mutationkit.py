@@ -251,7 +251,9 @@ def checkpoint_mutation(draw, data: bytes) -> bytes:
     elif where == "history":
         table = d["history"][draw(st.integers(0, len(d["history"]) - 1))]
     elif where == "designs":
-        table = d["best"]["designs"][0]
+        table = d["app"]["best"]["designs"][0]
+    elif where == "best":  # the application's record, beside the algorithm's state
+        table = d["app"]["best"]
     else:
         table = d[where]
     key = draw(st.sampled_from(sorted(table)))

@@ -21,6 +21,7 @@ from swarmcode_torch.app import best_team
 from swarmcode_torch.app.cli import app
 from swarmcode_torch.app.evaluate import evaluate
 from swarmcode_torch.app.reporting import best_scalars, read_metrics_csv
+from swarmcode_torch.app.run_record import app_record
 from swarmcode_torch.app.session import Bounds
 from swarmcode_torch.app.summary import read_summary, read_teams
 from swarmcode_torch.coevo.evaluation import team_scores
@@ -103,7 +104,7 @@ def test_evolution_is_the_same_with_and_without_reevaluation(straight):
 def test_scalars_inspect_and_the_replay_page_report_the_reevaluated_score(straight, tmp_path):
     run = straight.run_dir
     s = _summary(run)
-    result = SimpleNamespace(best=straight.evolution.state.best)
+    result = SimpleNamespace(best=app_record(straight.evolution).best)
     b = best_scalars(result)
     assert b["best/fitness"] == s["best_fitness"]
     assert [b["best/fitness_ci_lo"], b["best/fitness_ci_hi"]] == s["best_fitness_ci95"]
@@ -134,9 +135,9 @@ def test_a_resumed_run_records_what_a_straight_run_does(straight, tmp_path):
     for key in ("best_fitness", "best_generation", *NEW_FIELDS, "designs"):
         assert a[key] == b[key], key
     assert read_teams(straight.run_dir) == read_teams(res.run_dir)
-    assert straight.evolution.state.best == res.evolution.state.best
+    assert app_record(straight.evolution).best == app_record(res.evolution).best
     ck = torch.load(res.run_dir / "checkpoint.pt", weights_only=True)
-    assert ck["best"] == straight.evolution.state.best
+    assert ck["app"]["best"] == app_record(straight.evolution).best
 
 
 class _Fake:
@@ -167,10 +168,18 @@ def _team(g: int, single: float, radius: float) -> dict:
 def _run_updates(monkeypatch, k: int, teams: list[dict], means: dict[float, float]):
     fake = _Fake(means)
     monkeypatch.setattr(best_team, "reevaluator", lambda ev: fake)
-    ev = SimpleNamespace(cfg=SimpleNamespace(reeval_trials=k), state=SimpleNamespace(best=None))
+    ev = _FakeEvolution(cfg=SimpleNamespace(reeval_trials=k), state=SimpleNamespace())
     for t in teams:
-        ev.state.best, _ = best_team.update(ev, t)
+        app_record(ev).best, _ = best_team.update(ev, t)
     return ev, fake
+
+
+class _FakeEvolution(SimpleNamespace):
+    """What `best_team.update` and `Bounds` read of an Evolution (a record can be kept beside
+    it: a SimpleNamespace cannot be referred to weakly)."""
+
+    __slots__ = ("__weakref__",)
+    __hash__ = object.__hash__
 
 
 def test_a_lucky_early_team_is_not_kept_over_a_better_one(monkeypatch):
@@ -179,7 +188,7 @@ def test_a_lucky_early_team_is_not_kept_over_a_better_one(monkeypatch):
     teams = [_team(0, 100.0, 0.1), _team(1, 50.0, 0.2), _team(2, 90.0, 0.3), _team(3, 60.0, 0.2)]
     means = {0.1: 10.0, 0.2: 40.0, 0.3: 30.0}
     ev, fake = _run_updates(monkeypatch, K, [dict(t) for t in teams], means)
-    best = ev.state.best
+    best = app_record(ev).best
     assert best["generation"] == 1 and best["fitness"] == 40.0
     assert best["single_trial_fitness"] == 50.0
     assert best["run_single_trial"] == {"fitness": 100.0, "generation": 0}
@@ -188,8 +197,8 @@ def test_a_lucky_early_team_is_not_kept_over_a_better_one(monkeypatch):
     assert s["best_single_trial_fitness"] == 100.0 and s["best_fitness_ci95"] == [39.0, 41.0]
     # without re-evaluation: the lucky team, as before
     old, fake = _run_updates(monkeypatch, 0, [dict(t) for t in teams], means)
-    assert old.state.best["generation"] == 0 and old.state.best["fitness"] == 100.0
-    assert fake.calls == 0 and "reeval" not in old.state.best
+    assert app_record(old).best["generation"] == 0 and app_record(old).best["fitness"] == 100.0
+    assert fake.calls == 0 and "reeval" not in app_record(old).best
 
 
 def test_patience_counts_from_the_reevaluated_best(monkeypatch):
@@ -258,7 +267,7 @@ def _make_old(run: Path) -> None:
     )
     ck = torch.load(run / "checkpoint.pt", weights_only=True)
     del ck["config"]["reeval_trials"]
-    best = ck["best"]
+    best = ck["app"]["best"]
     best["fitness"] = best.pop("single_trial_fitness")
     del best["reeval"], best["run_single_trial"]
     torch.save(ck, run / "checkpoint.pt")
@@ -308,7 +317,7 @@ def test_a_branch_that_turns_reevaluation_on_reevaluates_its_parents_best(tmp_pa
         logdir=tmp_path,
         **{k: v for k, v in TINY.items() if k in ("render_every", "figure_every", "threads")},
     )
-    best = branch.evolution.state.best
+    best = app_record(branch.evolution).best
     assert best["reeval"]["trials"] == K
     ref = evaluate(branch.run_dir, team="best", episodes=K, seed_start=2_000_000)
     assert best["fitness"] == ref.fitness.mean

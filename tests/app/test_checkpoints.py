@@ -90,3 +90,89 @@ def test_a_damaged_checkpoint_is_a_one_line_error(finished_run, tmp_path, damage
     with pytest.raises(RunError):
         read_checkpoint(path)
     one_line_error(invoke("evolve", "--resume", run, "--generations", 3), "checkpoint")
+
+
+def _old_layout(path: Path) -> dict:
+    """The checkpoint at `path` rewritten as a version before the application's record moved out
+    of the algorithm's state wrote it: "best" among the algorithm's entries, no "app" table;
+    the new layout's contents."""
+    d = torch.load(path, weights_only=True)
+    old = {k: v for k, v in d.items() if k != "app"}
+    old["best"] = d["app"]["best"]
+    buf = io.BytesIO()
+    torch.save(old, buf)
+    path.write_bytes(buf.getvalue())
+    return d
+
+
+def test_a_checkpoint_holds_the_apps_record_beside_the_algorithms_state(finished_run):
+    from swarmcode_torch.app.api import load
+    from swarmcode_torch.app.runconfig import read_config
+    from swarmcode_torch.coevo.evolve import Evolution
+
+    d = torch.load(finished_run / "checkpoint.pt", weights_only=True)
+    best = d["app"]["best"]
+    assert set(d["app"]) == {"best"} and best["generation"] in (0, 1)
+    assert "best" not in d  # the algorithm's state does not hold it
+    algorithm = set(Evolution(read_config(finished_run)).state_dict())
+    assert "best" not in algorithm and set(d) == algorithm | {"app", "run_files"}
+    assert load(finished_run).best_team == best
+
+
+def test_an_old_layout_checkpoint_reads_and_resumes_as_a_new_one(finished_run, tmp_path):
+    from swarmcode_torch.app.api import load
+
+    new = _copy_run(finished_run, tmp_path / "new")
+    old = _copy_run(finished_run, tmp_path / "old")
+    saved = _old_layout(old / "checkpoint.pt")
+    assert "app" not in torch.load(old / "checkpoint.pt", weights_only=True)
+    d = read_checkpoint(old / "checkpoint.pt")  # the record moved over on reading
+    assert "best" not in d and d["app"] == saved["app"]
+    assert load(old).best_team == load(new).best_team == saved["app"]["best"]
+    assert invoke("inspect", old).exit_code == 0
+    for run in (new, old):
+        r = invoke("evolve", "--resume", run, "--generations", 4)
+        assert r.exit_code == 0, r.output
+    assert (old / "teams.jsonl").read_bytes() == (new / "teams.jsonl").read_bytes()
+    a, b = load_checkpoint(old), load_checkpoint(new)
+    assert a["generation"] == b["generation"] == 4 and a["app"] == b["app"]
+    assert a["history"] == b["history"] and torch.equal(a["rng_state"], b["rng_state"])
+    assert all(torch.equal(a["genome"][k], b["genome"][k]) for k in a["genome"])
+    # the resume wrote the new layout
+    assert "best" not in torch.load(old / "checkpoint.pt", weights_only=True)
+
+
+def test_an_old_layout_checkpoint_branches(finished_run, tmp_path):
+    old = _copy_run(finished_run, tmp_path / "old")
+    _old_layout(old / "checkpoint.pt")
+    logdir = tmp_path / "runs"
+    r = invoke("evolve", "--from", old, "--generations", 3, "--logdir", logdir)
+    assert r.exit_code == 0, r.output
+    (branch,) = list(logdir.iterdir())
+    assert load_checkpoint(branch)["generation"] == 3
+
+
+@pytest.mark.parametrize(
+    "edit,needle",
+    [
+        (lambda d: d.__setitem__("app", [1]), "'app' has the wrong type (list)"),
+        (lambda d: d.__setitem__("app", {}), "no 'app.best'"),
+        (lambda d: d["app"].__setitem__("best", 5), "'app.best' has the wrong type (int)"),
+        (lambda d: d["app"]["best"].__setitem__("fitness", "high"), "app.best.fitness"),
+        (lambda d: d.pop("app"), "no 'app'"),
+        # an old layout's record, damaged: named where it lies in the file
+        (lambda d: d.__setitem__("best", dict(d.pop("app")["best"], fitness="x")), ": best.fit"),
+        (lambda d: d.__setitem__("best", d.pop("app") and 7), "'best' has the wrong type (int)"),
+    ],
+)
+def test_a_damaged_app_record_is_a_one_line_error(finished_run, tmp_path, edit, needle):
+    run = _copy_run(finished_run, tmp_path / "run")
+    path = run / "checkpoint.pt"
+    d = torch.load(path, weights_only=True)
+    edit(d)
+    buf = io.BytesIO()
+    torch.save(d, buf)
+    path.write_bytes(buf.getvalue())
+    with pytest.raises(RunError, match="checkpoint.pt"):
+        read_checkpoint(path)
+    one_line_error(invoke("evolve", "--resume", run, "--generations", 3), needle)

@@ -68,7 +68,7 @@ def _beyond(d) -> None:  # a generation past the run's 2, with a record for each
 
 def _best(key, value):
     def edit(d):
-        d["best"][key] = value
+        d["app"]["best"][key] = value
 
     return edit
 
@@ -90,10 +90,10 @@ def _no_population(d) -> None:
     [
         (_set("generation", 10**6), "generation: 1000000 is beyond the 2 generations"),
         (_beyond, "generation: 7 is beyond the 2 generations"),
-        (_best("fitness", "high"), "best.fitness: expected a number, got 'high'"),
-        (_set("best", {}), "best.generation: expected a finished generation"),
-        (_best("designs", [{"x": 1}, 5]), "best: designs[0]: missing 'count'"),
-        (_best("designs", "lots"), "best: designs: expected a non-empty list"),
+        (_best("fitness", "high"), "app.best.fitness: expected a number, got 'high'"),
+        (_set("app", {"best": {}}), "app.best.generation: expected a finished generation"),
+        (_best("designs", [{"x": 1}, 5]), "app.best: designs[0]: missing 'count'"),
+        (_best("designs", "lots"), "app.best: designs: expected a non-empty list"),
         (
             lambda d: d.__setitem__("history", list(range(len(d["history"])))),
             "history[0]: expected a record",

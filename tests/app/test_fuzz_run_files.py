@@ -263,9 +263,9 @@ FOUND = [
         "checkpoint.pt",
         "dynamics",
         _checkpoint_edit(
-            lambda d: d["best"]["designs"][0].__setitem__("battery_tier", torch.tensor([]))
+            lambda d: d["app"]["best"]["designs"][0].__setitem__("battery_tier", torch.tensor([]))
         ),
-        "best: designs[0].battery_tier",
+        "app.best: designs[0].battery_tier",
     ),
     # an integer of 5,000 digits: ValueError from json.loads and from every repr of it
     ("summary.json", "inspect", lambda b: b"1" + b"0" * 5000, "more than 4300 digits"),
@@ -273,8 +273,8 @@ FOUND = [
     (
         "checkpoint.pt",
         "dynamics",
-        _checkpoint_edit(lambda d: d["best"]["designs"][0].__setitem__("radius", 10**400)),
-        "best: designs[0].radius",
+        _checkpoint_edit(lambda d: d["app"]["best"]["designs"][0].__setitem__("radius", 10**400)),
+        "app.best: designs[0].radius",
     ),
     # an integer too large for a float: OverflowError from math.isfinite
     ("summary.json", "inspect", _design("radius", 10**400), "designs[0].radius"),
@@ -290,8 +290,8 @@ FOUND = [
     (
         "checkpoint.pt",
         "resume",
-        _checkpoint_edit(lambda d: d["best"].__setitem__("fitness", 10**400)),
-        "best.fitness",
+        _checkpoint_edit(lambda d: d["app"]["best"].__setitem__("fitness", 10**400)),
+        "app.best.fitness",
     ),
     (
         "checkpoint.pt",
@@ -303,8 +303,8 @@ FOUND = [
     (
         "checkpoint.pt",
         "resume",
-        _checkpoint_edit(lambda d: d["best"].__setitem__("fitness", math.nan)),
-        "best.fitness",
+        _checkpoint_edit(lambda d: d["app"]["best"].__setitem__("fitness", math.nan)),
+        "app.best.fitness",
     ),
 ]
 

@@ -158,8 +158,8 @@ def test_keep_checkpoints_keeps_the_last_k_and_the_best(tmp_path):
     )
     best = read_checkpoint(run_dir / "checkpoints" / "best.pt")
     # the state written right after the generation that found the run's best team
-    assert best["best"] == latest["best"]
-    assert best["generation"] == latest["best"]["generation"] + 1
+    assert best["app"]["best"] == latest["app"]["best"]
+    assert best["generation"] == latest["app"]["best"]["generation"] + 1
     r = invoke("evolve", "--resume", run_dir, "--generations", 9, "--checkpoint-every", 2,
                "--keep-checkpoints", 2)  # fmt: skip
     assert r.exit_code == 0, r.output

@@ -90,7 +90,7 @@ def teams(run_dir: Path) -> dict[int, str]:
 
 def same_state(a: dict, b: dict) -> bool:
     """Two checkpoints hold the same evolution state (every tensor and value but the config)."""
-    for key in ("generation", "next_species_id", "best", "history"):
+    for key in ("generation", "next_species_id", "app", "history"):
         if a[key] != b[key]:
             return False
     for key in ("species_hint", "proto_ids", "fitness", "has_fitness", "rng_state"):
@@ -157,7 +157,10 @@ def test_branch_with_set_changes_exactly_that_setting(parent, tmp_path):
 
     class First:
         def on_start(self, ev):
-            seen.append(ev.state_dict())
+            from swarmcode_torch.app.run_record import app_record
+
+            # the algorithm's state and the application's record, as a checkpoint holds them
+            seen.append({**ev.state_dict(), "app": app_record(ev).state_dict()})
 
         def on_generation(self, ev, result):
             pass

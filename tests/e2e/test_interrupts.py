@@ -114,7 +114,7 @@ def _same_run(a: Path, b: Path) -> None:
     ca, cb = load_checkpoint(a), load_checkpoint(b)
     assert ca["generation"] == cb["generation"] == GENERATIONS
     assert torch.equal(ca["rng_state"], cb["rng_state"]) and ca["history"] == cb["history"]
-    assert ca["best"] == cb["best"]
+    assert ca["app"] == cb["app"]
     for k in ca["genome"]:
         assert torch.equal(ca["genome"][k], cb["genome"][k]), k
     for k in ("fitness", "has_fitness", "species_hint", "proto_ids"):
