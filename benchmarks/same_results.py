@@ -234,7 +234,12 @@ def _checkpoint(run_dir: Path) -> dict:
         else:
             yield path, json.dumps(x, sort_keys=True, default=str)
 
-    return dict(flat(torch.load(run_dir / "checkpoint.pt", weights_only=True)))
+    d = torch.load(run_dir / "checkpoint.pt", weights_only=True)
+    if isinstance(d, dict) and "best" in d and "app" not in d:
+        # a checkpoint written before the best team became the application's record (0.8):
+        # the same record, read where the newer layout keeps it
+        d["app"] = {"best": d.pop("best")}
+    return dict(flat(d))
 
 
 def compare(a: Path, b: Path) -> int:
