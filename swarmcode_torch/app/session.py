@@ -393,6 +393,17 @@ class Bounds:
         return out
 
 
+def _stop(ev: Evolution, bounds: Bounds, reason: str, saver, reporters: list) -> None:
+    """A bound reached: the reason kept, the checkpoint written, the reporters told
+    (`on_stop`, with summary.json's "stop" record)."""
+    bounds.reason = reason
+    if saver is not None:
+        saver.save_state(ev)
+    for r in reporters:
+        if callable(getattr(r, "on_stop", None)):
+            r.on_stop(ev, bounds.record(ev))
+
+
 def run(
     ev: Evolution,
     run_dir: Path | None,
@@ -446,12 +457,7 @@ def run(
                     bounds.elapsed = clock() - t0
                     reason = bounds.reached(ev, bounds.elapsed, result)
                 if reason is not None:
-                    bounds.reason = reason
-                    if saver is not None:
-                        saver.save_state(ev)
-                    for r in reporters:
-                        if callable(getattr(r, "on_stop", None)):
-                            r.on_stop(ev, bounds.record(ev))
+                    _stop(ev, bounds, reason, saver, reporters)
             for r in after:
                 r.on_generation(ev, result)
             if reason is not None:
