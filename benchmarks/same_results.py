@@ -122,6 +122,8 @@ VERSION_KEYS = {
     "w_tool",
     "w_size",
     "gamma",
+    # settings added off since (their default is the behaviour before them)
+    "demote_far_after",
 }
 
 
