@@ -200,8 +200,8 @@ def check_capability_classes(designs: list[dict], classes: int, source: str) -> 
             )
 
 
-#: summary.json keys and whether each must be a number (None allowed: a non-finite value).
-_SUMMARY_NUMBERS = (
+#: The figures of a run's best team in summary.json (a sweep's table has a column of each).
+TEAM_FIGURES = (
     "best_fitness",
     "team_cost",
     "deliveries",
@@ -209,8 +209,9 @@ _SUMMARY_NUMBERS = (
     "deliveries_collab",
     "energy_used",
     "num_species",
-    "best_generation",
 )
+#: summary.json keys that must be numbers (None allowed: a non-finite value).
+_SUMMARY_NUMBERS = (*TEAM_FIGURES, "best_generation")
 
 
 #: What a JSON run file with an integer of more digits than Python converts is told.

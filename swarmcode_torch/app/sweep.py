@@ -26,18 +26,9 @@ from .files import (
     read_text,
 )
 from .runconfig import config_differences, read_config, run_scenario
-from .summary import read_summary
+from .summary import TEAM_FIGURES, read_summary
 
-COLUMNS = (
-    "budget",
-    "best_fitness",
-    "team_cost",
-    "deliveries",
-    "deliveries_individual",
-    "deliveries_collab",
-    "energy_used",
-    "num_species",
-)
+COLUMNS = ("budget", *TEAM_FIGURES)
 HEADERS = (
     "Budget",
     "Best fitness",
