@@ -124,6 +124,7 @@ VERSION_KEYS = {
     "gamma",
     # settings added off since (their default is the behaviour before them)
     "demote_far_after",
+    "equal_quotas_until",
 }
 
 

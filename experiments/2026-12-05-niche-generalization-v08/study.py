@@ -81,6 +81,14 @@ ARMS = {
         "--set",
         "demote_far_after=100",
     ],
+    "v13": [
+        "--set",
+        "essential_floor=0",
+        "--set",
+        "admission_basis=members",
+        "--set",
+        "equal_quotas_until=30",
+    ],
     "paper": ["--preset", "paper"],
 }
 BUILTIN = {"one-niche": 1, "two-niche": 2, "four-niche": 4}

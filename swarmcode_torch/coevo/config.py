@@ -142,6 +142,12 @@ class SwarmCoDeConfig:
     members beat their baselines) is archived, and this many generations after its death a
     few offspring become copies of it, founding a species with a trial quota floor; 0: never
     (the default). Needs `partner_admission = "substitute"`."""
+    equal_quotas_until: int = 0
+    """Before this generation every species gets the same share of the next generation
+    (offspring quotas equal, not by fitness; selection within a species is unchanged); 0: never
+    (the default). NEAT's protection of young species: a design that can do a hard job but does
+    it badly at first, as the holders of hard niches in random teams do, is not starved out
+    before it improves."""
     demote_far_after: int = 0
     """From this generation on, the admission's demotion of substitutes (`coevo.admission`)
     also pairs a partner with its nearest partner design of the same effector when that design

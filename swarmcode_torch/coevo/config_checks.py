@@ -50,6 +50,7 @@ LOWER_BOUNDS = {
     "essential_floor": 0,
     "refound_after": 0,
     "demote_far_after": 0,
+    "equal_quotas_until": 0,
     "reeval_trials": 0,
 }
 
@@ -110,6 +111,7 @@ UPPER_BOUNDS = {
     "essential_floor": 1_000_000,
     "refound_after": 10_000_000,
     "demote_far_after": 10_000_000,
+    "equal_quotas_until": 10_000_000,
     "w_tag": 1e6,
     "w_hw": 1e6,
     "w_bt": 1e6,

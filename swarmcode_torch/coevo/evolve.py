@@ -186,7 +186,8 @@ def generation(
 
     # 3. reproduction: the quotas (`_quotas`), the generation's report read with the number of
     # elites they keep, the offspring (`_reproduction`), re-founding copies among them
-    plan = _quotas(ctx, sp, adm, fit, refound.on_trial(arc, sp.proto_ids, state.generation))
+    trial = refound.on_trial(arc, sp.proto_ids, state.generation)
+    plan = _quotas(ctx, sp, adm, fit, trial, equal=state.generation < ctx.cfg.equal_quotas_until)
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
     composition: dict[str, Any] = {
         "generation": state.generation,
@@ -325,10 +326,12 @@ def _quotas(
     adm: Admission | None,
     fit: Tensor,
     trial: Tensor | None = None,
+    equal: bool = False,
 ) -> Quotas:
     """Step 3, its first part: each species' share of the next generation and its elites
     (`reproduction.quotas`), on the device. `trial` [K] bool: species founded by re-founding
-    copies that keep their trial floor (`refound`)."""
+    copies that keep their trial floor (`refound`). `equal` (`equal_quotas_until`): every
+    species the same share, whatever its fitness and size."""
     # 3. reproduction; essential species (partners that beat their baselines: they do a job no
     # partner does) keep a quota floor, so that a hard niche's holder is not starved out
     essential = priority = None
@@ -341,6 +344,8 @@ def _quotas(
         priority = torch.where(trial, -1.0, 0.0 if priority is None else priority)
         floor = max(repro.essential_floor, refound.REFOUND.floor)
         repro = replace(repro, essential_floor=floor)
+    if equal:
+        fit, repro = torch.ones_like(fit), replace(repro, quota_size_exponent=0.0)
     return quotas(fit, sp.species, sp.proto_ids, repro, essential, priority, present=True)
 
 
