@@ -7,30 +7,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from typer.testing import CliRunner
+from runkit import TINY as RUN_TINY
+from runkit import runner
 
 from swarmcode_torch.app.cli import app
 
-runner = CliRunner()
-TINY = [
-    "--scenario",
-    "one-niche",
-    "--population",
-    "6",
-    "--swarm-size",
-    "4",
-    "--trials",
-    "1",
-    "--ticks",
-    "10",
-    "--seed",
-    "3",
-    "--render-every",
-    "0",
-    "--no-compile",
-    "--device",
-    "cpu",
-]
+#: runkit's tiny run, without replay images or compiling, on the CPU
+TINY = [*RUN_TINY, "--render-every", "0", "--no-compile", "--device", "cpu"]
 RFAST = ["--render-every", "0", "--device", "cpu"]
 
 
