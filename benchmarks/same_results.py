@@ -125,6 +125,7 @@ VERSION_KEYS = {
     # settings added off since (their default is the behaviour before them)
     "demote_far_after",
     "equal_quotas_until",
+    "refound_source",
 }
 
 

@@ -34,6 +34,7 @@ def migrate_config(d: Any, keep_retired: bool = False) -> Any:
     d.setdefault("admission_basis", "members")
     d.setdefault("essential_below", 0.3)
     d.setdefault("refound_after", 0)
+    d.setdefault("refound_source", "partners")
     d.setdefault("demote_far_after", 0)
     d.setdefault("equal_quotas_until", 0)
     # written before 0.8: the best team was the highest single evaluation, never re-evaluated

@@ -142,6 +142,12 @@ class SwarmCoDeConfig:
     members beat their baselines) is archived, and this many generations after its death a
     few offspring become copies of it, founding a species with a trial quota floor; 0: never
     (the default). Needs `partner_admission = "substitute"`."""
+    refound_source: str = "partners"
+    """What re-founding (`refound_after`) archives: "partners", the champions of species that
+    die while partners beating their baselines and at least 5 generations old (the default), or
+    "designs", the champion of any species that dies as the only champion of its design cell
+    (effector and one of three radius bands), one entry per cell, re-founded while the cell is
+    empty: a memory of every kind of robot the run has had, against early lock-in."""
     equal_quotas_until: int = 0
     """Before this generation every species gets the same share of the next generation
     (offspring quotas equal, not by fitness; selection within a species is unchanged); 0: never

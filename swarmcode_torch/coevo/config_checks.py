@@ -27,6 +27,7 @@ CHOICES = {
     "partners_per_niche": ("all", "one"),
     "partner_admission": ("open", "substitute"),
     "admission_basis": ("elites", "members"),
+    "refound_source": ("partners", "designs"),
 }
 #: Choices of settings that may also be unset.
 OPTIONAL_CHOICES = {"preset": ("default", "paper")}

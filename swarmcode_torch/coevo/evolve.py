@@ -171,6 +171,7 @@ def generation(
         state.next_species_id,
         sp.next_species_id,
         state.generation,
+        bins=_design_bins(ctx),
     )
     call_hooks(hooks.after_speciation, AfterSpeciation(state.generation, state, sp))
     # the population's phenotype, once a generation: evaluation and the best team read it
@@ -403,10 +404,14 @@ def _archive_champions(
 ) -> Archive | None:
     """Step 2, after the evaluation: with re-founding on (`refound_after`), the champions of
     the partners that beat their baselines archived (a species that dies as one is worth
-    re-founding); else `arc` as it is."""
-    if adm is None or ctx.cfg.refound_after <= 0:
+    re-founding), or with `refound_source = "designs"` the champions alone in their design
+    cell; else `arc` as it is."""
+    bins = _design_bins(ctx)
+    if ctx.cfg.refound_after <= 0 or (adm is None and bins == 0):
         return arc
-    useful = adm.partner & (adm.gated < admission.SUBSTITUTE.admit_below)
+    useful = None
+    if bins == 0 and adm is not None:
+        useful = adm.partner & (adm.gated < admission.SUBSTITUTE.admit_below)
     return refound.champions(
         arc,
         state.genome,
@@ -416,7 +421,14 @@ def _archive_champions(
         useful,
         sp.next_species_id,
         state.generation,
+        bins=bins,
     )
+
+
+def _design_bins(ctx: Context) -> int:
+    """The radius bands of re-founding's design cells (`refound_source = "designs"`); 0: the
+    archive keeps partners."""
+    return refound.REFOUND.size_bins if ctx.cfg.refound_source == "designs" else 0
 
 
 def _refound(
@@ -443,6 +455,7 @@ def _refound(
         generation,
         ctx.cfg.refound_after,
         partial(mutate, params=ctx.repro, generator=g),
+        bins=_design_bins(ctx),
     )
     return replace(new_state, genome=children, species_hint=hint, rng_state=g.get_state()), arc
 

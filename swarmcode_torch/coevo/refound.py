@@ -21,8 +21,17 @@ did), and gives it a second life:
   after its trial; a re-founded species that is admitted and dies again is archived again, up
   to `tries` re-foundings of one lineage.
 
-It reads only what the algorithm has (fitness, species, admission); it knows no niche. All of it
-runs on the device with shapes known on the host: it adds no host read to a generation.
+With `refound_source = "designs"` the archive keeps designs, not partners: a species' champion
+is archived on its death when it was the only champion of its *design cell* (its effector and
+which of `size_bins` equal bands of the radius range its robots fall in), young or old, partner
+or not; an entry replaces an older one of the same cell, and it is re-founded only while no
+living species' champion is in its cell. This keeps a memory of every kind of robot the run
+has had, including those of the first generations that did a hard job badly and starved before
+any became a partner (issue 38's early lock-in).
+
+It reads only what the algorithm has (fitness, species, admission, genomes); it knows no niche.
+All of it runs on the device with shapes known on the host: it adds no host read to a
+generation.
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from ..sim.hardware import R_MAX, R_MIN
 from .population import Population
 
 
@@ -43,6 +53,7 @@ class RefoundParams:
     tries: int = 2
     capacity: int = 8
     min_age: int = 5
+    size_bins: int = 3  # with refound_source "designs": equal bands of the radius range
 
 
 REFOUND = RefoundParams()
@@ -116,6 +127,13 @@ class Archive:
         return cls(genome=pops["genome"], champ=pops["champ"], **tensors)
 
 
+def design_cell(pop: Population, bins: int) -> Tensor:
+    """[P] long: each genome's design cell, effector * bins + the band of its radius among
+    `bins` equal bands of [R_MIN, R_MAX]."""
+    band = ((pop.radius.float() - R_MIN) / (R_MAX - R_MIN) * bins).floor().long()
+    return pop.effector.long() * bins + band.clamp(0, bins - 1)
+
+
 def _grow(t: Tensor, n: int, fill: int) -> Tensor:
     m = t.numel()
     return t if n <= m else torch.cat([t, t.new_full((n - m,), fill)])
@@ -129,10 +147,12 @@ def observe(
     next_id: int,
     generation: int,
     params: RefoundParams = REFOUND,
+    bins: int = 0,
 ) -> Archive | None:
     """After speciation: the species founded by last generation's copies start their trial; the
     champions of species that died since the last generation (absent from `proto_ids`) that
-    were partners go into the archive. None (no state yet) stays None."""
+    were partners (`bins` > 0: the only champion of their design cell) go into the archive,
+    by design cell over an entry of the same cell. None (no state yet) stays None."""
     if arc is None:
         return None
     lineage = _grow(arc.lineage, next_id, 0)
@@ -152,10 +172,7 @@ def observe(
     dead = ~torch.isin(arc.champ_ids, proto_ids)
     keep = dead & arc.champ_partner & (arc.champ_tries < params.tries)
     c = arc.died.numel()
-    rank = keep.long().cumsum(0) - 1
-    key = torch.where(arc.died < 0, torch.iinfo(torch.long).min, arc.died)
-    slots = torch.sort(key, stable=True).indices
-    dest = torch.where(keep & (rank < c), slots[rank.clamp(0, c - 1)], c)
+    dest = _slots(arc, keep, bins)
     k = arc.champ_ids.numel()
     src = torch.full((c + 1,), -1, dtype=torch.long, device=dest.device)
     src = src.scatter(0, dest, torch.arange(k, device=dest.device))[:c]
@@ -180,21 +197,47 @@ def observe(
     )
 
 
+def _slots(arc: Archive, keep: Tensor, bins: int) -> Tensor:
+    """[K] long: the archive slot each kept champion goes to (C: none), the empty slots first,
+    then the oldest; with `bins` > 0 the slot of an entry of its design cell, where there is
+    one, and those slots are no one else's."""
+    c = arc.died.numel()
+    key = torch.where(arc.died < 0, torch.iinfo(torch.long).min, arc.died)
+    fresh = keep
+    limit: Tensor | int = c
+    if bins > 0:
+        held = arc.died >= 0
+        cells = design_cell(arc.genome, bins)
+        same = keep[:, None] & held[None, :] & (design_cell(arc.champ, bins)[:, None] == cells)
+        taken = same.any(0)
+        key = torch.where(taken, torch.iinfo(torch.long).max, key)
+        limit = c - taken.sum()
+        fresh = keep & ~same.any(1)
+    rank = fresh.long().cumsum(0) - 1
+    slots = torch.sort(key, stable=True).indices
+    dest = torch.where(fresh & (rank < limit), slots[rank.clamp(0, c - 1)], c)
+    if bins > 0:
+        dest = torch.where(same.any(1), same.int().argmax(1), dest)
+    return dest
+
+
 def champions(
     arc: Archive | None,
     genome: Population,
     fitness: Tensor,
     species: Tensor,
     proto_ids: Tensor,
-    partner: Tensor,
+    partner: Tensor | None,
     next_id: int,
     generation: int,
     params: RefoundParams = REFOUND,
+    bins: int = 0,
 ) -> Archive:
     """After evaluation: each species' champion (its member of the highest `fitness`), whether
     it would be archived on its death (`partner` [N] by species id, and founded `min_age`
     generations ago or more: a species of a few generations is noise of the search, not a job
-    done) and its lineage's re-foundings. Starts the state (an empty archive) where `arc` is
+    done; with `bins` > 0, `partner` unused: it is the only champion of its design cell, at any
+    age) and its lineage's re-foundings. Starts the state (an empty archive) where `arc` is
     None."""
     dev = fitness.device
     k = proto_ids.numel()
@@ -212,7 +255,7 @@ def champions(
             torch.zeros(c, dtype=torch.long, device=dev),
             genome.index(champ_row),
             proto_ids,
-            partner[proto_ids],
+            torch.zeros(k, dtype=torch.bool, device=dev),
             torch.zeros(k, dtype=torch.long, device=dev),
             torch.zeros(next_id, dtype=torch.long, device=dev),
             torch.full((next_id,), -1, dtype=torch.long, device=dev),
@@ -223,13 +266,20 @@ def champions(
         )
     lineage = _grow(arc.lineage, next_id, 0)
     born = _grow(arc.born, next_id, generation)
+    champ = genome.index(champ_row)
+    if bins > 0:
+        cells = design_cell(champ, bins)
+        archivable = (cells[:, None] == cells[None, :]).sum(1) == 1
+    else:
+        assert partner is not None
+        archivable = partner[proto_ids] & (generation - born[proto_ids] >= params.min_age)
     return Archive(
         arc.genome,
         arc.died,
         arc.tries,
-        genome.index(champ_row),
+        champ,
         proto_ids,
-        partner[proto_ids] & (generation - born[proto_ids] >= params.min_age),
+        archivable,
         lineage[proto_ids],
         lineage,
         _grow(arc.trial_until, next_id, -1),
@@ -257,15 +307,19 @@ def inject(
     after: int,
     mutate,
     params: RefoundParams = REFOUND,
+    bins: int = 0,
 ) -> tuple[Archive, Population, Tensor]:
     """After reproduction: where an archive entry has been dead `after` generations, the
     `clones` offspring of the least fit parents become copies of it (the first exact, the
     others `mutate`d) with no species hint, and the entry leaves the archive. `mutate` is
     called on every generation, copies or not, so that the run's random stream does not depend
-    on the archive."""
+    on the archive. With `bins` > 0 an entry whose design cell a living species' champion holds
+    waits."""
     dev = hint.device
     m = min(params.clones, int(children.size))
     due = (arc.died >= 0) & (arc.died + after <= generation)
+    if bins > 0:
+        due = due & ~torch.isin(design_cell(arc.genome, bins), design_cell(arc.champ, bins))
     key = torch.where(due, arc.died, torch.iinfo(torch.long).max)
     pick = key.argmin()
     has = due.any()
