@@ -13,7 +13,9 @@ is run only to report an adopted change.
 Arms: `v07` is the 0.7 default (`--set essential_floor=0 --set admission_basis=members`),
 `v08` the quota floor of essential species alone, `v09` the floor and admission by elites,
 `v10` the floor kept until a holder is gated as often as a substitute (`essential_below=0.5`)
-with admission by elites, `paper` the paper preset (`--preset paper`). (v09 was run while the
+with admission by elites, `v11` re-founding of dead partners (`refound_after=5`), `v12` far
+substitutes demoted (`demote_far_after=100`), `v13` equal quotas until generation 30, `v14`
+re-founding by design cell (`refound_after=5`, `refound_source=designs`), `paper` the paper preset (`--preset paper`). (v09 was run while the
 code's defaults were its settings, as `[]`.) (The v07 and v08 runs of the train split were made with the code of commit
 59bf1a5, whose defaults were those settings.)
 
@@ -88,6 +90,16 @@ ARMS = {
         "admission_basis=members",
         "--set",
         "equal_quotas_until=30",
+    ],
+    "v14": [
+        "--set",
+        "essential_floor=0",
+        "--set",
+        "admission_basis=members",
+        "--set",
+        "refound_after=5",
+        "--set",
+        "refound_source=designs",
     ],
     "paper": ["--preset", "paper"],
 }
