@@ -21,7 +21,7 @@ from ..sim import bt
 from ..sim.scenario import ScenarioError, builtin_names, load_scenario
 from . import evolve_start
 from .inspect_view import capabilities, inspect_sweep, print_lineage
-from .options import Dynamics, Evaluate, Replay, Worlds, command
+from .options import WORLD_OPTIONS, Dynamics, Evaluate, Replay, command
 from .optspec import Values, check_values
 from .run_options import EVOLVE_OPTIONS, SWEEP_OPTIONS
 from .signals import TERMINATED, ignore_stop_signals, stop_once
@@ -127,33 +127,8 @@ def scenarios() -> None:
     (console if console.is_terminal else Console(width=100_000, highlight=False)).print(t)
 
 
-@app.command()
-def world(
-    seed: Worlds.seed = None,
-    niches: Worlds.niches = None,
-    family: Worlds.family = None,
-    effectors: Worlds.effectors = None,
-    bands: Worlds.bands = None,
-    mass: Worlds.mass = None,
-    distance: Worlds.distance = None,
-    inversion: Worlds.inversion = None,
-    obstacles: Worlds.obstacles = None,
-    num_robots: Worlds.num_robots = None,
-    packages: Worlds.packages = None,
-    budget: Worlds.budget = None,
-    species_overhead: Worlds.species_overhead = None,
-    episode_ticks: Worlds.episode_ticks = None,
-    arena: Worlds.arena = None,
-    base_radius: Worlds.base_radius = None,
-    name: Worlds.name = None,
-    split: Worlds.split = None,
-    index: Worlds.index = None,
-    out: Worlds.out = None,
-    force: Worlds.force = False,
-) -> None:
-    """Generate a world that needs a known number of niches (distinct robot designs) and write
-    it as a scenario TOML file, or print it (docs/WORLDS.md)."""
-    knobs = {k: v for k, v in locals().items() if v is not None and k != "force"}
+def _world(values: Values) -> None:
+    knobs = {k: v for k, v in values.items() if v is not None and k != "force"}
     from ..sim import worlds
     from .files import atomic_write_bytes, check_output_path
     from .runs import RunError
@@ -165,7 +140,7 @@ def world(
             check_output_path(path)
         except RunError as e:
             fail(str(e))
-        if path.exists() and not force:
+        if path.exists() and not values.force:
             fail(f"--out {path} exists; give --force to replace it")
     try:
         if split is not None or index is not None:
@@ -206,6 +181,18 @@ def world(
         highlight=False,
         soft_wrap=True,
     )
+
+
+#: world: its options from `options.WORLD_OPTIONS`
+world = app.command("world")(
+    command(
+        WORLD_OPTIONS,
+        _world,
+        "world",
+        "Generate a world that needs a known number of niches (distinct robot designs) and write "
+        "it as a scenario TOML file, or print it (docs/WORLDS.md).",
+    )
+)
 
 
 def _evolve(values: Values) -> None:

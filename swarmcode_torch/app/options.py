@@ -1,7 +1,7 @@
 """The options of the `swarmcode-torch` commands, as Typer reads them. Those of evolve and
-sweep are declared once, in `run_options.RUN_OPTIONS`, and made into a command by `command`; the
-other commands' are one `Annotated` type per option, grouped by command (`Replay.seed`, ...),
-so that `cli` holds the commands and what they print."""
+sweep are declared once, in `run_options.RUN_OPTIONS`, and world's in `WORLD_OPTIONS`, each
+made into a command by `command`; the other commands' are one `Annotated` type per option,
+grouped by command (`Replay.seed`, ...), so that `cli` holds the commands and what they print."""
 
 from __future__ import annotations
 
@@ -187,88 +187,79 @@ class WorldSplit(str, Enum):
     test = "test"
 
 
-class Worlds:
-    """The options of `swarmcode-torch world` (`cli.world`, `sim.worlds.generate_world`); the
-    generator's options default to None so that --split can refuse them."""
-
-    seed = Annotated[
+#: The options of `swarmcode-torch world` (`cli.world`, `sim.worlds.generate_world`), in the
+#: order --help lists them; the generator's options default to None so that --split can refuse
+#: them.
+WORLD_OPTIONS: tuple[Opt, ...] = (
+    Opt(
+        "seed",
         int | None,
-        typer.Option(
-            help="Generator seed: the same seed and options give the same file [default: 0]."
-        ),
-    ]
-    niches = Annotated[
+        help="Generator seed: the same seed and options give the same file [default: 0].",
+    ),
+    Opt(
+        "niches",
         int | None,
-        typer.Option(help="Niches, 1-6: the distinct robot designs the world needs [default: 3]."),
-    ]
-    family = Annotated[
+        help="Niches, 1-6: the distinct robot designs the world needs [default: 3].",
+    ),
+    Opt(
+        "family",
         WorldFamily | None,
-        typer.Option(
-            help="classes: one package class per niche; generalist: plus a class two niches lift; collab: plus a collaborative class; single: classes one design lifts (1 niche) [default: classes]."
-        ),
-    ]
-    effectors = Annotated[
+        help="classes: one package class per niche; generalist: plus a class two niches lift; "
+        "collab: plus a collaborative class; single: classes one design lifts (1 niche) "
+        "[default: classes].",
+    ),
+    Opt(
+        "effectors",
         str | None,
-        typer.Option(
-            metavar="LIST",
-            help="Comma-separated effectors of the niches [default: pincher,suction].",
-        ),
-    ]
-    bands = Annotated[
+        help="Comma-separated effectors of the niches [default: pincher,suction].",
+        metavar="LIST",
+    ),
+    Opt(
+        "bands",
         WorldBands | None,
-        typer.Option(
-            help="Radius bands of one effector's niches: disjoint, or overlapping (told apart by mass; give --mass up to ~120) [default: disjoint]."
-        ),
-    ]
-    mass = Annotated[
-        str | None, typer.Option(metavar="LO,HI", help="Package masses in kg [default: 2,24].")
-    ]
-    distance = Annotated[
+        help="Radius bands of one effector's niches: disjoint, or overlapping (told apart by "
+        "mass; give --mass up to ~120) [default: disjoint].",
+    ),
+    Opt("mass", str | None, help="Package masses in kg [default: 2,24].", metavar="LO,HI"),
+    Opt(
+        "distance",
         str | None,
-        typer.Option(
-            metavar="LO,HI", help="Package distances from the base centre in m [default: 3,9.5]."
-        ),
-    ]
-    inversion = Annotated[
+        help="Package distances from the base centre in m [default: 3,9.5].",
+        metavar="LO,HI",
+    ),
+    Opt(
+        "inversion",
         bool | None,
-        typer.Option(
-            "--inversion/--no-inversion",
-            help="Heavy packages far from the base instead of near it [default: near].",
-        ),
-    ]
-    obstacles = Annotated[int | None, typer.Option(help="Obstacles [default: 4].")]
-    num_robots = Annotated[int | None, typer.Option(help="Robots in a team [default: 20].")]
-    packages = Annotated[
-        int | None, typer.Option(help="Packages in all, shared among the classes [default: 16].")
-    ]
-    budget = Annotated[
+        help="Heavy packages far from the base instead of near it [default: near].",
+        flags=("--inversion/--no-inversion",),
+    ),
+    Opt("obstacles", int | None, help="Obstacles [default: 4]."),
+    Opt("num_robots", int | None, help="Robots in a team [default: 20]."),
+    Opt("packages", int | None, help="Packages in all, shared among the classes [default: 16]."),
+    Opt(
+        "budget",
         float | None,
-        typer.Option(
-            help="Fabrication budget in $ the world is drawn for: refused when no team with one robot per niche fits it; written in the file's header (pass it to evolve --budget) [default: none]."
-        ),
-    ]
-    species_overhead = Annotated[
-        float | None, typer.Option(help="$ per distinct species in a team [default: 0].")
-    ]
-    episode_ticks = Annotated[int | None, typer.Option(help="Episode length [default: 200].")]
-    arena = Annotated[float | None, typer.Option(help="Side of the arena in m [default: 20].")]
-    base_radius = Annotated[float | None, typer.Option(help="Base radius in m [default: 1.5].")]
-    name = Annotated[
-        str | None, typer.Option(help="Scenario name [default: world-FAMILY-Nn-SEED].")
-    ]
-    split = Annotated[
+        help="Fabrication budget in $ the world is drawn for: refused when no team with one "
+        "robot per niche fits it; written in the file's header (pass it to evolve --budget) "
+        "[default: none].",
+    ),
+    Opt("species_overhead", float | None, help="$ per distinct species in a team [default: 0]."),
+    Opt("episode_ticks", int | None, help="Episode length [default: 200]."),
+    Opt("arena", float | None, help="Side of the arena in m [default: 20]."),
+    Opt("base_radius", float | None, help="Base radius in m [default: 1.5]."),
+    Opt("name", str | None, help="Scenario name [default: world-FAMILY-Nn-SEED]."),
+    Opt(
+        "split",
         WorldSplit | None,
-        typer.Option(
-            help="Write standard study world --index of this split instead (train: seeds 1000-1999, test: 5000-5999; docs/WORLDS.md)."
-        ),
-    ]
-    index = Annotated[
-        int | None, typer.Option(metavar="K", help="Which study world of --split, 0-14.")
-    ]
-    out = Annotated[
+        help="Write standard study world --index of this split instead (train: seeds "
+        "1000-1999, test: 5000-5999; docs/WORLDS.md).",
+    ),
+    Opt("index", int | None, help="Which study world of --split, 0-14.", metavar="K"),
+    Opt(
+        "out",
         str | None,
-        typer.Option(
-            metavar="PATH", help="Write the scenario TOML to this file [default: print it]."
-        ),
-    ]
-    force = Annotated[bool, typer.Option("--force", help="Replace an existing --out file.")]
+        help="Write the scenario TOML to this file [default: print it].",
+        metavar="PATH",
+    ),
+    Opt("force", bool, False, "Replace an existing --out file.", flags=("--force",)),
+)

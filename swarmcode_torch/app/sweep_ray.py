@@ -87,16 +87,18 @@ def _ray_jobs(todo, data, checkpoint_every, log_every, again, wb) -> tuple[Path,
     # carries its files, for a node that does not see --out (`unshared`)
     jobs = [
         (
-            run_dir.resolve(),
-            cfg,
-            data,
-            state,
-            checkpoint_every,
-            log_every,
-            again,
+            (
+                run_dir.resolve(),
+                cfg,
+                data,
+                state,
+                checkpoint_every,
+                log_every,
+                again,
+                (wb or {}).get(id(p)),
+            ),
             token,
             resume.get(id(p)),
-            (wb or {}).get(id(p)),
         )
         for p in todo
         for _, _, run_dir, cfg, state, _ in [p]
@@ -186,36 +188,21 @@ def _run_on_ray(jobs, workers, cpus, gpus, address, what, again, shown: _RayProg
     return errors
 
 
-def sweep_task(
-    run_dir: Path,
-    cfg,
-    data: bytes,
-    state: str,
-    checkpoint_every: int,
-    log_every: int,
-    again: str,
-    token: str = "",
-    files: dict | None = None,
-    wb: tuple[str, dict] | None = None,
-):
-    """One run of a sweep as a Ray task (`distributed.run_tasks`): `run_sweep_run`, as the
-    sweep runs it in this process. None when the run finished; else its error in one line (a
-    failed start or write; a stop by Ctrl-C or SIGTERM, after its checkpoint was written).
-    On a node that does not see the sweep directory (its mark does not hold `token`), the run
-    is made in a local temporary directory from `files` and the task returns (error, the run
-    directory's files) for the driver to write (`unshared`)."""
+def sweep_task(run: tuple, token: str = "", files: dict | None = None):
+    """One run of a sweep as a Ray task (`distributed.run_tasks`): `run_sweep_run(*run)` (`run`:
+    its arguments, the run directory first), as the sweep runs it in this process. None when
+    the run finished; else its error in one line (a failed start or write; a stop by Ctrl-C or
+    SIGTERM, after its checkpoint was written). On a node that does not see the sweep directory
+    (its mark does not hold `token`), the run is made in a local temporary directory from
+    `files` and the task returns (error, the run directory's files) for the driver to write
+    (`unshared`)."""
     from .unshared import run_elsewhere, sees_storage
 
+    run_dir = run[0]
     if token and not sees_storage(run_dir.parent, token):
-        return run_elsewhere(
-            run_dir,
-            files,
-            lambda local: sweep_task(
-                local, cfg, data, state, checkpoint_every, log_every, again, wb=wb
-            ),
-        )
+        return run_elsewhere(run_dir, files, lambda local: sweep_task((local, *run[1:])))
     try:
-        run_sweep_run(run_dir, cfg, data, state, checkpoint_every, log_every, again, wb)
+        run_sweep_run(*run)
     except Failed as e:
         return e.message
     except typer.Exit as e:

@@ -34,8 +34,27 @@ def sense(
     """Leaf statuses of every robot from the current state (`keys`: see :func:`random_keys`)."""
     E = robots.radius.shape[0]
     base, gpos, avail, free = grip_points(state, layout, robots, params)
-    dist = (gpos[:, None, :, :] - state.pos[:, :, None, :]).norm(dim=-1)  # [E, N, H]
-    valid = compat & avail.reshape(E, 1, gpos.shape[1]) & free[..., None]
+    avail = avail.reshape(E, gpos.shape[1])
+    best, best_d, rand, rand_d = nearest_grips(state.pos, gpos, avail, free, compat, keys)
+
+    return leaf_senses(state, params, base, gpos, best, best_d, rand, rand_d)
+
+
+def nearest_grips(
+    pos: torch.Tensor,
+    gpos: torch.Tensor,
+    avail: torch.Tensor,
+    free: torch.Tensor,
+    compat: torch.Tensor,
+    keys: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The robot x grip-point phase of `sense` (the Triton tick's `sense_triton` replaces it by
+    its kernel's): (best, best_d, rand, rand_d) [E, N], each robot's nearest takeable grip and
+    its randomly preferred one, as flat grip indices, with their distances (_INF if none), from
+    positions [E, N, 2], grip points [E, H, 2], avail [E, H], free [E, N], compat [E, N, H] and
+    keys [E, N, H]."""
+    dist = (gpos[:, None, :, :] - pos[:, :, None, :]).norm(dim=-1)  # [E, N, H]
+    valid = compat & avail[:, None, :] & free[..., None]
     dm = torch.where(valid, dist, _INF)
     best_d, best = dm.min(-1)
     score = torch.where(valid, keys, -1.0)
@@ -45,8 +64,7 @@ def sense(
         dist.gather(-1, rand[..., None]).squeeze(-1),
         _INF,
     )
-
-    return leaf_senses(state, params, base, gpos, best, best_d, rand, rand_d)
+    return best, best_d, rand, rand_d
 
 
 def grip_points(

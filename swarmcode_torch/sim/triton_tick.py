@@ -9,8 +9,9 @@ obstacles and walls (`contacts.collide`), and the robot x grip-point part of sen
   broad phase) and one launch per pass over blocks of robots in cell order
   (`collide_cells_kernel`), which visits every robot of the 9 neighbouring cells: no per-cell
   capacity (the reference's `neighbour_candidates` sees 32 per cell).
-* `sense_triton`: `sense` with the nearest and the preferred grip found by `sense_kernel`;
-  the leaf statuses from them as `sense` computes them.
+* `sense_triton`: `sense` itself with the nearest and the preferred grip found by
+  `sense_kernel` (its code over other globals: `nearest_grips` resolved to this module's); the
+  leaf statuses from them as `sense` computes them.
 * `step_triton`: `step.step` itself, with `sense` and `collide` resolved to the two above
   (the same function code over other globals, so it follows step.py as it changes); every
   other part of the tick is the reference's torch code. `TritonTicks` is it as a `step_fn`.
@@ -38,8 +39,7 @@ from typing import Any
 import torch
 
 from .cell_list import cell_list_for
-from .layout import Layout
-from .sense import _INF, Senses, grip_points, leaf_senses
+from .sense import _INF, sense
 from .state import Robots, State, WorldParams
 from .step import step
 
@@ -251,16 +251,8 @@ def collide_triton(
     return p, v
 
 
-def nearest_grips(
-    pos: torch.Tensor,
-    gpos: torch.Tensor,
-    avail: torch.Tensor,
-    free: torch.Tensor,
-    compat: torch.Tensor,
-    keys: torch.Tensor,
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """(best, best_d, rand, rand_d) [E, N] of `sense` from positions [E, N, 2], grip points
-    [E, H, 2], avail [E, H], free [E, N], compat [E, N, H] and keys [E, N, H]."""
+def nearest_grips(pos, gpos, avail, free, compat, keys):
+    """`sense.nearest_grips` (same arguments and results) in `sense_kernel`."""
     k = _kernels()
     E, N = free.shape
     H = gpos.shape[1]
@@ -293,26 +285,10 @@ def nearest_grips(
     return best, best_d, rand, rand_d
 
 
-def sense_triton(
-    state: State,
-    layout: Layout,
-    robots: Robots,
-    compat: torch.Tensor,
-    keys: torch.Tensor,
-    params: WorldParams,
-) -> Senses:
-    """`sense.sense` with the robot x grip-point phase in `sense_kernel`."""
-    E = robots.radius.shape[0]
-    base, gpos, avail, free = grip_points(state, layout, robots, params)
-    avail = avail.reshape(E, gpos.shape[1])
-    best, best_d, rand, rand_d = nearest_grips(state.pos, gpos, avail, free, compat, keys)
-
-    return leaf_senses(state, params, base, gpos, best, best_d, rand, rand_d)
-
-
 def _rebind(fn: Callable, name: str, **names: Callable) -> Callable:
     """`fn`'s code over a copy of its globals with `names` replaced (each must be a global that
-    the code reads, so a change of step.py that drops one fails here, not silently)."""
+    the code reads, so a change of step.py or sense.py that drops one fails here, not
+    silently)."""
     missing = [n for n in names if n not in fn.__code__.co_names or n not in fn.__globals__]
     if missing:
         raise RuntimeError(f"{fn.__qualname__} no longer reads {missing}: update triton_tick")
@@ -320,11 +296,16 @@ def _rebind(fn: Callable, name: str, **names: Callable) -> Callable:
     g.update(names)
     out = types.FunctionType(fn.__code__, g, name, fn.__defaults__, fn.__closure__)
     out.__kwdefaults__ = fn.__kwdefaults__
-    out.__doc__ = f"`step.step` with the pair phases in Triton kernels ({', '.join(names)})."
+    module = fn.__module__.rsplit(".", 1)[-1]
+    out.__doc__ = (
+        f"`{module}.{fn.__name__}` with the pair phases in Triton kernels ({', '.join(names)})."
+    )
     out.__qualname__ = name
     return out
 
 
+#: `sense.sense` with the robot x grip-point phase in `sense_kernel` (`nearest_grips`)
+sense_triton = _rebind(sense, "sense_triton", nearest_grips=nearest_grips)
 step_triton = _rebind(step, "step_triton", sense=sense_triton, collide=collide_triton)
 
 
