@@ -126,6 +126,7 @@ VERSION_KEYS = {
     "demote_far_after",
     "equal_quotas_until",
     "refound_source",
+    "best_team_floor",
 }
 
 

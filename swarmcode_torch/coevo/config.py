@@ -148,6 +148,12 @@ class SwarmCoDeConfig:
     "designs", the champion of any species that dies as the only champion of its design cell
     (effector and one of three radius bands), one entry per cell, re-founded while the cell is
     empty: a memory of every kind of robot the run has had, against early lock-in."""
+    best_team_floor: int = 0
+    """Offspring quota floor of every species with a robot in the generation's best team (the
+    focal team of the individual of the highest gated fitness): it keeps at least this many
+    slots, exempt from `min_share`; 0: none (the default). A species whose robots do a hard job
+    in the best team but whose own focal teams score low (its design fills most of their
+    slots) is not starved out while the best team uses it."""
     equal_quotas_until: int = 0
     """Before this generation every species gets the same share of the next generation
     (offspring quotas equal, not by fitness; selection within a species is unchanged); 0: never

@@ -188,7 +188,15 @@ def generation(
     # 3. reproduction: the quotas (`_quotas`), the generation's report read with the number of
     # elites they keep, the offspring (`_reproduction`), re-founding copies among them
     trial = refound.on_trial(arc, sp.proto_ids, state.generation)
-    plan = _quotas(ctx, sp, adm, fit, trial, equal=state.generation < ctx.cfg.equal_quotas_until)
+    plan = _quotas(
+        ctx,
+        sp,
+        adm,
+        fit,
+        trial,
+        equal=state.generation < ctx.cfg.equal_quotas_until,
+        best=_best_team_species(res, sp) if ctx.cfg.best_team_floor > 0 else None,
+    )
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
     composition: dict[str, Any] = {
         "generation": state.generation,
@@ -328,11 +336,13 @@ def _quotas(
     fit: Tensor,
     trial: Tensor | None = None,
     equal: bool = False,
+    best: Tensor | None = None,
 ) -> Quotas:
     """Step 3, its first part: each species' share of the next generation and its elites
     (`reproduction.quotas`), on the device. `trial` [K] bool: species founded by re-founding
     copies that keep their trial floor (`refound`). `equal` (`equal_quotas_until`): every
-    species the same share, whatever its fitness and size."""
+    species the same share, whatever its fitness and size. `best` [K] bool: the species of the
+    generation's best team, which keep a floor of `best_team_floor`."""
     # 3. reproduction; essential species (partners that beat their baselines: they do a job no
     # partner does) keep a quota floor, so that a hard niche's holder is not starved out
     essential = priority = None
@@ -345,9 +355,23 @@ def _quotas(
         priority = torch.where(trial, -1.0, 0.0 if priority is None else priority)
         floor = max(repro.essential_floor, refound.REFOUND.floor)
         repro = replace(repro, essential_floor=floor)
+    if best is not None:  # the best team's species, after any trial species
+        essential = best if essential is None else essential | best
+        priority = torch.zeros(best.numel(), device=best.device) if priority is None else priority
+        floor = max(repro.essential_floor, ctx.cfg.best_team_floor)
+        repro = replace(repro, essential_floor=floor)
     if equal:
         fit, repro = torch.ones_like(fit), replace(repro, quota_size_exponent=0.0)
     return quotas(fit, sp.species, sp.proto_ids, repro, essential, priority, present=True)
+
+
+def _best_team_species(res: EvalResult, sp: SpeciationResult) -> Tensor:
+    """[K] bool: the species (of `sp.proto_ids`) with a robot in the generation's best team,
+    the focal team of the individual of the highest gated fitness (`readout`'s), on the
+    device."""
+    rows = res.swarms.focal_team[res.fitness.argmax()]
+    ids = torch.where(rows >= 0, sp.species[rows.clamp(min=0)], -1)
+    return torch.isin(sp.proto_ids, ids)
 
 
 def _reproduction(
