@@ -1,3 +1,13 @@
+"""Probe of a run's first generations: every species' members as focal individuals (size,
+design, mean fitness, focal score, marginal contribution, share beating the baseline, slots
+their design fills), one line a generation.
+
+    python experiments/2026-12-05-niche-generalization-v08/probe.py WORLD.toml SEED GENERATIONS \
+        [setting=value ...]
+
+Runs the study's v07 arm (the 0.7 default) plus the given settings, population 50, 20 robots.
+"""
+
 import sys, torch
 from dataclasses import replace
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
