@@ -16,7 +16,7 @@ Arms: `v07` is the 0.7 default (`--set essential_floor=0 --set admission_basis=m
 with admission by elites, `v11` re-founding of dead partners (`refound_after=5`), `v12` far
 substitutes demoted (`demote_far_after=100`), `v13` equal quotas until generation 30, `v14`
 re-founding by design cell (`refound_after=5`, `refound_source=designs`), `v15` a quota floor
-of 3 for the best team's species (`best_team_floor=3`), `paper` the paper preset (`--preset paper`). (v09 was run while the
+of 3 for the best team's species (`best_team_floor=3`), `v16` v13 and v15 together, `paper` the paper preset (`--preset paper`). (v09 was run while the
 code's defaults were its settings, as `[]`.) (The v07 and v08 runs of the train split were made with the code of commit
 59bf1a5, whose defaults were those settings.)
 
@@ -107,6 +107,16 @@ ARMS = {
         "essential_floor=0",
         "--set",
         "admission_basis=members",
+        "--set",
+        "best_team_floor=3",
+    ],
+    "v16": [
+        "--set",
+        "essential_floor=0",
+        "--set",
+        "admission_basis=members",
+        "--set",
+        "equal_quotas_until=30",
         "--set",
         "best_team_floor=3",
     ],
