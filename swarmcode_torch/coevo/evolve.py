@@ -21,7 +21,7 @@ from ..sim.hardware import Phenotype
 from ..sim.runtime import resolve_device, tick_function, tick_mode
 from ..sim.scenario import Scenario, load_scenario
 from ..sim.state import WorldParams
-from . import admission, refound
+from . import admission, refound, shares
 from .admission import Admission
 from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
 from .dynamics import Turnover, median
@@ -32,7 +32,7 @@ from .hooks import call as call_hooks
 from .population import Population, genome_phenotype
 from .readout import BestTeam, Readout, read_generation  # noqa: F401 (BestTeam: re-exported)
 from .refound import Archive
-from .reproduction import Quotas, mutate, mutate_bt, quotas, reproduce
+from .reproduction import Quotas, mutate, mutate_bt, reproduce
 from .run_state import (  # noqa: F401 (re-exported: the checkpoint's state dict)
     CHECKPOINT_VERSION,
     EvolutionState,
@@ -185,17 +185,18 @@ def generation(
     arc = _archive_champions(arc, state, ctx, sp, adm, fit)
     call_hooks(hooks.after_evaluation, AfterEvaluation(state.generation, state, sp, res, fit))
 
-    # 3. reproduction: the quotas (`_quotas`), the generation's report read with the number of
+    # 3. reproduction: the quotas (`shares.plan`), the generation's report read with the number of
     # elites they keep, the offspring (`_reproduction`), re-founding copies among them
     trial = refound.on_trial(arc, sp.proto_ids, state.generation)
-    plan = _quotas(
-        ctx,
+    plan = shares.plan(
+        ctx.cfg,
+        ctx.repro,
         sp,
         adm,
         fit,
         trial,
         equal=state.generation < ctx.cfg.equal_quotas_until,
-        best=_best_team_species(res, sp) if ctx.cfg.best_team_floor > 0 else None,
+        best=shares.best_team_species(res, sp) if ctx.cfg.best_team_floor > 0 else None,
     )
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
     composition: dict[str, Any] = {
@@ -327,51 +328,6 @@ def _evaluation(
         elite=state.has_fitness if ctx.cfg.admission_basis == "elites" else None,
     )
     return res, adm
-
-
-def _quotas(
-    ctx: Context,
-    sp: SpeciationResult,
-    adm: Admission | None,
-    fit: Tensor,
-    trial: Tensor | None = None,
-    equal: bool = False,
-    best: Tensor | None = None,
-) -> Quotas:
-    """Step 3, its first part: each species' share of the next generation and its elites
-    (`reproduction.quotas`), on the device. `trial` [K] bool: species founded by re-founding
-    copies that keep their trial floor (`refound`). `equal` (`equal_quotas_until`): every
-    species the same share, whatever its fitness and size. `best` [K] bool: the species of the
-    generation's best team, which keep a floor of `best_team_floor`."""
-    # 3. reproduction; essential species (partners that beat their baselines: they do a job no
-    # partner does) keep a quota floor, so that a hard niche's holder is not starved out
-    essential = priority = None
-    if adm is not None and ctx.cfg.essential_floor > 0:
-        priority = adm.gated[sp.proto_ids]
-        essential = adm.partner[sp.proto_ids] & (priority < ctx.cfg.essential_below)
-    repro = ctx.repro
-    if trial is not None:  # a trial species first, at a floor of at least the trial's
-        essential = trial if essential is None else essential | trial
-        priority = torch.where(trial, -1.0, 0.0 if priority is None else priority)
-        floor = max(repro.essential_floor, refound.REFOUND.floor)
-        repro = replace(repro, essential_floor=floor)
-    if best is not None:  # the best team's species, after any trial species
-        essential = best if essential is None else essential | best
-        priority = torch.zeros(best.numel(), device=best.device) if priority is None else priority
-        floor = max(repro.essential_floor, ctx.cfg.best_team_floor)
-        repro = replace(repro, essential_floor=floor)
-    if equal:
-        fit, repro = torch.ones_like(fit), replace(repro, quota_size_exponent=0.0)
-    return quotas(fit, sp.species, sp.proto_ids, repro, essential, priority, present=True)
-
-
-def _best_team_species(res: EvalResult, sp: SpeciationResult) -> Tensor:
-    """[K] bool: the species (of `sp.proto_ids`) with a robot in the generation's best team,
-    the focal team of the individual of the highest gated fitness (`readout`'s), on the
-    device."""
-    rows = res.swarms.focal_team[res.fitness.argmax()]
-    ids = torch.where(rows >= 0, sp.species[rows.clamp(min=0)], -1)
-    return torch.isin(sp.proto_ids, ids)
 
 
 def _reproduction(

@@ -1,5 +1,5 @@
 """`best_team_floor`: a quota floor for the species of the generation's best team
-(`coevo.evolve._quotas`)."""
+(`coevo.shares`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import torch
 
-from swarmcode_torch.coevo import evolve
+from swarmcode_torch.coevo import shares
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.evolve import Evolution
 from swarmcode_torch.coevo.hooks import Hooks
@@ -31,7 +31,7 @@ def test_best_team_species_are_those_of_the_fittest_individuals_focal_team():
         b = int(res.fitness.argmax())
         rows = [r for r in res.swarms.focal_team[b].tolist() if r >= 0]
         want = {int(sp.species[r]) for r in rows}
-        got = evolve._best_team_species(res, sp)
+        got = shares.best_team_species(res, sp)
         assert {int(i) for i in sp.proto_ids[got]} == want and want
 
 
@@ -41,9 +41,9 @@ def test_floor_gives_every_best_team_species_its_slots_and_keeps_the_total():
     lifted = 0
     for e in seen:
         res, sp = e.evaluation, e.speciation
-        best = evolve._best_team_species(res, sp)
-        plain = evolve._quotas(ev.ctx, sp, None, e.fitness)
-        floored = evolve._quotas(ev.ctx, sp, None, e.fitness, best=best)
+        best = shares.best_team_species(res, sp)
+        plain = shares.plan(ev.cfg, ev.ctx.repro, sp, None, e.fitness)
+        floored = shares.plan(ev.cfg, ev.ctx.repro, sp, None, e.fitness, best=best)
         assert int(floored.quota.sum()) == int(plain.quota.sum()) == cfg.population
         # at most population // (2 * floor) species get a floor (`floor_quotas`), the oldest
         cap = cfg.population // (2 * 4)

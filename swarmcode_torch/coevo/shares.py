@@ -1,0 +1,63 @@
+"""Each species' share of the next generation: the offspring quotas of `reproduction.quotas`
+with the rules that keep a species alive whatever its fitness (the essential floor, the trial
+floor of re-founded species, the best team's floor, equal shares early in a run). Step 3 of
+`evolve.generation`, its first part; on the device, no host read."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import torch
+from torch import Tensor
+
+from . import refound
+from .admission import Admission
+from .config import ReproductionParams, SwarmCoDeConfig
+from .evaluation import EvalResult
+from .reproduction import Quotas, quotas
+from .speciation import SpeciationResult
+
+
+def plan(
+    cfg: SwarmCoDeConfig,
+    repro: ReproductionParams,
+    sp: SpeciationResult,
+    adm: Admission | None,
+    fit: Tensor,
+    trial: Tensor | None = None,
+    equal: bool = False,
+    best: Tensor | None = None,
+) -> Quotas:
+    """Step 3 of a generation, its first part: each species' share of the next generation and its elites
+    (`reproduction.quotas`), on the device. `trial` [K] bool: species founded by re-founding
+    copies that keep their trial floor (`refound`). `equal` (`equal_quotas_until`): every
+    species the same share, whatever its fitness and size. `best` [K] bool: the species of the
+    generation's best team, which keep a floor of `best_team_floor`."""
+    # 3. reproduction; essential species (partners that beat their baselines: they do a job no
+    # partner does) keep a quota floor, so that a hard niche's holder is not starved out
+    essential = priority = None
+    if adm is not None and cfg.essential_floor > 0:
+        priority = adm.gated[sp.proto_ids]
+        essential = adm.partner[sp.proto_ids] & (priority < cfg.essential_below)
+    if trial is not None:  # a trial species first, at a floor of at least the trial's
+        essential = trial if essential is None else essential | trial
+        priority = torch.where(trial, -1.0, 0.0 if priority is None else priority)
+        floor = max(repro.essential_floor, refound.REFOUND.floor)
+        repro = replace(repro, essential_floor=floor)
+    if best is not None:  # the best team's species, after any trial species
+        essential = best if essential is None else essential | best
+        priority = torch.zeros(best.numel(), device=best.device) if priority is None else priority
+        floor = max(repro.essential_floor, cfg.best_team_floor)
+        repro = replace(repro, essential_floor=floor)
+    if equal:
+        fit, repro = torch.ones_like(fit), replace(repro, quota_size_exponent=0.0)
+    return quotas(fit, sp.species, sp.proto_ids, repro, essential, priority, present=True)
+
+
+def best_team_species(res: EvalResult, sp: SpeciationResult) -> Tensor:
+    """[K] bool: the species (of `sp.proto_ids`) with a robot in the generation's best team,
+    the focal team of the individual of the highest gated fitness (`readout`'s), on the
+    device."""
+    rows = res.swarms.focal_team[res.fitness.argmax()]
+    ids = torch.where(rows >= 0, sp.species[rows.clamp(min=0)], -1)
+    return torch.isin(sp.proto_ids, ids)
