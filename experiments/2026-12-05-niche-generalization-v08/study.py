@@ -56,70 +56,24 @@ LAST = 50
 HOLD = 100
 REFOUND = 50
 NOISE_GAP = 5
+def _sets(*settings: str) -> list[str]:
+    """`--set K=V` for each setting."""
+    return [a for kv in settings for a in ("--set", kv)]
+
+
+#: the 0.7 default's settings, the base of every later arm
+V07 = ("essential_floor=0", "admission_basis=members")
 ARMS = {
-    "v07": ["--set", "essential_floor=0", "--set", "admission_basis=members"],
-    "v08": ["--set", "admission_basis=members"],
-    "v09": ["--set", "essential_floor=3", "--set", "admission_basis=elites"],
-    "v10": [
-        "--set",
-        "essential_floor=3",
-        "--set",
-        "admission_basis=elites",
-        "--set",
-        "essential_below=0.5",
-    ],
-    "v11": [
-        "--set",
-        "essential_floor=0",
-        "--set",
-        "admission_basis=members",
-        "--set",
-        "refound_after=5",
-    ],
-    "v12": [
-        "--set",
-        "essential_floor=0",
-        "--set",
-        "admission_basis=members",
-        "--set",
-        "demote_far_after=100",
-    ],
-    "v13": [
-        "--set",
-        "essential_floor=0",
-        "--set",
-        "admission_basis=members",
-        "--set",
-        "equal_quotas_until=30",
-    ],
-    "v14": [
-        "--set",
-        "essential_floor=0",
-        "--set",
-        "admission_basis=members",
-        "--set",
-        "refound_after=5",
-        "--set",
-        "refound_source=designs",
-    ],
-    "v15": [
-        "--set",
-        "essential_floor=0",
-        "--set",
-        "admission_basis=members",
-        "--set",
-        "best_team_floor=3",
-    ],
-    "v16": [
-        "--set",
-        "essential_floor=0",
-        "--set",
-        "admission_basis=members",
-        "--set",
-        "equal_quotas_until=30",
-        "--set",
-        "best_team_floor=3",
-    ],
+    "v07": _sets(*V07),
+    "v08": _sets("admission_basis=members"),
+    "v09": _sets("essential_floor=3", "admission_basis=elites"),
+    "v10": _sets("essential_floor=3", "admission_basis=elites", "essential_below=0.5"),
+    "v11": _sets(*V07, "refound_after=5"),
+    "v12": _sets(*V07, "demote_far_after=100"),
+    "v13": _sets(*V07, "equal_quotas_until=30"),
+    "v14": _sets(*V07, "refound_after=5", "refound_source=designs"),
+    "v15": _sets(*V07, "best_team_floor=3"),
+    "v16": _sets(*V07, "equal_quotas_until=30", "best_team_floor=3"),
     "paper": ["--preset", "paper"],
 }
 BUILTIN = {"one-niche": 1, "two-niche": 2, "four-niche": 4}
