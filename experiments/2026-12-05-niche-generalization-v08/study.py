@@ -4,6 +4,8 @@ tuned for?
     python experiments/2026-12-05-niche-generalization-v08/study.py run --split train \
         --arms v07,v08 [--generations 300] [--seeds 0,1,2] [--workers 2] [--runs DIR]
     python experiments/2026-12-05-niche-generalization-v08/study.py table --split train
+    python experiments/2026-12-05-niche-generalization-v08/study.py paired --split train \
+        --arms v13,v14 [--base v07] [--seeds 0,1,2]
 
 Worlds: `--split train` or `test` are the generator's study worlds of that split
 (`swarmcode_torch.sim.worlds.study_worlds`, generator seeds 1000-1999 and 5000-5999); `--split builtin` is
@@ -43,6 +45,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import statistics
 import subprocess
@@ -320,6 +323,45 @@ def cmd_table(a) -> None:
         Path(a.json).write_text(json.dumps(out, indent=1) + "\n")
 
 
+def _sign_p(gains: int, losses: int) -> float:
+    """Two-sided exact sign test of `gains` against `losses` (ties dropped)."""
+    n, k = gains + losses, min(gains, losses)
+    if n == 0:
+        return 1.0
+    return min(1.0, 2 * sum(math.comb(n, i) for i in range(k + 1)) / 2**n)
+
+
+def cmd_paired(a) -> None:
+    """Each arm against `--base` run by run (the same world and seed): the runs it gains and
+    loses on "every niche kept" and on "species = niches", with a sign test's p-value."""
+    seeds = {int(x) for x in a.seeds.split(",")}
+
+    def runs(arm: str) -> dict:
+        out = {}
+        for f in (HERE / "results" / a.split / arm).glob("*.json"):
+            d = json.loads(f.read_text())
+            if d["seed"] in seeds:
+                out[(d["world"], d["seed"])] = d
+        return out
+
+    tests = {
+        "every niche kept": lambda d: bool(d["kept_last"]),
+        "species = niches": lambda d: d["team_species"] == d["niches"],
+    }
+    base = runs(a.base)
+    print(f"| arm | paired runs | {' | '.join(f'{t}: gained / lost (p)' for t in tests)} |")
+    print("|---|---|" + "---|" * len(tests))
+    for arm in a.arms.split(","):
+        mine = runs(arm)
+        keys = sorted(set(base) & set(mine))
+        cells = []
+        for test in tests.values():
+            gain = sum(test(mine[k]) and not test(base[k]) for k in keys)
+            loss = sum(test(base[k]) and not test(mine[k]) for k in keys)
+            cells.append(f"{gain} / {loss} ({_sign_p(gain, loss):.2f})")
+        print(f"| {arm} | {len(keys)} | {' | '.join(cells)} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -336,8 +378,13 @@ def main() -> None:
     t.add_argument("--runs-table", action="store_true")
     t.add_argument("--seeds", help="only the runs of these seeds, e.g. 0")
     t.add_argument("--json")
+    p = sub.add_parser("paired")
+    p.add_argument("--split", choices=("train", "test", "builtin"), required=True)
+    p.add_argument("--arms", required=True)
+    p.add_argument("--base", default="v07")
+    p.add_argument("--seeds", default="0,1,2")
     a = ap.parse_args()
-    {"run": cmd_run, "table": cmd_table}[a.cmd](a)
+    {"run": cmd_run, "table": cmd_table, "paired": cmd_paired}[a.cmd](a)
 
 
 if __name__ == "__main__":
