@@ -10,6 +10,7 @@ from dataclasses import replace
 import torch
 from torch import Tensor
 
+from ..sim.tensors import cast
 from . import refound
 from .admission import Admission
 from .config import ReproductionParams, SwarmCoDeConfig
@@ -49,9 +50,11 @@ def plan(
         priority = torch.zeros(best.numel(), device=best.device) if priority is None else priority
         floor = max(repro.essential_floor, cfg.best_team_floor)
         repro = replace(repro, essential_floor=floor)
-    if equal:
-        fit, repro = torch.ones_like(fit), replace(repro, quota_size_exponent=0.0)
-    return quotas(fit, sp.species, sp.proto_ids, repro, essential, priority, present=True)
+    share = fit
+    if equal:  # the shares only: selection within a species still reads `fit`
+        share, repro = torch.ones_like(fit), replace(repro, quota_size_exponent=0.0)
+    q = quotas(share, sp.species, sp.proto_ids, repro, essential, priority, present=True)
+    return q if share is fit else replace(q, fit=cast(fit, torch.float))
 
 
 def best_team_species(res: EvalResult, sp: SpeciationResult) -> Tensor:
