@@ -18,7 +18,8 @@ Arms: `v07` is the 0.7 default (`--set essential_floor=0 --set admission_basis=m
 with admission by elites, `v11` re-founding of dead partners (`refound_after=5`), `v12` far
 substitutes demoted (`demote_far_after=100`), `v13` equal quotas until generation 30, `v14`
 re-founding by design cell (`refound_after=5`, `refound_source=designs`), `v15` a quota floor
-of 3 for the best team's species (`best_team_floor=3`), `v16` v13 and v15 together, `paper` the paper preset (`--preset paper`). (v09 was run while the
+of 3 for the best team's species (`best_team_floor=3`), `v16` v13 and v15 together (v13 and v16 ran with the defect that made selection within a species
+follow row order while shares were equal), `v13b` v13 with that fixed, `paper` the paper preset (`--preset paper`). (v09 was run while the
 code's defaults were its settings, as `[]`.) (The v07 and v08 runs of the train split were made with the code of commit
 59bf1a5, whose defaults were those settings.)
 
@@ -77,6 +78,7 @@ ARMS = {
     "v14": _sets(*V07, "refound_after=5", "refound_source=designs"),
     "v15": _sets(*V07, "best_team_floor=3"),
     "v16": _sets(*V07, "equal_quotas_until=30", "best_team_floor=3"),
+    "v13b": _sets(*V07, "equal_quotas_until=30"),  # v13 with selection within species fixed
     "paper": ["--preset", "paper"],
 }
 BUILTIN = {"one-niche": 1, "two-niche": 2, "four-niche": 4}
