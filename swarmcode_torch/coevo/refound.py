@@ -205,19 +205,20 @@ def _slots(arc: Archive, keep: Tensor, bins: int) -> Tensor:
     key = torch.where(arc.died < 0, torch.iinfo(torch.long).min, arc.died)
     fresh = keep
     limit: Tensor | int = c
+    matched = None
     if bins > 0:
         held = arc.died >= 0
         cells = design_cell(arc.genome, bins)
         same = keep[:, None] & held[None, :] & (design_cell(arc.champ, bins)[:, None] == cells)
-        taken = same.any(0)
+        taken, matched = same.any(0), same.any(1)
         key = torch.where(taken, torch.iinfo(torch.long).max, key)
         limit = c - taken.sum()
-        fresh = keep & ~same.any(1)
+        fresh = keep & ~matched
     rank = fresh.long().cumsum(0) - 1
     slots = torch.sort(key, stable=True).indices
     dest = torch.where(fresh & (rank < limit), slots[rank.clamp(0, c - 1)], c)
-    if bins > 0:
-        dest = torch.where(same.any(1), same.int().argmax(1), dest)
+    if matched is not None:
+        dest = torch.where(matched, same.int().argmax(1), dest)
     return dest
 
 
