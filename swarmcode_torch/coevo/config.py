@@ -154,6 +154,14 @@ class SwarmCoDeConfig:
     slots, exempt from `min_share`; 0: none (the default). A species whose robots do a hard job
     in the best team but whose own focal teams score low (its design fills most of their
     slots) is not starved out while the best team uses it."""
+    knockout_credit: float = 0.0
+    """Knock-out credit (`coevo.knockout`): each generation the best team is evaluated again
+    beside one team per species with that species' slots re-filled from the team's other
+    slots; a species whose knock-out costs the team more than this fraction of its score gets
+    the share of the next generation that the species of the highest mean fitness would get at
+    its size (selection within species unchanged); 0: off (the default). A holder the best
+    team needs is paid as the best species is, whatever its own focal teams score; a
+    substitute, whose slots go to a species doing the same job, is not."""
     equal_quotas_until: int = 0
     """Before this generation every species gets the same share of the next generation
     (offspring quotas equal, not by fitness; selection within a species is unchanged); 0: never

@@ -79,6 +79,7 @@ POSITIVE = ("delta", "gamma")
 #: Settings that are probabilities or factors in [0, 1]; an optional one may be unset.
 UNIT_INTERVAL = (
     "p_marginal",
+    "knockout_credit",
     "quota_size_exponent",
     "essential_below",
     "alpha",

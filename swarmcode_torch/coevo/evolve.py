@@ -21,7 +21,7 @@ from ..sim.hardware import Phenotype
 from ..sim.runtime import resolve_device, tick_function, tick_mode
 from ..sim.scenario import Scenario, load_scenario
 from ..sim.state import WorldParams
-from . import admission, refound, shares
+from . import admission, knockout, refound, shares
 from .admission import Admission
 from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
 from .dynamics import Turnover, median
@@ -197,6 +197,9 @@ def generation(
         trial,
         equal=state.generation < ctx.cfg.equal_quotas_until,
         best=shares.best_team_species(res, sp) if ctx.cfg.best_team_floor > 0 else None,
+        credit=knockout.best_team_credit(res, sp, state.genome, ph, ctx, g)
+        if ctx.cfg.knockout_credit > 0
+        else None,
     )
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
     composition: dict[str, Any] = {

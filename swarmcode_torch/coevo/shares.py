@@ -11,7 +11,7 @@ import torch
 from torch import Tensor
 
 from ..sim.tensors import cast
-from . import refound
+from . import knockout, refound
 from .admission import Admission
 from .config import ReproductionParams, SwarmCoDeConfig
 from .evaluation import EvalResult
@@ -28,12 +28,15 @@ def plan(
     trial: Tensor | None = None,
     equal: bool = False,
     best: Tensor | None = None,
+    credit: Tensor | None = None,
 ) -> Quotas:
     """Step 3 of a generation, its first part: each species' share of the next generation and its elites
     (`reproduction.quotas`), on the device. `trial` [K] bool: species founded by re-founding
     copies that keep their trial floor (`refound`). `equal` (`equal_quotas_until`): every
     species the same share, whatever its fitness and size. `best` [K] bool: the species of the
-    generation's best team, which keep a floor of `best_team_floor`."""
+    generation's best team, which keep a floor of `best_team_floor`. `credit` [K] bool: the
+    species credited by their knock-out from the best team (`knockout`), whose shares are those
+    of the species of the highest mean fitness at their size."""
     # 3. reproduction; essential species (partners that beat their baselines: they do a job no
     # partner does) keep a quota floor, so that a hard niche's holder is not starved out
     essential = priority = None
@@ -50,7 +53,7 @@ def plan(
         priority = torch.zeros(best.numel(), device=best.device) if priority is None else priority
         floor = max(repro.essential_floor, cfg.best_team_floor)
         repro = replace(repro, essential_floor=floor)
-    share = fit
+    share = fit if credit is None else knockout.lift(fit, sp.species, sp.proto_ids, credit)
     if equal:  # the shares only: selection within a species still reads `fit`
         share, repro = torch.ones_like(fit), replace(repro, quota_size_exponent=0.0)
     q = quotas(share, sp.species, sp.proto_ids, repro, essential, priority, present=True)

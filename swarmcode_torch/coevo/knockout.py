@@ -1,0 +1,145 @@
+"""Knock-out credit (`knockout_credit`, off by default): a species the best team needs is paid
+as the best species is, whatever its own focal teams score.
+
+A species is paid by its own focal teams, in which its design fills the slots the dominance
+draw gives it; a specialist that does one hard job fills many, and those teams score low, so
+the holder of a hard niche can starve while the best team needs it. Each generation this
+module evaluates the generation's best team again beside one knock-out team per species (that
+species' slots re-filled by robots drawn from the team's other slots), all on the same fresh
+environments, and credits a species whose knock-out costs the team more than a margin: the
+difference reward G(z) - G(z_-i) of multi-agent credit assignment (Wolpert and Tumer), taken
+on the best team. A substitute's slots go to the species doing the same job, its knock-out
+costs nothing, and it gets no credit. A credited species' share of the next generation is
+that of a species with the highest species mean fitness at its size (`lift`); selection
+within species still reads fitness. Reads scores only: no package class, capability or niche.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import torch
+from torch import Tensor
+
+from ..sim import bt
+from ..sim.hardware import Phenotype
+from ..sim.layout import make_layouts
+from ..sim.scenario import Scenario
+from ..sim.state import WorldParams
+from ..sim.tensors import arange
+from .config import EvalConfig
+from .evaluation import EvalResult, ScoreFn, _scores, simulate_teams, team_scores
+from .fitness import team_cost
+from .population import Population, genome_phenotype
+from .selection import group_sizes
+from .speciation import SpeciationResult
+
+
+def knockout_teams(
+    team: Tensor, species: Tensor, proto_ids: Tensor, generator: torch.Generator
+) -> tuple[Tensor, Tensor]:
+    """team [S] population rows (-1 empty), species [P], proto_ids [K] -> (teams [K + 1, S],
+    in_team [K] bool). Row 0 is the team; row 1 + k the team with every slot of species k
+    re-filled by a robot drawn uniformly from the team's other filled slots (all -1 where the
+    team has no other); a species not in the team leaves its row equal to the team."""
+    s, k = team.numel(), proto_ids.numel()
+    filled = team >= 0
+    slot_species = torch.where(filled, species[team.clamp(min=0)], -1)
+    hit = slot_species[None, :] == proto_ids[:, None]  # [K, S]
+    keep = filled[None, :] & ~hit
+    other = keep.any(1, keepdim=True)
+    w = torch.where(other, keep.float(), 1.0)  # dummy weights where nothing is left
+    draw = torch.multinomial(w, s, replacement=True, generator=generator) if k else w.long()
+    refill = torch.where(other, team[draw], -1)
+    out = torch.where(hit, refill, team[None, :].expand(k, s))
+    return torch.cat([team[None, :], out]), hit.any(1)
+
+
+def team_species_count(teams: Tensor, species: Tensor, proto_ids: Tensor) -> Tensor:
+    """teams [R, S] -> [R] long: the number of distinct species with a robot in each team."""
+    slot_species = torch.where(teams >= 0, species[teams.clamp(min=0)], -1)  # [R, S]
+    return (slot_species[:, :, None] == proto_ids).any(1).sum(1)
+
+
+def team_scores_on_shared_layouts(
+    teams: Tensor,
+    genome: Population,
+    species: Tensor,
+    proto_ids: Tensor,
+    scenario: Scenario,
+    cfg: EvalConfig,
+    generator: torch.Generator,
+    params: WorldParams,
+    step_fn=None,
+    score_fn: ScoreFn = team_scores,
+    phenotype: Phenotype | None = None,
+) -> Tensor:
+    """teams [R, S] -> [R] each team's mean score over `cfg.trials` fresh environments, the same
+    environments for every team (drawn from `generator`), scored as evaluation scores (cost,
+    budget penalty, `score_fn`)."""
+    r, s = teams.shape
+    t = cfg.trials
+    dev = teams.device
+    ph = phenotype if phenotype is not None else genome_phenotype(genome, scenario.hardware)
+    layouts = make_layouts(replace(scenario, num_robots=s), t, generator, dev)
+    m = simulate_teams(
+        teams.repeat_interleave(t, 0),
+        genome,
+        bt.build_tables(genome.bt),
+        arange(t, dev).repeat(r),
+        layouts,
+        params,
+        cfg.ticks,
+        step_fn,
+        scenario.hardware,
+        ph,
+    )
+    counts = team_species_count(teams, species, proto_ids)
+    cost = team_cost(ph.cost[teams.clamp_min(0)], teams >= 0, counts, scenario.species_overhead)
+    scores = _scores(score_fn, m, cost.repeat_interleave(t), cfg)
+    return scores.view(r, t).mean(1)
+
+
+def credited(scores: Tensor, in_team: Tensor, margin: float) -> Tensor:
+    """scores [K + 1] (the team, then each knock-out) , in_team [K] bool -> [K] bool: the
+    species of the team whose knock-out lowers the team's score by more than `margin` times
+    its magnitude."""
+    return in_team & (scores[0] - scores[1:] > margin * scores[0].abs())
+
+
+def lift(fit: Tensor, species: Tensor, proto_ids: Tensor, credit: Tensor) -> Tensor:
+    """fit [P], species [P], proto_ids [K] (every individual's species listed), credit [K] bool
+    -> [P] the shares' fitness: each credited species' members raised by one amount, so that
+    its mean is the highest species mean (no change where it already is); others as `fit`."""
+    k = proto_ids.numel()
+    pos = (species[:, None] == proto_ids).to(torch.int32).argmax(1)
+    f = fit.float()
+    mean = torch.zeros(k, device=f.device).index_add_(0, pos, f) / group_sizes(pos, k).clamp(min=1)
+    raise_by = torch.where(credit, (mean.max() - mean).clamp(min=0), 0.0)
+    return f + raise_by[pos]
+
+
+def best_team_credit(
+    res: EvalResult, sp: SpeciationResult, genome: Population, phenotype: Phenotype, ctx: Any, g
+) -> Tensor:
+    """[K] bool: the species of `sp.proto_ids` credited this generation (`credited` at the margin
+    `ctx.cfg.knockout_credit`), from the best team of `res` (the focal team of the highest gated
+    fitness) and its knock-outs, scored on fresh environments drawn from `g`. `ctx`: the run's
+    `evolve.Context` (its scenario, evaluation config, world, tick and score function)."""
+    team = res.swarms.focal_team[res.fitness.argmax()]
+    teams, in_team = knockout_teams(team, sp.species, sp.proto_ids, g)
+    scores = team_scores_on_shared_layouts(
+        teams,
+        genome,
+        sp.species,
+        sp.proto_ids,
+        ctx.scenario,
+        ctx.eval_cfg,
+        g,
+        ctx.params,
+        ctx.step_fn,
+        ctx.score_fn,
+        phenotype,
+    )
+    return credited(scores, in_team, ctx.cfg.knockout_credit)
