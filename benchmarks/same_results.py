@@ -128,6 +128,7 @@ VERSION_KEYS = {
     "refound_source",
     "best_team_floor",
     "knockout_credit",
+    "knockout_floor",
 }
 
 

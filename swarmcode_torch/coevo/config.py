@@ -162,6 +162,10 @@ class SwarmCoDeConfig:
     its size (selection within species unchanged); 0: off (the default). A holder the best
     team needs is paid as the best species is, whatever its own focal teams score; a
     substitute, whose slots go to a species doing the same job, is not."""
+    knockout_floor: int = 0
+    """With `knockout_credit`: the species credited by their knock-out keep a quota floor of
+    this many slots (exempt from `min_share`, as `best_team_floor`'s) instead of the lift of
+    their share; 0: the lift (the default)."""
     equal_quotas_until: int = 0
     """Before this generation every species gets the same share of the next generation
     (offspring quotas equal, not by fitness; selection within a species is unchanged); 0: never

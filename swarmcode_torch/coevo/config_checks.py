@@ -53,6 +53,7 @@ LOWER_BOUNDS = {
     "demote_far_after": 0,
     "equal_quotas_until": 0,
     "best_team_floor": 0,
+    "knockout_floor": 0,
     "reeval_trials": 0,
 }
 
@@ -116,6 +117,7 @@ UPPER_BOUNDS = {
     "demote_far_after": 10_000_000,
     "equal_quotas_until": 10_000_000,
     "best_team_floor": 1_000_000,
+    "knockout_floor": 1_000_000,
     "w_tag": 1e6,
     "w_hw": 1e6,
     "w_bt": 1e6,

@@ -36,7 +36,8 @@ def plan(
     species the same share, whatever its fitness and size. `best` [K] bool: the species of the
     generation's best team, which keep a floor of `best_team_floor`. `credit` [K] bool: the
     species credited by their knock-out from the best team (`knockout`), whose shares are those
-    of the species of the highest mean fitness at their size."""
+    of the species of the highest mean fitness at their size, or, with `knockout_floor`, which
+    keep that floor instead."""
     # 3. reproduction; essential species (partners that beat their baselines: they do a job no
     # partner does) keep a quota floor, so that a hard niche's holder is not starved out
     essential = priority = None
@@ -48,11 +49,15 @@ def plan(
         priority = torch.where(trial, -1.0, 0.0 if priority is None else priority)
         floor = max(repro.essential_floor, refound.REFOUND.floor)
         repro = replace(repro, essential_floor=floor)
-    if best is not None:  # the best team's species, after any trial species
-        essential = best if essential is None else essential | best
-        priority = torch.zeros(best.numel(), device=best.device) if priority is None else priority
-        floor = max(repro.essential_floor, cfg.best_team_floor)
-        repro = replace(repro, essential_floor=floor)
+    floored = [(best, cfg.best_team_floor)]
+    if credit is not None and cfg.knockout_floor > 0:  # a floor for the credited, no lift
+        floored, credit = floored + [(credit, cfg.knockout_floor)], None
+    for kept, at in floored:  # the best team's (or credited) species, after any trial species
+        if kept is None:
+            continue
+        essential = kept if essential is None else essential | kept
+        priority = torch.zeros(kept.numel(), device=kept.device) if priority is None else priority
+        repro = replace(repro, essential_floor=max(repro.essential_floor, at))
     share = fit if credit is None else knockout.lift(fit, sp.species, sp.proto_ids, credit)
     if equal:  # the shares only: selection within a species still reads `fit`
         share, repro = torch.ones_like(fit), replace(repro, quota_size_exponent=0.0)

@@ -134,3 +134,23 @@ def test_off_by_default_on_it_changes_the_run_and_repeats_itself():
 def test_margin_outside_the_unit_interval_is_refused(bad):
     with pytest.raises(ValueError, match="knockout_credit"):
         replace(SMALL, knockout_credit=bad).validate()
+
+
+def test_knockout_floor_floors_the_credited_species_instead_of_lifting_them():
+    ev, seen = _seen(SMALL, 3)
+    floored_any = 0
+    for e in seen:
+        sp = e.speciation
+        k = sp.proto_ids.numel()
+        credit = torch.zeros(k, dtype=torch.bool)
+        credit[-1] = True  # the youngest species, credited
+        plain = shares.plan(ev.cfg, ev.ctx.repro, sp, None, e.fitness)
+        cfg = replace(ev.cfg, knockout_credit=0.05, knockout_floor=4)
+        got = shares.plan(cfg, ev.ctx.repro, sp, None, e.fitness, credit=credit)
+        best = shares.plan(
+            replace(ev.cfg, best_team_floor=4), ev.ctx.repro, sp, None, e.fitness, best=credit
+        )
+        assert torch.equal(got.quota, best.quota)  # the best team's floor, for the credited
+        assert int(got.quota[-1]) >= 4 and int(got.quota.sum()) == SMALL.population
+        floored_any += int(plain.quota[-1]) < 4
+    assert floored_any > 0
