@@ -1,0 +1,87 @@
+"""What is a missing niche worth to the team? The last best team of a run (its teams.jsonl)
+scored on fresh seeds as evolved, then with k of its largest species' robots swapped for a hand
+design that lifts the missing class (the class's effector, radius R, every tier 3, torque and
+battery operating points 1, a fetch-and-return tree), and, as the control for the tree, the
+team's own hardware with every design given that tree.
+
+    python experiments/2026-12-05-niche-generalization-v08/niche_value.py RUN_DIR CLASS \
+        --radius R [--seeds 20] [--json OUT]
+
+The same seeds for every variant (1000 .. 1000 + seeds - 1), so the differences are paired.
+If the team scores no better with the class than without it, the fitness does not ask for that
+niche in this world, and a run that leaves it empty is not losing it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+from pathlib import Path
+
+from swarmcode_torch.app.team_eval import score_team
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.sim.bt import (
+    ACT_DROP,
+    ACT_MOVE_TO_BASE,
+    ACT_MOVE_TO_PACK,
+    ACT_PICK_UP,
+    COND_HAS_PACKAGE,
+    COND_NEAR_BASE,
+    COND_NEAR_PACKAGE,
+    END,
+    SEL,
+    SEQ,
+)
+from swarmcode_torch.sim.scenario import load_scenario
+
+#: carrying: to the base and drop there; else at a package: pick it up; else go to one
+FETCH = [
+    SEL, SEQ, COND_HAS_PACKAGE, SEL, SEQ, COND_NEAR_BASE, ACT_DROP, END, ACT_MOVE_TO_BASE, END,
+    END, SEQ, COND_NEAR_PACKAGE, ACT_PICK_UP, END, ACT_MOVE_TO_PACK, END,
+]  # fmt: skip
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("run")
+    p.add_argument("cls", type=int)
+    p.add_argument("--radius", type=float, required=True)
+    p.add_argument("--seeds", type=int, default=20)
+    p.add_argument("--json")
+    a = p.parse_args()
+    run = Path(a.run)
+    world = load_scenario(str(run / "scenario.toml"))
+    c = world.packages[a.cls]
+    team = [json.loads(x) for x in (run / "teams.jsonl").read_text().splitlines()][-1]["designs"]
+    cfg = SwarmCoDeConfig()
+    seeds = list(range(1000, 1000 + a.seeds))
+
+    def score(designs: list[dict]) -> dict:
+        s = score_team(designs, cfg, world, seeds, world.episode_ticks)
+        return {"mean": round(s.mean, 1), "low": round(s.low, 1), "high": round(s.high, 1)}
+
+    rows = {"world": world.name, "class": a.cls, "label": c.label, "run": run.name}
+    rows["as evolved"] = score(team)
+    big = max(range(len(team)), key=lambda i: team[i]["count"])
+    hand = dict(
+        species=-1, effector="pincher" if c.grips[0] else "suction", radius=a.radius,
+        chassis_tier=3, battery_tier=3, motor_tier=3, torque_point=1.0, battery_point=1.0, bt=FETCH,
+    )  # fmt: skip
+    for k in (1, 2, 3, 4, 6):
+        t = copy.deepcopy(team)
+        t[big]["count"] -= k
+        t.append(dict(hand, count=k))
+        rows[f"+{k} robots for the class"] = score(t)
+    t = copy.deepcopy(team)
+    for d in t:
+        d["bt"] = FETCH
+    rows["own hardware, fetch tree (control)"] = score(t)
+    for k, v in rows.items():
+        print(f"{k}: {v}")
+    if a.json:
+        Path(a.json).write_text(json.dumps(rows, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
