@@ -109,7 +109,7 @@ class _Timers:
     PARTS = {
         "speciation": (evolve, "speciate"),
         "reproduction": (evolve, "reproduce"),
-        "eval_plan": (evaluation, "plan_evaluation"),
+        "eval_plan": (evolve, "plan_evaluation"),
         "simulation": (evaluation, "simulate_batch"),
         "scoring": (evaluation, "score_plan"),
     }

@@ -390,49 +390,28 @@ def score_plan(
 
 
 def evaluate(
+    plan: EvalPlan,
     genome: Population,
-    species: Tensor,
-    proto_ids: Tensor,
-    proto_index: Tensor,
-    fitness: Tensor,
-    has_fitness: Tensor,
     scenario: Scenario,
     cfg: EvalConfig,
-    generator: torch.Generator,
     params: WorldParams | None = None,
     step_fn: StepFn | None = None,
     tables: Tensor | None = None,
     evaluator=None,
     score_fn: ScoreFn = team_scores,
-    allowed: Tensor | None = None,
-    proto_distance: Tensor | None = None,
     phenotype: Phenotype | None = None,
 ) -> EvalResult:
-    """Score every individual of the population by its marginal contribution to a team:
-    `plan_evaluation` (teams and environments, drawn here), the simulation, `score`. The
-    simulation runs here (`simulate_batch` of the whole plan), or, given an `evaluator`, where
-    its `simulate(plan, genome)` runs it (`distributed.ShardedEvaluator`: shards of whole
-    evaluations on Ray actors), which returns the same per-environment metrics. `score_plan`
-    then scores them here, each team-episode by `score_fn`. `allowed` [K] bool: the species
-    that may be partners, `proto_distance` [K, K] the prototypes' distances (`plan_evaluation`).
-    `phenotype`: the genome's (`population.genome_phenotype`), computed here if not given."""
+    """Score every individual of the population by its marginal contribution to a team, from
+    the `plan_evaluation` of the same genome, scenario and config (its teams and environments):
+    the simulation, then `score_plan`. The simulation runs here (`simulate_batch` of the whole
+    plan), or, given an `evaluator`, where its `simulate(plan, genome)` runs it
+    (`distributed.ShardedEvaluator`: shards of whole evaluations on Ray actors), which returns
+    the same per-environment metrics; `score_plan` then scores them here, each team-episode by
+    `score_fn`. `phenotype`: the genome's (`population.genome_phenotype`), computed here if not
+    given."""
     params = params or WorldParams.for_scenario(scenario)
     if phenotype is None:
         phenotype = genome_phenotype(genome, scenario.hardware)
-    plan = plan_evaluation(
-        genome,
-        species,
-        proto_ids,
-        proto_index,
-        fitness,
-        has_fitness,
-        scenario,
-        cfg,
-        generator,
-        allowed,
-        proto_distance,
-        phenotype,
-    )
     if evaluator is None:
         m, sim_seconds = simulate_batch(
             sim_batch(plan, genome),

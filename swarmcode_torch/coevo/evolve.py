@@ -25,7 +25,7 @@ from . import admission, knockout, refound, shares
 from .admission import Admission
 from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
 from .dynamics import Turnover, median
-from .evaluation import EvalResult, ScoreFn, evaluate, score_fn_name, team_scores
+from .evaluation import EvalResult, ScoreFn, evaluate, plan_evaluation, score_fn_name, team_scores
 from .fitness import beats_baseline, ema
 from .hooks import AfterEvaluation, AfterReproduction, AfterSpeciation, Hooks
 from .hooks import call as call_hooks
@@ -293,7 +293,7 @@ def _evaluation(
         adm = adm.grow(sp.next_species_id, partner=state.generation == 0)
         allowed = adm.allowed(sp.proto_ids)
         designs_d = design_distance(sp.prototypes, ctx.speciation.weights)
-    res = evaluate(
+    plan = plan_evaluation(
         state.genome,
         sp.species,
         sp.proto_ids,
@@ -303,12 +303,19 @@ def _evaluation(
         ctx.scenario,
         ctx.eval_cfg,
         g,
+        allowed,
+        designs_d,
+        ph,
+    )
+    res = evaluate(
+        plan,
+        state.genome,
+        ctx.scenario,
+        ctx.eval_cfg,
         ctx.params,
         ctx.step_fn,
         evaluator=ctx.evaluator,
         score_fn=ctx.score_fn,
-        allowed=allowed,
-        proto_distance=designs_d,
         phenotype=ph,
     )
     if adm is None:

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
-from swarmcode_torch.coevo.evaluation import EvalConfig, evaluate
+from swarmcode_torch.coevo.evaluation import EvalConfig, evaluate, plan_evaluation
 from swarmcode_torch.coevo.evolve import Evolution, random_population
 from swarmcode_torch.sim.scenario import load_scenario
 from swarmcode_torch.sim.step import step as world_step
@@ -15,6 +15,16 @@ from swarmcode_torch.sim.step import step as world_step
 TINY = SwarmCoDeConfig(
     scenario="one-niche", population=8, swarm_size=5, trials=2, ticks=15, generations=4, seed=1
 )
+
+
+def _planned(pop, cfg, g):
+    """`evaluate`'s first arguments for two individuals of two species on one-niche: the plan
+    (`plan_evaluation`, drawn from `g`), the genome, the scenario and the config."""
+    ids = torch.tensor([0, 1])
+    zeros = torch.zeros(2)
+    world = load_scenario("one-niche")
+    plan = plan_evaluation(pop, ids, ids, ids, zeros, zeros.bool(), world, cfg, g)
+    return plan, pop, world, cfg
 
 
 def _two_identical(cfg=TINY):
@@ -35,18 +45,7 @@ def test_all_focal_and_baseline_trials_run_as_one_batch():
         return world_step(state, *args)
 
     cfg = EvalConfig(swarm_size=5, trials=3, ticks=7)
-    evaluate(
-        pop,
-        torch.tensor([0, 1]),
-        torch.tensor([0, 1]),
-        torch.tensor([0, 1]),
-        torch.zeros(2),
-        torch.zeros(2, dtype=torch.bool),
-        load_scenario("one-niche"),
-        cfg,
-        torch.Generator().manual_seed(0),
-        step_fn=spy,
-    )
+    evaluate(*_planned(pop, cfg, torch.Generator().manual_seed(0)), step_fn=spy)
     assert len(seen) == 7  # one tick loop
     assert all(s == (2 * 2 * 3, 5, 2) for s in seen)  # 2 individuals x (focal, baseline) x 3 trials
 
@@ -56,17 +55,7 @@ def test_identical_partner_gives_zero_marginal_and_gated_fitness():
     # environments, so both teams score exactly the same and the gate applies to both
     pop = _two_identical()
     cfg = EvalConfig(swarm_size=6, trials=2, ticks=60)
-    res = evaluate(
-        pop,
-        torch.tensor([0, 1]),
-        torch.tensor([0, 1]),
-        torch.tensor([0, 1]),
-        torch.zeros(2),
-        torch.zeros(2, dtype=torch.bool),
-        load_scenario("one-niche"),
-        cfg,
-        torch.Generator().manual_seed(4),
-    )
+    res = evaluate(*_planned(pop, cfg, torch.Generator().manual_seed(4)))
     assert (res.swarms.baseline_team[0] == 1).all() and (res.swarms.baseline_team[1] == 0).all()
     assert torch.equal(res.focal, res.baseline)
     assert torch.allclose(res.fitness, res.focal * cfg.p_marginal)
@@ -76,17 +65,7 @@ def test_alone_an_individual_beats_an_empty_baseline():
     pop = _two_identical()
     pop.selectivity[:] = 0.0  # no partners: the baseline team is empty
     cfg = EvalConfig(swarm_size=4, trials=1, ticks=30)
-    res = evaluate(
-        pop,
-        torch.tensor([0, 1]),
-        torch.tensor([0, 1]),
-        torch.tensor([0, 1]),
-        torch.zeros(2),
-        torch.zeros(2, dtype=torch.bool),
-        load_scenario("one-niche"),
-        cfg,
-        torch.Generator().manual_seed(4),
-    )
+    res = evaluate(*_planned(pop, cfg, torch.Generator().manual_seed(4)))
     assert (res.swarms.baseline_team == -1).all() and (res.swarms.focal_team >= 0).all()
     assert torch.allclose(res.baseline, torch.full((2,), 0.1))  # floor of an empty team's score
     assert (res.fitness == res.focal).all()

@@ -275,12 +275,12 @@ def test_shards_score_exactly_like_one_batch():
         ctx.scenario,
         ctx.eval_cfg,
     )
-    whole = evaluation.evaluate(*call, torch.Generator().manual_seed(1), ctx.params, ctx.step_fn)
+    plan = evaluation.plan_evaluation(*call, torch.Generator().manual_seed(1))
+    run = (plan, st.genome, ctx.scenario, ctx.eval_cfg, ctx.params)
+    whole = evaluation.evaluate(*run, ctx.step_fn)
     for shards in (2, 3):  # 3: shards of 2, 3 and 3 evaluations
         ev_shards = _InProcessShards(ctx, shards)
-        res = evaluation.evaluate(
-            *call, torch.Generator().manual_seed(1), ctx.params, evaluator=ev_shards
-        )
+        res = evaluation.evaluate(*run, evaluator=ev_shards)
         for f in ("fitness", "focal", "baseline", "team_cost"):
             assert torch.equal(getattr(res, f), getattr(whole, f)), (shards, f)
         for k, v in whole.team_metrics.items():
