@@ -18,6 +18,14 @@ draws, `Population.random`), the share that lift the class's lightest and its he
 by the simulator's lift rule (`sim.state.capabilities`, read here to *describe* the worlds,
 never by the algorithm); beside it, per world, how many of the split's recorded runs (every
 arm) kept every niche in the last 50 generations.
+
+    python experiments/2026-12-05-niche-generalization-v08/class_probe.py audit \
+        --split train [--json OUT]
+
+The world audit of PLAN.md (fixed before it met a test world): a world is flagged when a class
+is a needle (its heaviest package lifted by fewer than 1 % of random designs) or a niche's own
+class is out of reach (a full swarm of all-premium designs with the fetch tree, at the best of
+three radii in its band, delivers fewer than half its packages on 4 layouts of the class alone).
 """
 
 from __future__ import annotations
@@ -116,7 +124,92 @@ def shares(split: str, designs: int) -> list[dict]:
     return rows
 
 
+NEEDLE = 0.01  # a class lifted by fewer than this share of random designs is a needle
+REACH = 0.5  # a niche's own class is out of reach below this share of its packages delivered
+
+
+def own_classes(toml: Path) -> list[int]:
+    """The classes of a generated world that are a niche's own ("# niche k: ...; only its robots
+    lift these", the comment the generator writes above the class)."""
+    out, k, last = [], -1, ""
+    for line in toml.read_text().splitlines():
+        if line.strip() == "[[packages]]":
+            k += 1
+            if last.startswith("# niche ") and "only its robots lift these" in last:
+                out.append(k)
+        if line.strip():
+            last = line.strip()
+    return out
+
+
+def fetch_deliveries(world, cls: int, radius: float, layouts: int = 4) -> float:
+    """Mean packages of class `cls` delivered per episode, the class alone, by the world's
+    robot count of all-premium designs of radius `radius` running the fetch tree."""
+    from niche_value import FETCH
+
+    from swarmcode_torch.app.team_eval import draw_layouts, run_episodes, team_rows
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+
+    c = world.packages[cls]
+    alone = replace(world, packages=(c,))
+    cfg = SwarmCoDeConfig()
+    d = dict(
+        species=0, effector="pincher" if c.grips[0] else "suction", radius=radius,
+        chassis_tier=3, battery_tier=3, motor_tier=3, torque_point=1.0, battery_point=1.0,
+        bt=FETCH, count=world.num_robots,
+    )  # fmt: skip
+    genome, team = team_rows([d], cfg.tag_length)
+    lay = draw_layouts(alone, int(team.numel()), list(range(layouts)))
+    ep = run_episodes(
+        genome, torch.tensor([0]), team.repeat(layouts, 1), lay, torch.arange(layouts), alone,
+        cfg, world.episode_ticks, torch.device("cpu"),
+    )  # fmt: skip
+    return float(ep.delivered.sum(1).float().mean())
+
+
+def audit(split: str, designs: int = 100_000) -> list[dict]:
+    """One row a world of `split`: its needle classes, its out-of-reach own classes (with the
+    best fetch deliveries of each own class), flagged or not, and its recorded runs kept."""
+    rows = []
+    for toml in sorted((HERE / "worlds" / split).glob("*.toml")):
+        world = load_scenario(str(toml))
+        shares_ = lift_shares(world, designs)
+        needles = [i for i, (_, hi) in enumerate(shares_) if hi < NEEDLE]
+        reach = {}
+        for i in own_classes(toml):
+            lo, hi = world.packages[i].radius_band
+            radii = (lo + 0.01, (lo + hi) / 2, hi - 0.01)
+            best = max(fetch_deliveries(world, i, r) for r in radii)
+            reach[i] = round(best, 2)
+        far = [i for i, v in reach.items() if v < REACH * world.packages[i].count]
+        runs = {}
+        for f in sorted((HERE / "results" / split).glob(f"*/{world.name}__s*.json")):
+            r = json.loads(f.read_text())
+            runs.setdefault(r["arm"], []).append(bool(r["kept_last"]))
+        row = {
+            "world": world.name,
+            "classes": len(world.packages),
+            "needles": needles,
+            "out_of_reach": far,
+            "own_class_deliveries": {str(k): v for k, v in reach.items()},
+            "flagged": bool(needles or far),
+            "kept": {arm: [sum(v), len(v)] for arm, v in sorted(runs.items())},
+        }
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    return rows
+
+
 def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "audit":
+        q = argparse.ArgumentParser(prog="class_probe.py audit")
+        q.add_argument("--split", choices=("train", "test"), required=True)
+        q.add_argument("--json")
+        b = q.parse_args(sys.argv[2:])
+        rows = audit(b.split)
+        if b.json:
+            Path(b.json).write_text(json.dumps(rows, indent=1))
+        return
     if len(sys.argv) > 1 and sys.argv[1] == "shares":
         q = argparse.ArgumentParser(prog="class_probe.py shares")
         q.add_argument("--split", choices=("train", "test"), required=True)
