@@ -249,6 +249,14 @@ WORLD_OPTIONS: tuple[Opt, ...] = (
     Opt("base_radius", float | None, help="Base radius in m [default: 1.5]."),
     Opt("name", str | None, help="Scenario name [default: world-FAMILY-Nn-SEED]."),
     Opt(
+        "min_lift_share",
+        float | None,
+        help="Redraw a world in which a class's heaviest package is lifted by fewer than this "
+        "share of random designs, e.g. 0.01 (a needle evolution may never find; "
+        "docs/WORLDS.md) [default: 0, no check].",
+        metavar="SHARE",
+    ),
+    Opt(
         "split",
         WorldSplit | None,
         help="Write standard study world --index of this split instead (train: seeds "

@@ -51,6 +51,17 @@ def test_world_prints_the_file_without_out():
     assert r.stdout == world_toml(generate_world(3, niches=2, effectors=("suction",)))
 
 
+def test_world_min_lift_share_redraws_and_refuses_in_one_line():
+    args = ("world", "--seed", 0, "--niches", 3, "--bands", "overlapping", "--mass", "2,120")
+    r = invoke(*args, "--min-lift-share", 0.01)
+    assert r.exit_code == 0, r.output
+    kw = dict(niches=3, bands="overlapping", mass=(2.0, 120.0))
+    assert r.stdout == world_toml(generate_world(0, **kw, min_lift_share=0.01))
+    assert r.stdout != world_toml(generate_world(0, **kw))
+    one_line_error(invoke(*args, "--min-lift-share", 0.2), "fewer than min_lift_share 20.00%")
+    one_line_error(invoke("world", "--min-lift-share", 2), "min_lift_share: must be in")
+
+
 @pytest.mark.parametrize("split, index", [("train", 0), ("test", 11)])
 def test_world_writes_a_study_world(tmp_path, split, index):
     out = tmp_path / "s.toml"

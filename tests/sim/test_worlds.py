@@ -5,6 +5,7 @@ the TOML file read back; refusals of worlds no team can solve; the train / test 
 from __future__ import annotations
 
 import itertools
+import json
 import re
 import subprocess
 import sys
@@ -29,6 +30,7 @@ from swarmcode_torch.sim.worlds import (
     cheapest_robot,
     fewest_designs,
     generate_world,
+    lift_shares,
     max_lift,
     split_seeds,
     study_world,
@@ -247,6 +249,27 @@ def test_unsolvable_knobs_are_refused_with_the_reason():
         generate_world(1, niches=3, family="collab", packages=3)
     with pytest.raises(ScenarioError, match="seed"):
         generate_world(-1)
+
+
+def test_min_lift_share_redraws_needle_worlds_and_is_written_in_the_header():
+    knobs = dict(niches=3, bands="overlapping", mass=(2.0, 120.0))
+    plain = generate_world(0, **knobs)
+    assert min(lift_shares(plain.scenario)) < 0.01  # a needle without the knob
+    w = generate_world(0, **knobs, min_lift_share=0.01)
+    assert w.scenario != plain.scenario and min(lift_shares(w.scenario)) >= 0.01
+    assert w.niches == 3 == fewest_designs(w.scenario, heaviest=True)
+    text = world_toml(w)
+    assert '"min_lift_share": 0.01' in text and "--min-lift-share 0.01" in text
+    # a world drawn without it is written as before the knob existed
+    assert "min_lift_share" not in world_toml(plain) and "lift-share" not in world_toml(plain)
+    # the header's knobs draw it again
+    k = json.loads(re.search(r"^# knobs: (.*)$", text, re.M).group(1))
+    assert world_toml(generate_world(k.pop("seed"), **k)) == text
+    # a check no draw passes: refused with the class and its share
+    with pytest.raises(ScenarioError, match=r"no solvable world .* fewer than min_lift_share"):
+        generate_world(1, **knobs, min_lift_share=0.2)
+    with pytest.raises(ScenarioError, match=r"min_lift_share: must be in \[0, 0.5\]"):
+        generate_world(1, min_lift_share=0.9)
 
 
 def test_a_budget_that_cannot_field_the_niches_is_refused():

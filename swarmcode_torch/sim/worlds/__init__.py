@@ -22,13 +22,13 @@ back into the same `Scenario`. `split_seeds` and `study_worlds` give fixed, disj
 test sets of worlds.
 
 The generator is split by job: `model` (its constants, `World`, `Niche`), `lift` (the lift rule
-searched: `max_lift`, `fewest_designs`, `cheapest_robot`), `knobs` (the knobs checked), `draw`
+searched: `max_lift`, `fewest_designs`, `cheapest_robot`, `lift_shares`), `knobs` (the knobs checked), `draw`
 (`generate_world`), `writing` (`world_toml`, `world_command`) and `study` (the study splits);
 every public name is importable from here.
 """
 
 from .draw import generate_world
-from .lift import cheapest_robot, fewest_designs, max_lift
+from .lift import cheapest_robot, fewest_designs, lift_shares, max_lift
 from .model import (
     BAND_MODES,
     COLLAB_SIZE,
@@ -68,6 +68,7 @@ __all__ = [
     "cheapest_robot",
     "fewest_designs",
     "generate_world",
+    "lift_shares",
     "max_lift",
     "split_seeds",
     "study_world",

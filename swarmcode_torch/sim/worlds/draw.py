@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from ..hardware import R_MAX, R_MIN, Catalog, default_catalog
 from ..scenario import PACKAGE_CLEARANCE, Scenario, ScenarioError, scenario_from_dict
 from .knobs import _check_knobs
-from .lift import _peak_radius, _unliftable, cheapest_robot, fewest_designs, max_lift
+from .lift import _peak_radius, _unliftable, cheapest_robot, fewest_designs, lift_shares, max_lift
 from .model import (
     COLLAB_SIZE,
     INDIVIDUAL_SIZE,
@@ -314,6 +314,19 @@ def _check_niche_count(scenario: Scenario, n: int) -> None:
         )
 
 
+def _check_lift_shares(scenario: Scenario, least: float) -> None:
+    """_Redraw if a class's heaviest package is lifted by fewer than `least` of random designs
+    (`lift_shares`; 0: no check)."""
+    if least <= 0:
+        return
+    for i, (c, share) in enumerate(zip(scenario.packages, lift_shares(scenario))):
+        if share < least:
+            raise _Redraw(
+                f"class {i + 1} ({c.label}): {share:.2%} of random designs lift its heaviest "
+                f"package, fewer than min_lift_share {least:.2%}"
+            )
+
+
 def _draw(rng: random.Random, seed: int, knobs: dict, catalog: Catalog) -> World:
     order = list(knobs["effectors"])
     if len(order) > 1 and rng.random() < 0.5:
@@ -331,6 +344,7 @@ def _draw(rng: random.Random, seed: int, knobs: dict, catalog: Catalog) -> World
     # the cheap checks first: the cost of a team, then the search over designs
     cheapest, team = _team_costs(scenario, niches, knobs, catalog)
     _check_niche_count(scenario, knobs["niches"])
+    _check_lift_shares(scenario, knobs["min_lift_share"])
     return World(
         seed=seed,
         knobs=dict(knobs),
@@ -366,6 +380,7 @@ def generate_world(
     arena: float = 20.0,
     base_radius: float = 1.5,
     name: str | None = None,
+    min_lift_share: float = 0.0,
 ) -> World:
     """A foraging world drawn from `seed` that needs `niches` distinct robot designs.
 
@@ -395,6 +410,9 @@ def generate_world(
         arena: the arena's side (m).
         base_radius: the base's radius (m).
         name: the scenario's name (default: one made from the seed and knobs).
+        min_lift_share: redraw a world in which a class's heaviest package is lifted by fewer
+            than this share of random designs (`lift_shares`: a needle that evolution may never
+            find, though a design lifts it; docs/WORLDS.md). 0 (the default): no such check.
 
     Returns:
         The `World`: its scenario, niches and knobs.
@@ -424,6 +442,7 @@ def generate_world(
             arena=arena,
             base_radius=base_radius,
             name=name,
+            min_lift_share=min_lift_share,
         ),
         catalog,
     )

@@ -112,6 +112,7 @@ def _check_fields(k: dict, n: int) -> None:
             f"{k['family']!r}, {n} niche{'s' if n > 1 else ''}); every class needs one"
         )
     k["species_overhead"] = _float(k["species_overhead"], "species_overhead", 0.0, MAX_NUMBER)
+    k["min_lift_share"] = _float(k["min_lift_share"], "min_lift_share", 0.0, 0.5)
     name = k["name"]
     if name is not None and (
         not isinstance(name, str)

@@ -1,6 +1,6 @@
 """The simulator's lift rule, searched: what the designs the hardware catalog builds can lift
-(`max_lift`, `fewest_designs`) and what the cheapest robot that lifts a load costs
-(`cheapest_robot`)."""
+(`max_lift`, `fewest_designs`), what the cheapest robot that lifts a load costs
+(`cheapest_robot`) and how common the designs that lift a class are (`lift_shares`)."""
 
 from __future__ import annotations
 
@@ -252,3 +252,26 @@ def cheapest_robot(
     ok = capabilities(ph, probe, WorldParams())[:, 0]
     costs = [float(x) for x, good in zip(ph.cost, ok) if bool(good)]
     return min(costs) if costs else None
+
+
+#: Random designs `lift_shares` draws (from a generator of its own: the same shares every call).
+SHARE_DESIGNS = 20_000
+
+
+def lift_shares(s: Scenario, designs: int = SHARE_DESIGNS, seed: int = 0) -> list[float]:
+    """For each package class of `s`, the share of `designs` random designs (every hardware gene
+    uniform: the effector, the radius in [R_MIN, R_MAX], each tier, the torque and battery
+    operating points in [0, 1], as a run's first generation draws them) that lift its heaviest
+    package (each robot's share of a collaborative one) by the simulator's lift rule."""
+    g = torch.Generator().manual_seed(seed)
+
+    def tiers() -> torch.Tensor:
+        return torch.randint(0, NUM_TIERS, (designs,), generator=g)
+
+    radius = R_MIN + (R_MAX - R_MIN) * torch.rand(designs, generator=g)
+    chassis, battery, motor = tiers(), tiers(), tiers()
+    torque, charge = torch.rand(designs, generator=g), torch.rand(designs, generator=g)
+    effector = torch.randint(0, len(EFFECTORS), (designs,), generator=g)
+    ph = phenotype(radius, chassis, battery, motor, torque, charge, effector, s.hardware)
+    lifts = capabilities(ph, _heaviest(s), WorldParams.for_scenario(s))
+    return [float(x) for x in lifts.float().mean(0)]

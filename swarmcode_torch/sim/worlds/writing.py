@@ -55,6 +55,8 @@ def world_command(world: World) -> str:
         parts.append(f"--budget {_num(k['budget'])}")
     if k["name"] is not None:
         parts.append(f"--name {json.dumps(k['name'])}")
+    if k.get("min_lift_share"):
+        parts.append(f"--min-lift-share {_num(k['min_lift_share'])}")
     return "swarmcode-torch world " + " ".join(parts)
 
 
@@ -69,7 +71,11 @@ def world_toml(world: World) -> str:
         and what it means, the budget), then the scenario's fields, each package class under a
         comment saying what it is for.
     """
+    # min_lift_share is written where it is set: the files of worlds drawn without it (the
+    # study's splits among them) stay as they were before it existed
     knobs = {"seed": world.seed, **world.knobs}
+    if not knobs.get("min_lift_share"):
+        knobs.pop("min_lift_share", None)
     if world.study is not None:
         knobs["study"] = list(world.study)
     budget = (
