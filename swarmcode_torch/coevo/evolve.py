@@ -200,6 +200,9 @@ def generation(
         credit=knockout.best_team_credit(res, sp, state.genome, ph, ctx, g)
         if ctx.cfg.knockout_credit > 0
         else None,
+        marginal=(res.focal - res.baseline).clamp(min=0)
+        if ctx.cfg.quota_basis == "marginal"
+        else None,
     )
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
     composition: dict[str, Any] = {

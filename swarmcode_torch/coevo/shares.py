@@ -29,6 +29,7 @@ def plan(
     equal: bool = False,
     best: Tensor | None = None,
     credit: Tensor | None = None,
+    marginal: Tensor | None = None,
 ) -> Quotas:
     """Step 3 of a generation, its first part: each species' share of the next generation and its elites
     (`reproduction.quotas`), on the device. `trial` [K] bool: species founded by re-founding
@@ -37,7 +38,8 @@ def plan(
     generation's best team, which keep a floor of `best_team_floor`. `credit` [K] bool: the
     species credited by their knock-out from the best team (`knockout`), whose shares are those
     of the species of the highest mean fitness at their size, or, with `knockout_floor`, which
-    keep that floor instead."""
+    keep that floor instead. `marginal` [P] (`quota_basis = "marginal"`): each individual's
+    marginal contribution, at least 0, which the shares follow instead of `fit`."""
     # 3. reproduction; essential species (partners that beat their baselines: they do a job no
     # partner does) keep a quota floor, so that a hard niche's holder is not starved out
     essential = priority = None
@@ -58,7 +60,8 @@ def plan(
         essential = kept if essential is None else essential | kept
         priority = torch.zeros(kept.numel(), device=kept.device) if priority is None else priority
         repro = replace(repro, essential_floor=max(repro.essential_floor, at))
-    share = fit if credit is None else knockout.lift(fit, sp.species, sp.proto_ids, credit)
+    basis = fit if marginal is None else cast(marginal, torch.float)
+    share = basis if credit is None else knockout.lift(basis, sp.species, sp.proto_ids, credit)
     if equal:  # the shares only: selection within a species still reads `fit`
         share, repro = torch.ones_like(fit), replace(repro, quota_size_exponent=0.0)
     q = quotas(share, sp.species, sp.proto_ids, repro, essential, priority, present=True)

@@ -1,0 +1,76 @@
+"""`quota_basis = "marginal"`: offspring shares follow each species' mean marginal contribution
+(focal team's score less the baseline's, at least 0) instead of its mean fitness; selection
+within species still reads fitness."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+import torch
+
+from swarmcode_torch.coevo import shares
+from swarmcode_torch.coevo.config import SwarmCoDeConfig
+from swarmcode_torch.coevo.evolve import Evolution
+from swarmcode_torch.coevo.hooks import Hooks
+from swarmcode_torch.coevo.reproduction import quotas
+
+SMALL = replace(SwarmCoDeConfig(), scenario="four-niche", population=30, trials=2, ticks=40, seed=5)
+
+
+def _seen(cfg: SwarmCoDeConfig, gens: int) -> tuple[Evolution, list]:
+    ev = Evolution(cfg)
+    seen: list = []
+    ev.hooks = Hooks(after_evaluation=[seen.append])
+    for _ in range(gens):
+        ev.step()
+    return ev, seen
+
+
+def test_shares_follow_the_marginal_and_selection_still_reads_fitness():
+    ev, seen = _seen(SMALL, 3)
+    moved = 0
+    for e in seen:
+        res, sp = e.evaluation, e.speciation
+        marginal = (res.focal - res.baseline).clamp(min=0)
+        got = shares.plan(ev.cfg, ev.ctx.repro, sp, None, e.fitness, marginal=marginal)
+        # the reference: `reproduction.quotas` of the marginal itself, by species
+        ref = quotas(marginal, sp.species, sp.proto_ids, ev.ctx.repro, present=True)
+        assert torch.equal(got.quota, ref.quota)
+        assert int(got.quota.sum()) == SMALL.population
+        assert torch.equal(got.fit, e.fitness.float())  # selection within species: fitness
+        plain = shares.plan(ev.cfg, ev.ctx.repro, sp, None, e.fitness)
+        moved += int(not torch.equal(plain.quota, got.quota))
+    assert moved > 0
+
+
+def test_a_low_fitness_holder_with_the_largest_contribution_gets_the_largest_share():
+    # species 0: high fitness, nothing a partner does not do (a substitute); species 1: its own
+    # teams score low, but the team loses a lot without it
+    species = torch.tensor([0, 0, 0, 1, 1, 1])
+    ids = torch.tensor([0, 1])
+    fitness = torch.tensor([900.0, 880.0, 860.0, 200.0, 180.0, 220.0])
+    marginal = torch.tensor([0.0, 5.0, 0.0, 150.0, 120.0, 160.0])
+    cfg = SwarmCoDeConfig()
+    sp = type("Sp", (), {"species": species, "proto_ids": ids})()
+    by_fit = shares.plan(cfg, cfg.reproduction, sp, None, fitness)
+    by_marg = shares.plan(cfg, cfg.reproduction, sp, None, fitness, marginal=marginal)
+    assert by_fit.quota.tolist()[0] > by_fit.quota.tolist()[1]
+    assert by_marg.quota.tolist()[1] > by_marg.quota.tolist()[0]
+    assert int(by_marg.quota.sum()) == 6
+
+
+def test_off_by_default_on_it_changes_the_run_and_repeats_itself():
+    assert SwarmCoDeConfig().quota_basis == "fitness"
+    a, _ = _seen(SMALL, 4)
+    on = replace(SMALL, quota_basis="marginal")
+    b, _ = _seen(on, 4)
+    c, _ = _seen(on, 4)
+    assert not torch.equal(a.state.fitness, b.state.fitness)
+    assert torch.equal(b.state.fitness, c.state.fitness)
+    assert torch.equal(b.state.species_hint, c.state.species_hint)
+
+
+def test_an_unknown_basis_is_refused():
+    with pytest.raises(ValueError, match="quota_basis"):
+        replace(SMALL, quota_basis="novelty").validate()
