@@ -172,7 +172,8 @@ class SwarmCoDeConfig:
     team's score less the baseline's (where the nearest partner refills their slots), at least
     0 (selection within species still reads fitness). A holder whose own teams score low but
     that does a job no partner does is paid for that job; a substitute, whose slots its partner
-    fills as well, is not."""
+    fills as well, is not. "fitness+marginal": the sum of the two, a member's fitness plus its
+    marginal contribution."""
     equal_quotas_until: int = 0
     """Before this generation every species gets the same share of the next generation
     (offspring quotas equal, not by fitness; selection within a species is unchanged); 0: never

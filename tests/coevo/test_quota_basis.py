@@ -9,7 +9,7 @@ from dataclasses import replace
 import pytest
 import torch
 
-from swarmcode_torch.coevo import shares
+from swarmcode_torch.coevo import evolve, shares
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.evolve import Evolution
 from swarmcode_torch.coevo.hooks import Hooks
@@ -60,10 +60,31 @@ def test_a_low_fitness_holder_with_the_largest_contribution_gets_the_largest_sha
     assert int(by_marg.quota.sum()) == 6
 
 
-def test_off_by_default_on_it_changes_the_run_and_repeats_itself():
+def test_the_sum_basis_pays_fitness_plus_marginal():
+    species = torch.tensor([0, 0, 0, 1, 1, 1])
+    fitness = torch.tensor([900.0, 880.0, 860.0, 200.0, 180.0, 220.0])
+    res = type(
+        "Res",
+        (),
+        {"focal": fitness, "baseline": fitness - torch.tensor([0, 5, 0, 700, 720, 690.0])},
+    )()
+    assert evolve._quota_basis("fitness", res, fitness) is None
+    m = evolve._quota_basis("marginal", res, fitness)
+    assert m.tolist() == [0.0, 5.0, 0.0, 700.0, 720.0, 690.0]
+    both = evolve._quota_basis("fitness+marginal", res, fitness)
+    assert torch.equal(both, fitness + m)
+    cfg = SwarmCoDeConfig()
+    sp = type("Sp", (), {"species": species, "proto_ids": torch.tensor([0, 1])})()
+    got = shares.plan(cfg, cfg.reproduction, sp, None, fitness, marginal=both)
+    ref = quotas(fitness + m, species, sp.proto_ids, cfg.reproduction, present=True)
+    assert torch.equal(got.quota, ref.quota) and got.quota.tolist()[1] >= got.quota.tolist()[0]
+
+
+@pytest.mark.parametrize("basis", ["marginal", "fitness+marginal"])
+def test_off_by_default_on_it_changes_the_run_and_repeats_itself(basis):
     assert SwarmCoDeConfig().quota_basis == "fitness"
     a, _ = _seen(SMALL, 4)
-    on = replace(SMALL, quota_basis="marginal")
+    on = replace(SMALL, quota_basis=basis)
     b, _ = _seen(on, 4)
     c, _ = _seen(on, 4)
     assert not torch.equal(a.state.fitness, b.state.fitness)
