@@ -166,14 +166,15 @@ class SwarmCoDeConfig:
     """With `knockout_credit`: the species credited by their knock-out keep a quota floor of
     this many slots (exempt from `min_share`, as `best_team_floor`'s) instead of the lift of
     their share; 0: the lift (the default)."""
-    quota_basis: str = "fitness"
+    share_basis: str = "fitness"
     """What a species' offspring share follows: "fitness", its members' mean smoothed fitness
     (the default), or "marginal", their mean marginal contribution this generation, the focal
     team's score less the baseline's (where the nearest partner refills their slots), at least
     0 (selection within species still reads fitness). A holder whose own teams score low but
     that does a job no partner does is paid for that job; a substitute, whose slots its partner
     fills as well, is not. "fitness+marginal": the sum of the two, a member's fitness plus its
-    marginal contribution."""
+    marginal contribution. (Not 0.6's retired `quota_basis`, whose values were "sum" and
+    "mean".)"""
     equal_quotas_until: int = 0
     """Before this generation every species gets the same share of the next generation
     (offspring quotas equal, not by fitness; selection within a species is unchanged); 0: never

@@ -28,7 +28,7 @@ CHOICES = {
     "partner_admission": ("open", "substitute"),
     "admission_basis": ("elites", "members"),
     "refound_source": ("partners", "designs"),
-    "quota_basis": ("fitness", "marginal", "fitness+marginal"),
+    "share_basis": ("fitness", "marginal", "fitness+marginal"),
 }
 #: Choices of settings that may also be unset.
 OPTIONAL_CHOICES = {"preset": ("default", "paper")}

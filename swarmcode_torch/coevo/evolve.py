@@ -200,7 +200,7 @@ def generation(
         credit=knockout.best_team_credit(res, sp, state.genome, ph, ctx, g)
         if ctx.cfg.knockout_credit > 0
         else None,
-        marginal=_quota_basis(ctx.cfg.quota_basis, res, fit),
+        marginal=_share_basis(ctx.cfg.share_basis, res, fit),
     )
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
     composition: dict[str, Any] = {
@@ -416,8 +416,8 @@ def _archive_champions(
     )
 
 
-def _quota_basis(basis: str, res: EvalResult, fit: Tensor) -> Tensor | None:
-    """[P] what the offspring shares follow in place of `fit` (`quota_basis`): each member's
+def _share_basis(basis: str, res: EvalResult, fit: Tensor) -> Tensor | None:
+    """[P] what the offspring shares follow in place of `fit` (`share_basis`): each member's
     marginal contribution this generation (at least 0), or `fit` plus it; None: `fit`."""
     if basis == "fitness":
         return None

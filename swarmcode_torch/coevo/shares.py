@@ -38,9 +38,9 @@ def plan(
     generation's best team, which keep a floor of `best_team_floor`. `credit` [K] bool: the
     species credited by their knock-out from the best team (`knockout`), whose shares are those
     of the species of the highest mean fitness at their size, or, with `knockout_floor`, which
-    keep that floor instead. `marginal` [P] (`quota_basis` other than "fitness"): what the
+    keep that floor instead. `marginal` [P] (`share_basis` other than "fitness"): what the
     shares follow instead of `fit`, each individual's marginal contribution (at least 0), or
-    `fit` plus it (`evolve._quota_basis`)."""
+    `fit` plus it (`evolve._share_basis`)."""
     # 3. reproduction; essential species (partners that beat their baselines: they do a job no
     # partner does) keep a quota floor, so that a hard niche's holder is not starved out
     essential = priority = None

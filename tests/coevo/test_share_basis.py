@@ -1,4 +1,4 @@
-"""`quota_basis = "marginal"`: offspring shares follow each species' mean marginal contribution
+"""`share_basis = "marginal"`: offspring shares follow each species' mean marginal contribution
 (focal team's score less the baseline's, at least 0) instead of its mean fitness; selection
 within species still reads fitness."""
 
@@ -68,10 +68,10 @@ def test_the_sum_basis_pays_fitness_plus_marginal():
         (),
         {"focal": fitness, "baseline": fitness - torch.tensor([0, 5, 0, 700, 720, 690.0])},
     )()
-    assert evolve._quota_basis("fitness", res, fitness) is None
-    m = evolve._quota_basis("marginal", res, fitness)
+    assert evolve._share_basis("fitness", res, fitness) is None
+    m = evolve._share_basis("marginal", res, fitness)
     assert m.tolist() == [0.0, 5.0, 0.0, 700.0, 720.0, 690.0]
-    both = evolve._quota_basis("fitness+marginal", res, fitness)
+    both = evolve._share_basis("fitness+marginal", res, fitness)
     assert torch.equal(both, fitness + m)
     cfg = SwarmCoDeConfig()
     sp = type("Sp", (), {"species": species, "proto_ids": torch.tensor([0, 1])})()
@@ -82,9 +82,9 @@ def test_the_sum_basis_pays_fitness_plus_marginal():
 
 @pytest.mark.parametrize("basis", ["marginal", "fitness+marginal"])
 def test_off_by_default_on_it_changes_the_run_and_repeats_itself(basis):
-    assert SwarmCoDeConfig().quota_basis == "fitness"
+    assert SwarmCoDeConfig().share_basis == "fitness"
     a, _ = _seen(SMALL, 4)
-    on = replace(SMALL, quota_basis=basis)
+    on = replace(SMALL, share_basis=basis)
     b, _ = _seen(on, 4)
     c, _ = _seen(on, 4)
     assert not torch.equal(a.state.fitness, b.state.fitness)
@@ -93,5 +93,5 @@ def test_off_by_default_on_it_changes_the_run_and_repeats_itself(basis):
 
 
 def test_an_unknown_basis_is_refused():
-    with pytest.raises(ValueError, match="quota_basis"):
-        replace(SMALL, quota_basis="novelty").validate()
+    with pytest.raises(ValueError, match="share_basis"):
+        replace(SMALL, share_basis="novelty").validate()
