@@ -200,7 +200,7 @@ def generation(
         credit=knockout.best_team_credit(res, sp, state.genome, ph, ctx, g)
         if ctx.cfg.knockout_credit > 0
         else None,
-        marginal=_share_basis(ctx.cfg.share_basis, res, fit),
+        marginal=shares.basis(ctx.cfg.share_basis, res, fit),
     )
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
     composition: dict[str, Any] = {
@@ -414,15 +414,6 @@ def _archive_champions(
         state.generation,
         bins=bins,
     )
-
-
-def _share_basis(basis: str, res: EvalResult, fit: Tensor) -> Tensor | None:
-    """[P] what the offspring shares follow in place of `fit` (`share_basis`): each member's
-    marginal contribution this generation (at least 0), or `fit` plus it; None: `fit`."""
-    if basis == "fitness":
-        return None
-    marginal = (res.focal - res.baseline).clamp(min=0)
-    return marginal if basis == "marginal" else fit + marginal
 
 
 def _design_bins(ctx: Context) -> int:

@@ -40,7 +40,7 @@ def plan(
     of the species of the highest mean fitness at their size, or, with `knockout_floor`, which
     keep that floor instead. `marginal` [P] (`share_basis` other than "fitness"): what the
     shares follow instead of `fit`, each individual's marginal contribution (at least 0), or
-    `fit` plus it (`evolve._share_basis`)."""
+    `fit` plus it (`basis`)."""
     # 3. reproduction; essential species (partners that beat their baselines: they do a job no
     # partner does) keep a quota floor, so that a hard niche's holder is not starved out
     essential = priority = None
@@ -76,3 +76,12 @@ def best_team_species(res: EvalResult, sp: SpeciationResult) -> Tensor:
     rows = res.swarms.focal_team[res.fitness.argmax()]
     ids = torch.where(rows >= 0, sp.species[rows.clamp(min=0)], -1)
     return torch.isin(sp.proto_ids, ids)
+
+
+def basis(share_basis: str, res: EvalResult, fit: Tensor) -> Tensor | None:
+    """[P] what the offspring shares follow in place of `fit` (`share_basis`): each member's
+    marginal contribution this generation (at least 0), or `fit` plus it; None: `fit`."""
+    if share_basis == "fitness":
+        return None
+    marginal = (res.focal - res.baseline).clamp(min=0)
+    return marginal if share_basis == "marginal" else fit + marginal

@@ -9,7 +9,7 @@ from dataclasses import replace
 import pytest
 import torch
 
-from swarmcode_torch.coevo import evolve, shares
+from swarmcode_torch.coevo import shares
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.evolve import Evolution
 from swarmcode_torch.coevo.hooks import Hooks
@@ -68,10 +68,10 @@ def test_the_sum_basis_pays_fitness_plus_marginal():
         (),
         {"focal": fitness, "baseline": fitness - torch.tensor([0, 5, 0, 700, 720, 690.0])},
     )()
-    assert evolve._share_basis("fitness", res, fitness) is None
-    m = evolve._share_basis("marginal", res, fitness)
+    assert shares.basis("fitness", res, fitness) is None
+    m = shares.basis("marginal", res, fitness)
     assert m.tolist() == [0.0, 5.0, 0.0, 700.0, 720.0, 690.0]
-    both = evolve._share_basis("fitness+marginal", res, fitness)
+    both = shares.basis("fitness+marginal", res, fitness)
     assert torch.equal(both, fitness + m)
     cfg = SwarmCoDeConfig()
     sp = type("Sp", (), {"species": species, "proto_ids": torch.tensor([0, 1])})()
