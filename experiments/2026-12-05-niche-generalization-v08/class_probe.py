@@ -20,7 +20,7 @@ never by the algorithm); beside it, per world, how many of the split's recorded 
 arm) kept every niche in the last 50 generations.
 
     python experiments/2026-12-05-niche-generalization-v08/class_probe.py audit \
-        --split train [--json OUT]
+        (--split train | --worlds W.toml ...) [--json OUT]
 
 The world audit of PLAN.md (fixed before it met a test world): a world is flagged when a class
 is a needle (its heaviest package lifted by fewer than 1 % of random designs) or a niche's own
@@ -167,11 +167,13 @@ def fetch_deliveries(world, cls: int, radius: float, layouts: int = 4) -> float:
     return float(ep.delivered.sum(1).float().mean())
 
 
-def audit(split: str, designs: int = 100_000) -> list[dict]:
-    """One row a world of `split`: its needle classes, its out-of-reach own classes (with the
-    best fetch deliveries of each own class), flagged or not, and its recorded runs kept."""
+def audit(split: str | None, designs: int = 100_000, paths: list[str] | None = None) -> list[dict]:
+    """One row a world of `split` (or of `paths`, generated world files): its needle classes,
+    its out-of-reach own classes (with the best fetch deliveries of each own class), flagged or
+    not, and its recorded runs kept (none for `paths`)."""
     rows = []
-    for toml in sorted((HERE / "worlds" / split).glob("*.toml")):
+    tomls = [Path(p) for p in paths] if paths else sorted((HERE / "worlds" / str(split)).glob("*.toml"))
+    for toml in tomls:
         world = load_scenario(str(toml))
         shares_ = lift_shares(world, designs)
         needles = [i for i, (_, hi) in enumerate(shares_) if hi < NEEDLE]
@@ -183,7 +185,7 @@ def audit(split: str, designs: int = 100_000) -> list[dict]:
             reach[i] = round(best, 2)
         far = [i for i, v in reach.items() if v < REACH * world.packages[i].count]
         runs = {}
-        for f in sorted((HERE / "results" / split).glob(f"*/{world.name}__s*.json")):
+        for f in sorted((HERE / "results" / str(split)).glob(f"*/{world.name}__s*.json")):
             r = json.loads(f.read_text())
             runs.setdefault(r["arm"], []).append(bool(r["kept_last"]))
         row = {
@@ -203,10 +205,12 @@ def audit(split: str, designs: int = 100_000) -> list[dict]:
 def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "audit":
         q = argparse.ArgumentParser(prog="class_probe.py audit")
-        q.add_argument("--split", choices=("train", "test"), required=True)
+        w = q.add_mutually_exclusive_group(required=True)
+        w.add_argument("--split", choices=("train", "test"))
+        w.add_argument("--worlds", nargs="+", help="generated world files (swarmcode-torch world)")
         q.add_argument("--json")
         b = q.parse_args(sys.argv[2:])
-        rows = audit(b.split)
+        rows = audit(b.split, paths=b.worlds)
         if b.json:
             Path(b.json).write_text(json.dumps(rows, indent=1))
         return
