@@ -6,26 +6,16 @@ from __future__ import annotations
 from dataclasses import replace
 
 import torch
+from evokit import evolve_seen
 
 from swarmcode_torch.coevo import shares
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
-from swarmcode_torch.coevo.evolve import Evolution
-from swarmcode_torch.coevo.hooks import Hooks
 
 SMALL = replace(SwarmCoDeConfig(), scenario="four-niche", population=30, trials=1, ticks=40, seed=5)
 
 
-def _seen(cfg: SwarmCoDeConfig, gens: int) -> tuple[Evolution, list]:
-    ev = Evolution(cfg)
-    seen: list = []
-    ev.hooks = Hooks(after_evaluation=[seen.append])
-    for _ in range(gens):
-        ev.step()
-    return ev, seen
-
-
 def test_best_team_species_are_those_of_the_fittest_individuals_focal_team():
-    _, seen = _seen(SMALL, 3)
+    _, seen = evolve_seen(SMALL, 3)
     for e in seen:
         res, sp = e.evaluation, e.speciation
         b = int(res.fitness.argmax())
@@ -37,7 +27,7 @@ def test_best_team_species_are_those_of_the_fittest_individuals_focal_team():
 
 def test_floor_gives_every_best_team_species_its_slots_and_keeps_the_total():
     cfg = replace(SMALL, best_team_floor=4)
-    ev, seen = _seen(cfg, 4)
+    ev, seen = evolve_seen(cfg, 4)
     lifted = 0
     for e in seen:
         res, sp = e.evaluation, e.speciation
@@ -54,8 +44,8 @@ def test_floor_gives_every_best_team_species_its_slots_and_keeps_the_total():
 
 def test_off_by_default_and_on_it_changes_the_run():
     assert SwarmCoDeConfig().best_team_floor == 0
-    a, _ = _seen(SMALL, 5)
-    b, _ = _seen(replace(SMALL, best_team_floor=4), 5)
+    a, _ = evolve_seen(SMALL, 5)
+    b, _ = evolve_seen(replace(SMALL, best_team_floor=4), 5)
     assert not torch.equal(a.state.species_hint, b.state.species_hint) or not torch.equal(
         a.state.fitness, b.state.fitness
     )

@@ -6,11 +6,10 @@ from dataclasses import replace
 
 import pytest
 import torch
+from evokit import evolve_seen
 
 from swarmcode_torch.coevo import knockout, shares
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
-from swarmcode_torch.coevo.evolve import Evolution
-from swarmcode_torch.coevo.hooks import Hooks
 from swarmcode_torch.coevo.population import genome_phenotype
 
 SMALL = replace(SwarmCoDeConfig(), scenario="four-niche", population=30, trials=2, ticks=40, seed=5)
@@ -73,17 +72,8 @@ def test_lift_raises_a_credited_species_to_the_top_mean_and_keeps_its_order():
     assert torch.equal(top, fit)  # already the top mean: no change
 
 
-def _seen(cfg: SwarmCoDeConfig, gens: int) -> tuple[Evolution, list]:
-    ev = Evolution(cfg)
-    seen: list = []
-    ev.hooks = Hooks(after_evaluation=[seen.append])
-    for _ in range(gens):
-        ev.step()
-    return ev, seen
-
-
 def test_knockout_scores_share_environments_and_credit_moves_quotas_to_credited_species():
-    ev, seen = _seen(SMALL, 3)
+    ev, seen = evolve_seen(SMALL, 3)
     ctx = ev.ctx
     moved = 0
     for e in seen:
@@ -121,10 +111,10 @@ def test_knockout_scores_share_environments_and_credit_moves_quotas_to_credited_
 
 def test_off_by_default_on_it_changes_the_run_and_repeats_itself():
     assert SwarmCoDeConfig().knockout_credit == 0.0
-    a, _ = _seen(SMALL, 4)
+    a, _ = evolve_seen(SMALL, 4)
     on = replace(SMALL, knockout_credit=0.05)
-    b, _ = _seen(on, 4)
-    c, _ = _seen(on, 4)
+    b, _ = evolve_seen(on, 4)
+    c, _ = evolve_seen(on, 4)
     assert not torch.equal(a.state.fitness, b.state.fitness)
     assert torch.equal(b.state.fitness, c.state.fitness)
     assert torch.equal(b.state.species_hint, c.state.species_hint)
@@ -137,7 +127,7 @@ def test_margin_outside_the_unit_interval_is_refused(bad):
 
 
 def test_knockout_floor_floors_the_credited_species_instead_of_lifting_them():
-    ev, seen = _seen(SMALL, 3)
+    ev, seen = evolve_seen(SMALL, 3)
     floored_any = 0
     for e in seen:
         sp = e.speciation

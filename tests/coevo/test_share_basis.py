@@ -8,27 +8,17 @@ from dataclasses import replace
 
 import pytest
 import torch
+from evokit import evolve_seen
 
 from swarmcode_torch.coevo import shares
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
-from swarmcode_torch.coevo.evolve import Evolution
-from swarmcode_torch.coevo.hooks import Hooks
 from swarmcode_torch.coevo.reproduction import quotas
 
 SMALL = replace(SwarmCoDeConfig(), scenario="four-niche", population=30, trials=2, ticks=40, seed=5)
 
 
-def _seen(cfg: SwarmCoDeConfig, gens: int) -> tuple[Evolution, list]:
-    ev = Evolution(cfg)
-    seen: list = []
-    ev.hooks = Hooks(after_evaluation=[seen.append])
-    for _ in range(gens):
-        ev.step()
-    return ev, seen
-
-
 def test_shares_follow_the_marginal_and_selection_still_reads_fitness():
-    ev, seen = _seen(SMALL, 3)
+    ev, seen = evolve_seen(SMALL, 3)
     moved = 0
     for e in seen:
         res, sp = e.evaluation, e.speciation
@@ -83,10 +73,10 @@ def test_the_sum_basis_pays_fitness_plus_marginal():
 @pytest.mark.parametrize("basis", ["marginal", "fitness+marginal"])
 def test_off_by_default_on_it_changes_the_run_and_repeats_itself(basis):
     assert SwarmCoDeConfig().share_basis == "fitness"
-    a, _ = _seen(SMALL, 4)
+    a, _ = evolve_seen(SMALL, 4)
     on = replace(SMALL, share_basis=basis)
-    b, _ = _seen(on, 4)
-    c, _ = _seen(on, 4)
+    b, _ = evolve_seen(on, 4)
+    c, _ = evolve_seen(on, 4)
     assert not torch.equal(a.state.fitness, b.state.fitness)
     assert torch.equal(b.state.fitness, c.state.fitness)
     assert torch.equal(b.state.species_hint, c.state.species_hint)
