@@ -39,6 +39,8 @@ from pathlib import Path
 
 import torch
 
+from niche_value import fetch_deliveries
+
 import swarmcode_torch as sc
 from swarmcode_torch.coevo.population import Population, genome_phenotype
 from swarmcode_torch.sim.scenario import load_scenario
@@ -142,31 +144,6 @@ def own_classes(toml: Path) -> list[int]:
     return out
 
 
-def fetch_deliveries(world, cls: int, radius: float, layouts: int = 4) -> float:
-    """Mean packages of class `cls` delivered per episode, the class alone, by the world's
-    robot count of all-premium designs of radius `radius` running the fetch tree."""
-    from niche_value import FETCH
-
-    from swarmcode_torch.app.team_eval import draw_layouts, run_episodes, team_rows
-    from swarmcode_torch.coevo.config import SwarmCoDeConfig
-
-    c = world.packages[cls]
-    alone = replace(world, packages=(c,))
-    cfg = SwarmCoDeConfig()
-    d = dict(
-        species=0, effector="pincher" if c.grips[0] else "suction", radius=radius,
-        chassis_tier=3, battery_tier=3, motor_tier=3, torque_point=1.0, battery_point=1.0,
-        bt=FETCH, count=world.num_robots,
-    )  # fmt: skip
-    genome, team = team_rows([d], cfg.tag_length)
-    lay = draw_layouts(alone, int(team.numel()), list(range(layouts)))
-    ep = run_episodes(
-        genome, torch.tensor([0]), team.repeat(layouts, 1), lay, torch.arange(layouts), alone,
-        cfg, world.episode_ticks, torch.device("cpu"),
-    )  # fmt: skip
-    return float(ep.delivered.sum(1).float().mean())
-
-
 def audit(split: str | None, designs: int = 100_000, paths: list[str] | None = None) -> list[dict]:
     """One row a world of `split` (or of `paths`, generated world files): its needle classes,
     its out-of-reach own classes (with the best fetch deliveries of each own class), flagged or
@@ -181,7 +158,7 @@ def audit(split: str | None, designs: int = 100_000, paths: list[str] | None = N
         for i in own_classes(toml):
             lo, hi = world.packages[i].radius_band
             radii = (lo + 0.01, (lo + hi) / 2, hi - 0.01)
-            best = max(fetch_deliveries(world, i, r) for r in radii)
+            best = max(fetch_deliveries(world, i, r, world.num_robots) for r in radii)
             reach[i] = round(best, 2)
         far = [i for i, v in reach.items() if v < REACH * world.packages[i].count]
         runs = {}

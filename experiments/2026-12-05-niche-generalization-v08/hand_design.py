@@ -14,13 +14,11 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import replace
 from pathlib import Path
 
-import torch
+from niche_value import fetch_deliveries, hand
 
-from niche_value import FETCH
-from swarmcode_torch.app.team_eval import draw_layouts, run_episodes, team_rows
+from swarmcode_torch.app.team_eval import team_rows
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.population import genome_phenotype
 from swarmcode_torch.sim.scenario import load_scenario
@@ -38,23 +36,12 @@ def main() -> None:
     a = p.parse_args()
     world = load_scenario(a.world)
     c = world.packages[a.cls]
-    alone = replace(world, packages=(c,))
-    cfg = SwarmCoDeConfig()
     params = WorldParams.for_scenario(world)
     rows = []
     for r in (float(x) for x in a.radii.split(",")):
-        d = dict(
-            species=0, effector="pincher" if c.grips[0] else "suction", radius=r, chassis_tier=3,
-            battery_tier=3, motor_tier=3, torque_point=1.0, battery_point=1.0, bt=FETCH,
-            count=a.robots,
-        )  # fmt: skip
-        genome, team = team_rows([d], cfg.tag_length)
+        genome, _ = team_rows([hand(c, r, a.robots)], SwarmCoDeConfig().tag_length)
         ph = genome_phenotype(genome, world.hardware)
-        layouts = draw_layouts(alone, int(team.numel()), list(range(a.seeds)))
-        ep = run_episodes(
-            genome, torch.tensor([0]), team.repeat(a.seeds, 1), layouts, torch.arange(a.seeds),
-            alone, cfg, world.episode_ticks, torch.device("cpu"),
-        )  # fmt: skip
+        delivered = fetch_deliveries(world, a.cls, r, a.robots, a.seeds)
         row = {
             "world": world.name, "class": a.cls, "label": c.label, "distance": list(c.distance),
             "robots": a.robots, "radius": r, "mass": round(float(ph.mass[0]), 2),
@@ -62,7 +49,7 @@ def main() -> None:
             "force_needed_heaviest": round(
                 params.lift_force * (float(ph.mass[0]) + c.mass[1] / len(c.grips)), 1
             ),
-            "delivered_per_episode": float(ep.delivered.sum(1).float().mean()),
+            "delivered_per_episode": delivered,
             "count": c.count,
         }  # fmt: skip
         print(json.dumps(row), flush=True)

@@ -17,9 +17,12 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+from dataclasses import replace
 from pathlib import Path
 
-from swarmcode_torch.app.team_eval import score_team
+import torch
+
+from swarmcode_torch.app.team_eval import draw_layouts, run_episodes, score_team, team_rows
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.sim.bt import (
     ACT_DROP,
@@ -40,6 +43,31 @@ FETCH = [
     SEL, SEQ, COND_HAS_PACKAGE, SEL, SEQ, COND_NEAR_BASE, ACT_DROP, END, ACT_MOVE_TO_BASE, END,
     END, SEQ, COND_NEAR_PACKAGE, ACT_PICK_UP, END, ACT_MOVE_TO_PACK, END,
 ]  # fmt: skip
+
+
+def hand(c, radius: float, count: int, species: int = 0) -> dict:
+    """The hand design for package class `c`: its first grip's effector, radius `radius`, every
+    tier 3, torque and battery operating points 1, the fetch tree; `count` robots."""
+    return dict(
+        species=species, effector="pincher" if c.grips[0] else "suction", radius=radius,
+        chassis_tier=3, battery_tier=3, motor_tier=3, torque_point=1.0, battery_point=1.0,
+        bt=FETCH, count=count,
+    )  # fmt: skip
+
+
+def fetch_deliveries(world, cls: int, radius: float, robots: int, layouts: int = 4) -> float:
+    """Mean packages of class `cls` delivered per episode, the class alone in `world`, by
+    `robots` robots of the hand design of radius `radius`, on layouts of seeds 0 .. layouts - 1."""
+    c = world.packages[cls]
+    alone = replace(world, packages=(c,))
+    cfg = SwarmCoDeConfig()
+    genome, team = team_rows([hand(c, radius, robots)], cfg.tag_length)
+    lay = draw_layouts(alone, int(team.numel()), list(range(layouts)))
+    ep = run_episodes(
+        genome, torch.tensor([0]), team.repeat(layouts, 1), lay, torch.arange(layouts), alone,
+        cfg, world.episode_ticks, torch.device("cpu"),
+    )  # fmt: skip
+    return float(ep.delivered.sum(1).float().mean())
 
 
 def main() -> None:
@@ -64,14 +92,10 @@ def main() -> None:
     rows = {"world": world.name, "class": a.cls, "label": c.label, "run": run.name}
     rows["as evolved"] = score(team)
     big = max(range(len(team)), key=lambda i: team[i]["count"])
-    hand = dict(
-        species=-1, effector="pincher" if c.grips[0] else "suction", radius=a.radius,
-        chassis_tier=3, battery_tier=3, motor_tier=3, torque_point=1.0, battery_point=1.0, bt=FETCH,
-    )  # fmt: skip
     for k in (1, 2, 3, 4, 6):
         t = copy.deepcopy(team)
         t[big]["count"] -= k
-        t.append(dict(hand, count=k))
+        t.append(hand(c, a.radius, k, species=-1))
         rows[f"+{k} robots for the class"] = score(t)
     t = copy.deepcopy(team)
     for d in t:
