@@ -28,7 +28,7 @@ CHOICES = {
     "partner_admission": ("open", "substitute"),
     "admission_basis": ("elites", "members"),
     "refound_source": ("partners", "designs"),
-    "share_basis": ("fitness", "marginal", "fitness+marginal"),
+    "share_basis": ("fitness", "marginal", "fitness+marginal", "marginal/slot"),
 }
 #: Choices of settings that may also be unset.
 OPTIONAL_CHOICES = {"preset": ("default", "paper")}

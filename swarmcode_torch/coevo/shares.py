@@ -80,8 +80,11 @@ def best_team_species(res: EvalResult, sp: SpeciationResult) -> Tensor:
 
 def basis(share_basis: str, res: EvalResult, fit: Tensor) -> Tensor | None:
     """[P] what the offspring shares follow in place of `fit` (`share_basis`): each member's
-    marginal contribution this generation (at least 0), or `fit` plus it; None: `fit`."""
+    marginal contribution this generation (at least 0), that per slot its design fills in its
+    focal team ("marginal/slot"), or `fit` plus the marginal; None: `fit`."""
     if share_basis == "fitness":
         return None
     marginal = (res.focal - res.baseline).clamp(min=0)
+    if share_basis == "marginal/slot":
+        return marginal / res.swarms.focal_slot.sum(1).clamp(min=1).to(marginal.dtype)
     return marginal if share_basis == "marginal" else fit + marginal

@@ -70,7 +70,7 @@ def test_the_sum_basis_pays_fitness_plus_marginal():
     assert torch.equal(got.quota, ref.quota) and got.quota.tolist()[1] >= got.quota.tolist()[0]
 
 
-@pytest.mark.parametrize("basis", ["marginal", "fitness+marginal"])
+@pytest.mark.parametrize("basis", ["marginal", "fitness+marginal", "marginal/slot"])
 def test_off_by_default_on_it_changes_the_run_and_repeats_itself(basis):
     assert SwarmCoDeConfig().share_basis == "fitness"
     a, _ = evolve_seen(SMALL, 4)
@@ -80,6 +80,31 @@ def test_off_by_default_on_it_changes_the_run_and_repeats_itself(basis):
     assert not torch.equal(a.state.fitness, b.state.fitness)
     assert torch.equal(b.state.fitness, c.state.fitness)
     assert torch.equal(b.state.species_hint, c.state.species_hint)
+
+
+def test_the_per_slot_basis_divides_by_the_slots_a_design_fills():
+    ev, seen = evolve_seen(SMALL, 2)
+    for e in seen:
+        res = e.evaluation
+        got = shares.basis("marginal/slot", res, e.fitness)
+        marginal = shares.basis("marginal", res, e.fitness)
+        slots = res.swarms.focal_slot.sum(1)
+        assert int(slots.min()) >= 1  # slot 0 is always the focal's own
+        for i in range(got.numel()):  # reference: one member at a time
+            assert float(got[i]) == pytest.approx(float(marginal[i]) / int(slots[i]))
+        assert bool((slots > 1).any())  # some designs fill more than one slot here
+    # a holder filling 3 slots for 240 is paid above a generalist filling 17 for 800
+    res = type(
+        "Res",
+        (),
+        {
+            "focal": torch.tensor([1000.0, 1000.0]),
+            "baseline": torch.tensor([760.0, 200.0]),
+            "swarms": type("Sw", (), {"focal_slot": torch.arange(20) < torch.tensor([[3], [17]])})(),
+        },
+    )()
+    per = shares.basis("marginal/slot", res, torch.zeros(2))
+    assert per.tolist() == pytest.approx([80.0, 800.0 / 17])
 
 
 def test_an_unknown_basis_is_refused():
