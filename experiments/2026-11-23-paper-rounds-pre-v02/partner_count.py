@@ -72,9 +72,11 @@ def main() -> None:
         """[R * P, 5]: species in the focal team, focal score, gated fitness, positive, deliveries."""
         rows = []
         for rep in range(args.repeats):
-            r = evaluation.evaluate(replace(g, selectivity=selectivity), sp.species, sp.proto_ids,
-                         sp.proto_index, st.fitness, st.has_fitness, ctx.scenario, ecfg,
-                         torch.Generator().manual_seed(rep), ctx.params)
+            gs = replace(g, selectivity=selectivity)
+            plan = evaluation.plan_evaluation(gs, sp.species, sp.proto_ids, sp.proto_index,
+                                              st.fitness, st.has_fitness, ctx.scenario, ecfg,
+                                              torch.Generator().manual_seed(rep))
+            r = evaluation.evaluate(plan, gs, ctx.scenario, ecfg, ctx.params)
             delivered = r.team_metrics["delivered_individual"] + r.team_metrics["delivered_collab"]
             rows.append(torch.stack([r.swarms.focal_species_count.float(), r.focal, r.fitness,
                                      (r.focal > r.baseline).float(), delivered], 1))
@@ -101,9 +103,10 @@ def main() -> None:
 
     real = evaluation.choose_partners
 
-    def one_per_niche(tag, selectivity, species, proto_ids, proto_tag, elite_index, generator):
+    def one_per_niche(tag, selectivity, species, proto_ids, proto_tag, elite_index, generator,
+                      allowed=None):
         every = real(tag, torch.full_like(selectivity, 2.0), species, proto_ids, proto_tag,
-                     elite_index, generator)                     # one random elite per species
+                     elite_index, generator, allowed)            # one random elite per species
         return niche_partners(g, species, proto_ids, sp.proto_index, ctx.scenario,
                               lambda kk: every[:, kk])
 
