@@ -129,6 +129,7 @@ VERSION_KEYS = {
     "best_team_floor",
     "knockout_credit",
     "knockout_floor",
+    "knockout_pairs",
     "share_basis",
 }
 

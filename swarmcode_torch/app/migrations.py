@@ -40,6 +40,7 @@ def migrate_config(d: Any, keep_retired: bool = False) -> Any:
     d.setdefault("best_team_floor", 0)
     d.setdefault("knockout_credit", 0.0)
     d.setdefault("knockout_floor", 0)
+    d.setdefault("knockout_pairs", 0.0)
     d.setdefault("share_basis", "fitness")
     # written before 0.8: the best team was the highest single evaluation, never re-evaluated
     d.setdefault("reeval_trials", 0)

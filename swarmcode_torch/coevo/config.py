@@ -166,6 +166,15 @@ class SwarmCoDeConfig:
     """With `knockout_credit`: the species credited by their knock-out keep a quota floor of
     this many slots (exempt from `min_share`, as `best_team_floor`'s) instead of the lift of
     their share; 0: the lift (the default)."""
+    knockout_pairs: float = 0.0
+    """Demotion of substitute pairs by knock-out (`coevo.knockout.demote_substitutes`): each
+    generation the best team is evaluated again with each of its species knocked out and with
+    each pair of them knocked out together (slots re-filled from the team's other slots); two
+    partners whose knock-outs each cost the team at most this fraction of its score, but whose
+    joint knock-out costs more, stand in for each other, and the lower-ranked (the smaller, then
+    the younger) stops being a partner and is on probation again, at most one a generation; 0:
+    off (the default). The admission's substitution test without design distance, for
+    duplicates whose designs differ by more than δ. Needs `partner_admission = "substitute"`."""
     share_basis: str = "fitness"
     """What a species' offspring share follows: "fitness", its members' mean smoothed fitness
     (the default), or "marginal", their mean marginal contribution this generation, the focal

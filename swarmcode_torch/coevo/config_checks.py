@@ -82,6 +82,7 @@ POSITIVE = ("delta", "gamma")
 UNIT_INTERVAL = (
     "p_marginal",
     "knockout_credit",
+    "knockout_pairs",
     "quota_size_exponent",
     "essential_below",
     "alpha",

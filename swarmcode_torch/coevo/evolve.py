@@ -338,7 +338,7 @@ def _evaluation(
         near=near,
         elite=state.has_fitness if ctx.cfg.admission_basis == "elites" else None,
     )
-    return res, adm
+    return res, knockout.demote_substitutes(adm, res, sp, state.genome, ph, ctx, g)
 
 
 def _reproduction(

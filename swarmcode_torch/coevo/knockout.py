@@ -12,6 +12,13 @@ on the best team. A substitute's slots go to the species doing the same job, its
 costs nothing, and it gets no credit. A credited species' share of the next generation is
 that of a species with the highest species mean fitness at its size (`lift`); selection
 within species still reads fitness. Reads scores only: no package class, capability or niche.
+
+Demotion of substitute pairs (`knockout_pairs`, off by default) reads the same knock-outs the
+other way: two species of the best team that each cost nothing when knocked out alone (each
+one's slots go to the other) but a lot when knocked out together do one job twice, however far
+apart their designs; the lower-ranked stops being a partner (`demote_substitutes`), as the
+admission demotes a substitute within δ (`coevo.admission`). A substitute pair of Wiegand's
+and Panait's cooperative coevolution, found by the difference reward of the pair.
 """
 
 from __future__ import annotations
@@ -28,12 +35,32 @@ from ..sim.layout import make_layouts
 from ..sim.scenario import Scenario
 from ..sim.state import WorldParams
 from ..sim.tensors import arange
+from .admission import Admission
 from .config import EvalConfig
 from .evaluation import EvalResult, ScoreFn, _scores, simulate_teams, team_scores
 from .fitness import team_cost
 from .population import Population, genome_phenotype
 from .selection import group_sizes
 from .speciation import SpeciationResult
+
+
+def knocked_out(
+    team: Tensor, species: Tensor, proto_ids: Tensor, out: Tensor, generator: torch.Generator
+) -> tuple[Tensor, Tensor]:
+    """team [S] population rows (-1 empty), species [P], proto_ids [K], out [R, K] bool (the
+    species each row knocks out) -> (teams [R, S], left [R] bool). Row r is the team with every
+    slot of the species of out[r] re-filled by a robot drawn uniformly from the team's other
+    filled slots (all -1, and left False, where the team has no other)."""
+    s, r = team.numel(), out.shape[0]
+    filled = team >= 0
+    slot_species = torch.where(filled, species[team.clamp(min=0)], -1)
+    hit = ((slot_species[:, None] == proto_ids) & out[:, None, :]).any(2)  # [R, S]
+    keep = filled[None, :] & ~hit
+    other = keep.any(1, keepdim=True)
+    w = torch.where(other, keep.float(), 1.0)  # dummy weights where nothing is left
+    draw = torch.multinomial(w, s, replacement=True, generator=generator) if r else w.long()
+    refill = torch.where(other, team[draw], -1)
+    return torch.where(hit, refill, team[None, :].expand(r, s)), other.squeeze(1)
 
 
 def knockout_teams(
@@ -43,17 +70,11 @@ def knockout_teams(
     in_team [K] bool). Row 0 is the team; row 1 + k the team with every slot of species k
     re-filled by a robot drawn uniformly from the team's other filled slots (all -1 where the
     team has no other); a species not in the team leaves its row equal to the team."""
-    s, k = team.numel(), proto_ids.numel()
-    filled = team >= 0
-    slot_species = torch.where(filled, species[team.clamp(min=0)], -1)
-    hit = slot_species[None, :] == proto_ids[:, None]  # [K, S]
-    keep = filled[None, :] & ~hit
-    other = keep.any(1, keepdim=True)
-    w = torch.where(other, keep.float(), 1.0)  # dummy weights where nothing is left
-    draw = torch.multinomial(w, s, replacement=True, generator=generator) if k else w.long()
-    refill = torch.where(other, team[draw], -1)
-    out = torch.where(hit, refill, team[None, :].expand(k, s))
-    return torch.cat([team[None, :], out]), hit.any(1)
+    k = proto_ids.numel()
+    eye = torch.eye(k, dtype=torch.bool, device=team.device)
+    teams, _ = knocked_out(team, species, proto_ids, eye, generator)
+    slot_species = torch.where(team >= 0, species[team.clamp(min=0)], -1)
+    return torch.cat([team[None, :], teams]), (slot_species[None, :] == proto_ids[:, None]).any(1)
 
 
 def team_species_count(teams: Tensor, species: Tensor, proto_ids: Tensor) -> Tensor:
@@ -143,3 +164,80 @@ def best_team_credit(
         phenotype,
     )
     return credited(scores, in_team, ctx.cfg.knockout_credit)
+
+
+def substitute_pairs(scores: Tensor, m: int, left: Tensor, margin: float) -> Tensor:
+    """scores [1 + m + m(m-1)/2] (the team, each of its m species knocked out, then each pair
+    (i, j), i < j, in `torch.combinations` order), left [m(m-1)/2] bool (the pair's knock-out
+    left robots in the team) -> [m(m-1)/2] bool: the pairs whose knock-outs each cost the team
+    at most `margin` times its score while their joint knock-out costs more: two species that
+    stand in for each other."""
+    limit = margin * scores[0].abs()
+    single = scores[0] - scores[1 : 1 + m] <= limit
+    ij = torch.combinations(arange(m, scores.device), 2)
+    joint = scores[0] - scores[1 + m :] > limit
+    return single[ij[:, 0]] & single[ij[:, 1]] & joint & left
+
+
+def demote_substitutes(
+    adm: Admission | None,
+    res: EvalResult,
+    sp: SpeciationResult,
+    genome: Population,
+    phenotype: Phenotype,
+    ctx: Any,
+    g: torch.Generator,
+) -> Admission | None:
+    """The admission (`coevo.admission.Admission`) after `knockout_pairs`' test of the best team
+    (the focal team of the highest gated fitness of `res`): of the pairs of its species that
+    stand in for each other (`substitute_pairs`, on fresh environments drawn from `g`), the
+    lowest-ranked member (the smaller, then the younger) of any pair stops being a partner and
+    is on probation again (`admission.update`'s demotion), if it is a partner; at most one a
+    generation. `adm` unchanged where the setting is 0 or admission is open. Reads on the host
+    which species are in the team (one value a generation, with the setting on)."""
+    margin = ctx.cfg.knockout_pairs
+    if adm is None or margin <= 0:
+        return adm
+    team = res.swarms.focal_team[res.fitness.argmax()]
+    slot_species = torch.where(team >= 0, sp.species[team.clamp(min=0)], -1)
+    idx = (slot_species[None, :] == sp.proto_ids[:, None]).any(1).nonzero().squeeze(1)
+    m = idx.numel()  # the host read
+    if m < 2:
+        return adm
+    dev = team.device
+    ij = torch.combinations(arange(m, dev), 2)
+    out = torch.zeros(m + ij.shape[0], sp.proto_ids.numel(), dtype=torch.bool, device=dev)
+    rows = arange(m, dev)
+    out[rows, idx] = True
+    pair_rows = arange(ij.shape[0], dev) + m
+    out[pair_rows, idx[ij[:, 0]]] = True
+    out[pair_rows, idx[ij[:, 1]]] = True
+    teams, left = knocked_out(team, sp.species, sp.proto_ids, out, g)
+    scores = team_scores_on_shared_layouts(
+        torch.cat([team[None, :], teams]),
+        genome,
+        sp.species,
+        sp.proto_ids,
+        ctx.scenario,
+        ctx.eval_cfg,
+        g,
+        ctx.params,
+        ctx.step_fn,
+        ctx.score_fn,
+        phenotype,
+    )
+    pairs = substitute_pairs(scores, m, left[m:], margin)
+    ids = sp.proto_ids[idx]
+    size = (sp.species[:, None] == ids).sum(0)
+    rank = size * (sp.proto_ids.max() + 1) - ids  # higher: larger, then older
+    loser = torch.where(rank[ij[:, 0]] < rank[ij[:, 1]], ij[:, 0], ij[:, 1])
+    low = torch.where(pairs, rank[loser], rank.max() + 1)
+    who = ids[loser[low.argmin()]]
+    demote = pairs.any() & adm.partner[who]
+    at = (who[None],)
+    return replace(
+        adm,
+        partner=adm.partner.index_put(at, (adm.partner[who] & ~demote)[None]),
+        calm=adm.calm.index_put(at, torch.where(demote, 0, adm.calm[who])[None]),
+        clash=adm.clash.index_put(at, torch.where(demote, 0, adm.clash[who])[None]),
+    )

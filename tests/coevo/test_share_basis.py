@@ -100,7 +100,9 @@ def test_the_per_slot_basis_divides_by_the_slots_a_design_fills():
         {
             "focal": torch.tensor([1000.0, 1000.0]),
             "baseline": torch.tensor([760.0, 200.0]),
-            "swarms": type("Sw", (), {"focal_slot": torch.arange(20) < torch.tensor([[3], [17]])})(),
+            "swarms": type(
+                "Sw", (), {"focal_slot": torch.arange(20) < torch.tensor([[3], [17]])}
+            )(),
         },
     )()
     per = shares.basis("marginal/slot", res, torch.zeros(2))
