@@ -141,16 +141,12 @@ def lift(fit: Tensor, species: Tensor, proto_ids: Tensor, credit: Tensor) -> Ten
     return f + raise_by[pos]
 
 
-def best_team_credit(
-    res: EvalResult, sp: SpeciationResult, genome: Population, phenotype: Phenotype, ctx: Any, g
+def _run_scores(
+    teams: Tensor, genome: Population, sp: SpeciationResult, phenotype: Phenotype, ctx: Any, g
 ) -> Tensor:
-    """[K] bool: the species of `sp.proto_ids` credited this generation (`credited` at the margin
-    `ctx.cfg.knockout_credit`), from the best team of `res` (the focal team of the highest gated
-    fitness) and its knock-outs, scored on fresh environments drawn from `g`. `ctx`: the run's
-    `evolve.Context` (its scenario, evaluation config, world, tick and score function)."""
-    team = res.swarms.focal_team[res.fitness.argmax()]
-    teams, in_team = knockout_teams(team, sp.species, sp.proto_ids, g)
-    scores = team_scores_on_shared_layouts(
+    """`team_scores_on_shared_layouts` of `teams` with the run's scenario, evaluation config,
+    world, tick and score function (`ctx`, the run's `evolve.Context`)."""
+    return team_scores_on_shared_layouts(
         teams,
         genome,
         sp.species,
@@ -163,6 +159,18 @@ def best_team_credit(
         ctx.score_fn,
         phenotype,
     )
+
+
+def best_team_credit(
+    res: EvalResult, sp: SpeciationResult, genome: Population, phenotype: Phenotype, ctx: Any, g
+) -> Tensor:
+    """[K] bool: the species of `sp.proto_ids` credited this generation (`credited` at the margin
+    `ctx.cfg.knockout_credit`), from the best team of `res` (the focal team of the highest gated
+    fitness) and its knock-outs, scored on fresh environments drawn from `g`. `ctx`: the run's
+    `evolve.Context` (its scenario, evaluation config, world, tick and score function)."""
+    team = res.swarms.focal_team[res.fitness.argmax()]
+    teams, in_team = knockout_teams(team, sp.species, sp.proto_ids, g)
+    scores = _run_scores(teams, genome, sp, phenotype, ctx, g)
     return credited(scores, in_team, ctx.cfg.knockout_credit)
 
 
@@ -213,19 +221,7 @@ def demote_substitutes(
     out[pair_rows, idx[ij[:, 0]]] = True
     out[pair_rows, idx[ij[:, 1]]] = True
     teams, left = knocked_out(team, sp.species, sp.proto_ids, out, g)
-    scores = team_scores_on_shared_layouts(
-        torch.cat([team[None, :], teams]),
-        genome,
-        sp.species,
-        sp.proto_ids,
-        ctx.scenario,
-        ctx.eval_cfg,
-        g,
-        ctx.params,
-        ctx.step_fn,
-        ctx.score_fn,
-        phenotype,
-    )
+    scores = _run_scores(torch.cat([team[None, :], teams]), genome, sp, phenotype, ctx, g)
     pairs = substitute_pairs(scores, m, left[m:], margin)
     ids = sp.proto_ids[idx]
     size = (sp.species[:, None] == ids).sum(0)
