@@ -170,17 +170,27 @@ def _world(values: Values) -> None:
     text = worlds.world_toml(w)
     if path is None:
         typer.echo(text, nl=False)
-        return
-    try:
-        atomic_write_bytes(path, text.encode("utf-8"))
-    except OSError as e:
-        os_fail(e, f"cannot write {path}")
-    console.print(
-        f"Wrote {path}: {w.scenario.name}, {w.niches} niche{'s' if w.niches > 1 else ''}",
-        markup=False,
-        highlight=False,
-        soft_wrap=True,
-    )
+    else:
+        try:
+            atomic_write_bytes(path, text.encode("utf-8"))
+        except OSError as e:
+            os_fail(e, f"cannot write {path}")
+        console.print(
+            f"Wrote {path}: {w.scenario.name}, {w.niches} niche{'s' if w.niches > 1 else ''}",
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
+    for i, share in worlds.needles(w.scenario):  # on stderr: a printed world stays clean
+        by = f"{100 * share:.2g} % of" if share else f"none of {worlds.SHARE_DESIGNS}"
+        err.print(
+            f"Warning: class {i}'s heaviest package is lifted by {by} random designs, "
+            f"a needle evolution may never find (--min-lift-share {worlds.NEEDLE_SHARE} draws "
+            'another world; docs/WORLDS.md, "Needles")',
+            markup=False,
+            highlight=False,
+            soft_wrap=True,
+        )
 
 
 #: world: its options from `options.WORLD_OPTIONS`

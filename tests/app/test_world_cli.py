@@ -11,7 +11,14 @@ from typer.testing import CliRunner
 
 from swarmcode_torch.app.cli import app
 from swarmcode_torch.sim.scenario import load_scenario
-from swarmcode_torch.sim.worlds import generate_world, study_world, world_toml
+from swarmcode_torch.sim.worlds import (
+    NEEDLE_SHARE,
+    generate_world,
+    lift_shares,
+    needles,
+    study_world,
+    world_toml,
+)
 
 runner = CliRunner()
 
@@ -124,3 +131,25 @@ def test_world_bad_options_give_one_line_errors(tmp_path, args, needle):
     out = tmp_path / "w.toml"
     one_line_error(invoke("world", *args, "--out", out), needle)
     assert not out.exists()
+
+
+def test_world_warns_of_each_needle_class_on_stderr_and_prints_the_world_unchanged(tmp_path):
+    w = study_world("train", 14)
+    shares = lift_shares(w.scenario)
+    low = [i for i, s in enumerate(shares) if s < NEEDLE_SHARE]
+    assert needles(w.scenario) == [(i, shares[i]) for i in low] and len(low) >= 2
+    r = invoke("world", "--split", "train", "--index", 14)
+    assert r.exit_code == 0, r.output
+    assert r.stdout == world_toml(w)  # the TOML alone on stdout
+    lines = r.stderr.splitlines()
+    assert len(lines) == len(low)
+    for line, i in zip(lines, low):
+        assert line.startswith(f"Warning: class {i}'s heaviest package is lifted by ")
+        assert "--min-lift-share 0.01" in line
+    out = tmp_path / "w.toml"
+    r = invoke("world", "--split", "train", "--index", 14, "--out", out)
+    assert r.exit_code == 0 and len(r.stderr.splitlines()) == len(low)
+    assert out.read_text(encoding="utf-8") == world_toml(w)
+    # a world without a needle: no warning
+    assert not needles(study_world("train", 3).scenario)
+    assert not invoke("world", "--split", "train", "--index", 3).stderr.strip()

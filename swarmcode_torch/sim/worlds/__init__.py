@@ -22,13 +22,21 @@ back into the same `Scenario`. `split_seeds` and `study_worlds` give fixed, disj
 test sets of worlds.
 
 The generator is split by job: `model` (its constants, `World`, `Niche`), `lift` (the lift rule
-searched: `max_lift`, `fewest_designs`, `cheapest_robot`, `lift_shares`), `knobs` (the knobs checked), `draw`
+searched: `max_lift`, `fewest_designs`, `cheapest_robot`, `lift_shares`, `needles`), `knobs` (the knobs checked), `draw`
 (`generate_world`), `writing` (`world_toml`, `world_command`) and `study` (the study splits);
 every public name is importable from here.
 """
 
 from .draw import generate_world
-from .lift import cheapest_robot, fewest_designs, lift_shares, max_lift
+from .lift import (
+    NEEDLE_SHARE,
+    SHARE_DESIGNS,
+    cheapest_robot,
+    fewest_designs,
+    lift_shares,
+    max_lift,
+    needles,
+)
 from .model import (
     BAND_MODES,
     COLLAB_SIZE,
@@ -57,8 +65,10 @@ __all__ = [
     "MAX_DRAWS",
     "MAX_NICHES",
     "MAX_SEED",
+    "NEEDLE_SHARE",
     "NICHES_PER_EFFECTOR",
     "OBSTACLE_RADIUS",
+    "SHARE_DESIGNS",
     "SPLITS",
     "STUDY_SPECS",
     "TEST_SEEDS",
@@ -70,6 +80,7 @@ __all__ = [
     "generate_world",
     "lift_shares",
     "max_lift",
+    "needles",
     "split_seeds",
     "study_world",
     "study_worlds",

@@ -257,6 +257,12 @@ def cheapest_robot(
 #: Random designs `lift_shares` draws (from a generator of its own: the same shares every call).
 SHARE_DESIGNS = 20_000
 
+#: A class whose heaviest package fewer than this share of random designs lift is a needle: in
+#: the niche study (experiments/2026-12-05-niche-generalization-v08, "Why five train worlds are
+#: never kept") the default never delivered such a class (0.01-0.08 % on the train worlds; every
+#: other class at least 8 %), though hand-built robots do.
+NEEDLE_SHARE = 0.01
+
 
 def lift_shares(s: Scenario, designs: int = SHARE_DESIGNS, seed: int = 0) -> list[float]:
     """For each package class of `s`, the share of `designs` random designs (every hardware gene
@@ -275,3 +281,9 @@ def lift_shares(s: Scenario, designs: int = SHARE_DESIGNS, seed: int = 0) -> lis
     ph = phenotype(radius, chassis, battery, motor, torque, charge, effector, s.hardware)
     lifts = capabilities(ph, _heaviest(s), WorldParams.for_scenario(s))
     return [float(x) for x in lifts.float().mean(0)]
+
+
+def needles(s: Scenario, least: float = NEEDLE_SHARE) -> list[tuple[int, float]]:
+    """(class index, share) of each package class of `s` whose heaviest package fewer than
+    `least` of random designs lift (`lift_shares`)."""
+    return [(i, share) for i, share in enumerate(lift_shares(s)) if share < least]
