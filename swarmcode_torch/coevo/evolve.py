@@ -156,7 +156,8 @@ def generation(
     """Advance one generation; the new state and what this generation measured. `hooks`:
     observers called after speciation, evaluation and reproduction (`Hooks`). Two values are
     read on the host, each a device sync on a GPU: in speciation (which pairs are within δ)
-    and in `readout.read_generation` (what the generation reports, and the number of elites)."""
+    and in `readout.read_generation` (what the generation reports, and the number of elites);
+    a third with `knockout_pairs` (the species in the best team)."""
     hooks = hooks or Hooks()
     t0 = time.perf_counter()
     g = torch.Generator(device=ctx.device)
