@@ -183,8 +183,8 @@ class SwarmCoDeConfig:
     that does a job no partner does is paid for that job; a substitute, whose slots its partner
     fills as well, is not. "fitness+marginal": the sum of the two, a member's fitness plus its
     marginal contribution. "marginal/slot": the marginal contribution divided by the slots the
-    member's design fills in its focal team, the job done per robot. (Not 0.6's retired `quota_basis`, whose values were "sum" and
-    "mean".)"""
+    member's design fills in its focal team, the job done per robot. (Not 0.6's retired
+    `quota_basis`, whose values were "sum" and "mean".)"""
     equal_quotas_until: int = 0
     """Before this generation every species gets the same share of the next generation
     (offspring quotas equal, not by fitness; selection within a species is unchanged); 0: never
