@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import pytest
 import torch
-from evokit import evolve_seen
+from evokit import assert_changes_and_repeats, evolve_seen
 
 from swarmcode_torch.coevo import knockout, shares
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
@@ -111,13 +111,7 @@ def test_knockout_scores_share_environments_and_credit_moves_quotas_to_credited_
 
 def test_off_by_default_on_it_changes_the_run_and_repeats_itself():
     assert SwarmCoDeConfig().knockout_credit == 0.0
-    a, _ = evolve_seen(SMALL, 4)
-    on = replace(SMALL, knockout_credit=0.05)
-    b, _ = evolve_seen(on, 4)
-    c, _ = evolve_seen(on, 4)
-    assert not torch.equal(a.state.fitness, b.state.fitness)
-    assert torch.equal(b.state.fitness, c.state.fitness)
-    assert torch.equal(b.state.species_hint, c.state.species_hint)
+    assert_changes_and_repeats(SMALL, 4, knockout_credit=0.05)
 
 
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan")])

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import pytest
 import torch
-from evokit import evolve_seen
+from evokit import assert_changes_and_repeats
 
 from swarmcode_torch.coevo import knockout
 from swarmcode_torch.coevo.admission import Admission
@@ -116,13 +116,7 @@ def test_off_or_open_admission_returns_the_admission_itself():
 
 def test_off_by_default_on_it_changes_the_run_and_repeats_itself():
     assert SwarmCoDeConfig().knockout_pairs == 0.0
-    a, _ = evolve_seen(SMALL, 5)
-    on = replace(SMALL, knockout_pairs=0.05)
-    b, _ = evolve_seen(on, 5)
-    c, _ = evolve_seen(on, 5)
-    assert not torch.equal(a.state.fitness, b.state.fitness)
-    assert torch.equal(b.state.fitness, c.state.fitness)
-    assert torch.equal(b.state.admission.partner, c.state.admission.partner)
+    assert_changes_and_repeats(SMALL, 5, knockout_pairs=0.05)
 
 
 @pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan")])

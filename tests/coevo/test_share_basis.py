@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import pytest
 import torch
-from evokit import evolve_seen
+from evokit import assert_changes_and_repeats, evolve_seen
 
 from swarmcode_torch.coevo import shares
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
@@ -73,13 +73,7 @@ def test_the_sum_basis_pays_fitness_plus_marginal():
 @pytest.mark.parametrize("basis", ["marginal", "fitness+marginal", "marginal/slot"])
 def test_off_by_default_on_it_changes_the_run_and_repeats_itself(basis):
     assert SwarmCoDeConfig().share_basis == "fitness"
-    a, _ = evolve_seen(SMALL, 4)
-    on = replace(SMALL, share_basis=basis)
-    b, _ = evolve_seen(on, 4)
-    c, _ = evolve_seen(on, 4)
-    assert not torch.equal(a.state.fitness, b.state.fitness)
-    assert torch.equal(b.state.fitness, c.state.fitness)
-    assert torch.equal(b.state.species_hint, c.state.species_hint)
+    assert_changes_and_repeats(SMALL, 4, share_basis=basis)
 
 
 def test_the_per_slot_basis_divides_by_the_slots_a_design_fills():
