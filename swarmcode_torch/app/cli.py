@@ -191,6 +191,16 @@ def _world(values: Values) -> None:
             highlight=False,
             soft_wrap=True,
         )
+    if not w.knobs.get("min_reach"):  # drawn without the reach check: say what it would redraw
+        for i, share in worlds.out_of_reach(w.scenario, w.niche_designs):
+            err.print(
+                f"Warning: niche {i + 1} ({w.niche_designs[i].label}) is out of reach: a full "
+                f"swarm of its best design brings home {share:.0%} of its packages an episode "
+                f'(--min-reach {worlds.REACH_SHARE} draws another world; docs/WORLDS.md, "Reach")',
+                markup=False,
+                highlight=False,
+                soft_wrap=True,
+            )
 
 
 #: world: its options from `options.WORLD_OPTIONS`

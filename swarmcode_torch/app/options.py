@@ -257,6 +257,14 @@ WORLD_OPTIONS: tuple[Opt, ...] = (
         metavar="SHARE",
     ),
     Opt(
+        "min_reach",
+        float | None,
+        help="Redraw a world in which a full swarm of a niche's best design brings home fewer "
+        "than this share of the niche's packages an episode (a niche the fitness does not ask "
+        'for; docs/WORLDS.md, "Reach"); 0: no check [default: 0.5].',
+        metavar="SHARE",
+    ),
+    Opt(
         "split",
         WorldSplit | None,
         help="Write standard study world --index of this split instead (train: seeds "

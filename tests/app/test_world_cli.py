@@ -16,6 +16,7 @@ from swarmcode_torch.sim.worlds import (
     generate_world,
     lift_shares,
     needles,
+    out_of_reach,
     study_world,
     world_toml,
 )
@@ -59,10 +60,12 @@ def test_world_prints_the_file_without_out():
 
 
 def test_world_min_lift_share_redraws_and_refuses_in_one_line():
+    # without the reach check (no overlapping world of seed 0 passes both)
     args = ("world", "--seed", 0, "--niches", 3, "--bands", "overlapping", "--mass", "2,120")
+    args += ("--min-reach", 0)
     r = invoke(*args, "--min-lift-share", 0.01)
     assert r.exit_code == 0, r.output
-    kw = dict(niches=3, bands="overlapping", mass=(2.0, 120.0))
+    kw = dict(niches=3, bands="overlapping", mass=(2.0, 120.0), min_reach=0.0)
     assert r.stdout == world_toml(generate_world(0, **kw, min_lift_share=0.01))
     assert r.stdout != world_toml(generate_world(0, **kw))
     one_line_error(invoke(*args, "--min-lift-share", 0.2), "fewer than min_lift_share 20.00%")
@@ -141,15 +144,42 @@ def test_world_warns_of_each_needle_class_on_stderr_and_prints_the_world_unchang
     r = invoke("world", "--split", "train", "--index", 14)
     assert r.exit_code == 0, r.output
     assert r.stdout == world_toml(w)  # the TOML alone on stdout
+    # the needles first, then the niches out of reach (a study world is drawn without the check)
+    far = out_of_reach(w.scenario, w.niche_designs)
     lines = r.stderr.splitlines()
-    assert len(lines) == len(low)
+    assert len(lines) == len(low) + len(far) and far
+    for line, (i, share) in zip(lines[len(low) :], far):
+        assert line.startswith(f"Warning: niche {i + 1} ({w.niche_designs[i].label}) is out of")
+        assert f"brings home {share:.0%} of its packages" in line and "--min-reach 0.5" in line
     for line, i in zip(lines, low):
         assert line.startswith(f"Warning: class {i}'s heaviest package is lifted by ")
         assert "--min-lift-share 0.01" in line
     out = tmp_path / "w.toml"
     r = invoke("world", "--split", "train", "--index", 14, "--out", out)
-    assert r.exit_code == 0 and len(r.stderr.splitlines()) == len(low)
+    assert r.exit_code == 0 and len(r.stderr.splitlines()) == len(low) + len(far)
     assert out.read_text(encoding="utf-8") == world_toml(w)
-    # a world without a needle: no warning
-    assert not needles(study_world("train", 3).scenario)
+    # a world without a needle, its niches within reach: no warning
+    w3 = study_world("train", 3)
+    assert not needles(w3.scenario) and not out_of_reach(w3.scenario, w3.niche_designs)
     assert not invoke("world", "--split", "train", "--index", 3).stderr.strip()
+
+
+def test_world_min_reach_redraws_a_world_with_a_niche_out_of_reach_and_warns_without_it():
+    args = ("world", "--seed", 6, "--niches", 4)
+    plain = generate_world(6, niches=4, min_reach=0.0)
+    far = out_of_reach(plain.scenario, plain.niche_designs)
+    assert [i for i, _ in far] == [0]  # niche 1, far from the base
+    r = invoke(*args, "--min-reach", 0)
+    assert r.exit_code == 0 and r.stdout == world_toml(plain)
+    assert r.stdout.splitlines()[1].endswith("--min-reach 0")
+    (line,) = r.stderr.splitlines()
+    assert line.startswith("Warning: niche 1 (pincher, robots ") and "out of reach" in line
+    # the default draws another world whose niches are all within reach, and says nothing
+    r = invoke(*args)
+    drawn = generate_world(6, niches=4)
+    assert r.exit_code == 0 and r.stdout == world_toml(drawn) and not r.stderr.strip()
+    assert drawn.scenario != plain.scenario and not out_of_reach(
+        drawn.scenario, drawn.niche_designs
+    )
+    assert "--min-reach 0.5" in r.stdout.splitlines()[1]
+    one_line_error(invoke(*args, "--min-reach", 2), "min_reach: must be in [0, 1]")

@@ -14,7 +14,8 @@ strongest designs lift its class's heaviest package. Then
 by the simulator's own lift rule (`sim.state.capabilities`: the effector, the radius band, a
 payload and a drive force for the load). `generate_world` checks the count on every world it
 returns: it searches the designs the hardware catalog can build (`fewest_designs`), and a world
-whose count is not the one asked for, or that some class makes unsolvable, is drawn again.
+whose count is not the one asked for, that some class makes unsolvable, or (`min_reach`) whose
+niche's class no swarm of its designs brings home within an episode, is drawn again.
 
 Everything is drawn from `random.Random(seed)`: the same seed and knobs give the same world
 and byte for byte the same TOML (`world_toml`), which `parse_scenario` / `load_scenario` read
@@ -22,7 +23,8 @@ back into the same `Scenario`. `split_seeds` and `study_worlds` give fixed, disj
 test sets of worlds.
 
 The generator is split by job: `model` (its constants, `World`, `Niche`), `lift` (the lift rule
-searched: `max_lift`, `fewest_designs`, `cheapest_robot`, `lift_shares`, `needles`), `knobs` (the knobs checked), `draw`
+searched: `max_lift`, `fewest_designs`, `cheapest_robot`, `lift_shares`, `needles`), `reach` (whether a niche's class can be brought home in an episode:
+`fetch_deliveries`, `niche_reach`, `out_of_reach`), `knobs` (the knobs checked), `draw`
 (`generate_world`), `writing` (`world_toml`, `world_command`) and `study` (the study splits);
 every public name is importable from here.
 """
@@ -53,6 +55,7 @@ from .model import (
     Niche,
     World,
 )
+from .reach import FETCH, REACH_LAYOUTS, REACH_SHARE, fetch_deliveries, niche_reach, out_of_reach
 from .study import SPLITS, STUDY_SPECS, split_seeds, study_world, study_worlds
 from .writing import world_command, world_toml
 
@@ -65,9 +68,12 @@ __all__ = [
     "MAX_DRAWS",
     "MAX_NICHES",
     "MAX_SEED",
+    "FETCH",
     "NEEDLE_SHARE",
     "NICHES_PER_EFFECTOR",
     "OBSTACLE_RADIUS",
+    "REACH_LAYOUTS",
+    "REACH_SHARE",
     "SHARE_DESIGNS",
     "SPLITS",
     "STUDY_SPECS",
@@ -76,11 +82,14 @@ __all__ = [
     "Niche",
     "World",
     "cheapest_robot",
+    "fetch_deliveries",
     "fewest_designs",
     "generate_world",
     "lift_shares",
     "max_lift",
     "needles",
+    "niche_reach",
+    "out_of_reach",
     "split_seeds",
     "study_world",
     "study_worlds",

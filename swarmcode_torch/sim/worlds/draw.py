@@ -22,6 +22,7 @@ from .model import (
     World,
     _Redraw,
 )
+from .reach import REACH_SHARE, niche_reach
 
 
 def _up(x: float, digits: int) -> float:
@@ -327,6 +328,20 @@ def _check_lift_shares(scenario: Scenario, least: float) -> None:
             )
 
 
+def _check_reach(scenario: Scenario, niches: list[Niche], least: float) -> None:
+    """_Redraw if a niche's exclusive class is out of reach: the best hand swarm of its designs
+    delivers fewer than `least` of its packages an episode (`reach.niche_reach`; 0: no check)."""
+    if least <= 0:
+        return
+    for i, niche in enumerate(niches):
+        r = niche_reach(scenario, niche)
+        if r < least:
+            raise _Redraw(
+                f"niche {i + 1} ({niche.label}): a full swarm of its best design brings home "
+                f"{r:.0%} of its class's packages an episode, fewer than min_reach {least:.0%}"
+            )
+
+
 def _draw(rng: random.Random, seed: int, knobs: dict, catalog: Catalog) -> World:
     order = list(knobs["effectors"])
     if len(order) > 1 and rng.random() < 0.5:
@@ -345,6 +360,7 @@ def _draw(rng: random.Random, seed: int, knobs: dict, catalog: Catalog) -> World
     cheapest, team = _team_costs(scenario, niches, knobs, catalog)
     _check_niche_count(scenario, knobs["niches"])
     _check_lift_shares(scenario, knobs["min_lift_share"])
+    _check_reach(scenario, niches, knobs["min_reach"])  # the costliest: rollouts
     return World(
         seed=seed,
         knobs=dict(knobs),
@@ -381,6 +397,7 @@ def generate_world(
     base_radius: float = 1.5,
     name: str | None = None,
     min_lift_share: float = 0.0,
+    min_reach: float = REACH_SHARE,
 ) -> World:
     """A foraging world drawn from `seed` that needs `niches` distinct robot designs.
 
@@ -413,6 +430,10 @@ def generate_world(
         min_lift_share: redraw a world in which a class's heaviest package is lifted by fewer
             than this share of random designs (`lift_shares`: a needle that evolution may never
             find, though a design lifts it; docs/WORLDS.md). 0 (the default): no such check.
+        min_reach: redraw a world in which a niche's exclusive class is out of reach: a full
+            swarm of the niche's best hand design brings home fewer than this share of the
+            class's packages an episode (`reach.niche_reach`: a niche the fitness does not ask
+            for; docs/WORLDS.md, "Reach"). Default `REACH_SHARE` (0.5); 0: no such check.
 
     Returns:
         The `World`: its scenario, niches and knobs.
@@ -443,6 +464,7 @@ def generate_world(
             base_radius=base_radius,
             name=name,
             min_lift_share=min_lift_share,
+            min_reach=min_reach,
         ),
         catalog,
     )

@@ -113,6 +113,7 @@ def _check_fields(k: dict, n: int) -> None:
         )
     k["species_overhead"] = _float(k["species_overhead"], "species_overhead", 0.0, MAX_NUMBER)
     k["min_lift_share"] = _float(k["min_lift_share"], "min_lift_share", 0.0, 0.5)
+    k["min_reach"] = _float(k["min_reach"], "min_reach", 0.0, 1.0)
     name = k["name"]
     if name is not None and (
         not isinstance(name, str)

@@ -57,6 +57,8 @@ def world_command(world: World) -> str:
         parts.append(f"--name {json.dumps(k['name'])}")
     if k.get("min_lift_share"):
         parts.append(f"--min-lift-share {_num(k['min_lift_share'])}")
+    # always written: a world drawn without the check (0) is not the default's world
+    parts.append(f"--min-reach {_num(k.get('min_reach', 0.0))}")
     return "swarmcode-torch world " + " ".join(parts)
 
 
@@ -71,11 +73,14 @@ def world_toml(world: World) -> str:
         and what it means, the budget), then the scenario's fields, each package class under a
         comment saying what it is for.
     """
-    # min_lift_share is written where it is set: the files of worlds drawn without it (the
-    # study's splits among them) stay as they were before it existed
+    # min_lift_share is written where it is set, so that the files of worlds drawn without it
+    # stay as they were before it existed; min_reach always (its default is not 0, and the
+    # knobs must draw the world again), but for the study's splits, drawn before it existed
     knobs = {"seed": world.seed, **world.knobs}
     if not knobs.get("min_lift_share"):
         knobs.pop("min_lift_share", None)
+    if world.study is not None:
+        knobs.pop("min_reach", None)
     if world.study is not None:
         knobs["study"] = list(world.study)
     budget = (
