@@ -90,10 +90,58 @@ ARMS = {
 BUILTIN = {"one-niche": 1, "two-niche": 2, "four-niche": 4}
 
 
+#: The reach-checked splits (PLAN.md, "the generator's reach check"): world K of the split's
+#: seeds and knobs drawn with the generator's default `min_reach`.
+REACH_SPLITS = {"train-r": "train", "test-r": "test"}
+SPLITS = ("train", "test", "builtin", *REACH_SPLITS)
+#: (K, why) of each world K the generator refuses with the reach check (no draw of its seed
+#: and knobs within reach): left out of the reach-checked split, and said so
+REFUSED: dict[str, list[tuple[int, str]]] = {s: [] for s in REACH_SPLITS}
+
+
+def _reach_worlds(split: str) -> list[dict]:
+    """The worlds of a reach-checked split: where the default draws the old split's world K
+    again (every niche within reach at the first draw), that world, whose results are the old
+    split's ("results": the split folder they are in); else the world it draws instead, named
+    study-SPLIT-K and written to worlds/SPLIT/."""
+    from swarmcode_torch.sim.scenario import ScenarioError
+    from swarmcode_torch.sim.worlds import STUDY_SPECS, generate_world, split_seeds, world_toml
+
+    base = REACH_SPLITS[split]
+    folder = HERE / "worlds" / split
+    out = []
+    for k, (old, spec) in enumerate(zip(worlds(base), STUDY_SPECS)):
+        seed = split_seeds(base)[k]
+        try:
+            again = generate_world(seed, name=old["name"], **spec)
+        except ScenarioError as e:  # refused: no world of these knobs within reach
+            REFUSED[split].append((k, str(e)))
+            continue
+        if again.table == _table(old["path"]):
+            out.append({**old, "results": base})
+            continue
+        w = generate_world(seed, name=f"study-{split}-{k:02d}", **spec)
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{w.scenario.name}.toml"
+        text = world_toml(w)
+        if not path.exists() or path.read_text() != text:
+            path.write_text(text)
+        out.append({"name": w.scenario.name, "path": str(path), "niches": int(w.niches)})
+    return out
+
+
+def _table(path: str) -> dict:
+    import tomllib
+
+    return tomllib.loads(Path(path).read_text())
+
+
 def worlds(split: str) -> list[dict]:
     """[{name, path, niches}] of a split; generated worlds are written to worlds/SPLIT/."""
     if split == "builtin":
         return [{"name": n, "path": n, "niches": k} for n, k in BUILTIN.items()]
+    if split in REACH_SPLITS:
+        return _reach_worlds(split)
     from swarmcode_torch.sim.worlds import study_worlds, world_toml
 
     out = []
@@ -263,8 +311,10 @@ def cmd_run(a) -> None:
                         "generations": a.generations,
                         "code": a.code,
                         # one folder per run, so that the CLI's new directory is the only one
-                        "run": str(runs / a.split / arm / key / f"study__{key}"),
-                        "result": str(HERE / "results" / a.split / arm / f"{key}.json"),
+                        "run": str(runs / w.get("results", a.split) / arm / key / f"study__{key}"),
+                        "result": str(
+                            HERE / "results" / w.get("results", a.split) / arm / f"{key}.json"
+                        ),
                     }
                 )
     t0 = time.time()
@@ -275,9 +325,14 @@ def cmd_run(a) -> None:
 
 
 def load(split: str) -> list[dict]:
+    """Every recorded run of a split; of a reach-checked split, its own runs and the old
+    split's runs on the worlds it shares with it."""
     rows = []
     for p in sorted((HERE / "results" / split).glob("*/*.json")):
         rows.append(json.loads(p.read_text()))
+    if split in REACH_SPLITS:
+        shared = {w["name"] for w in worlds(split) if "results" in w}
+        rows += [r for r in load(REACH_SPLITS[split]) if r["world"] in shared]
     return rows
 
 
@@ -289,8 +344,14 @@ def cmd_table(a) -> None:
     best: dict[str, float] = {}
     for r in rows:
         best[r["world"]] = max(best.get(r["world"], float("-inf")), r["score"])
+    if a.split in REACH_SPLITS:  # the arms run on the split's own worlds (the relative
+        # score still against the best run of any arm)
+        mine = {p.name for p in (HERE / "results" / a.split).iterdir() if p.is_dir()}
+        rows = [r for r in rows if r["arm"] in mine]
     arms = sorted({r["arm"] for r in rows})
     out = {}
+    for k, why in REFUSED.get(a.split, []):
+        print(f"world {k} refused by the generator: {why}")
     print(f"split {a.split}: {len({r['world'] for r in rows})} worlds")
     print(
         "| arm | runs | every niche kept, last 50 | best-team species = niches | "
@@ -374,7 +435,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")
-    r.add_argument("--split", choices=("train", "test", "builtin"), required=True)
+    r.add_argument("--split", choices=SPLITS, required=True)
     r.add_argument("--arms", default="v08")
     r.add_argument("--seeds", default="0,1,2")
     r.add_argument("--generations", type=int, default=300)
@@ -382,12 +443,12 @@ def main() -> None:
     r.add_argument("--runs", default="/tmp/niche-study-runs")
     r.add_argument("--code", help="run the package of this checkout (PYTHONPATH)")
     t = sub.add_parser("table")
-    t.add_argument("--split", choices=("train", "test", "builtin"), required=True)
+    t.add_argument("--split", choices=SPLITS, required=True)
     t.add_argument("--runs-table", action="store_true")
     t.add_argument("--seeds", help="only the runs of these seeds, e.g. 0")
     t.add_argument("--json")
     p = sub.add_parser("paired")
-    p.add_argument("--split", choices=("train", "test", "builtin"), required=True)
+    p.add_argument("--split", choices=SPLITS, required=True)
     p.add_argument("--arms", required=True)
     p.add_argument("--base", default="v07")
     p.add_argument("--seeds", default="0,1,2")
