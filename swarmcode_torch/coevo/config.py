@@ -147,7 +147,9 @@ class SwarmCoDeConfig:
     die while partners beating their baselines and at least 5 generations old (the default), or
     "designs", the champion of any species that dies as the only champion of its design cell
     (effector and one of three radius bands), one entry per cell, re-founded while the cell is
-    empty: a memory of every kind of robot the run has had, against early lock-in."""
+    empty: a memory of every kind of robot the run has had, against early lock-in; or
+    "random", an explorer: every `refound_after` generations the copies are of the
+    generation's best individual with its hardware genes drawn as generation 0 draws them."""
     best_team_floor: int = 0
     """Offspring quota floor of every species with a robot in the generation's best team (the
     focal team of the individual of the highest gated fitness): it keeps at least this many

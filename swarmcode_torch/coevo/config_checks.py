@@ -27,7 +27,7 @@ CHOICES = {
     "partners_per_niche": ("all", "one"),
     "partner_admission": ("open", "substitute"),
     "admission_basis": ("elites", "members"),
-    "refound_source": ("partners", "designs"),
+    "refound_source": ("partners", "designs", "random"),
     "share_basis": ("fitness", "marginal", "fitness+marginal", "marginal/slot"),
 }
 #: Choices of settings that may also be unset.

@@ -2,8 +2,7 @@
 
 `Evolution` owns the population and the run's random generator. `step()` advances one
 generation and returns its `GenerationResult`; the application's records and reporters
-(TensorBoard, summary, checkpoints, progress) consume it. Nothing here prints, writes files or
-imports a CLI or logging library.
+(TensorBoard, summary, checkpoints, progress) consume it. Nothing here prints or writes files.
 """
 
 from __future__ import annotations
@@ -448,6 +447,7 @@ def _refound(
         ctx.cfg.refound_after,
         partial(mutate, params=ctx.repro, generator=g),
         bins=_design_bins(ctx),
+        explore=refound.explorer(ctx.cfg.refound_source, g),
     )
     return replace(new_state, genome=children, species_hint=hint, rng_state=g.get_state()), arc
 

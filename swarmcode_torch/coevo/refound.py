@@ -29,6 +29,15 @@ living species' champion is in its cell. This keeps a memory of every kind of ro
 has had, including those of the first generations that did a hard job badly and starved before
 any became a partner (issue 38's early lock-in).
 
+With `refound_source = "random"` re-founding explores instead of remembering: every
+`refound_after` generations (from generation `refound_after` on) the copies are of the
+generation's best individual (its elite copy: the elite child of the fittest parent) with its
+hardware genes (radius, effector, tiers, operating points) drawn as generation 0 draws them, one
+design for every copy; its tree, tag, selectivity and dominance stay. A design the population
+has lost, or never had, is tried with a tree that works, under the same trial (random
+immigrants, Grefenstette 1992, with the best tree). The archive is kept but not re-founded
+from.
+
 It reads only what the algorithm has (fitness, species, admission, genomes); it knows no niche.
 All of it runs on the device with shapes known on the host: it adds no host read to a
 generation.
@@ -36,6 +45,7 @@ generation.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
@@ -291,6 +301,35 @@ def champions(
     )
 
 
+def random_hardware(base: Population, generator: torch.Generator) -> Population:
+    """`base` with its hardware genes drawn as `Population.random` draws them (generation 0),
+    one design for every row. Draws the same numbers whatever `base` holds."""
+    fresh = Population.random(1, base.tag.shape[1], base.bt[:1], generator, base.radius.device)
+    rows = torch.zeros(base.size, dtype=torch.long, device=base.radius.device)
+    drawn = fresh.index(rows)
+    return Population(
+        base.tag,
+        base.selectivity,
+        base.dominance,
+        base.bt,
+        drawn.radius,
+        drawn.chassis,
+        drawn.battery,
+        drawn.motor,
+        drawn.torque_point,
+        drawn.battery_point,
+        drawn.effector,
+    )
+
+
+def explorer(source: str, generator: torch.Generator) -> Callable[[Population], Population] | None:
+    """`inject`'s `explore` of a run whose `refound_source` is `source`: `random_hardware` with
+    the run's generator for "random"; None otherwise."""
+    if source != "random":
+        return None
+    return lambda base: random_hardware(base, generator)
+
+
 def on_trial(arc: Archive | None, proto_ids: Tensor, generation: int) -> Tensor | None:
     """[K] bool: the species proto_ids that keep their trial floor this generation."""
     if arc is None:
@@ -309,13 +348,16 @@ def inject(
     mutate,
     params: RefoundParams = REFOUND,
     bins: int = 0,
+    explore: Callable[[Population], Population] | None = None,
 ) -> tuple[Archive, Population, Tensor]:
     """After reproduction: where an archive entry has been dead `after` generations, the
     `clones` offspring of the least fit parents become copies of it (the first exact, the
     others `mutate`d) with no species hint, and the entry leaves the archive. `mutate` is
     called on every generation, copies or not, so that the run's random stream does not depend
     on the archive. With `bins` > 0 an entry whose design cell a living species' champion holds
-    waits."""
+    waits. With `explore` (`explorer`), every `after` generations the copies are `explore` of
+    the best elite child (the copy of the fittest parent), and the archive is not read;
+    `explore` too is called every generation."""
     dev = hint.device
     m = min(params.clones, int(children.size))
     due = (arc.died >= 0) & (arc.died + after <= generation)
@@ -325,6 +367,11 @@ def inject(
     pick = key.argmin()
     has = due.any()
     copies = arc.genome.index(pick.expand(m))
+    if explore is not None:
+        best = torch.where(is_elite, parent_fitness.float(), -torch.inf).argmax()
+        copies = explore(children.index(best.expand(m)))
+        has = torch.tensor(generation >= after and generation % after == 0, device=dev)
+        has = has & is_elite.any()
     mutated = mutate(copies)
     first = torch.arange(m, device=dev) == 0
     copies = copies.where(first, mutated)
@@ -337,7 +384,8 @@ def inject(
     )
     children = copies.index(src).where(put, children)
     hint = torch.where(put, -1, hint)
-    died = torch.where(has & (torch.arange(arc.died.numel(), device=dev) == pick), -1, arc.died)
+    leaves = has & (explore is None)  # an explorer takes no entry from the archive
+    died = torch.where(leaves & (torch.arange(arc.died.numel(), device=dev) == pick), -1, arc.died)
     return (
         Archive(
             arc.genome,
