@@ -24,25 +24,12 @@ import torch
 
 from swarmcode_torch.app.team_eval import draw_layouts, run_episodes, score_team, team_rows
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
-from swarmcode_torch.sim.bt import (
-    ACT_DROP,
-    ACT_MOVE_TO_BASE,
-    ACT_MOVE_TO_PACK,
-    ACT_PICK_UP,
-    COND_HAS_PACKAGE,
-    COND_NEAR_BASE,
-    COND_NEAR_PACKAGE,
-    END,
-    SEL,
-    SEQ,
-)
 from swarmcode_torch.sim.scenario import load_scenario
+from swarmcode_torch.sim.worlds import FETCH as _FETCH
 
-#: carrying: to the base and drop there; else at a package: pick it up; else go to one
-FETCH = [
-    SEL, SEQ, COND_HAS_PACKAGE, SEL, SEQ, COND_NEAR_BASE, ACT_DROP, END, ACT_MOVE_TO_BASE, END,
-    END, SEQ, COND_NEAR_PACKAGE, ACT_PICK_UP, END, ACT_MOVE_TO_PACK, END,
-]  # fmt: skip
+#: carrying: to the base and drop there; else at a package: pick it up; else go to one (the
+#: generator's reach check runs the same tree)
+FETCH = list(_FETCH)
 
 
 def hand(c, radius: float, count: int, species: int = 0) -> dict:
