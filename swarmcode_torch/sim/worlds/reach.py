@@ -31,10 +31,10 @@ from ..bt import (
     build_tables,
     encode,
 )
+from ..fused import FusedTicks
 from ..hardware import NUM_TIERS, phenotype
 from ..layout import make_layouts
 from ..rollout import rollout
-from ..runtime import tick_function
 from ..scenario import EFFECTORS, Scenario
 from ..state import Robots, WorldParams
 from .model import Niche
@@ -50,6 +50,10 @@ FETCH = (
     SEL, SEQ, COND_HAS_PACKAGE, SEL, SEQ, COND_NEAR_BASE, ACT_DROP, END, ACT_MOVE_TO_BASE, END,
     END, SEQ, COND_NEAR_PACKAGE, ACT_PICK_UP, END, ACT_MOVE_TO_PACK, END,
 )  # fmt: skip
+
+
+#: the tick of every reach test of a process (one build or load of the extension, one warning)
+_TICK = FusedTicks()
 
 
 def fetch_deliveries(
@@ -73,8 +77,9 @@ def fetch_deliveries(
 
     Returns:
         One mean a radius, in the order of `radii`. One rollout of every radius and layout
-        together, with the CPU tick of a run (`runtime.tick_function`: the fused C++ tick, which
-        gives the Python tick's results to the bit); the same arguments give the same figures.
+        together, with the fused C++ tick (`FusedTicks`, which gives the Python tick's results to
+        the bit, and falls back to it, with one warning a process, where it cannot be built);
+        the same arguments give the same figures.
     """
     alone = replace(s, packages=(s.packages[cls],))
     lay = make_layouts(alone, layouts, torch.Generator().manual_seed(seed))
@@ -88,8 +93,7 @@ def fetch_deliveries(
     ph = phenotype(radius, best, best, best, ones, ones, kind, s.hardware)
     robots = Robots.from_phenotype(ph, torch.ones_like(best, dtype=torch.bool), best * 0)
     tables = build_tables(encode(FETCH, len(FETCH))[None])
-    tick, _ = tick_function(torch.device("cpu"), compile=False)
-    m = rollout(lay, robots, tables, WorldParams.for_scenario(s), s.episode_ticks, step_fn=tick)
+    m = rollout(lay, robots, tables, WorldParams.for_scenario(s), s.episode_ticks, step_fn=_TICK)
     done = (m["delivered_individual"] + m["delivered_collab"]).view(k, layouts).mean(1)
     return [float(x) for x in done]
 
