@@ -406,13 +406,10 @@ def cmd_paired(a) -> None:
     loses on "every niche kept" and on "species = niches", with a sign test's p-value."""
     seeds = {int(x) for x in a.seeds.split(",")}
 
+    rows = load(a.split)
+
     def runs(arm: str) -> dict:
-        out = {}
-        for f in (HERE / "results" / a.split / arm).glob("*.json"):
-            d = json.loads(f.read_text())
-            if d["seed"] in seeds:
-                out[(d["world"], d["seed"])] = d
-        return out
+        return {(d["world"], d["seed"]): d for d in rows if d["arm"] == arm and d["seed"] in seeds}
 
     tests = {
         "every niche kept": lambda d: bool(d["kept_last"]),
