@@ -23,10 +23,11 @@ back into the same `Scenario`. `split_seeds` and `study_worlds` give fixed, disj
 test sets of worlds.
 
 The generator is split by job: `model` (its constants, `World`, `Niche`), `lift` (the lift rule
-searched: `max_lift`, `fewest_designs`, `cheapest_robot`, `lift_shares`, `needles`), `reach` (whether a niche's class can be brought home in an episode:
-`fetch_deliveries`, `niche_reach`, `out_of_reach`), `knobs` (the knobs checked), `draw`
-(`generate_world`), `writing` (`world_toml`, `world_command`) and `study` (the study splits);
-every public name is importable from here.
+searched: `max_lift`, `fewest_designs`, `cheapest_robot`, `lift_shares`, `needles`), `reach`
+(whether a niche's class can be brought home in an episode: `fetch_deliveries`, `niche_reach`,
+`out_of_reach`), `knobs` (the knobs checked), `draw` (`generate_world`), `writing`
+(`world_toml`, `world_command`) and `study` (the study splits); every public name is importable
+from here.
 """
 
 from .draw import generate_world
