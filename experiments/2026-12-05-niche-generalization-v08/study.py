@@ -297,7 +297,10 @@ def cmd_run(a) -> None:
     jobs = []
     runs = Path(a.runs)
     # world by world, seed by seed, the arms side by side: a partial study is paired
+    only = set(a.worlds.split(",")) if a.worlds else None
     for w in worlds(a.split):
+        if only is not None and w["name"] not in only:
+            continue
         for seed in [int(s) for s in a.seeds.split(",")]:
             for arm in a.arms.split(","):
                 key = f"{w['name']}__s{seed}"
@@ -440,6 +443,7 @@ def main() -> None:
     r.add_argument("--workers", type=int, default=2)
     r.add_argument("--runs", default="/tmp/niche-study-runs")
     r.add_argument("--code", help="run the package of this checkout (PYTHONPATH)")
+    r.add_argument("--worlds", help="only these worlds of the split, e.g. two-niche")
     t = sub.add_parser("table")
     t.add_argument("--split", choices=SPLITS, required=True)
     t.add_argument("--runs-table", action="store_true")
