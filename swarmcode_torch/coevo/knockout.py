@@ -44,6 +44,23 @@ from .selection import group_sizes
 from .speciation import SpeciationResult
 
 
+def best_team(res: EvalResult) -> Tensor:
+    """[S] population rows of the generation's best team: the focal team of the individual of
+    the highest gated fitness (`readout`'s)."""
+    return res.swarms.focal_team[res.fitness.argmax()]
+
+
+def slot_species(teams: Tensor, species: Tensor) -> Tensor:
+    """teams [..., S] population rows (-1 empty), species [P] -> [..., S]: each slot's species
+    (-1 where empty)."""
+    return torch.where(teams >= 0, species[teams.clamp(min=0)], -1)
+
+
+def team_has(team: Tensor, species: Tensor, proto_ids: Tensor) -> Tensor:
+    """team [S] -> [K] bool: the species of `proto_ids` with a robot in the team."""
+    return torch.isin(proto_ids, slot_species(team, species))
+
+
 def knocked_out(
     team: Tensor, species: Tensor, proto_ids: Tensor, out: Tensor, generator: torch.Generator
 ) -> tuple[Tensor, Tensor]:
@@ -53,8 +70,7 @@ def knocked_out(
     filled slots (all -1, and left False, where the team has no other)."""
     s, r = team.numel(), out.shape[0]
     filled = team >= 0
-    slot_species = torch.where(filled, species[team.clamp(min=0)], -1)
-    hit = ((slot_species[:, None] == proto_ids) & out[:, None, :]).any(2)  # [R, S]
+    hit = ((slot_species(team, species)[:, None] == proto_ids) & out[:, None, :]).any(2)  # [R, S]
     keep = filled[None, :] & ~hit
     other = keep.any(1, keepdim=True)
     w = torch.where(other, keep.float(), 1.0)  # dummy weights where nothing is left
@@ -73,14 +89,12 @@ def knockout_teams(
     k = proto_ids.numel()
     eye = torch.eye(k, dtype=torch.bool, device=team.device)
     teams, _ = knocked_out(team, species, proto_ids, eye, generator)
-    slot_species = torch.where(team >= 0, species[team.clamp(min=0)], -1)
-    return torch.cat([team[None, :], teams]), (slot_species[None, :] == proto_ids[:, None]).any(1)
+    return torch.cat([team[None, :], teams]), team_has(team, species, proto_ids)
 
 
 def team_species_count(teams: Tensor, species: Tensor, proto_ids: Tensor) -> Tensor:
     """teams [R, S] -> [R] long: the number of distinct species with a robot in each team."""
-    slot_species = torch.where(teams >= 0, species[teams.clamp(min=0)], -1)  # [R, S]
-    return (slot_species[:, :, None] == proto_ids).any(1).sum(1)
+    return (slot_species(teams, species)[:, :, None] == proto_ids).any(1).sum(1)
 
 
 def team_scores_on_shared_layouts(
@@ -168,8 +182,7 @@ def best_team_credit(
     `ctx.cfg.knockout_credit`), from the best team of `res` (the focal team of the highest gated
     fitness) and its knock-outs, scored on fresh environments drawn from `g`. `ctx`: the run's
     `evolve.Context` (its scenario, evaluation config, world, tick and score function)."""
-    team = res.swarms.focal_team[res.fitness.argmax()]
-    teams, in_team = knockout_teams(team, sp.species, sp.proto_ids, g)
+    teams, in_team = knockout_teams(best_team(res), sp.species, sp.proto_ids, g)
     scores = _run_scores(teams, genome, sp, phenotype, ctx, g)
     return credited(scores, in_team, ctx.cfg.knockout_credit)
 
@@ -206,9 +219,8 @@ def demote_substitutes(
     margin = ctx.cfg.knockout_pairs
     if adm is None or margin <= 0:
         return adm
-    team = res.swarms.focal_team[res.fitness.argmax()]
-    slot_species = torch.where(team >= 0, sp.species[team.clamp(min=0)], -1)
-    idx = (slot_species[None, :] == sp.proto_ids[:, None]).any(1).nonzero().squeeze(1)
+    team = best_team(res)
+    idx = team_has(team, sp.species, sp.proto_ids).nonzero().squeeze(1)
     m = idx.numel()  # the host read
     if m < 2:
         return adm

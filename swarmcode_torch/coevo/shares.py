@@ -73,9 +73,7 @@ def best_team_species(res: EvalResult, sp: SpeciationResult) -> Tensor:
     """[K] bool: the species (of `sp.proto_ids`) with a robot in the generation's best team,
     the focal team of the individual of the highest gated fitness (`readout`'s), on the
     device."""
-    rows = res.swarms.focal_team[res.fitness.argmax()]
-    ids = torch.where(rows >= 0, sp.species[rows.clamp(min=0)], -1)
-    return torch.isin(sp.proto_ids, ids)
+    return knockout.team_has(knockout.best_team(res), sp.species, sp.proto_ids)
 
 
 def basis(share_basis: str, res: EvalResult, fit: Tensor) -> Tensor | None:
