@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from ..hardware import R_MAX, R_MIN, Catalog, default_catalog
 from ..scenario import PACKAGE_CLEARANCE, Scenario, ScenarioError, scenario_from_dict
 from .knobs import _check_knobs
-from .lift import _peak_radius, _unliftable, cheapest_robot, fewest_designs, lift_shares, max_lift
+from .lift import _peak_radius, _unliftable, cheapest_robot, fewest_designs, max_lift, needles
 from .model import (
     COLLAB_SIZE,
     INDIVIDUAL_SIZE,
@@ -22,7 +22,7 @@ from .model import (
     World,
     _Redraw,
 )
-from .reach import REACH_SHARE, niche_reach
+from .reach import REACH_SHARE, out_of_reach
 
 
 def _up(x: float, digits: int) -> float:
@@ -317,29 +317,30 @@ def _check_niche_count(scenario: Scenario, n: int) -> None:
 
 def _check_lift_shares(scenario: Scenario, least: float) -> None:
     """_Redraw if a class's heaviest package is lifted by fewer than `least` of random designs
-    (`lift_shares`; 0: no check)."""
+    (`needles`; 0: no check)."""
     if least <= 0:
         return
-    for i, (c, share) in enumerate(zip(scenario.packages, lift_shares(scenario))):
-        if share < least:
-            raise _Redraw(
-                f"class {i + 1} ({c.label}): {share:.2%} of random designs lift its heaviest "
-                f"package, fewer than min_lift_share {least:.2%}"
-            )
+    low = needles(scenario, least)
+    if low:
+        i, share = low[0]
+        raise _Redraw(
+            f"class {i + 1} ({scenario.packages[i].label}): {share:.2%} of random designs lift "
+            f"its heaviest package, fewer than min_lift_share {least:.2%}"
+        )
 
 
 def _check_reach(scenario: Scenario, niches: list[Niche], least: float) -> None:
     """_Redraw if a niche's exclusive class is out of reach: the best hand swarm of its designs
-    delivers fewer than `least` of its packages an episode (`reach.niche_reach`; 0: no check)."""
+    delivers fewer than `least` of its packages an episode (`out_of_reach`; 0: no check)."""
     if least <= 0:
         return
-    for i, niche in enumerate(niches):
-        r = niche_reach(scenario, niche)
-        if r < least:
-            raise _Redraw(
-                f"niche {i + 1} ({niche.label}): a full swarm of its best design brings home "
-                f"{r:.0%} of its class's packages an episode, fewer than min_reach {least:.0%}"
-            )
+    far = out_of_reach(scenario, niches, least)
+    if far:
+        i, r = far[0]
+        raise _Redraw(
+            f"niche {i + 1} ({niches[i].label}): a full swarm of its best design brings home "
+            f"{r:.0%} of its class's packages an episode, fewer than min_reach {least:.0%}"
+        )
 
 
 def _draw(rng: random.Random, seed: int, knobs: dict, catalog: Catalog) -> World:
