@@ -181,26 +181,23 @@ def _world(values: Values) -> None:
             highlight=False,
             soft_wrap=True,
         )
-    for i, share in worlds.needles(w.scenario):  # on stderr: a printed world stays clean
+    lines = []
+    for i, share in worlds.needles(w.scenario):
         by = f"{100 * share:.2g} % of" if share else f"none of {worlds.SHARE_DESIGNS}"
-        err.print(
-            f"Warning: class {i}'s heaviest package is lifted by {by} random designs, "
-            f"a needle evolution may never find (--min-lift-share {worlds.NEEDLE_SHARE} draws "
-            'another world; docs/WORLDS.md, "Needles")',
-            markup=False,
-            highlight=False,
-            soft_wrap=True,
+        lines.append(
+            f"class {i}'s heaviest package is lifted by {by} random designs, a needle evolution "
+            f"may never find (--min-lift-share {worlds.NEEDLE_SHARE} draws another world; "
+            'docs/WORLDS.md, "Needles")'
         )
     if not w.knobs.get("min_reach"):  # drawn without the reach check: say what it would redraw
         for i, share in worlds.out_of_reach(w.scenario, w.niche_designs):
-            err.print(
-                f"Warning: niche {i + 1} ({w.niche_designs[i].label}) is out of reach: a full "
-                f"swarm of its best design brings home {share:.0%} of its packages an episode "
-                f'(--min-reach {worlds.REACH_SHARE} draws another world; docs/WORLDS.md, "Reach")',
-                markup=False,
-                highlight=False,
-                soft_wrap=True,
+            lines.append(
+                f"niche {i + 1} ({w.niche_designs[i].label}) is out of reach: a full swarm of "
+                f"its best design brings home {share:.0%} of its packages an episode "
+                f'(--min-reach {worlds.REACH_SHARE} draws another world; docs/WORLDS.md, "Reach")'
             )
+    for line in lines:  # on stderr: a printed world stays clean
+        err.print(f"Warning: {line}", markup=False, highlight=False, soft_wrap=True)
 
 
 #: world: its options from `options.WORLD_OPTIONS`
