@@ -30,6 +30,11 @@ GENE_VALUES: dict[str, int] = {
 }
 #: The social genes (mutated with social_sigma; the other continuous genes with hw_sigma).
 SOCIAL_GENES: tuple[str, ...] = ("selectivity", "dominance")
+#: The hardware genes: every continuous or categorical gene but the social ones (what a design
+#: is built of; `refound.random_hardware` draws them afresh).
+HARDWARE_GENES: tuple[str, ...] = tuple(
+    n for n in (*GENE_BOUNDS, *GENE_VALUES) if n not in SOCIAL_GENES
+)
 #: Gene groups inherited together in uniform crossover (tier + operating point of one part move
 #: together).
 CROSSOVER_GROUPS: tuple[tuple[str, ...], ...] = (

@@ -46,13 +46,13 @@ generation.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 from torch import Tensor
 
 from ..sim.hardware import R_MAX, R_MIN
-from .population import Population
+from .population import HARDWARE_GENES, Population
 
 
 @dataclass(frozen=True)
@@ -305,21 +305,8 @@ def random_hardware(base: Population, generator: torch.Generator) -> Population:
     """`base` with its hardware genes drawn as `Population.random` draws them (generation 0),
     one design for every row. Draws the same numbers whatever `base` holds."""
     fresh = Population.random(1, base.tag.shape[1], base.bt[:1], generator, base.radius.device)
-    rows = torch.zeros(base.size, dtype=torch.long, device=base.radius.device)
-    drawn = fresh.index(rows)
-    return Population(
-        base.tag,
-        base.selectivity,
-        base.dominance,
-        base.bt,
-        drawn.radius,
-        drawn.chassis,
-        drawn.battery,
-        drawn.motor,
-        drawn.torque_point,
-        drawn.battery_point,
-        drawn.effector,
-    )
+    drawn = fresh.index(torch.zeros(base.size, dtype=torch.long, device=base.radius.device))
+    return replace(base, **{n: getattr(drawn, n) for n in HARDWARE_GENES})
 
 
 def explorer(source: str, generator: torch.Generator) -> Callable[[Population], Population] | None:
