@@ -73,7 +73,7 @@ def _inject(arc, gen: int, explore):
         is_elite,
         gen,
         5,
-        partial(mutate, params=Evolution(CFG).ctx.repro, generator=g),
+        partial(mutate, params=CFG.reproduction, generator=g),
         explore=explore,
     )
     return children, out

@@ -91,7 +91,9 @@ def fetch_deliveries(
     ones = torch.ones_like(radius)
     kind = torch.full_like(best, EFFECTORS[effector])
     ph = phenotype(radius, best, best, best, ones, ones, kind, s.hardware)
-    robots = Robots.from_phenotype(ph, torch.ones_like(best, dtype=torch.bool), best * 0)
+    robots = Robots.from_phenotype(
+        ph, torch.ones_like(best, dtype=torch.bool), torch.zeros_like(best)
+    )
     tables = build_tables(encode(FETCH, len(FETCH))[None])
     m = rollout(lay, robots, tables, WorldParams.for_scenario(s), s.episode_ticks, step_fn=_TICK)
     done = (m["delivered_individual"] + m["delivered_collab"]).view(k, layouts).mean(1)
