@@ -127,6 +127,7 @@ VERSION_KEYS = {
     "equal_quotas_until",
     "refound_source",
     "best_team_floor",
+    "team_partners",
     "knockout_credit",
     "knockout_floor",
     "knockout_pairs",

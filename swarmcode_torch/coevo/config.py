@@ -133,10 +133,8 @@ class SwarmCoDeConfig:
     generalization study, not adopted: docs/MODEL.md)."""
     essential_below: float = 0.3
     """With `essential_floor`: a partner is essential while the moving average of its gated
-    share is below this (0.3, the admission threshold: it beats the baseline in which its
-    nearest partner design refills its slots; 0.5, the clash threshold above which two partners
-    count as substitutes: a holder keeps its floor until it is gated as often as a perfect
-    substitute is)."""
+    share is below this (0.3, the admission threshold; 0.5, the clash threshold above which two
+    partners count as substitutes: a holder keeps its floor until gated as often as one)."""
     refound_after: int = 0
     """Re-founding (`coevo.refound`): the champion of a species that dies while a partner (its
     members beat their baselines) is archived, and this many generations after its death a
@@ -150,12 +148,14 @@ class SwarmCoDeConfig:
     empty: a memory of every kind of robot the run has had, against early lock-in; or
     "random", an explorer: every `refound_after` generations the copies are of the
     generation's best individual with its hardware genes drawn as generation 0 draws them."""
+    team_partners: bool = False
+    """The species of the previous generation's best team are partners of every focal, besides
+    those its tag and selectivity choose (a species whose job no other does is then in most
+    teams); False: partners by tag alone (the paper, and the default)."""
     best_team_floor: int = 0
     """Offspring quota floor of every species with a robot in the generation's best team (the
     focal team of the individual of the highest gated fitness): it keeps at least this many
-    slots, exempt from `min_share`; 0: none (the default). A species whose robots do a hard job
-    in the best team but whose own focal teams score low (its design fills most of their
-    slots) is not starved out while the best team uses it."""
+    slots, exempt from `min_share`, not starved out while the best team uses it; 0: none."""
     knockout_credit: float = 0.0
     """Knock-out credit (`coevo.knockout`): each generation the best team is evaluated again
     beside one team per species with that species' slots re-filled from the team's other

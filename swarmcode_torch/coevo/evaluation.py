@@ -215,6 +215,7 @@ def plan_evaluation(
     allowed: Tensor | None = None,
     proto_distance: Tensor | None = None,
     phenotype: Phenotype | None = None,
+    always: Tensor | None = None,
 ) -> EvalPlan:
     """The driver's part of an evaluation, every random draw of it from the run's generator:
     partners by tag and selectivity, team slots by dominance, and the environments. Only the
@@ -223,7 +224,9 @@ def plan_evaluation(
     may be partners at all (`admission.Admission.allowed`); None: every species.
     `proto_distance` [K, K]: the design distance between the species' prototypes
     (`speciation.design_distance`); given, a focal's baseline re-fills its slots from its
-    nearest partner species (`partner_admission = "substitute"`), else from any partner."""
+    nearest partner species (`partner_admission = "substitute"`), else from any partner.
+    `always` [K] bool: species that are partners of every focal whatever the tags
+    (`team_partners`)."""
     P = genome.size
     dev = genome.bt.device
     S, T = cfg.swarm_size, cfg.trials
@@ -249,6 +252,7 @@ def plan_evaluation(
         elites,
         generator,
         allowed,
+        always,
     )
     dominance = genome.dominance if cfg.dominance else torch.ones_like(genome.dominance)
     near = None

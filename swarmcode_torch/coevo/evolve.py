@@ -20,7 +20,7 @@ from ..sim.hardware import Phenotype
 from ..sim.runtime import resolve_device, tick_function, tick_mode
 from ..sim.scenario import Scenario, load_scenario
 from ..sim.state import WorldParams
-from . import admission, knockout, refound, shares
+from . import admission, knockout, partners, refound, shares
 from .admission import Admission
 from .config import EvalConfig, ReproductionParams, SpeciationParams, SwarmCoDeConfig
 from .dynamics import Turnover, median
@@ -286,8 +286,7 @@ def _evaluation(
 ) -> tuple[EvalResult, Admission | None]:
     """Step 2: every individual's scores (`evaluation.evaluate`), and the partner admission
     after them (None where `partner_admission` is "open")."""
-    # which species may be partners (`admission`): the species of generation 0 and, on a run
-    # resumed from a checkpoint without the state, the species it had, are partners
+    # partners (`admission`): generation 0's species, and a resumed run's without the state
     adm = allowed = designs_d = None
     if ctx.cfg.partner_admission != "open":
         adm = state.admission or Admission.empty(ctx.device).grow(state.next_species_id, True)
@@ -307,6 +306,7 @@ def _evaluation(
         allowed,
         designs_d,
         ph,
+        partners.team_partner_mask(state.history, sp.proto_ids) if ctx.cfg.team_partners else None,
     )
     res = evaluate(
         plan,

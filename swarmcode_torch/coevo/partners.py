@@ -40,15 +40,16 @@ def choose_partners(
     elite_index: Tensor,
     generator: torch.Generator,
     allowed: Tensor | None = None,
+    always: Tensor | None = None,
 ) -> Tensor:
     """tag [P, L] bool, selectivity [P], species [P], proto_ids [K], proto_tag [K, L],
     elite_index [K, M] -> partner_rows [P, K] long.
 
     Species k is a partner of i iff it is not i's species, has >= 1 elite, and
-    H(tag_i, proto_tag_k)/L < selectivity_i (strict), and `allowed[k]` where that [K] bool mask is
-    given
+    H(tag_i, proto_tag_k)/L < selectivity_i (strict) or `always[k]` where that [K] bool mask is
+    given (`team_partner_mask`), and `allowed[k]` where that [K] bool mask is given
     (`niche_representatives`); partner_rows[i, k] is one of k's elites drawn uniformly, else -1.
-    The random draws do not depend on `allowed`.
+    The random draws do not depend on `allowed` or `always`.
     """
     p, l = tag.shape
     k = proto_ids.numel()
@@ -58,7 +59,10 @@ def choose_partners(
     dist = hamming(tag, cast(proto_tag, device=dev)) / max(l, 1)  # [P, K]
     valid = elite_index >= 0
     count = valid.sum(1)  # [K]
-    eligible = (dist < selectivity[:, None]) & (species[:, None] != proto_ids) & (count > 0)
+    chosen = dist < selectivity[:, None]
+    if always is not None:
+        chosen |= cast(always, device=dev)
+    eligible = chosen & (species[:, None] != proto_ids) & (count > 0)
     if allowed is not None:
         eligible &= cast(allowed, device=dev)
     # left-pack each species' elites so that entries 0..count-1 are valid
@@ -67,6 +71,16 @@ def choose_partners(
     j = torch.minimum((u * count).long(), (count - 1).clamp(min=0))  # [P, K] the elite drawn
     rows = packed.T.gather(0, j)  # rows[i, k] = packed[k, j[i, k]]
     return torch.where(eligible, rows, -1)
+
+
+def team_partner_mask(history: list, proto_ids: Tensor) -> Tensor | None:
+    """[K] bool: the species of `proto_ids` with a robot in the last best team of `history` (the
+    generations' composition records, `{"team": {species id: robots}}`); None before the first
+    generation (`team_partners`)."""
+    if not history:
+        return None
+    ids = [int(s) for s in history[-1]["team"]]
+    return torch.isin(proto_ids, torch.tensor(ids, dtype=proto_ids.dtype, device=proto_ids.device))
 
 
 def ranking_fitness(fitness: Tensor, has_fitness: Tensor) -> Tensor:
