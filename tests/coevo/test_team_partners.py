@@ -5,18 +5,12 @@ from dataclasses import replace
 
 import torch
 from evokit import assert_changes_and_repeats, evolve_seen
+from test_partners import tags_at_distance
 
 from swarmcode_torch.coevo.config import SwarmCoDeConfig
 from swarmcode_torch.coevo.partners import choose_partners, team_partner_mask
 
 SMALL = replace(SwarmCoDeConfig(), scenario="four-niche", population=30, trials=2, ticks=40, seed=5)
-
-
-def _tags(ds, l=16):
-    t = torch.zeros(len(ds), l, dtype=torch.bool)
-    for i, d in enumerate(ds):
-        t[i, :d] = True
-    return t
 
 
 def test_team_partner_mask_reads_the_last_best_team():
@@ -29,7 +23,7 @@ def test_team_partner_mask_reads_the_last_best_team():
 
 def test_always_adds_partners_and_keeps_the_other_rules_and_the_draws():
     # focal tags 0; prototypes at distance 3, 12, 12, 0 bits; selectivity 0.25 takes the first only
-    proto_tag = _tags([3, 12, 12, 0])
+    proto_tag = tags_at_distance([3, 12, 12, 0])
     proto_ids = torch.tensor([10, 11, 12, 13])
     elites = torch.tensor([[100, 110], [101, 111], [-1, -1], [103, -1]])
     tag = torch.zeros(3, 16, dtype=torch.bool)
@@ -37,30 +31,12 @@ def test_always_adds_partners_and_keeps_the_other_rules_and_the_draws():
     species = torch.tensor([13, 10, 11])
     always = torch.tensor([False, True, True, True])
     allowed = torch.tensor([True, True, True, False])
-    base = choose_partners(
-        tag, sel, species, proto_ids, proto_tag, elites, torch.Generator().manual_seed(1)
-    )
-    more = choose_partners(
-        tag,
-        sel,
-        species,
-        proto_ids,
-        proto_tag,
-        elites,
-        torch.Generator().manual_seed(1),
-        always=always,
-    )
-    both = choose_partners(
-        tag,
-        sel,
-        species,
-        proto_ids,
-        proto_tag,
-        elites,
-        torch.Generator().manual_seed(1),
-        allowed,
-        always,
-    )
+
+    def choose(*extra, **kw):
+        args = (tag, sel, species, proto_ids, proto_tag, elites, torch.Generator().manual_seed(1))
+        return choose_partners(*args, *extra, **kw)
+
+    base, more, both = choose(), choose(always=always), choose(allowed, always)
     # species 11 joins every focal's partners but its own; 12 has no elite; 13 is never anyone's
     # partner but by tag (own species of focal 0), and `allowed` still rules it out
     assert (more[:, 1] >= 0).tolist() == [True, True, False]
