@@ -52,7 +52,7 @@ def test_a_run_with_team_partners_puts_the_last_best_team_in_every_team():
     """Every focal's team holds a robot of each species of the previous best team that is still
     there (but its own), where the team has room for all its partners; and the setting changes
     a run, and repeats itself."""
-    ev, seen = evolve_seen(replace(SMALL, team_partners=True), 4)
+    _, seen = evolve_seen(replace(SMALL, team_partners=True), 4)
     checked = 0
     for e in seen[1:]:
         sp, res = e.speciation, e.evaluation
