@@ -128,6 +128,7 @@ VERSION_KEYS = {
     "refound_source",
     "best_team_floor",
     "team_partners",
+    "team_partners_margin",
     "knockout_credit",
     "knockout_floor",
     "knockout_pairs",

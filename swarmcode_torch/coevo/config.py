@@ -120,17 +120,15 @@ class SwarmCoDeConfig:
     admission_basis: str = "members"
     """Whose gate results make a species' gated share in partner admission (probation,
     demotion, the essential floor): "elites", its members carried over unchanged where it has
-    any (a species' fresh offspring, some broken by mutation, are gated whatever the species
-    does), or "members", all of them (the default). "elites" was a candidate of the 0.8
-    generalization study and was not adopted (docs/MODEL.md)."""
+    any (fresh offspring, some broken by mutation, are gated whatever the species does), or
+    "members", all of them (the default; "elites" was not adopted: docs/MODEL.md)."""
     essential_floor: int = 0
     """Offspring quota floor of an essential species: a partner whose members beat their
     baselines (the moving average of its gated share below the admission threshold, 0.3), i.e.
     whose robots do a job no partner's robots can do. It keeps at least this many slots and is
     exempt from `min_share`, so that the holder of a hard niche, whose mean fitness may be lower
     than the others', is not starved out. Needs `partner_admission = "substitute"` (it reads the
-    admission's gate statistics); 0: no floor, the default (a candidate of the 0.8
-    generalization study, not adopted: docs/MODEL.md)."""
+    admission's gate statistics); 0: no floor (the default; not adopted: docs/MODEL.md)."""
     essential_below: float = 0.3
     """With `essential_floor`: a partner is essential while the moving average of its gated
     share is below this (0.3, the admission threshold; 0.5, the clash threshold above which two
@@ -152,6 +150,9 @@ class SwarmCoDeConfig:
     """The species of the previous generation's best team are partners of every focal, besides
     those its tag and selectivity choose (a species whose job no other does is then in most
     teams); False: partners by tag alone (the paper, and the default)."""
+    team_partners_margin: float = 0.0
+    """With `team_partners`: only those of the best team's species whose knock-out costs it
+    more than this fraction of its score (`coevo.knockout`); 0: all of them."""
     best_team_floor: int = 0
     """Offspring quota floor of every species with a robot in the generation's best team (the
     focal team of the individual of the highest gated fitness): it keeps at least this many
@@ -161,9 +162,8 @@ class SwarmCoDeConfig:
     beside one team per species with that species' slots re-filled from the team's other
     slots; a species whose knock-out costs the team more than this fraction of its score gets
     the share of the next generation that the species of the highest mean fitness would get at
-    its size (selection within species unchanged); 0: off (the default). A holder the best
-    team needs is paid as the best species is, whatever its own focal teams score; a
-    substitute, whose slots go to a species doing the same job, is not."""
+    its size (selection within species unchanged); 0: off (the default). A holder the best team
+    needs is paid as the best species is; a substitute (its slots go to one doing its job) not."""
     knockout_floor: int = 0
     """With `knockout_credit`: the species credited by their knock-out keep a quota floor of
     this many slots (exempt from `min_share`, as `best_team_floor`'s) instead of the lift of

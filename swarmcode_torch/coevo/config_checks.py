@@ -82,6 +82,7 @@ POSITIVE = ("delta", "gamma")
 UNIT_INTERVAL = (
     "p_marginal",
     "knockout_credit",
+    "team_partners_margin",
     "knockout_pairs",
     "quota_size_exponent",
     "essential_below",

@@ -156,7 +156,7 @@ def generation(
     observers called after speciation, evaluation and reproduction (`Hooks`). Two values are
     read on the host, each a device sync on a GPU: in speciation (which pairs are within δ)
     and in `readout.read_generation` (what the generation reports, and the number of elites);
-    a third with `knockout_pairs` (the species in the best team)."""
+    a third with `knockout_pairs` or `team_partners_margin` (the best team's species)."""
     hooks = hooks or Hooks()
     t0 = time.perf_counter()
     g = torch.Generator(device=ctx.device)
@@ -203,11 +203,10 @@ def generation(
         marginal=shares.basis(ctx.cfg.share_basis, res, fit),
     )
     out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
-    composition: dict[str, Any] = {
-        "generation": state.generation,
-        "population": out.population,
-        "team": out.team,
-    }
+    composition: dict[str, Any] = {"generation": state.generation, "population": out.population}
+    composition["team"] = out.team
+    if ctx.cfg.team_partners and ctx.cfg.team_partners_margin > 0:  # the next generation's
+        composition["needed"] = knockout.needed_ids(res, sp, state.genome, ph, ctx, g)
     turnover = state.turnover.copy()
     founded, extinct = turnover.advance(state.generation, composition["population"])
     new_state, is_elite, parent = _reproduction(state, ctx, sp, fit, plan, out.n_elites, g)

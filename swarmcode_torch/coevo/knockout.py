@@ -13,6 +13,9 @@ costs nothing, and it gets no credit. A credited species' share of the next gene
 that of a species with the highest species mean fitness at its size (`lift`); selection
 within species still reads fitness. Reads scores only: no package class, capability or niche.
 
+With `team_partners_margin` the same knock-outs choose which of the best team's species are
+team partners of the next generation (`needed_ids`).
+
 Demotion of substitute pairs (`knockout_pairs`, off by default) reads the same knock-outs the
 other way: two species of the best team that each cost nothing when knocked out alone (each
 one's slots go to the other) but a lot when knocked out together do one job twice, however far
@@ -176,15 +179,34 @@ def _run_scores(
 
 
 def best_team_credit(
-    res: EvalResult, sp: SpeciationResult, genome: Population, phenotype: Phenotype, ctx: Any, g
+    res: EvalResult,
+    sp: SpeciationResult,
+    genome: Population,
+    phenotype: Phenotype,
+    ctx: Any,
+    g,
+    margin: float | None = None,
 ) -> Tensor:
-    """[K] bool: the species of `sp.proto_ids` credited this generation (`credited` at the margin
-    `ctx.cfg.knockout_credit`), from the best team of `res` (the focal team of the highest gated
-    fitness) and its knock-outs, scored on fresh environments drawn from `g`. `ctx`: the run's
-    `evolve.Context` (its scenario, evaluation config, world, tick and score function)."""
+    """[K] bool: the species of `sp.proto_ids` credited this generation (`credited` at `margin`,
+    by default `ctx.cfg.knockout_credit`), from the best team of `res` (the focal team of the
+    highest gated fitness) and its knock-outs, scored on fresh environments drawn from `g`.
+    `ctx`: the run's `evolve.Context` (its scenario, evaluation config, world, tick and score
+    function)."""
     teams, in_team = knockout_teams(best_team(res), sp.species, sp.proto_ids, g)
     scores = _run_scores(teams, genome, sp, phenotype, ctx, g)
-    return credited(scores, in_team, ctx.cfg.knockout_credit)
+    return credited(scores, in_team, ctx.cfg.knockout_credit if margin is None else margin)
+
+
+def needed_ids(
+    res: EvalResult, sp: SpeciationResult, genome: Population, phenotype: Phenotype, ctx: Any, g
+) -> list[int]:
+    """The ids of the best team's species whose knock-out costs the team more than
+    `ctx.cfg.team_partners_margin` of its score (`best_team_credit`): the next generation's
+    team partners (`partners.team_partner_mask`). A species that another of the team stands in
+    for (in a world where every complete team delivers everything, any second species of the
+    one job) costs nothing and is not among them. Read on the host."""
+    credit = best_team_credit(res, sp, genome, phenotype, ctx, g, ctx.cfg.team_partners_margin)
+    return [int(i) for i in sp.proto_ids[credit].tolist()]
 
 
 def substitute_pairs(scores: Tensor, m: int, left: Tensor, margin: float) -> Tensor:

@@ -75,11 +75,13 @@ def choose_partners(
 
 def team_partner_mask(history: list, proto_ids: Tensor) -> Tensor | None:
     """[K] bool: the species of `proto_ids` with a robot in the last best team of `history` (the
-    generations' composition records, `{"team": {species id: robots}}`); None before the first
+    generations' composition records, `{"team": {species id: robots}}`), or of its `needed` list
+    of species ids where the record has one (`team_partners_margin`); None before the first
     generation (`team_partners`)."""
     if not history:
         return None
-    ids = [int(s) for s in history[-1]["team"]]
+    last = history[-1]
+    ids = [int(s) for s in last.get("needed", last["team"])]
     return torch.isin(proto_ids, torch.tensor(ids, dtype=proto_ids.dtype, device=proto_ids.device))
 
 
