@@ -127,6 +127,7 @@ VERSION_KEYS = {
     "equal_quotas_until",
     "refound_source",
     "best_team_floor",
+    "best_team_tie",
     "team_partners",
     "team_partners_margin",
     "knockout_credit",

@@ -19,7 +19,7 @@ with admission by elites, `v11` re-founding of dead partners (`refound_after=5`)
 substitutes demoted (`demote_far_after=100`), `v13` equal quotas until generation 30, `v14`
 re-founding by design cell (`refound_after=5`, `refound_source=designs`), `v15` a quota floor
 of 3 for the best team's species (`best_team_floor=3`), `v16` v13 and v15 together (v13 and v16 ran with the defect that made selection within a species
-follow row order while shares were equal), `v13b` v13 with that fixed, `v17` knock-out credit for the best team's needed species (`knockout_credit=0.05`), `v18` a floor of 3 for those species instead (`knockout_floor=3`), `v19` offspring shares by the mean marginal contribution (`share_basis=marginal`), `v20` by fitness plus marginal (`share_basis=fitness+marginal`), `v21` by the marginal contribution per slot the design fills (`share_basis=marginal/slot`), `v22` substitute pairs of the best team demoted by knock-out (`knockout_pairs=0.05`), `v23` an explorer every 10 generations (`refound_after=10`, `refound_source=random`), `v24` the previous best team's species partners of every focal (`team_partners=true`), `v25` v24 with substitute pairs of the best team demoted by knock-out (`knockout_pairs=0.05`), `v26` v24 with only the best team's species whose knock-out costs it more than 5 % (`team_partners_margin=0.05`), `paper` the paper preset (`--preset paper`). (v09 was run while the
+follow row order while shares were equal), `v13b` v13 with that fixed, `v17` knock-out credit for the best team's needed species (`knockout_credit=0.05`), `v18` a floor of 3 for those species instead (`knockout_floor=3`), `v19` offspring shares by the mean marginal contribution (`share_basis=marginal`), `v20` by fitness plus marginal (`share_basis=fitness+marginal`), `v21` by the marginal contribution per slot the design fills (`share_basis=marginal/slot`), `v22` substitute pairs of the best team demoted by knock-out (`knockout_pairs=0.05`), `v23` an explorer every 10 generations (`refound_after=10`, `refound_source=random`), `v24` the previous best team's species partners of every focal (`team_partners=true`), `v25` v24 with substitute pairs of the best team demoted by knock-out (`knockout_pairs=0.05`), `v26` v24 with only the best team's species whose knock-out costs it more than 5 % (`team_partners_margin=0.05`), `v27` v24 with the best team the fewest species within 0.1 % of the top (`best_team_tie=0.001`), `v28` the default with that best team (a diagnostic), `paper` the paper preset (`--preset paper`). (v09 was run while the
 code's defaults were its settings, as `[]`.) (The v07 and v08 runs of the train split were made with the code of commit
 59bf1a5, whose defaults were those settings.)
 
@@ -89,6 +89,8 @@ ARMS = {
     "v24": _sets(*V07, "team_partners=true"),
     "v25": _sets(*V07, "team_partners=true", "knockout_pairs=0.05"),
     "v26": _sets(*V07, "team_partners=true", "team_partners_margin=0.05"),
+    "v27": _sets(*V07, "team_partners=true", "best_team_tie=0.001"),
+    "v28": _sets(*V07, "best_team_tie=0.001"),  # a diagnostic: v07's evolution, another report
     "paper": ["--preset", "paper"],
 }
 BUILTIN = {"one-niche": 1, "two-niche": 2, "four-niche": 4}

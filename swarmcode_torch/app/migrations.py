@@ -38,6 +38,7 @@ def migrate_config(d: Any, keep_retired: bool = False) -> Any:
     d.setdefault("demote_far_after", 0)
     d.setdefault("equal_quotas_until", 0)
     d.setdefault("best_team_floor", 0)
+    d.setdefault("best_team_tie", 0.0)
     d.setdefault("team_partners", False)
     d.setdefault("team_partners_margin", 0.0)
     d.setdefault("knockout_credit", 0.0)

@@ -153,6 +153,10 @@ class SwarmCoDeConfig:
     team_partners_margin: float = 0.0
     """With `team_partners`: only those of the best team's species whose knock-out costs it
     more than this fraction of its score (`coevo.knockout`); 0: all of them."""
+    best_team_tie: float = 0.0
+    """The generation's best team (reported, and read by `team_partners` and the knock-outs): of
+    the focal teams within this fraction of the highest gated fitness, one of the fewest species,
+    the highest of those; 0: the highest (the default)."""
     best_team_floor: int = 0
     """Offspring quota floor of every species with a robot in the generation's best team (the
     focal team of the individual of the highest gated fitness): it keeps at least this many
@@ -196,10 +200,9 @@ class SwarmCoDeConfig:
     demote_far_after: int = 0
     """From this generation on, the admission's demotion of substitutes (`coevo.admission`)
     also pairs a partner with its nearest partner design of the same effector when that design
-    is farther than δ (before it, and with 0, the default: only within δ, 0.7's rule). Two
-    partners of one effector whose robots stand in for each other at no loss are then told
-    apart however their radii and tiers differ; the delay keeps the first generations, when
-    most species are gated half the time, from demoting a niche holder. Needs
+    is farther than δ (before it, and with 0, the default: only within δ, 0.7's rule): two
+    partners of one effector that stand in for each other are told apart however they differ;
+    the delay spares the first generations, when most species are gated half the time. Needs
     `partner_admission = "substitute"`."""
     hw_sigma: float = 0.05
     """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
@@ -208,22 +211,19 @@ class SwarmCoDeConfig:
     p_categorical: float = 0.02
     """Mutation: probability of resampling each tier and the effector."""
     p_effector: float | None = 0.005
-    """Mutation: probability of resampling the effector (None: p_categorical, as the tiers). A
-    rate below the tiers' makes effector flips, which found most late species, rarer (beyond the
-    paper; docs/MODEL.md)."""
+    """Mutation: probability of resampling the effector (None: p_categorical, as the tiers); below
+    the tiers' it makes effector flips, which found most late species, rarer (docs/MODEL.md)."""
     p_tag_flip: float = 0.01
     """Mutation: probability of flipping each tag bit."""
     bt_mutation_rate: float = 0.5
-    """Mutation: probability that an offspring gets its behavior-tree mutation event (1.0: every
-    offspring)."""
+    """Mutation: probability that an offspring gets its behavior-tree mutation event."""
     p_gene_mutation: float = 0.2
-    """Mutation: probability that each continuous gene (radius, operating points, selectivity,
-    dominance) of an offspring gets its Gaussian step (1.0: every gene)."""
+    """Mutation: probability that each continuous gene of an offspring gets its Gaussian step."""
     partners_per_niche: str = "all"
     """Which species may be partners: "all" (the paper: any species whose tag the focal's
-    selectivity accepts) or "one", a diagnostic reference that is no part of SwarmCoDe: of the
-    species whose elites have the same capability (the scenario's package classes a design can
-    lift), only the largest may be a partner. "one" tells the algorithm the task's niches."""
+    selectivity accepts) or "one", a diagnostic reference, no part of SwarmCoDe, that tells the
+    algorithm the task's niches: of the species whose elites lift the same package classes,
+    only the largest."""
     partner_admission: str = "substitute"
     """When a species becomes and stays a partner (`coevo.admission`): "open", from its founding
     (the paper); "substitute", every focal's baseline re-fills its slots from its nearest

@@ -83,6 +83,7 @@ UNIT_INTERVAL = (
     "p_marginal",
     "knockout_credit",
     "team_partners_margin",
+    "best_team_tie",
     "knockout_pairs",
     "quota_size_exponent",
     "essential_below",

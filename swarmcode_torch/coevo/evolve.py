@@ -187,7 +187,7 @@ def generation(
 
     # 3. reproduction: the quotas (`shares.plan`), the generation's report read with the number of
     # elites they keep, the offspring (`_reproduction`), re-founding copies among them
-    trial = refound.on_trial(arc, sp.proto_ids, state.generation)
+    trial, tie = refound.on_trial(arc, sp.proto_ids, state.generation), ctx.cfg.best_team_tie
     plan = shares.plan(
         ctx.cfg,
         ctx.repro,
@@ -196,13 +196,13 @@ def generation(
         fit,
         trial,
         equal=state.generation < ctx.cfg.equal_quotas_until,
-        best=shares.best_team_species(res, sp) if ctx.cfg.best_team_floor > 0 else None,
+        best=shares.best_team_species(res, sp, tie) if ctx.cfg.best_team_floor > 0 else None,
         credit=knockout.best_team_credit(res, sp, state.genome, ph, ctx, g)
         if ctx.cfg.knockout_credit > 0
         else None,
         marginal=shares.basis(ctx.cfg.share_basis, res, fit),
     )
-    out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum())
+    out = read_generation(state.genome, sp.species, res, ph, fit, plan.n_elite.sum(), tie)
     composition: dict[str, Any] = {"generation": state.generation, "population": out.population}
     composition["team"] = out.team
     if ctx.cfg.team_partners and ctx.cfg.team_partners_margin > 0:  # the next generation's

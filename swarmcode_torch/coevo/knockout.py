@@ -43,14 +43,15 @@ from .config import EvalConfig
 from .evaluation import EvalResult, ScoreFn, _scores, simulate_teams, team_scores
 from .fitness import team_cost
 from .population import Population, genome_phenotype
+from .readout import best_index
 from .selection import group_sizes
 from .speciation import SpeciationResult
 
 
-def best_team(res: EvalResult) -> Tensor:
-    """[S] population rows of the generation's best team: the focal team of the individual of
-    the highest gated fitness (`readout`'s)."""
-    return res.swarms.focal_team[res.fitness.argmax()]
+def best_team(res: EvalResult, tie: float = 0.0) -> Tensor:
+    """[S] population rows of the generation's best team, `readout.best_index`'s at `tie`: the
+    focal team of the individual of the highest gated fitness (by default)."""
+    return res.swarms.focal_team[best_index(res, tie)[0]]
 
 
 def slot_species(teams: Tensor, species: Tensor) -> Tensor:
@@ -192,7 +193,9 @@ def best_team_credit(
     highest gated fitness) and its knock-outs, scored on fresh environments drawn from `g`.
     `ctx`: the run's `evolve.Context` (its scenario, evaluation config, world, tick and score
     function)."""
-    teams, in_team = knockout_teams(best_team(res), sp.species, sp.proto_ids, g)
+    teams, in_team = knockout_teams(
+        best_team(res, ctx.cfg.best_team_tie), sp.species, sp.proto_ids, g
+    )
     scores = _run_scores(teams, genome, sp, phenotype, ctx, g)
     return credited(scores, in_team, ctx.cfg.knockout_credit if margin is None else margin)
 
@@ -241,7 +244,7 @@ def demote_substitutes(
     margin = ctx.cfg.knockout_pairs
     if adm is None or margin <= 0:
         return adm
-    team = best_team(res)
+    team = best_team(res, ctx.cfg.best_team_tie)
     idx = team_has(team, sp.species, sp.proto_ids).nonzero().squeeze(1)
     m = idx.numel()  # the host read
     if m < 2:

@@ -71,6 +71,22 @@ class Readout:
     n_elites: int  # elites that reproduction keeps
 
 
+def best_index(res: EvalResult, tie: float = 0.0) -> Tensor:
+    """[1] the evaluation whose focal team is the generation's best team: the highest fitness
+    score, gated (a focal whose marginal contribution is not positive is penalised, so a strong
+    team carried by its partners is not credited to a focal that weakens it); with `tie` > 0
+    (`best_team_tie`), of the focal teams within that fraction of the highest, one with the
+    fewest species, the highest of those. No host read."""
+    fit = res.fitness
+    if tie <= 0:
+        return fit.argmax().view(1)
+    top = fit.max()
+    near = fit >= top - tie * top.abs()
+    count = res.swarms.focal_species_count
+    fewest = torch.where(near, count, count.max() + 1).min()
+    return torch.where(near & (count == fewest), fit, -torch.inf).argmax().view(1)
+
+
 def read_generation(
     genome: Population,
     species: Tensor,
@@ -78,14 +94,13 @@ def read_generation(
     phenotype: Phenotype,
     fitness: Tensor,
     n_elites: Tensor,
+    tie: float = 0.0,
 ) -> Readout:
-    """The generation's report, in one transfer: the best team (the team of the individual with
-    the highest fitness score, gated: a focal whose marginal contribution is not positive is
-    penalised, so a strong team carried by its partners is not credited to a focal that weakens
-    it), the species' sizes, the summary numbers of `fitness` (the smoothed fitness) and
-    `res`, three genes of every individual, and `n_elites` (0-d). The best team's genes and
-    phenotype are its rows of the population's, all of which are read."""
-    b = res.fitness.argmax().view(1)
+    """The generation's report, in one transfer: the best team (`best_index`'s, at `tie`), the
+    species' sizes, the summary numbers of `fitness` (the smoothed fitness) and `res`, three
+    genes of every individual, and `n_elites` (0-d). The best team's genes and phenotype are
+    its rows of the population's, all of which are read."""
+    b = best_index(res, tie)
     team = res.swarms.focal_team.index_select(0, b)[0]
     names = [f.name for f in fields(Population)]
     n_g, n_ph = len(names), len(Phenotype._fields)

@@ -69,11 +69,10 @@ def plan(
     return q if share is fit else replace(q, fit=cast(fit, torch.float))
 
 
-def best_team_species(res: EvalResult, sp: SpeciationResult) -> Tensor:
-    """[K] bool: the species (of `sp.proto_ids`) with a robot in the generation's best team,
-    the focal team of the individual of the highest gated fitness (`readout`'s), on the
-    device."""
-    return knockout.team_has(knockout.best_team(res), sp.species, sp.proto_ids)
+def best_team_species(res: EvalResult, sp: SpeciationResult, tie: float = 0.0) -> Tensor:
+    """[K] bool: the species (of `sp.proto_ids`) with a robot in the generation's best team
+    (`readout.best_index`'s at `tie`), on the device."""
+    return knockout.team_has(knockout.best_team(res, tie), sp.species, sp.proto_ids)
 
 
 def basis(share_basis: str, res: EvalResult, fit: Tensor) -> Tensor | None:

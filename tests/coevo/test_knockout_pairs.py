@@ -72,7 +72,8 @@ def _case(partner: list[bool], scores: list[float]):
         torch.ones(n, dtype=torch.long),
         torch.full((n,), 2, dtype=torch.long),
     )
-    ctx = SimpleNamespace(cfg=SimpleNamespace(knockout_pairs=0.05), scenario=None, eval_cfg=None)
+    cfg = SimpleNamespace(knockout_pairs=0.05, best_team_tie=0.0)
+    ctx = SimpleNamespace(cfg=cfg, scenario=None, eval_cfg=None)
     ctx.params = ctx.step_fn = ctx.score_fn = None
     fake = lambda teams, *a, **k: torch.tensor(scores)  # noqa: E731
     return adm, res, sp, ctx, fake
