@@ -189,8 +189,8 @@ def best_team_credit(
     margin: float | None = None,
 ) -> Tensor:
     """[K] bool: the species of `sp.proto_ids` credited this generation (`credited` at `margin`,
-    by default `ctx.cfg.knockout_credit`), from the best team of `res` (the focal team of the
-    highest gated fitness) and its knock-outs, scored on fresh environments drawn from `g`.
+    by default `ctx.cfg.knockout_credit`), from the best team of `res` (`best_team`'s, at
+    `ctx.cfg.best_team_tie`) and its knock-outs, scored on fresh environments drawn from `g`.
     `ctx`: the run's `evolve.Context` (its scenario, evaluation config, world, tick and score
     function)."""
     teams, in_team = knockout_teams(
