@@ -124,6 +124,7 @@ VERSION_KEYS = {
     "gamma",
     # settings added off since (their default is the behaviour before them)
     "demote_far_after",
+    "demote_after",
     "equal_quotas_until",
     "refound_source",
     "best_team_floor",

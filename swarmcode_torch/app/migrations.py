@@ -36,6 +36,7 @@ def migrate_config(d: Any, keep_retired: bool = False) -> Any:
     d.setdefault("refound_after", 0)
     d.setdefault("refound_source", "partners")
     d.setdefault("demote_far_after", 0)
+    d.setdefault("demote_after", 2)
     d.setdefault("equal_quotas_until", 0)
     d.setdefault("best_team_floor", 0)
     d.setdefault("best_team_tie", 0.0)

@@ -130,9 +130,8 @@ class SwarmCoDeConfig:
     than the others', is not starved out. Needs `partner_admission = "substitute"` (it reads the
     admission's gate statistics); 0: no floor (the default; not adopted: docs/MODEL.md)."""
     essential_below: float = 0.3
-    """With `essential_floor`: a partner is essential while the moving average of its gated
-    share is below this (0.3, the admission threshold; 0.5, the clash threshold above which two
-    partners count as substitutes: a holder keeps its floor until gated as often as one)."""
+    """With `essential_floor`: a partner is essential while its gated share's moving average is
+    below this (0.3, the admission threshold; 0.5, the clash threshold of two substitutes)."""
     refound_after: int = 0
     """Re-founding (`coevo.refound`): the champion of a species that dies while a partner (its
     members beat their baselines) is archived, and this many generations after its death a
@@ -170,8 +169,7 @@ class SwarmCoDeConfig:
     needs is paid as the best species is; a substitute (its slots go to one doing its job) not."""
     knockout_floor: int = 0
     """With `knockout_credit`: the species credited by their knock-out keep a quota floor of
-    this many slots (exempt from `min_share`, as `best_team_floor`'s) instead of the lift of
-    their share; 0: the lift (the default)."""
+    this many slots (exempt from `min_share`) instead of the lift of their share; 0: the lift."""
     knockout_pairs: float = 0.0
     """Demotion of substitute pairs by knock-out (`coevo.knockout.demote_substitutes`): each
     generation the best team is evaluated again with each of its species knocked out and with
@@ -195,8 +193,7 @@ class SwarmCoDeConfig:
     """Before this generation every species gets the same share of the next generation
     (offspring quotas equal, not by fitness; selection within a species is unchanged); 0: never
     (the default). NEAT's protection of young species: a design that can do a hard job but does
-    it badly at first, as the holders of hard niches in random teams do, is not starved out
-    before it improves."""
+    it badly at first (a hard niche's holder in random teams) is not starved before it improves."""
     demote_far_after: int = 0
     """From this generation on, the admission's demotion of substitutes (`coevo.admission`)
     also pairs a partner with its nearest partner design of the same effector when that design
@@ -204,6 +201,9 @@ class SwarmCoDeConfig:
     partners of one effector that stand in for each other are told apart however they differ;
     the delay spares the first generations, when most species are gated half the time. Needs
     `partner_admission = "substitute"`."""
+    demote_after: int = 2
+    """Partner admission: the generations in a row a partner's gated-share average must stay
+    above one half before it is a substitute of its nearest partner (2: 0.7's rule, the default)."""
     hw_sigma: float = 0.05
     """Mutation: Gaussian step of radius and operating points, as a fraction of their range."""
     social_sigma: float = 0.05

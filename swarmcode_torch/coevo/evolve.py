@@ -333,7 +333,7 @@ def _evaluation(
         sp.proto_ids,
         gated,
         nearest,
-        admission.SUBSTITUTE,
+        replace(admission.SUBSTITUTE, clash_generations=ctx.cfg.demote_after),
         near=near,
         elite=state.has_fitness if ctx.cfg.admission_basis == "elites" else None,
     )
