@@ -336,3 +336,12 @@ def test_a_config_saved_before_0_6_admits_every_partner_and_names_no_preset():
     }
     cfg = SwarmCoDeConfig.from_dict(migrate_config(old))
     assert (cfg.partner_admission, cfg.preset) == ("open", None)
+
+
+def test_a_config_written_before_demote_after_resumes_with_the_0_7_rule():
+    """Configs written before `demote_after` existed demoted after 2 generations."""
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+
+    saved = SwarmCoDeConfig(demote_after=6).to_dict()
+    del saved["demote_after"]
+    assert SwarmCoDeConfig.from_dict(migrate_config(saved)).demote_after == 2

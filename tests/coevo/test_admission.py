@@ -191,3 +191,60 @@ def test_the_gated_share_is_that_of_the_elites_where_a_species_has_any():
     by_members = update(adm, species, ids, gated, nearest)
     assert by_elites.gated.tolist() == [0.0, 0.5]
     assert by_members.gated.tolist() == [0.75, 0.5]
+
+
+@pytest.mark.parametrize("k", [1, 2, 6])
+def test_a_substitute_is_demoted_after_exactly_clash_generations_above_one_half(k):
+    """`demote_after` (`AdmissionParams.clash_generations`): a near partner gated every time is
+    still a partner after k - 1 updates and on probation from the k-th, never before."""
+    from dataclasses import replace
+
+    from swarmcode_torch.coevo.admission import SUBSTITUTE
+
+    params = replace(SUBSTITUTE, clash_generations=k)
+    species, ids = torch.tensor([0, 0, 0, 1, 1]), torch.tensor([0, 1])
+    gated = torch.tensor([False, False, False, True, True])
+    nearest = torch.tensor([1, 0])
+    adm = Admission.empty().grow(2, True)
+    seen = []
+    for _ in range(k + 2):
+        adm = update(adm, species, ids, gated, nearest, params, near=torch.tensor([True, True]))
+        seen.append(bool(adm.partner[1]))
+    assert seen == [True] * (k - 1) + [False] * 3
+
+
+def test_demote_after_is_the_run_s_clash_generations(monkeypatch):
+    """The run setting reaches every admission update; its default, 2, is 0.7's rule."""
+    from dataclasses import replace
+
+    import swarmcode_torch.coevo.admission as A
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+    from swarmcode_torch.coevo.evolve import Evolution
+
+    seen = []
+    orig = A.update
+
+    def spy(adm, species, proto_ids, gated, nearest, params, **kw):
+        seen.append(params.clash_generations)
+        return orig(adm, species, proto_ids, gated, nearest, params, **kw)
+
+    monkeypatch.setattr(A, "update", spy)
+    cfg = SwarmCoDeConfig(
+        scenario="two-niche", population=12, swarm_size=6, trials=1, ticks=20, seed=1,
+        device="cpu", compile=False,
+    )  # fmt: skip
+    assert cfg.demote_after == A.SUBSTITUTE.clash_generations == 2
+    for c, want in ((cfg, 2), (replace(cfg, demote_after=6), 6)):
+        seen.clear()
+        ev = Evolution(c)
+        for _ in range(3):
+            ev.step()
+        assert seen == [want] * 3
+
+
+@pytest.mark.parametrize("bad", [0, -1, 2.5])
+def test_a_demote_after_below_one_or_not_a_whole_number_is_refused(bad):
+    from swarmcode_torch.coevo.config import SettingError, SwarmCoDeConfig
+
+    with pytest.raises(SettingError, match="demote_after"):
+        SwarmCoDeConfig(demote_after=bad).validate()
