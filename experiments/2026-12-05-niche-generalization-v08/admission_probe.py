@@ -9,8 +9,8 @@ is the study's run of the same world, seed and arm.
         --seed S --device cpu --logdir DIR --render-every 0 --figure-every 100000 \
         --checkpoint-every 50 --threads 1 --generations 300 [the arm's --set K=V ...]
 
-Results: `results/admission_probe/` (gzipped JSON lines: v27 on train-r-13 seeds 0 and 2;
-PLAN.md, "v29")."""
+Results: `results/admission_probe/` (gzipped JSON lines: v27 on train-r-13 seeds 0 and 2,
+v29 on seed 2; PLAN.md, "v29")."""
 
 import json
 import sys
