@@ -10,7 +10,7 @@ is the study's run of the same world, seed and arm.
         --checkpoint-every 50 --threads 1 --generations 300 [the arm's --set K=V ...]
 
 Results: `results/admission_probe/` (gzipped JSON lines: v27 on train-r-13 seeds 0 and 2,
-v29 on seed 2; PLAN.md, "v29")."""
+v29 on train-r-13 seed 2, train-03 seed 0 and train-r-08 seed 1; PLAN.md, "v29")."""
 
 import json
 import sys
