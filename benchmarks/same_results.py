@@ -125,6 +125,7 @@ VERSION_KEYS = {
     # settings added off since (their default is the behaviour before them)
     "demote_far_after",
     "demote_after",
+    "substitute_effector",
     "equal_quotas_until",
     "refound_source",
     "best_team_floor",

@@ -37,6 +37,7 @@ def migrate_config(d: Any, keep_retired: bool = False) -> Any:
     d.setdefault("refound_source", "partners")
     d.setdefault("demote_far_after", 0)
     d.setdefault("demote_after", 2)
+    d.setdefault("substitute_effector", False)
     d.setdefault("equal_quotas_until", 0)
     d.setdefault("best_team_floor", 0)
     d.setdefault("best_team_tie", 0.0)

@@ -35,6 +35,8 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from ..sim.tensors import arange, cast
+from .population import Population
+from .speciation import DistanceWeights, design_distance
 
 
 @dataclass(frozen=True)
@@ -125,6 +127,23 @@ class Admission:
 
 #: The thresholds of `partner_admission = "substitute"`.
 SUBSTITUTE = AdmissionParams()
+
+
+def effector_first(design_distance: Tensor, effector: Tensor, on: bool = True) -> Tensor:
+    """design_distance [K, K], effector [K] -> [K, K]: where `on` (`substitute_effector`), every
+    pair of differing effectors farther than any pair of one effector (the same order within
+    each), so that a species' nearest partner is of its own effector where it has one and never
+    within δ of another; else `design_distance` as it is."""
+    if not on or design_distance.numel() == 0:
+        return design_distance
+    differ = effector[:, None] != effector[None, :]
+    return torch.where(differ, design_distance + design_distance.max() + 1, design_distance)
+
+
+def designs(proto: Population, w: DistanceWeights, by_effector: bool) -> Tensor:
+    """[K, K]: the distances the admission reads between the designs of the prototypes `proto`
+    (`speciation.design_distance`), effector first where `by_effector` (`effector_first`)."""
+    return effector_first(design_distance(proto, w), proto.effector, by_effector)
 
 
 def nearest_partner(design_distance: Tensor, allowed: Tensor) -> Tensor:

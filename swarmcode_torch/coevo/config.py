@@ -138,17 +138,14 @@ class SwarmCoDeConfig:
     few offspring become copies of it, founding a species with a trial quota floor; 0: never
     (the default). Needs `partner_admission = "substitute"`."""
     refound_source: str = "partners"
-    """What re-founding (`refound_after`) archives: "partners", the champions of species that
-    die while partners beating their baselines and at least 5 generations old (the default), or
-    "designs", the champion of any species that dies as the only champion of its design cell
-    (effector and one of three radius bands), one entry per cell, re-founded while the cell is
-    empty: a memory of every kind of robot the run has had, against early lock-in; or
-    "random", an explorer: every `refound_after` generations the copies are of the
-    generation's best individual with its hardware genes drawn as generation 0 draws them."""
+    """What re-founding (`refound_after`) archives: "partners", the champions of species dying
+    as partners beating their baselines, at least 5 generations old (the default); "designs",
+    the champion of any species dying as the only champion of its design cell (effector, one of
+    three radius bands), re-founded while the cell is empty, against early lock-in; "random",
+    an explorer: copies of the generation's best with hardware genes drawn as generation 0's."""
     team_partners: bool = False
     """The species of the previous generation's best team are partners of every focal, besides
-    those its tag and selectivity choose (a species whose job no other does is then in most
-    teams); False: partners by tag alone (the paper, and the default)."""
+    those its tag and selectivity choose; False: partners by tag alone (the paper, the default)."""
     team_partners_margin: float = 0.0
     """With `team_partners`: only those of the best team's species whose knock-out costs it
     more than this fraction of its score (`coevo.knockout`); 0: all of them."""
@@ -201,6 +198,9 @@ class SwarmCoDeConfig:
     partners of one effector that stand in for each other are told apart however they differ;
     the delay spares the first generations, when most species are gated half the time. Needs
     `partner_admission = "substitute"`."""
+    substitute_effector: bool = False
+    """Partner admission: a species' nearest partner design (its baseline's refill, and the one
+    it may be a substitute of) is of its own effector where it has one; False: of any (0.7)."""
     demote_after: int = 2
     """Partner admission: the generations in a row a partner's gated-share average must stay
     above one half before it is a substitute of its nearest partner (2: 0.7's rule, the default)."""

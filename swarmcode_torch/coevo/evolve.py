@@ -39,7 +39,7 @@ from .run_state import (  # noqa: F401 (re-exported: the checkpoint's state dict
     load_state_dict,
     state_dict,
 )
-from .speciation import SpeciationResult, design_distance, distance, speciate
+from .speciation import SpeciationResult, distance, speciate
 
 
 def random_population(
@@ -291,7 +291,8 @@ def _evaluation(
         adm = state.admission or Admission.empty(ctx.device).grow(state.next_species_id, True)
         adm = adm.grow(sp.next_species_id, partner=state.generation == 0)
         allowed = adm.allowed(sp.proto_ids)
-        designs_d = design_distance(sp.prototypes, ctx.speciation.weights)
+        w = ctx.speciation.weights
+        designs_d = admission.designs(sp.prototypes, w, ctx.cfg.substitute_effector)
     plan = plan_evaluation(
         state.genome,
         sp.species,

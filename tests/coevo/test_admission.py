@@ -248,3 +248,43 @@ def test_a_demote_after_below_one_or_not_a_whole_number_is_refused(bad):
 
     with pytest.raises(SettingError, match="demote_after"):
         SwarmCoDeConfig(demote_after=bad).validate()
+
+
+def test_effector_first_makes_the_nearest_partner_one_of_the_same_effector_where_there_is_one():
+    """`substitute_effector`: a species' nearest partner is of its effector where one is allowed,
+    never within δ of another effector, and the distances are unchanged when off."""
+    from swarmcode_torch.coevo.admission import effector_first, nearest_partner
+
+    # 0 and 1 suction, 2 pincher; 0's nearest design is the pincher 2 (same size), then 1
+    dd = torch.tensor([[0.0, 0.5, 0.35], [0.5, 0.0, 0.6], [0.35, 0.6, 0.0]])
+    effector = torch.tensor([1, 1, 0])
+    every = torch.tensor([True, True, True])
+    assert torch.equal(effector_first(dd, effector, on=False), dd)
+    assert nearest_partner(dd, every).tolist() == [2, 0, 0]
+    first = effector_first(dd, effector)
+    assert nearest_partner(first, every).tolist() == [1, 0, 0]  # 2 has no pincher partner
+    assert (first[effector[:, None] != effector[None, :]] > 0.4).all()  # never within δ
+    assert torch.equal(first[:2, :2], dd[:2, :2])
+    assert nearest_partner(first, torch.tensor([True, False, True])).tolist() == [2, 0, 0]
+
+
+def test_substitute_effector_is_off_by_default_and_changes_the_run_when_on():
+    from dataclasses import replace
+
+    from swarmcode_torch.coevo.config import SwarmCoDeConfig
+    from swarmcode_torch.coevo.evolve import Evolution
+
+    cfg = SwarmCoDeConfig(
+        scenario="two-niche", population=16, swarm_size=6, trials=1, ticks=30, seed=3,
+        device="cpu", compile=False,
+    )  # fmt: skip
+    assert cfg.substitute_effector is False
+
+    def run(c):
+        ev = Evolution(c)
+        return [ev.step().best_fitness for _ in range(6)]
+
+    assert run(cfg) == run(cfg)
+    on = replace(cfg, substitute_effector=True)
+    assert run(on) == run(on)
+    assert run(on) != run(cfg)  # seed 3: a nearest partner of the other effector in generation <= 5
